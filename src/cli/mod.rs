@@ -1,0 +1,6 @@
+//! The `ffdic` command line: one file per subcommand.
+
+pub mod analyze;
+mod progress;
+
+pub use progress::ProgressBar;

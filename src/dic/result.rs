@@ -1,0 +1,101 @@
+//! What an analysis produces: one record per point of interest, the strain gauge, statistics.
+
+use super::{DicSettings, PoiGrid, Summary};
+use serde::{Deserialize, Serialize};
+
+/// The outcome of one point of interest. Only `Converged` points carry displacements.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PoiStatus {
+    Converged,
+    /// IC-GN hit the iteration limit.
+    NotConverged,
+    /// Converged, but the final ZNCC is below the threshold.
+    LowCorrelation,
+    /// The warped subset left the deformed image.
+    LeftImage,
+    /// The reference subset has no usable intensity variation (flat, or gradients in one
+    /// direction only, which makes the Gauss-Newton Hessian singular).
+    NoContrast,
+}
+
+impl PoiStatus {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            PoiStatus::Converged => "converged",
+            PoiStatus::NotConverged => "not_converged",
+            PoiStatus::LowCorrelation => "low_correlation",
+            PoiStatus::LeftImage => "left_image",
+            PoiStatus::NoContrast => "no_contrast",
+        }
+    }
+
+    pub fn is_valid(self) -> bool {
+        self == PoiStatus::Converged
+    }
+}
+
+/// One point of interest. Displacements and strains are NaN unless the point is valid.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PoiResult {
+    /// Subset centre in the reference image, px.
+    pub x: f64,
+    pub y: f64,
+    /// Displacement of the subset centre, px.
+    pub u: f64,
+    pub v: f64,
+    /// Displacement gradients of the first-order shape function.
+    pub du_dx: f64,
+    pub du_dy: f64,
+    pub dv_dx: f64,
+    pub dv_dy: f64,
+    /// Small strains from the strain window (not the subset's own gradients).
+    pub exx: f64,
+    pub eyy: f64,
+    pub exy: f64,
+    /// Zero-normalised cross-correlation at the solution (NaN when never evaluated).
+    pub zncc: f64,
+    pub iterations: u32,
+    pub status: PoiStatus,
+}
+
+impl PoiResult {
+    pub fn invalid(x: f64, y: f64, status: PoiStatus, zncc: f64, iterations: u32) -> Self {
+        Self {
+            x,
+            y,
+            u: f64::NAN,
+            v: f64::NAN,
+            du_dx: f64::NAN,
+            du_dy: f64::NAN,
+            dv_dx: f64::NAN,
+            dv_dy: f64::NAN,
+            exx: f64::NAN,
+            eyy: f64::NAN,
+            exy: f64::NAN,
+            zncc,
+            iterations,
+            status,
+        }
+    }
+}
+
+/// Everything one analysis produced, with every setting that produced it.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct DicResult {
+    pub settings: DicSettings,
+    pub grid: PoiGrid,
+    /// Row-major over the grid.
+    pub points: Vec<PoiResult>,
+    /// Integer rigid offset found by the global FFT cross-correlation, px.
+    pub global_offset_px: (i64, i64),
+    /// Size of the virtual strain gauge, px.
+    pub strain_gauge_px: usize,
+    pub summary: Summary,
+}
+
+impl DicResult {
+    pub fn valid_count(&self) -> usize {
+        self.points.iter().filter(|p| p.status.is_valid()).count()
+    }
+}

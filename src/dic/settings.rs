@@ -1,0 +1,117 @@
+//! Every setting of one DIC analysis. Defaults follow the paper's study (Hijazi, Rawashdeh &
+//! Kähler): subset 41x41, step 20, ROI 800x800 centred, strain window 7x7 points.
+
+use super::{DicError, Interpolation};
+use crate::image::Roi;
+use serde::{Deserialize, Serialize};
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DicSettings {
+    /// Subset side in px; odd.
+    pub subset_px: usize,
+    /// Distance between neighbouring points of interest in px.
+    pub step_px: usize,
+    /// Rectangle holding the POI centres; `None` is the centred 800x800, clipped to the image.
+    pub roi: Option<Roi>,
+    /// Strain window side in POIs; odd.
+    pub strain_window: usize,
+    pub interpolation: Interpolation,
+    /// Gaussian pre-filter applied to both images, σ in px (0 turns it off).
+    pub prefilter_sigma_px: f64,
+    /// IC-GN stops when the largest displacement the update causes in the subset is below this.
+    pub convergence_px: f64,
+    pub max_iterations: u32,
+    /// Points whose final ZNCC is below this get the `low_correlation` status.
+    pub min_zncc: f64,
+    /// Largest rigid motion the global FFT cross-correlation looks for, in px.
+    pub max_motion_px: usize,
+    /// Integer search radius around the global offset where no converged neighbour helps, in px.
+    pub search_radius_px: usize,
+}
+
+/// Side of the default ROI (the paper's 800x800 centred region).
+pub const DEFAULT_ROI_SIDE_PX: usize = 800;
+
+impl Default for DicSettings {
+    fn default() -> Self {
+        Self {
+            subset_px: 41,
+            step_px: 20,
+            roi: None,
+            strain_window: 7,
+            interpolation: Interpolation::Bspline3,
+            prefilter_sigma_px: 0.7,
+            convergence_px: 1e-3,
+            max_iterations: 50,
+            min_zncc: 0.6,
+            max_motion_px: 160,
+            search_radius_px: 3,
+        }
+    }
+}
+
+impl DicSettings {
+    /// Checks everything that does not depend on the images.
+    pub fn validate(&self) -> Result<(), DicError> {
+        let bad = |field: &'static str, reason: String| Err(DicError::Setting { field, reason });
+        if self.subset_px < 5 || self.subset_px % 2 == 0 {
+            return bad(
+                "subset",
+                format!("subset size must be odd and at least 5, got {}", self.subset_px),
+            );
+        }
+        if self.step_px == 0 {
+            return bad("step", "step must be at least 1 px".into());
+        }
+        if self.strain_window < 3 || self.strain_window % 2 == 0 {
+            return bad(
+                "strain_window",
+                format!(
+                    "strain window must be odd and at least 3, got {}",
+                    self.strain_window
+                ),
+            );
+        }
+        if !(0.0..=5.0).contains(&self.prefilter_sigma_px) {
+            return bad("prefilter_sigma_px", "must lie in [0, 5] px".into());
+        }
+        if !(self.convergence_px > 0.0) {
+            return bad("convergence_px", "must be positive".into());
+        }
+        if self.max_iterations == 0 {
+            return bad("max_iterations", "must be at least 1".into());
+        }
+        if !(-1.0..=1.0).contains(&self.min_zncc) {
+            return bad("min_zncc", "must lie in [-1, 1]".into());
+        }
+        Ok(())
+    }
+
+    /// Half the subset side: the subset spans centre-half ..= centre+half.
+    pub fn half_subset(&self) -> usize {
+        self.subset_px / 2
+    }
+
+    /// Size of the virtual strain gauge in px: the span of the strain window plus one subset.
+    pub fn strain_gauge_px(&self) -> usize {
+        (self.strain_window - 1) * self.step_px + self.subset_px
+    }
+
+    /// The ROI used for an image of the given size.
+    pub fn roi_for(&self, width: usize, height: usize) -> Result<Roi, DicError> {
+        match self.roi {
+            None => Ok(Roi::centred(
+                width,
+                height,
+                DEFAULT_ROI_SIDE_PX,
+                DEFAULT_ROI_SIDE_PX,
+            )),
+            Some(roi) => roi.clip(width, height).ok_or(DicError::RoiOutside {
+                roi,
+                width,
+                height,
+            }),
+        }
+    }
+}

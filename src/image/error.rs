@@ -1,0 +1,23 @@
+use std::path::PathBuf;
+
+/// Errors of image construction and TIFF input/output.
+#[derive(Debug, thiserror::Error)]
+pub enum ImageError {
+    #[error("cannot open {path}: {source}")]
+    Open {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path} is not a readable TIFF: {reason}")]
+    Decode { path: PathBuf, reason: String },
+    #[error("{path}: unsupported TIFF pixel type {kind} (expected 8- or 16-bit grayscale)")]
+    Unsupported { path: PathBuf, kind: String },
+    #[error("cannot write {path}: {reason}")]
+    Encode { path: PathBuf, reason: String },
+    #[error("image buffer of {len} values does not match {width}x{height}")]
+    Shape {
+        width: usize,
+        height: usize,
+        len: usize,
+    },
+}

@@ -1,0 +1,14 @@
+//! Images for the numerics: one f32 type, a pixel rectangle, and 8/16-bit grayscale TIFF I/O.
+//!
+//! Pixel coordinates follow DESIGN.md: the origin is the centre of the top-left pixel, x to the
+//! right, y down. Pixel (col, row) therefore covers the square [col-0.5, col+0.5] x [row-0.5, row+0.5].
+
+mod error;
+mod gray;
+mod roi;
+mod tiff_io;
+
+pub use error::ImageError;
+pub use gray::Image;
+pub use roi::Roi;
+pub use tiff_io::{read_tiff, write_tiff_u16, write_tiff_u8, TiffInfo};

@@ -1,0 +1,168 @@
+//! Grayscale TIFF in and out (the `tiff` crate). 8- and 16-bit integer and 32-bit float grey
+//! images are read; 8- and 16-bit are written. Writes go to a temporary file that is renamed into
+//! place, so a crash never leaves a half-written frame under the final name.
+
+use super::{Image, ImageError};
+use std::fs::File;
+use std::io::{BufReader, BufWriter};
+use std::path::Path;
+use tiff::decoder::{Decoder, DecodingResult};
+use tiff::encoder::{colortype, TiffEncoder};
+use tiff::ColorType;
+
+/// What a TIFF file held before conversion to f32.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TiffInfo {
+    pub width: usize,
+    pub height: usize,
+    pub bit_depth: u8,
+}
+
+/// Reads the first page of a grayscale TIFF as f32 grey values on the file's own scale.
+pub fn read_tiff(path: &Path) -> Result<(Image, TiffInfo), ImageError> {
+    let file = File::open(path).map_err(|source| ImageError::Open {
+        path: path.to_owned(),
+        source,
+    })?;
+    let decode_err = |e: tiff::TiffError| ImageError::Decode {
+        path: path.to_owned(),
+        reason: e.to_string(),
+    };
+    let mut decoder = Decoder::new(BufReader::new(file)).map_err(decode_err)?;
+    let (w, h) = decoder.dimensions().map_err(decode_err)?;
+    let (width, height) = (w as usize, h as usize);
+    let color = decoder.colortype().map_err(decode_err)?;
+    let bit_depth = match color {
+        ColorType::Gray(bits @ (8 | 16 | 32)) => bits,
+        other => {
+            return Err(ImageError::Unsupported {
+                path: path.to_owned(),
+                kind: format!("{other:?}"),
+            })
+        }
+    };
+    let data: Vec<f32> = match decoder.read_image().map_err(decode_err)? {
+        DecodingResult::U8(v) => v.into_iter().map(f32::from).collect(),
+        DecodingResult::U16(v) => v.into_iter().map(f32::from).collect(),
+        DecodingResult::F32(v) => v,
+        other => {
+            return Err(ImageError::Unsupported {
+                path: path.to_owned(),
+                kind: format!("{:?} samples", std::mem::discriminant(&other)),
+            })
+        }
+    };
+    let image = Image::from_vec(width, height, data).map_err(|_| ImageError::Decode {
+        path: path.to_owned(),
+        reason: "pixel data shorter than the image dimensions".into(),
+    })?;
+    Ok((
+        image,
+        TiffInfo {
+            width,
+            height,
+            bit_depth: bit_depth as u8,
+        },
+    ))
+}
+
+/// Writes 16-bit grey values, rounding and clamping to 0..=65535.
+pub fn write_tiff_u16(path: &Path, image: &Image) -> Result<(), ImageError> {
+    let data: Vec<u16> = image
+        .data()
+        .iter()
+        .map(|&v| v.round().clamp(0.0, 65535.0) as u16)
+        .collect();
+    write_atomically(path, |w| {
+        TiffEncoder::new(w)?.write_image::<colortype::Gray16>(
+            image.width() as u32,
+            image.height() as u32,
+            &data,
+        )
+    })
+}
+
+/// Writes 8-bit grey values, rounding and clamping to 0..=255.
+pub fn write_tiff_u8(path: &Path, image: &Image) -> Result<(), ImageError> {
+    let data: Vec<u8> = image
+        .data()
+        .iter()
+        .map(|&v| v.round().clamp(0.0, 255.0) as u8)
+        .collect();
+    write_atomically(path, |w| {
+        TiffEncoder::new(w)?.write_image::<colortype::Gray8>(
+            image.width() as u32,
+            image.height() as u32,
+            &data,
+        )
+    })
+}
+
+fn write_atomically(
+    path: &Path,
+    encode: impl FnOnce(&mut BufWriter<File>) -> Result<(), tiff::TiffError>,
+) -> Result<(), ImageError> {
+    let encode_err = |reason: String| ImageError::Encode {
+        path: path.to_owned(),
+        reason,
+    };
+    let file_name = path
+        .file_name()
+        .ok_or_else(|| encode_err("path has no file name".into()))?;
+    let tmp = path.with_file_name(format!(".{}.tmp", file_name.to_string_lossy()));
+    let result = (|| {
+        let file = File::create(&tmp).map_err(|e| encode_err(e.to_string()))?;
+        let mut writer = BufWriter::new(file);
+        encode(&mut writer).map_err(|e| encode_err(e.to_string()))?;
+        let file = writer
+            .into_inner()
+            .map_err(|e| encode_err(e.error().to_string()))?;
+        file.sync_all().map_err(|e| encode_err(e.to_string()))?;
+        std::fs::rename(&tmp, path).map_err(|e| encode_err(e.to_string()))
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
+
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sixteen_bit_round_trip_is_exact() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.tif");
+        let img = Image::from_fn(7, 5, |c, r| (c * 1000 + r * 7) as f32);
+        write_tiff_u16(&path, &img).unwrap();
+        let (back, info) = read_tiff(&path).unwrap();
+        assert_eq!(info.bit_depth, 16);
+        assert_eq!(back, img);
+    }
+
+    #[test]
+    fn eight_bit_round_trip_is_exact() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.tif");
+        let img = Image::from_fn(4, 3, |c, r| (c * 50 + r) as f32);
+        write_tiff_u8(&path, &img).unwrap();
+        let (back, info) = read_tiff(&path).unwrap();
+        assert_eq!(info.bit_depth, 8);
+        assert_eq!(back, img);
+    }
+
+    #[test]
+    fn truncated_file_is_a_decode_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.tif");
+        let img = Image::from_fn(64, 64, |c, r| (c + r) as f32);
+        write_tiff_u16(&path, &img).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
+        assert!(matches!(read_tiff(&path), Err(ImageError::Decode { .. })));
+        std::fs::write(&path, b"not a tiff at all").unwrap();
+        assert!(matches!(read_tiff(&path), Err(ImageError::Decode { .. })));
+    }
+}

@@ -1,0 +1,9 @@
+//! ffdic: translation experiments, fill-factor synthesis, 2D DIC and a physical model of the
+//! imaging chain. See DESIGN.md in the shared folder and the README.
+
+pub mod dic;
+pub mod image;
+pub mod model;
+
+/// The crate version, recorded in every result's settings.
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");

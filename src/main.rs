@@ -1,0 +1,30 @@
+//! The `ffdic` binary: a thin clap front over the library.
+
+mod cli;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Debug, Parser)]
+#[command(name = "ffdic", version, about = "Fill-factor DIC: camera accuracy from translation experiments")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Run 2D DIC on a reference/deformed image pair.
+    Analyze(cli::analyze::AnalyzeArgs),
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let outcome = match &cli.command {
+        Command::Analyze(args) => cli::analyze::run(args),
+    };
+    if let Err(err) = outcome {
+        // One line naming the problem: the whole cause chain, joined.
+        eprintln!("error: {err:#}");
+        std::process::exit(1);
+    }
+}

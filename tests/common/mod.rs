@@ -1,0 +1,28 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code)]
+
+use ffdic::image::Image;
+use ffdic::model::{render_dots, SpeckleLayout};
+use std::path::PathBuf;
+
+/// The shared benchmark data beside the repository (`../shared/data`).
+pub fn shared_data() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data")
+}
+
+/// A speckle layout covering a `w x h` image with margin for large motions.
+pub fn layout(w: usize, h: usize, seed: u64) -> SpeckleLayout {
+    SpeckleLayout::jittered(
+        (-120.0, -120.0, w as f64 + 120.0, h as f64 + 120.0),
+        5.0,
+        1.3,
+        90.0,
+        0.3,
+        seed,
+    )
+}
+
+/// Renders the layout at full fill factor on a 200-grey background.
+pub fn render(layout: &SpeckleLayout, w: usize, h: usize) -> Image {
+    render_dots(w, h, &layout.dots, 200.0, (1.0, 1.0))
+}
