@@ -5,7 +5,11 @@ mod cli;
 use clap::{Parser, Subcommand};
 
 #[derive(Debug, Parser)]
-#[command(name = "ffdic", version, about = "Fill-factor DIC: camera accuracy from translation experiments")]
+#[command(
+    name = "ffdic",
+    version,
+    about = "Fill-factor DIC: camera accuracy from translation experiments"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

@@ -20,11 +20,26 @@ fn sample3_shifts_are_recovered_within_the_bounds() {
         let truth = 0.1 * k as f64;
         println!(
             "k={k}: u {:.5}±{:.5} v {:.5}±{:.5} exx std {:.1} µε eyy std {:.1} µε ({} of {})",
-            s.u.mean, s.u.std, s.v.mean, s.v.std, s.exx.std * 1e6, s.eyy.std * 1e6, s.valid, s.points
+            s.u.mean,
+            s.u.std,
+            s.v.mean,
+            s.v.std,
+            s.exx.std * 1e6,
+            s.eyy.std * 1e6,
+            s.valid,
+            s.points
         );
         assert_eq!(s.valid, s.points, "every point converges on Sample 3");
-        assert!((s.u.mean - truth).abs() <= 0.002, "k={k}: mean u {}", s.u.mean);
-        assert!((s.v.mean - truth).abs() <= 0.002, "k={k}: mean v {}", s.v.mean);
+        assert!(
+            (s.u.mean - truth).abs() <= 0.002,
+            "k={k}: mean u {}",
+            s.u.mean
+        );
+        assert!(
+            (s.v.mean - truth).abs() <= 0.002,
+            "k={k}: mean v {}",
+            s.v.mean
+        );
         assert!(s.u.std <= 0.004, "k={k}: std u {}", s.u.std);
         assert!(s.v.std <= 0.004, "k={k}: std v {}", s.v.std);
         assert!(s.exx.std <= 40e-6, "k={k}: std exx {}", s.exx.std);

@@ -35,7 +35,10 @@ fn sub_pixel_shifts_have_small_bias() {
             assert_eq!(sm.valid, sm.points);
             let (bu, bv) = (sm.u.mean - dx, sm.v.mean - dy);
             worst = worst.max(bu.abs()).max(bv.abs());
-            assert!(bu.abs() <= 0.005 && bv.abs() <= 0.005, "shift ({dx},{dy}): bias ({bu},{bv})");
+            assert!(
+                bu.abs() <= 0.005 && bv.abs() <= 0.005,
+                "shift ({dx},{dy}): bias ({bu},{bv})"
+            );
         }
     }
     println!("worst sub-pixel bias {worst:.5} px");
@@ -66,9 +69,20 @@ fn large_motions_in_every_direction_are_found() {
         };
         let res = analyze(&r, &d, &s, None).unwrap();
         let sm = res.summary;
-        let st: Vec<_> = res.points.iter().map(|p| (p.status, p.iterations, p.zncc)).collect();
-        assert_eq!(sm.valid, sm.points, "({dx},{dy}) offset {:?} {st:?}", res.global_offset_px);
-        assert!((sm.u.mean - dx).abs() < 0.01 && (sm.v.mean - dy).abs() < 0.01, "({dx},{dy}): {sm:?}");
+        let st: Vec<_> = res
+            .points
+            .iter()
+            .map(|p| (p.status, p.iterations, p.zncc))
+            .collect();
+        assert_eq!(
+            sm.valid, sm.points,
+            "({dx},{dy}) offset {:?} {st:?}",
+            res.global_offset_px
+        );
+        assert!(
+            (sm.u.mean - dx).abs() < 0.01 && (sm.v.mean - dy).abs() < 0.01,
+            "({dx},{dy}): {sm:?}"
+        );
     }
 }
 
@@ -93,7 +107,10 @@ fn uniform_stretch_is_recovered() {
 fn result_does_not_depend_on_thread_count() {
     let (r, d) = shifted_pair(3.37, -1.21, 15);
     let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
         pool.install(|| analyze(&r, &d, &settings(), None).unwrap())
     };
     let (one, two) = (run(1), run(2));
@@ -118,7 +135,11 @@ fn flat_patch_gets_no_contrast_and_the_run_goes_on() {
         ..settings()
     };
     let res = analyze(&r, &d, &s, None).unwrap();
-    let centre = res.points.iter().find(|p| p.x == 240.0 && p.y == 200.0).unwrap();
+    let centre = res
+        .points
+        .iter()
+        .find(|p| p.x == 240.0 && p.y == 200.0)
+        .unwrap();
     assert_eq!(centre.status, PoiStatus::NoContrast);
     assert!(centre.u.is_nan());
     assert!(res.summary.valid > res.summary.points / 2);

@@ -88,7 +88,14 @@ pub fn run(args: &AnalyzeArgs) -> Result<()> {
         writeln!(out, "{doc}")?;
     } else {
         let s = &summary;
-        writeln!(out, "{} points, {} valid, {:.3} s ({:.0} POI/s)", s.points, s.valid, elapsed_s, s.points as f64 / elapsed_s)?;
+        writeln!(
+            out,
+            "{} points, {} valid, {:.3} s ({:.0} POI/s)",
+            s.points,
+            s.valid,
+            elapsed_s,
+            s.points as f64 / elapsed_s
+        )?;
         for (name, st, scale, unit) in [
             ("u", s.u, 1.0, "px"),
             ("v", s.v, 1.0, "px"),
@@ -130,7 +137,16 @@ fn write_outputs(dir: &Path, result: &DicResult, args: &AnalyzeArgs) -> Result<(
     for p in &result.points {
         csv.push_str(&format!(
             "{},{},{},{},{},{},{},{},{},{}\n",
-            p.x, p.y, p.u, p.v, p.exx, p.eyy, p.exy, p.zncc, p.iterations, p.status.as_str()
+            p.x,
+            p.y,
+            p.u,
+            p.v,
+            p.exx,
+            p.eyy,
+            p.exy,
+            p.zncc,
+            p.iterations,
+            p.status.as_str()
         ));
     }
     write_atomic(&dir.join("points.csv"), csv.as_bytes())?;

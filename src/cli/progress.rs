@@ -12,9 +12,11 @@ impl ProgressBar {
         }
         let bar = indicatif::ProgressBar::new(0);
         bar.set_style(
-            indicatif::ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} ({per_sec}, {eta})")
-                .expect("static template")
-                .progress_chars("=> "),
+            indicatif::ProgressStyle::with_template(
+                "{msg} [{bar:40}] {pos}/{len} ({per_sec}, {eta})",
+            )
+            .expect("static template")
+            .progress_chars("=> "),
         );
         bar.set_message(message);
         Self(Some(bar))

@@ -9,6 +9,7 @@
 //! correlation caused by intensity interpolation", Opt. Eng. 39 (2000)).
 
 use crate::image::Image;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// The interpolation kernel used for sub-pixel grey values.
@@ -87,31 +88,21 @@ impl BSplineImage {
         let (w, h) = (image.width(), image.height());
         let mut c: Vec<f64> = image.data().iter().map(|&v| v as f64).collect();
         let poles = kind.poles();
-        let mut line = vec![0.0f64; w.max(h)];
-        for row in c.chunks_exact_mut(w) {
-            line[..w].copy_from_slice(row);
-            prefilter_line(&mut line[..w], poles);
-            row.copy_from_slice(&line[..w]);
-        }
-        for col in 0..w {
-            for r in 0..h {
-                line[r] = c[r * w + col];
-            }
-            prefilter_line(&mut line[..h], poles);
-            for r in 0..h {
-                c[r * w + col] = line[r];
-            }
-        }
+        c.par_chunks_mut(w)
+            .for_each(|row| prefilter_line(row, poles));
+        prefilter_columns(&mut c, w, h, poles);
         let stride = w + 2 * PAD;
         let padded_h = h + 2 * PAD;
         let mut coeffs = vec![0.0f32; stride * padded_h];
-        for pr in 0..padded_h {
-            let r = mirror(pr as isize - PAD as isize, h);
-            for pc in 0..stride {
-                let col = mirror(pc as isize - PAD as isize, w);
-                coeffs[pr * stride + pc] = c[r * w + col] as f32;
-            }
-        }
+        coeffs
+            .par_chunks_mut(stride)
+            .enumerate()
+            .for_each(|(pr, out)| {
+                let r = mirror(pr as isize - PAD as isize, h);
+                for (pc, o) in out.iter_mut().enumerate() {
+                    *o = c[r * w + mirror(pc as isize - PAD as isize, w)] as f32;
+                }
+            });
         Self {
             kind,
             width: w,
@@ -182,7 +173,13 @@ impl BSplineImage {
                 [0.0, 0.5, 0.0, -0.5, 0.0],
             ),
             Interpolation::Bspline5 => (
-                [1.0 / 120.0, 13.0 / 60.0, 11.0 / 20.0, 13.0 / 60.0, 1.0 / 120.0],
+                [
+                    1.0 / 120.0,
+                    13.0 / 60.0,
+                    11.0 / 20.0,
+                    13.0 / 60.0,
+                    1.0 / 120.0,
+                ],
                 [1.0 / 24.0, 5.0 / 12.0, 0.0, -5.0 / 12.0, -1.0 / 24.0],
             ),
         }
@@ -197,32 +194,38 @@ impl BSplineImage {
         // Along x: d[r][col] = Σ_s der(s) c[r][col - s], v[r][col] = Σ_s val(s) c[r][col - s].
         let mut dx_rows = vec![0.0f64; padded_h * w];
         let mut vx_rows = vec![0.0f64; padded_h * w];
-        for r in 0..padded_h {
-            for col in 0..w {
-                let (mut d, mut v) = (0.0, 0.0);
-                for (k, (&vk, &dk)) in val.iter().zip(&der).enumerate() {
-                    let c = self.coeffs[r * stride + col + PAD + 2 - k] as f64;
-                    d += dk * c;
-                    v += vk * c;
+        dx_rows
+            .par_chunks_mut(w)
+            .zip(vx_rows.par_chunks_mut(w))
+            .enumerate()
+            .for_each(|(r, (drow, vrow))| {
+                let crow = &self.coeffs[r * stride..(r + 1) * stride];
+                for col in 0..w {
+                    let (mut d, mut v) = (0.0, 0.0);
+                    for (k, (&vk, &dk)) in val.iter().zip(&der).enumerate() {
+                        let c = crow[col + PAD + 2 - k] as f64;
+                        d += dk * c;
+                        v += vk * c;
+                    }
+                    drow[col] = d;
+                    vrow[col] = v;
                 }
-                dx_rows[r * w + col] = d;
-                vx_rows[r * w + col] = v;
-            }
-        }
+            });
         let mut gx = vec![0.0f32; w * h];
         let mut gy = vec![0.0f32; w * h];
-        for row in 0..h {
-            for col in 0..w {
-                let (mut a, mut b) = (0.0, 0.0);
+        gx.par_chunks_mut(w)
+            .zip(gy.par_chunks_mut(w))
+            .enumerate()
+            .for_each(|(row, (gxr, gyr))| {
                 for (k, (&vk, &dk)) in val.iter().zip(&der).enumerate() {
                     let r = row + PAD + 2 - k;
-                    a += vk * dx_rows[r * w + col];
-                    b += dk * vx_rows[r * w + col];
+                    let (drow, vrow) = (&dx_rows[r * w..(r + 1) * w], &vx_rows[r * w..(r + 1) * w]);
+                    for col in 0..w {
+                        gxr[col] += (vk * drow[col]) as f32;
+                        gyr[col] += (dk * vrow[col]) as f32;
+                    }
                 }
-                gx[row * w + col] = a as f32;
-                gy[row * w + col] = b as f32;
-            }
-        }
+            });
         (gx, gy)
     }
 
@@ -299,7 +302,7 @@ fn sum_taps<const N: usize>(
 }
 
 /// Whole-sample mirror of index `i` into 0..n.
-fn mirror(i: isize, n: usize) -> usize {
+pub(crate) fn mirror(i: isize, n: usize) -> usize {
     if n == 1 {
         return 0;
     }
@@ -331,9 +334,67 @@ fn prefilter_line(c: &mut [f64], poles: &[f64]) {
     }
 }
 
+/// The prefilter along columns, run on whole rows at a time so the recursions vectorise across
+/// columns (same arithmetic as [`prefilter_line`]).
+fn prefilter_columns(c: &mut [f64], w: usize, h: usize, poles: &[f64]) {
+    if h < 2 {
+        return;
+    }
+    let gain: f64 = poles.iter().map(|&z| (1.0 - z) * (1.0 - 1.0 / z)).product();
+    c.par_iter_mut().for_each(|v| *v *= gain);
+    let mut col = vec![0.0f64; h];
+    for &z in poles {
+        let horizon = causal_horizon(z);
+        let first: Vec<f64> = if horizon < h {
+            // Truncated sum Σ z^k c[k], accumulated row by row across all columns.
+            let mut acc = vec![0.0f64; w];
+            let mut zk = 1.0;
+            for r in 0..horizon {
+                for (a, &v) in acc.iter_mut().zip(&c[r * w..(r + 1) * w]) {
+                    *a += zk * v;
+                }
+                zk *= z;
+            }
+            acc
+        } else {
+            (0..w)
+                .map(|x| {
+                    for (r, v) in col.iter_mut().enumerate() {
+                        *v = c[r * w + x];
+                    }
+                    initial_causal(&col, z)
+                })
+                .collect()
+        };
+        c[..w].copy_from_slice(&first);
+        for r in 1..h {
+            let (prev, cur) = c[(r - 1) * w..(r + 1) * w].split_at_mut(w);
+            for (a, &b) in cur.iter_mut().zip(prev.iter()) {
+                *a += z * b;
+            }
+        }
+        let k = z / (z * z - 1.0);
+        let (prev, last) = c[(h - 2) * w..h * w].split_at_mut(w);
+        for (a, &b) in last.iter_mut().zip(prev.iter()) {
+            *a = k * (z * b + *a);
+        }
+        for r in (0..h - 1).rev() {
+            let (cur, next) = c[r * w..(r + 2) * w].split_at_mut(w);
+            for (a, &b) in cur.iter_mut().zip(next.iter()) {
+                *a = z * (b - *a);
+            }
+        }
+    }
+}
+
+/// Terms after which z^k is below machine precision.
+fn causal_horizon(z: f64) -> usize {
+    ((f64::EPSILON.ln() / z.abs().ln()).ceil() as usize).max(1)
+}
+
 fn initial_causal(c: &[f64], z: f64) -> f64 {
     let n = c.len();
-    let horizon = ((f64::EPSILON.ln() / z.abs().ln()).ceil() as usize).max(1);
+    let horizon = causal_horizon(z);
     if horizon < n {
         let mut zn = z;
         let mut sum = c[0];
@@ -348,7 +409,7 @@ fn initial_causal(c: &[f64], z: f64) -> f64 {
         let iz = 1.0 / z;
         let mut z2n = z.powi(n as i32 - 1);
         let mut sum = c[0] + z2n * c[n - 1];
-        z2n *= z2n * iz;
+        z2n = z2n * z2n * iz;
         for &v in &c[1..n - 1] {
             sum += (zn + z2n) * v;
             zn *= z;
@@ -384,6 +445,25 @@ mod tests {
     }
 
     #[test]
+    fn column_prefilter_matches_line_prefilter() {
+        for h in [3usize, 20, 64] {
+            let w = 5;
+            let data: Vec<f64> = (0..w * h).map(|k| ((k * 37) % 11) as f64).collect();
+            for kind in [Interpolation::Bspline3, Interpolation::Bspline5] {
+                let mut by_rows = data.clone();
+                prefilter_columns(&mut by_rows, w, h, kind.poles());
+                for x in 0..w {
+                    let mut col: Vec<f64> = (0..h).map(|r| data[r * w + x]).collect();
+                    prefilter_line(&mut col, kind.poles());
+                    for r in 0..h {
+                        assert!((col[r] - by_rows[r * w + x]).abs() < 1e-9, "h={h} {kind:?}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
     fn weights_sum_to_one() {
         for k in 0..=20 {
             let t = k as f32 / 20.0;
@@ -397,7 +477,10 @@ mod tests {
     fn smooth_function_is_reproduced_between_samples() {
         let f = |x: f64, y: f64| 100.0 + 50.0 * (0.2 * x).sin() * (0.15 * y).cos();
         let img = Image::from_fn(64, 64, |c, r| f(c as f64, r as f64) as f32);
-        for (kind, tol) in [(Interpolation::Bspline3, 0.02), (Interpolation::Bspline5, 0.005)] {
+        for (kind, tol) in [
+            (Interpolation::Bspline3, 0.02),
+            (Interpolation::Bspline5, 0.005),
+        ] {
             let bs = BSplineImage::new(&img, kind);
             for k in 0..=10 {
                 let s = k as f64 / 10.0;

@@ -1,13 +1,14 @@
 //! One analysis: prepare the reference once (interpolation coefficients, gradients, grid), then
 //! correlate any number of deformed images against it, in parallel over grid rows.
 //!
-//! Initial guesses: a global phase correlation gives the integer rigid offset; every point then
-//! refines its own integer displacement by a ZNCC search — around the global offset for the first
-//! point of a grid row, around the prediction from its converged left neighbour (the affine field
-//! moved by one step) for the others, in the spirit of reliability-guided propagation (Pan,
-//! "Reliability-guided digital image correlation for image deformation measurement", Appl. Opt. 48
-//! (2009)). When the integer refinement agrees with the neighbour's prediction IC-GN starts from the
-//! sub-pixel prediction, which usually converges in one or two iterations.
+//! Initial guesses: a global phase correlation gives the integer rigid offset. The first point of
+//! each grid row refines its own integer displacement by a ZNCC search around that offset; every
+//! further point starts IC-GN from the prediction of its converged left neighbour (the affine
+//! field moved by one step), in the spirit of reliability-guided propagation (Pan,
+//! "Reliability-guided digital image correlation for image deformation measurement", Appl. Opt.
+//! 48 (2009)). When that start does not converge to a good correlation — a discontinuity, a
+//! neighbour gone wrong — the point falls back to its own integer search, so no point inherits
+//! an error it cannot check.
 //!
 //! Rows are independent tasks processed left to right, so the result does not depend on the
 //! number of threads.
@@ -15,8 +16,8 @@
 use super::bspline::BSplineImage;
 use super::fft_guess::global_offset;
 use super::icgn::{Scratch, SubsetReference};
-use super::prefilter::gaussian_blur;
 use super::integer_search::integer_search;
+use super::prefilter::gaussian_blur;
 use super::strain::compute_strains;
 use super::{DicError, DicResult, DicSettings, PoiGrid, PoiResult, PoiStatus, Summary, Warp};
 use crate::image::Image;
@@ -124,7 +125,8 @@ impl PreparedReference {
         for &x0 in &self.grid.xs {
             let (x, y) = (x0 as f64, y0 as f64);
             let predicted = previous.map(|w| w.moved_by(s.step_px as f64, 0.0));
-            let result = self.correlate_point((x0, y0), deformed, def_spline, offset, predicted, scratch);
+            let result =
+                self.correlate_point((x0, y0), deformed, def_spline, offset, predicted, scratch);
             previous = match result.status {
                 PoiStatus::Converged => Some(Warp {
                     u: result.u,
@@ -154,24 +156,46 @@ impl PreparedReference {
         let s = &self.settings;
         let half = s.half_subset();
         let (x, y) = (x0 as f64, y0 as f64);
-        let Some(sref) =
-            SubsetReference::prepare(&self.image, &self.grad_x, &self.grad_y, (x0, y0), half, scratch)
-        else {
+        let Some(sref) = SubsetReference::prepare(
+            &self.image,
+            &self.grad_x,
+            &self.grad_y,
+            (x0, y0),
+            half,
+            scratch,
+        ) else {
             return PoiResult::invalid(x, y, PoiStatus::NoContrast, f64::NAN, 0);
         };
-        let (centre, radius) = match predicted {
-            Some(p) => ((p.u.round() as i64, p.v.round() as i64), 1),
-            None => (offset, s.search_radius_px as i64),
+        // A converged neighbour's prediction is usually within a few thousandths of a pixel:
+        // IC-GN starts from it directly. Points without one, and points whose propagated start
+        // does not converge to a good correlation, get the integer ZNCC search.
+        let propagated = predicted
+            .map(|p| sref.solve(def_spline, p, s.convergence_px, s.max_iterations, scratch));
+        let outcome = match propagated {
+            Some(o) if o.status == PoiStatus::Converged && o.zncc >= s.min_zncc => o,
+            _ => {
+                let centre = predicted.map_or(offset, |p| (p.u.round() as i64, p.v.round() as i64));
+                let Some(best) = integer_search(
+                    &scratch.f0,
+                    sref.df,
+                    deformed,
+                    (x0, y0),
+                    half,
+                    centre,
+                    s.search_radius_px as i64,
+                ) else {
+                    return PoiResult::invalid(x, y, PoiStatus::LeftImage, f64::NAN, 0);
+                };
+                let start = Warp::translation(best.u as f64, best.v as f64);
+                sref.solve(
+                    def_spline,
+                    start,
+                    s.convergence_px,
+                    s.max_iterations,
+                    scratch,
+                )
+            }
         };
-        let Some(best) = integer_search(&scratch.f0, sref.df, deformed, (x0, y0), half, centre, radius)
-        else {
-            return PoiResult::invalid(x, y, PoiStatus::LeftImage, f64::NAN, 0);
-        };
-        let start = match predicted {
-            Some(p) if (best.u, best.v) == centre => p,
-            _ => Warp::translation(best.u as f64, best.v as f64),
-        };
-        let outcome = sref.solve(def_spline, start, s.convergence_px, s.max_iterations, scratch);
         let status = match outcome.status {
             PoiStatus::Converged if !(outcome.zncc >= s.min_zncc) => PoiStatus::LowCorrelation,
             other => other,

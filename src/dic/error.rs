@@ -20,7 +20,9 @@ pub enum DicError {
     },
     #[error("subset of {subset_px} px is larger than the ROI {roi}")]
     SubsetLargerThanRoi { subset_px: usize, roi: Roi },
-    #[error("no subset of {subset_px} px centred in ROI {roi} fits inside the {width}x{height} image")]
+    #[error(
+        "no subset of {subset_px} px centred in ROI {roi} fits inside the {width}x{height} image"
+    )]
     NoPointFits {
         subset_px: usize,
         roi: Roi,

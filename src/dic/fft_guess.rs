@@ -8,6 +8,7 @@
 //! direction is found without circular wrap-around.
 
 use crate::image::{Image, Roi};
+use rayon::prelude::*;
 use rustfft::num_complex::Complex;
 use rustfft::FftPlanner;
 
@@ -16,7 +17,12 @@ const MAX_WINDOW_PX: usize = 384;
 
 /// Integer (dx, dy) such that reference content at p appears at p + (dx, dy) in `deformed`.
 /// Returns (0, 0) for images without texture.
-pub fn global_offset(reference: &Image, deformed: &Image, roi: Roi, max_motion_px: usize) -> (i64, i64) {
+pub fn global_offset(
+    reference: &Image,
+    deformed: &Image,
+    roi: Roi,
+    max_motion_px: usize,
+) -> (i64, i64) {
     // The window is centred on the ROI but may extend beyond it: the rigid offset is a property
     // of the image pair, and a small template gives a noisy correlation peak.
     let (cx, cy) = (roi.x + roi.width / 2, roi.y + roi.height / 2);
@@ -73,7 +79,11 @@ pub fn global_offset(reference: &Image, deformed: &Image, roi: Roi, max_motion_p
     for (x, y) in a.iter_mut().zip(&b) {
         let cross = x.conj() * y;
         let mag = cross.norm().sqrt();
-        *x = if mag > 1e-20 { cross / mag } else { Complex::new(0.0, 0.0) };
+        *x = if mag > 1e-20 {
+            cross / mag
+        } else {
+            Complex::new(0.0, 0.0)
+        };
     }
     fft2d(&mut planner, &mut a, l, true);
 
@@ -88,16 +98,21 @@ pub fn global_offset(reference: &Image, deformed: &Image, roi: Roi, max_motion_p
     (sx - m as i64, sy - m as i64)
 }
 
-/// In-place 2D FFT of an n x n row-major array (rows, then columns through a transpose).
+/// In-place 2D FFT of an n x n row-major array (rows in parallel, then columns through a
+/// transpose).
 fn fft2d(planner: &mut FftPlanner<f32>, data: &mut [Complex<f32>], n: usize, inverse: bool) {
     let fft = if inverse {
         planner.plan_fft_inverse(n)
     } else {
         planner.plan_fft_forward(n)
     };
-    fft.process(data);
+    let rows = |data: &mut [Complex<f32>]| {
+        data.par_chunks_mut(n * 16)
+            .for_each(|chunk| fft.process(chunk));
+    };
+    rows(data);
     transpose(data, n);
-    fft.process(data);
+    rows(data);
     transpose(data, n);
 }
 
@@ -111,16 +126,17 @@ fn transpose(data: &mut [Complex<f32>], n: usize) {
 
 /// Smallest length >= n whose only prime factors are 2, 3 and 5.
 fn fast_fft_len(n: usize) -> usize {
-    (n..).find(|&m| {
-        let mut k = m;
-        for p in [2, 3, 5] {
-            while k % p == 0 {
-                k /= p;
+    (n..)
+        .find(|&m| {
+            let mut k = m;
+            for p in [2, 3, 5] {
+                while k % p == 0 {
+                    k /= p;
+                }
             }
-        }
-        k == 1
-    })
-    .expect("a 5-smooth number always exists")
+            k == 1
+        })
+        .expect("a 5-smooth number always exists")
 }
 
 #[cfg(test)]
@@ -140,7 +156,15 @@ mod tests {
     #[test]
     fn finds_150_px_in_every_direction() {
         let reference = texture(900, 800, 0, 0);
-        for (dx, dy) in [(150, 0), (-150, 0), (0, 150), (0, -150), (150, -150), (-149, 148), (3, -2)] {
+        for (dx, dy) in [
+            (150, 0),
+            (-150, 0),
+            (0, 150),
+            (0, -150),
+            (150, -150),
+            (-149, 148),
+            (3, -2),
+        ] {
             let deformed = texture(900, 800, dx, dy);
             let roi = Roi::centred(900, 800, 400, 400);
             assert_eq!(global_offset(&reference, &deformed, roi, 160), (dx, dy));

@@ -112,6 +112,9 @@ mod tests {
             roi: Some(Roi::new(600, 10, 50, 50)),
             ..DicSettings::default()
         };
-        assert!(matches!(PoiGrid::new(&s, 512, 512), Err(DicError::RoiOutside { .. })));
+        assert!(matches!(
+            PoiGrid::new(&s, 512, 512),
+            Err(DicError::RoiOutside { .. })
+        ));
     }
 }

@@ -156,12 +156,8 @@ impl SubsetReference {
         let mut zncc = f64::NAN;
         for iteration in 1..=max_iterations {
             let inside = match deformed.kind() {
-                Interpolation::Bspline3 => {
-                    warp_subset::<4>(deformed, self, &warp, &mut scratch.g)
-                }
-                Interpolation::Bspline5 => {
-                    warp_subset::<6>(deformed, self, &warp, &mut scratch.g)
-                }
+                Interpolation::Bspline3 => warp_subset::<4>(deformed, self, &warp, &mut scratch.g),
+                Interpolation::Bspline5 => warp_subset::<6>(deformed, self, &warp, &mut scratch.g),
             };
             if !inside {
                 return IcgnOutcome {
@@ -199,7 +195,8 @@ impl SubsetReference {
                 let range = r * side..(r + 1) * side;
                 let (f0, g) = (&scratch.f0[range.clone()], &scratch.g[range.clone()]);
                 let (gx, gy) = (&scratch.gx[range.clone()], &scratch.gy[range]);
-                let (mut a0, mut a1, mut b0, mut b1, mut s) = (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
+                let (mut a0, mut a1, mut b0, mut b1, mut s) =
+                    (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
                 for i in 0..side {
                     let res = f0[i] - k * g[i] + offset;
                     let dx = scratch.dxs[i];
@@ -294,7 +291,13 @@ fn warp_subset<const N: usize>(
             *o = if N == 4 {
                 taps4(coeffs, base, stride, &cubic_weights(tx), &cubic_weights(ty))
             } else {
-                taps6(coeffs, base, stride, &quintic_weights(tx), &quintic_weights(ty))
+                taps6(
+                    coeffs,
+                    base,
+                    stride,
+                    &quintic_weights(tx),
+                    &quintic_weights(ty),
+                )
             };
         }
     }
@@ -308,25 +311,37 @@ fn floor_i32(x: f32) -> i32 {
     t - ((x < t as f32) as i32)
 }
 
+/// Σ_j wy_j Σ_i wx_i c[j][i] over a 4x4 tap block. Each tap row is 4 contiguous floats, summed
+/// column-wise first so the compiler keeps the four rows in one vector register.
 #[inline(always)]
 fn taps4(c: &[f32], base: usize, stride: usize, wx: &[f32; 4], wy: &[f32; 4]) -> f32 {
-    let row = |k: usize| {
-        let s = &c[base + k * stride..base + k * stride + 4];
-        wx[0] * s[0] + wx[1] * s[1] + wx[2] * s[2] + wx[3] * s[3]
+    let row = |k: usize| -> [f32; 4] {
+        c[base + k * stride..base + k * stride + 4]
+            .try_into()
+            .expect("4 taps")
     };
-    wy[0] * row(0) + wy[1] * row(1) + wy[2] * row(2) + wy[3] * row(3)
+    let (r0, r1, r2, r3) = (row(0), row(1), row(2), row(3));
+    let mut col = [0.0f32; 4];
+    for i in 0..4 {
+        col[i] = wy[0] * r0[i] + wy[1] * r1[i] + wy[2] * r2[i] + wy[3] * r3[i];
+    }
+    (col[0] * wx[0] + col[1] * wx[1]) + (col[2] * wx[2] + col[3] * wx[3])
 }
 
 #[inline(always)]
 fn taps6(c: &[f32], base: usize, stride: usize, wx: &[f32; 6], wy: &[f32; 6]) -> f32 {
-    let row = |k: usize| {
-        let s = &c[base + k * stride..base + k * stride + 6];
-        wx[0] * s[0] + wx[1] * s[1] + wx[2] * s[2] + wx[3] * s[3] + wx[4] * s[4] + wx[5] * s[5]
-    };
-    wy[0] * row(0) + wy[1] * row(1) + wy[2] * row(2) + wy[3] * row(3) + wy[4] * row(4) + wy[5] * row(5)
+    let mut col = [0.0f32; 6];
+    for (j, &wyj) in wy.iter().enumerate() {
+        let row = &c[base + j * stride..base + j * stride + 6];
+        for i in 0..6 {
+            col[i] += wyj * row[i];
+        }
+    }
+    col.iter().zip(wx).map(|(a, b)| a * b).sum()
 }
 
 /// Cholesky factor L (lower) of a symmetric positive-definite 6x6 matrix; None if not SPD.
+#[allow(clippy::needless_range_loop)] // index form mirrors the textbook recurrences
 fn cholesky(a: &[[f64; 6]; 6]) -> Option<[[f64; 6]; 6]> {
     let mut l = [[0.0f64; 6]; 6];
     for i in 0..6 {
@@ -349,6 +364,7 @@ fn cholesky(a: &[[f64; 6]; 6]) -> Option<[[f64; 6]; 6]> {
     Some(l)
 }
 
+#[allow(clippy::needless_range_loop)]
 fn cholesky_solve(l: &[[f64; 6]; 6], b: &[f64; 6]) -> [f64; 6] {
     let mut y = [0.0f64; 6];
     for i in 0..6 {
@@ -374,6 +390,7 @@ mod tests {
     use super::*;
 
     #[test]
+    #[allow(clippy::needless_range_loop)]
     fn cholesky_solves_spd_system() {
         let mut a = [[0.0f64; 6]; 6];
         for i in 0..6 {

@@ -72,7 +72,7 @@ mod tests {
 
     #[test]
     fn finds_an_integer_shift() {
-        let tex = |x: i64, y: i64| (((x * 37 + y * 91) % 17) as f32 + ((x * x + 3 * y) % 5) as f32);
+        let tex = |x: i64, y: i64| ((x * 37 + y * 91) % 17) as f32 + ((x * x + 3 * y) % 5) as f32;
         let reference = Image::from_fn(80, 80, |c, r| tex(c as i64, r as i64));
         let deformed = Image::from_fn(80, 80, |c, r| tex(c as i64 - 3, r as i64 + 2));
         let half = 5;

@@ -5,7 +5,9 @@
 //! (zero at whole and half pixels, largest near a quarter). A light Gaussian applied to both images
 //! equalises them and also damps the interpolation error of high frequencies.
 
+use super::bspline::mirror;
 use crate::image::Image;
+use rayon::prelude::*;
 
 /// Separable Gaussian blur with kernel radius ceil(3σ) and mirrored borders; σ ≤ 0 is a copy.
 pub fn gaussian_blur(image: &Image, sigma_px: f64) -> Image {
@@ -18,41 +20,37 @@ pub fn gaussian_blur(image: &Image, sigma_px: f64) -> Image {
         .collect();
     let total: f64 = kernel.iter().sum();
     kernel.iter_mut().for_each(|k| *k /= total);
+    let kernel: Vec<f32> = kernel.iter().map(|&k| k as f32).collect();
     let (w, h) = (image.width(), image.height());
-    let mirror = |i: isize, n: usize| -> usize {
-        let n = n as isize;
-        let mut k = i;
-        if k < 0 {
-            k = -k;
-        }
-        if k >= n {
-            k = 2 * (n - 1) - k;
-        }
-        k.clamp(0, n - 1) as usize
-    };
+    let r = radius as usize;
+    // Horizontal pass, row-parallel, on a mirror-padded copy of each row.
     let src = image.data();
     let mut tmp = vec![0.0f32; w * h];
-    for r in 0..h {
-        for c in 0..w {
-            let mut acc = 0.0f64;
-            for (k, &kv) in kernel.iter().enumerate() {
-                let cc = mirror(c as isize + k as isize - radius, w);
-                acc += kv * src[r * w + cc] as f64;
+    tmp.par_chunks_mut(w).enumerate().for_each_init(
+        || vec![0.0f32; w + 2 * r],
+        |line, (row, out)| {
+            for (i, v) in line.iter_mut().enumerate() {
+                *v = src[row * w + mirror(i as isize - radius, w)];
             }
-            tmp[r * w + c] = acc as f32;
-        }
-    }
+            for (c, o) in out.iter_mut().enumerate() {
+                *o = kernel
+                    .iter()
+                    .zip(&line[c..c + 2 * r + 1])
+                    .map(|(k, v)| k * v)
+                    .sum();
+            }
+        },
+    );
+    // Vertical pass: each output row is a weighted sum of whole input rows (vectorises).
     let mut out = vec![0.0f32; w * h];
-    for r in 0..h {
-        for c in 0..w {
-            let mut acc = 0.0f64;
-            for (k, &kv) in kernel.iter().enumerate() {
-                let rr = mirror(r as isize + k as isize - radius, h);
-                acc += kv * tmp[rr * w + c] as f64;
+    out.par_chunks_mut(w).enumerate().for_each(|(row, o)| {
+        for (k, &kv) in kernel.iter().enumerate() {
+            let rr = mirror(row as isize + k as isize - radius, h);
+            for (dst, &s) in o.iter_mut().zip(&tmp[rr * w..(rr + 1) * w]) {
+                *dst += kv * s;
             }
-            out[r * w + c] = acc as f32;
         }
-    }
+    });
     Image::from_vec(w, h, out).expect("same shape")
 }
 

@@ -58,7 +58,10 @@ impl DicSettings {
         if self.subset_px < 5 || self.subset_px % 2 == 0 {
             return bad(
                 "subset",
-                format!("subset size must be odd and at least 5, got {}", self.subset_px),
+                format!(
+                    "subset size must be odd and at least 5, got {}",
+                    self.subset_px
+                ),
             );
         }
         if self.step_px == 0 {
@@ -107,11 +110,9 @@ impl DicSettings {
                 DEFAULT_ROI_SIDE_PX,
                 DEFAULT_ROI_SIDE_PX,
             )),
-            Some(roi) => roi.clip(width, height).ok_or(DicError::RoiOutside {
-                roi,
-                width,
-                height,
-            }),
+            Some(roi) => roi
+                .clip(width, height)
+                .ok_or(DicError::RoiOutside { roi, width, height }),
         }
     }
 }

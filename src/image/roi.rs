@@ -83,7 +83,10 @@ mod tests {
     #[test]
     fn centred_roi_is_clipped_to_small_images() {
         assert_eq!(Roi::centred(512, 512, 800, 800), Roi::new(0, 0, 512, 512));
-        assert_eq!(Roi::centred(1280, 1080, 800, 800), Roi::new(240, 140, 800, 800));
+        assert_eq!(
+            Roi::centred(1280, 1080, 800, 800),
+            Roi::new(240, 140, 800, 800)
+        );
     }
 
     #[test]
@@ -96,7 +99,10 @@ mod tests {
 
     #[test]
     fn clip_keeps_the_inside() {
-        assert_eq!(Roi::new(10, 10, 100, 100).clip(50, 60), Some(Roi::new(10, 10, 40, 50)));
+        assert_eq!(
+            Roi::new(10, 10, 100, 100).clip(50, 60),
+            Some(Roi::new(10, 10, 40, 50))
+        );
         assert_eq!(Roi::new(60, 10, 10, 10).clip(50, 60), None);
     }
 }

@@ -126,7 +126,6 @@ fn write_atomically(
     result
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -172,7 +172,10 @@ mod tests {
         let img = render_dots(40, 40, &[dot], 0.0, (1.0, 1.0));
         let total: f64 = img.data().iter().map(|&v| -v as f64).sum();
         let expect = 100.0 * 2.0 * std::f64::consts::PI * 2.0 * 1.5;
-        assert!((total - expect).abs() / expect < 1e-5, "{total} vs {expect}");
+        assert!(
+            (total - expect).abs() / expect < 1e-5,
+            "{total} vs {expect}"
+        );
     }
 
     #[test]
