@@ -22,7 +22,17 @@ enum Command {
 }
 
 fn main() {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(err) if !err.use_stderr() => err.exit(), // --help, --version
+        Err(err) => {
+            // One line, like every other error of this binary.
+            let text = err.render().to_string();
+            let first = text.lines().next().unwrap_or("invalid arguments");
+            eprintln!("{first}");
+            std::process::exit(2);
+        }
+    };
     let outcome = match &cli.command {
         Command::Analyze(args) => cli::analyze::run(args),
     };

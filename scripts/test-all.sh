@@ -1,0 +1,30 @@
+#!/usr/bin/env bash
+# The whole test suite, as CI runs it. Installs what the suite needs on a fresh Debian machine
+# (as root; nothing is installed when everything is already there), then: format check, clippy
+# with every feature and target, all tests in the optimised test profile, and a benchmark build.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+# Debian packages the features need; empty until a feature needs a system library.
+APT_PACKAGES=()
+missing=()
+for pkg in "${APT_PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "installing: ${missing[*]}"
+  export DEBIAN_FRONTEND=noninteractive
+  apt-get update -qq
+  apt-get install -y -qq "${missing[@]}"
+fi
+
+{ cargo fmt --version && cargo clippy --version; } >/dev/null 2>&1 || rustup component add rustfmt clippy
+
+echo "== cargo fmt --check"
+cargo fmt --all --check
+echo "== cargo clippy"
+cargo clippy --all-targets --all-features -- -D warnings
+echo "== cargo test"
+cargo test --all-features --workspace
+echo "== benchmarks compile (they are run by hand: cargo bench)"
+cargo bench --no-run --quiet

@@ -1,0 +1,170 @@
+//! `ffdic analyze` as a user runs it: JSON on stdout, files in --out, one-line errors.
+
+mod common;
+
+use ffdic::image::{write_tiff_u16, Image};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn ffdic(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_ffdic"))
+        .args(args)
+        .output()
+        .expect("run ffdic")
+}
+
+fn sample3(name: &str) -> String {
+    common::shared_data()
+        .join("dic-challenge-1/sample3")
+        .join(name)
+        .to_string_lossy()
+        .into_owned()
+}
+
+fn stderr_line(out: &Output) -> String {
+    let s = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(
+        s.trim_end().lines().count(),
+        1,
+        "one-line error expected, got: {s}"
+    );
+    assert!(!s.contains("panicked"), "{s}");
+    s
+}
+
+#[test]
+fn json_document_has_the_documented_shape() {
+    let out = ffdic(&[
+        "analyze",
+        &sample3("reference.tif"),
+        &sample3("shift_05.tif"),
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(out.stderr.is_empty(), "nothing but JSON when --json");
+    let doc: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON document");
+    assert_eq!(doc["points"], 576);
+    assert_eq!(doc["valid"], 576);
+    for field in ["u", "v", "exx", "eyy", "exy"] {
+        for stat in ["mean", "std", "min", "max"] {
+            assert!(doc[field][stat].is_f64(), "{field}.{stat}");
+        }
+    }
+    assert!((doc["u"]["mean"].as_f64().unwrap() - 0.5).abs() < 0.002);
+    assert!(doc["elapsed_s"].as_f64().unwrap() > 0.0);
+    assert_eq!(doc["settings"]["dic"]["subset_px"], 41);
+    assert_eq!(doc["settings"]["strain_gauge_px"], 161);
+}
+
+#[test]
+fn out_folder_gets_points_and_settings() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_dir = dir.path().join("res");
+    let out = ffdic(&[
+        "analyze",
+        &sample3("reference.tif"),
+        &sample3("shift_02.tif"),
+        "--subset",
+        "31",
+        "--step",
+        "25",
+        "--roi",
+        "50,60,400,380",
+        "--strain-window",
+        "5",
+        "--interp",
+        "bspline5",
+        "--threads",
+        "1",
+        "--out",
+        out_dir.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let csv = std::fs::read_to_string(out_dir.join("points.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        "x,y,u,v,exx,eyy,exy,zncc,iterations,status"
+    );
+    let rows: Vec<&str> = lines.collect();
+    assert_eq!(rows.len(), 17 * 16);
+    assert!(rows.iter().all(|r| r.ends_with(",converged")));
+    let settings: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out_dir.join("settings.json")).unwrap())
+            .unwrap();
+    assert_eq!(settings["dic"]["subset_px"], 31);
+    assert_eq!(settings["dic"]["interpolation"], "bspline5");
+    assert_eq!(settings["strain_gauge_px"], 4 * 25 + 31);
+    assert_eq!(settings["ffdic_version"], ffdic::VERSION);
+}
+
+fn write_image(dir: &Path, name: &str, w: usize, h: usize) -> PathBuf {
+    let p = dir.join(name);
+    let layout = common::layout(w, h, 5);
+    write_tiff_u16(&p, &common::render(&layout, w, h)).unwrap();
+    p
+}
+
+#[test]
+fn bad_inputs_give_one_line_errors_and_a_failure_exit() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = write_image(dir.path(), "a.tif", 200, 160);
+    let b = write_image(dir.path(), "b.tif", 180, 160);
+    let corrupt = dir.path().join("corrupt.tif");
+    let bytes = std::fs::read(&a).unwrap();
+    std::fs::write(&corrupt, &bytes[..bytes.len() / 3]).unwrap();
+    let (a, b, corrupt) = (
+        a.to_str().unwrap(),
+        b.to_str().unwrap(),
+        corrupt.to_str().unwrap(),
+    );
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec!["analyze", "/nonexistent.tif", a], "cannot open"),
+        (vec!["analyze", a, corrupt], "not a readable TIFF"),
+        (vec!["analyze", a, b], "same size"),
+        (vec!["analyze", a, a, "--roi", "500,10,50,50"], "outside"),
+        (
+            vec!["analyze", a, a, "--roi", "60,60,30,30"],
+            "larger than the ROI",
+        ),
+        (vec!["analyze", a, a, "--subset", "40"], "odd"),
+        (vec!["analyze", a, a, "--strain-window", "4"], "odd"),
+        (vec!["analyze", a, a, "--interp", "linear"], "bspline3"),
+    ];
+    for (args, needle) in cases {
+        let out = ffdic(&args);
+        assert!(!out.status.success(), "{args:?} should fail");
+        let line = stderr_line(&out);
+        assert!(line.contains(needle), "{args:?}: '{line}' lacks '{needle}'");
+        assert!(out.stdout.is_empty());
+    }
+}
+
+#[test]
+fn flat_region_is_a_point_status_not_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let img = Image::filled(200, 160, 1000.0);
+    let p = dir.path().join("flat.tif");
+    write_tiff_u16(&p, &img).unwrap();
+    let out = ffdic(&[
+        "analyze",
+        p.to_str().unwrap(),
+        p.to_str().unwrap(),
+        "--json",
+        "--out",
+        dir.path().join("r").to_str().unwrap(),
+    ]);
+    assert!(out.status.success());
+    let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(doc["valid"], 0);
+    let csv = std::fs::read_to_string(dir.path().join("r/points.csv")).unwrap();
+    assert!(csv.lines().skip(1).all(|l| l.ends_with(",no_contrast")));
+}
