@@ -2,8 +2,16 @@
 //!
 //! Rendering integrates the scene exactly over each pixel's light-sensitive area; it never
 //! interpolates a raster, which would put interpolation bias into the truth the DIC engine is
-//! measured against.
+//! measured against. Effects and their ids follow DESIGN.md ("The model and its effects").
 
+mod config;
+pub mod effects;
+mod pattern;
+mod render;
 mod speckle;
 
+pub use config::{ModelConfig, ModelError};
+pub use effects::{Effects, EFFECT_IDS};
+pub use pattern::{SpecklePattern, TargetDot};
+pub use render::{project, render_frame, Camera, FrameSpec};
 pub use speckle::{render_dots, GaussianDot, SpeckleLayout};

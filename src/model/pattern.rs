@@ -1,0 +1,83 @@
+//! Printed random speckle targets, defined in mm on the target plane.
+//!
+//! A dot is a Gaussian darkening whose full width at half maximum is the dot diameter, softened
+//! by `edge_softness_mm` (a Gaussian blur of the print, variances add). Smooth dots can be
+//! integrated exactly over any pixel aperture (see `speckle.rs`); the price is that "diameter" is
+//! the FWHM of a soft dot rather than the edge of a hard disc.
+
+use serde::{Deserialize, Serialize};
+
+/// FWHM = 2·sqrt(2 ln 2)·σ.
+const FWHM_PER_SIGMA: f64 = 2.354_820_045_030_949;
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SpecklePattern {
+    pub label: String,
+    pub dot_diameter_mm: f64,
+    /// Mean distance between dot centres: one dot per spacing² of target.
+    pub dot_spacing_mm: f64,
+    /// Darkening at a dot centre as a fraction of the white background (1 = black dots).
+    pub contrast: f64,
+    /// Standard deviation of the print's blur, mm.
+    #[serde(default)]
+    pub edge_softness_mm: f64,
+}
+
+/// One dot on the target plane, mm, relative to the optical axis at the reference position.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TargetDot {
+    pub x_mm: f64,
+    pub y_mm: f64,
+    pub sigma_mm: f64,
+    /// Fraction of the background removed at the centre.
+    pub depth: f64,
+}
+
+impl SpecklePattern {
+    /// The paper's patterns (Hijazi et al., Fig. 3): `a` 0.5 mm dots at 0.75 mm, `b` 0.24 mm dots
+    /// at 0.36 mm, both black on white; `c` a defocused, low-contrast print of `a`.
+    pub fn preset(label: &str) -> Option<Self> {
+        let p = |d: f64, s: f64, c: f64, soft: f64| SpecklePattern {
+            label: label.to_string(),
+            dot_diameter_mm: d,
+            dot_spacing_mm: s,
+            contrast: c,
+            edge_softness_mm: soft,
+        };
+        match label {
+            "a" => Some(p(0.5, 0.75, 0.85, 0.02)),
+            "b" => Some(p(0.24, 0.36, 0.85, 0.02)),
+            "c" => Some(p(0.5, 0.75, 0.35, 0.2)),
+            _ => None,
+        }
+    }
+
+    /// σ of one dot's Gaussian profile, mm.
+    pub fn sigma_mm(&self) -> f64 {
+        ((self.dot_diameter_mm / FWHM_PER_SIGMA).powi(2) + self.edge_softness_mm.powi(2)).sqrt()
+    }
+
+    /// Dots covering the rectangle [x0, x1] x [y0, y1] mm on a jittered lattice (one dot per
+    /// cell, uniformly placed within it, depth ±15 %), reproducible from `seed`.
+    pub fn dots(&self, (x0, y0, x1, y1): (f64, f64, f64, f64), seed: u64) -> Vec<TargetDot> {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let s = self.dot_spacing_mm;
+        let nx = ((x1 - x0) / s).ceil() as usize;
+        let ny = ((y1 - y0) / s).ceil() as usize;
+        let sigma = self.sigma_mm();
+        let mut dots = Vec::with_capacity(nx * ny);
+        for j in 0..ny {
+            for i in 0..nx {
+                dots.push(TargetDot {
+                    x_mm: x0 + (i as f64 + rng.gen::<f64>()) * s,
+                    y_mm: y0 + (j as f64 + rng.gen::<f64>()) * s,
+                    sigma_mm: sigma,
+                    depth: self.contrast * (1.0 + 0.15 * (2.0 * rng.gen::<f64>() - 1.0)),
+                });
+            }
+        }
+        dots
+    }
+}

@@ -1,0 +1,226 @@
+//! The forward model against independent physics: aperture MTF, photon transfer, and DIC on
+//! simulated frames with every effect off.
+
+use ffdic::dic::{analyze, DicSettings};
+use ffdic::model::effects::{FillFactor, SensorNoise};
+use ffdic::model::{
+    render_dots, render_frame, Camera, Effects, FrameSpec, GaussianDot, SpecklePattern,
+};
+
+/// sinc(x) = sin(πx)/(πx).
+fn sinc(x: f64) -> f64 {
+    if x == 0.0 {
+        1.0
+    } else {
+        (std::f64::consts::PI * x).sin() / (std::f64::consts::PI * x)
+    }
+}
+
+#[test]
+fn uniform_scene_renders_uniform_for_any_aperture() {
+    for (fx, fy) in [(1.0, 1.0), (0.5, 1.0), (0.25, 0.5), (0.1, 0.1)] {
+        let img = render_dots(64, 48, &[], 1234.0, (fx, fy));
+        assert!(img.data().iter().all(|&v| v == 1234.0));
+        // Dots far outside the frame change nothing either.
+        let far = GaussianDot {
+            x_px: -500.0,
+            y_px: 20.0,
+            sigma_x_px: 2.0,
+            sigma_y_px: 2.0,
+            depth: 500.0,
+        };
+        let img = render_dots(64, 48, &[far], 1234.0, (fx, fy));
+        assert!(img.data().iter().all(|&v| (v - 1234.0).abs() < 1e-3));
+    }
+}
+
+/// Amplitude of the component of frequency k/n cycles per px along a row.
+fn fundamental(row: &[f32], k: usize) -> f64 {
+    let n = row.len() as f64;
+    let (mut re, mut im) = (0.0, 0.0);
+    for (i, &v) in row.iter().enumerate() {
+        let ph = 2.0 * std::f64::consts::PI * k as f64 * i as f64 / n;
+        re += v as f64 * ph.cos();
+        im += v as f64 * ph.sin();
+    }
+    2.0 * (re * re + im * im).sqrt() / n
+}
+
+#[test]
+fn sinusoidal_target_contrast_follows_the_aperture_mtf() {
+    // A grating of vertical Gaussian lines, period 8 px: its fundamental (1/8 cycle/px) is a
+    // sinusoid whose rendered amplitude must scale as sinc(fx·f) with the aperture fx.
+    let period = 8.0;
+    let width = 256usize;
+    let lines: Vec<GaussianDot> = (-4..(width as i32 / 8 + 4))
+        .map(|k| GaussianDot {
+            x_px: k as f64 * period + 0.3,
+            y_px: 2.0,
+            sigma_x_px: 1.2,
+            sigma_y_px: 1e5,
+            depth: 100.0,
+        })
+        .collect();
+    let amp = |fx: f64| {
+        let img = render_dots(width, 4, &lines, 1000.0, (fx, 1.0));
+        fundamental(img.row(2), width / 8)
+    };
+    let f = 1.0 / period;
+    // The point-sampled amplitude (aperture → 0) is the scene's own sinusoid.
+    let point = amp(1e-6);
+    for fx in [1.0, 0.75, 0.5, 0.25] {
+        let expect = sinc(fx * f);
+        let got = amp(fx) / point;
+        assert!(
+            (got / expect - 1.0).abs() < 0.01,
+            "fx={fx}: {got} vs sinc {expect}"
+        );
+    }
+}
+
+#[test]
+fn noise_variance_follows_the_photon_transfer_line() {
+    let gain_e_per_dn = 0.5;
+    let mut effects = Effects::default();
+    effects.sensor_noise = Some(SensorNoise {
+        full_well_e: 30000.0,
+        read_noise_e: 2.0,
+        gain: gain_e_per_dn,
+    });
+    let (mut means, mut vars) = (Vec::new(), Vec::new());
+    for level in [0.05, 0.15, 0.3, 0.45] {
+        let camera = Camera {
+            width: 200,
+            height: 200,
+            scale_px_per_mm: 10.0,
+            exposure_level: level,
+        };
+        let frame = |seed| FrameSpec {
+            stage_dx_mm: 0.0,
+            stage_dy_mm: 0.0,
+            moved: false,
+            seed,
+        };
+        let a = render_frame(&camera, &effects, &[], &frame(1));
+        let b = render_frame(&camera, &effects, &[], &frame(2));
+        // Half the variance of the difference of two frames: free of any fixed pattern.
+        let n = a.data().len() as f64;
+        let mean = a
+            .data()
+            .iter()
+            .chain(b.data())
+            .map(|&v| v as f64)
+            .sum::<f64>()
+            / (2.0 * n);
+        let diff: Vec<f64> = a
+            .data()
+            .iter()
+            .zip(b.data())
+            .map(|(x, y)| (x - y) as f64)
+            .collect();
+        let dm = diff.iter().sum::<f64>() / n;
+        let var = diff.iter().map(|d| (d - dm).powi(2)).sum::<f64>() / (n - 1.0) / 2.0;
+        means.push(mean);
+        vars.push(var);
+    }
+    // Least-squares slope of variance against mean.
+    let k = means.len() as f64;
+    let (mx, my) = (means.iter().sum::<f64>() / k, vars.iter().sum::<f64>() / k);
+    let sxy: f64 = means
+        .iter()
+        .zip(&vars)
+        .map(|(x, y)| (x - mx) * (y - my))
+        .sum();
+    let sxx: f64 = means.iter().map(|x| (x - mx).powi(2)).sum();
+    let slope = sxy / sxx;
+    let expect = 1.0 / gain_e_per_dn;
+    assert!(
+        (slope / expect - 1.0).abs() < 0.05,
+        "slope {slope} vs 1/gain {expect}"
+    );
+}
+
+fn dic_settings() -> DicSettings {
+    DicSettings {
+        roi: Some(ffdic::image::Roi::new(150, 110, 300, 220)),
+        ..DicSettings::default()
+    }
+}
+
+#[test]
+fn every_effect_off_dic_recovers_the_commanded_translation() {
+    let camera = Camera {
+        width: 640,
+        height: 480,
+        scale_px_per_mm: 13.0,
+        exposure_level: 0.5,
+    };
+    let pattern = SpecklePattern::preset("b").unwrap();
+    let dots = pattern.dots(camera.field_mm(8.0), 7);
+    let effects = Effects::default();
+    let reference = render_frame(
+        &camera,
+        &effects,
+        &dots,
+        &FrameSpec {
+            stage_dx_mm: 0.0,
+            stage_dy_mm: 0.0,
+            moved: false,
+            seed: 1,
+        },
+    );
+    for (dx_mm, dy_mm) in [(0.0123, 0.0), (0.0, -0.031), (5.0, 0.031)] {
+        let moved = render_frame(
+            &camera,
+            &effects,
+            &dots,
+            &FrameSpec {
+                stage_dx_mm: dx_mm,
+                stage_dy_mm: dy_mm,
+                moved: true,
+                seed: 2,
+            },
+        );
+        let r = analyze(&reference, &moved, &dic_settings(), None).unwrap();
+        let (u, v) = (dx_mm * 13.0, dy_mm * 13.0);
+        assert_eq!(r.summary.valid, r.summary.points);
+        assert!(
+            (r.summary.u.mean - u).abs() <= 0.005,
+            "({dx_mm},{dy_mm}): u {} vs {u}",
+            r.summary.u.mean
+        );
+        assert!(
+            (r.summary.v.mean - v).abs() <= 0.005,
+            "({dx_mm},{dy_mm}): v {} vs {v}",
+            r.summary.v.mean
+        );
+    }
+}
+
+#[test]
+fn fill_factor_lowers_contrast_but_not_the_mean() {
+    let camera = Camera {
+        width: 300,
+        height: 200,
+        scale_px_per_mm: 13.0,
+        exposure_level: 0.5,
+    };
+    let dots = SpecklePattern::preset("b")
+        .unwrap()
+        .dots(camera.field_mm(2.0), 3);
+    let frame = FrameSpec {
+        stage_dx_mm: 0.0,
+        stage_dy_mm: 0.0,
+        moved: false,
+        seed: 0,
+    };
+    let full = render_frame(&camera, &Effects::default(), &dots, &frame);
+    let mut e = Effects::default();
+    e.fill_factor = Some(FillFactor { fx: 0.5, fy: 0.5 });
+    let quarter = render_frame(&camera, &e, &dots, &frame);
+    let (m1, s1) = full.mean_std();
+    let (m2, s2) = quarter.mean_std();
+    assert!((m1 - m2).abs() / m1 < 0.002, "mean {m1} vs {m2}");
+    // A smaller aperture averages less: the speckle keeps more contrast.
+    assert!(s2 > s1, "std {s2} should exceed {s1}");
+}
