@@ -5,9 +5,13 @@
 // fail such checks, which `x <= limit` would let through.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod dataset;
 pub mod dic;
+pub mod experiment;
 pub mod image;
 pub mod model;
+pub mod reduce;
+pub mod report;
 
 /// The crate version, recorded in every result's settings.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");

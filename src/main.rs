@@ -19,6 +19,10 @@ struct Cli {
 enum Command {
     /// Run 2D DIC on a reference/deformed image pair.
     Analyze(cli::analyze::AnalyzeArgs),
+    /// The paper's fill-factor study end to end: Figures 5 and 6.
+    Reproduce(cli::reproduce::ReproduceArgs),
+    /// Render the frames a camera on the bench would deliver, as a dataset.
+    Simulate(cli::simulate::SimulateArgs),
 }
 
 fn main() {
@@ -35,6 +39,8 @@ fn main() {
     };
     let outcome = match &cli.command {
         Command::Analyze(args) => cli::analyze::run(args),
+        Command::Simulate(args) => cli::simulate::run(args),
+        Command::Reproduce(args) => cli::reproduce::run(args),
     };
     if let Err(err) = outcome {
         // One line naming the problem: the whole cause chain, joined.

@@ -81,12 +81,14 @@ fn sinusoidal_target_contrast_follows_the_aperture_mtf() {
 #[test]
 fn noise_variance_follows_the_photon_transfer_line() {
     let gain_e_per_dn = 0.5;
-    let mut effects = Effects::default();
-    effects.sensor_noise = Some(SensorNoise {
-        full_well_e: 30000.0,
-        read_noise_e: 2.0,
-        gain: gain_e_per_dn,
-    });
+    let effects = Effects {
+        sensor_noise: Some(SensorNoise {
+            full_well_e: 30000.0,
+            read_noise_e: 2.0,
+            gain: gain_e_per_dn,
+        }),
+        ..Effects::default()
+    };
     let (mut means, mut vars) = (Vec::new(), Vec::new());
     for level in [0.05, 0.15, 0.3, 0.45] {
         let camera = Camera {
@@ -215,8 +217,10 @@ fn fill_factor_lowers_contrast_but_not_the_mean() {
         seed: 0,
     };
     let full = render_frame(&camera, &Effects::default(), &dots, &frame);
-    let mut e = Effects::default();
-    e.fill_factor = Some(FillFactor { fx: 0.5, fy: 0.5 });
+    let e = Effects {
+        fill_factor: Some(FillFactor { fx: 0.5, fy: 0.5 }),
+        ..Effects::default()
+    };
     let quarter = render_frame(&camera, &e, &dots, &frame);
     let (m1, s1) = full.mean_std();
     let (m2, s2) = quarter.mean_std();

@@ -2,5 +2,7 @@
 
 pub mod analyze;
 mod progress;
+pub mod reproduce;
+pub mod simulate;
 
 pub use progress::ProgressBar;

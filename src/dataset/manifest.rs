@@ -1,0 +1,195 @@
+use serde::{Deserialize, Serialize};
+use serde_json::{Map, Value};
+use std::path::{Component, Path, PathBuf};
+
+pub const FORMAT: &str = "ffdic-dataset/1";
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    pub format: String,
+    pub name: String,
+    pub scale_px_per_mm: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera: Option<CameraInfo>,
+    pub runs: Vec<Run>,
+    /// Fields this version does not know, kept so a rewrite loses nothing.
+    #[serde(flatten)]
+    pub extra: Map<String, Value>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CameraInfo {
+    pub width: usize,
+    pub height: usize,
+    pub bit_depth: u8,
+    #[serde(flatten)]
+    pub extra: Map<String, Value>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PatternInfo {
+    pub label: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dot_diameter_mm: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dot_spacing_mm: Option<f64>,
+    #[serde(flatten)]
+    pub extra: Map<String, Value>,
+}
+
+/// The commanded stage move, not what happened.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StageMove {
+    pub dx_mm: f64,
+    pub dy_mm: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Run {
+    pub id: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pattern: Option<PatternInfo>,
+    pub reference: String,
+    pub deformed: String,
+    pub stage: StageMove,
+    /// Further static frames of the reference position.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub repeat: Vec<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exposure_us: Option<f64>,
+    #[serde(flatten)]
+    pub extra: Map<String, Value>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum DatasetError {
+    #[error("cannot read {path}: {source}")]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("cannot write {path}: {source}")]
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: {message}")]
+    Invalid { path: PathBuf, message: String },
+}
+
+impl Manifest {
+    pub fn new(name: &str, scale_px_per_mm: f64) -> Self {
+        Self {
+            format: FORMAT.into(),
+            name: name.into(),
+            scale_px_per_mm,
+            camera: None,
+            runs: Vec::new(),
+            extra: Map::new(),
+        }
+    }
+
+    /// Reads and checks `DIR/dataset.json`.
+    pub fn read(dir: &Path) -> Result<Self, DatasetError> {
+        let path = dir.join("dataset.json");
+        let text = std::fs::read_to_string(&path).map_err(|source| DatasetError::Read {
+            path: path.clone(),
+            source,
+        })?;
+        let invalid = |message: String| DatasetError::Invalid {
+            path: path.clone(),
+            message,
+        };
+        // serde_json names the missing field ("missing field `scale_px_per_mm`").
+        let m: Manifest = serde_json::from_str(&text).map_err(|e| invalid(e.to_string()))?;
+        m.validate().map_err(invalid)?;
+        Ok(m)
+    }
+
+    /// Checks the format, the numbers and every file name; returns the first problem.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.format != FORMAT {
+            return Err(format!("format is '{}', expected '{FORMAT}'", self.format));
+        }
+        if !(self.scale_px_per_mm > 0.0) {
+            return Err("scale_px_per_mm must be positive".into());
+        }
+        if self.runs.is_empty() {
+            return Err("runs is empty".into());
+        }
+        for run in &self.runs {
+            for file in std::iter::once(&run.reference)
+                .chain([&run.deformed])
+                .chain(&run.repeat)
+            {
+                if !is_plain_file_name(file) {
+                    return Err(format!(
+                        "run {}: '{file}' is not a file name inside the dataset",
+                        run.id
+                    ));
+                }
+            }
+            if !(run.stage.dx_mm.is_finite() && run.stage.dy_mm.is_finite()) {
+                return Err(format!("run {}: stage move is not finite", run.id));
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes `DIR/dataset.json` atomically.
+    pub fn write(&self, dir: &Path) -> Result<(), DatasetError> {
+        let path = dir.join("dataset.json");
+        let tmp = dir.join(".dataset.json.tmp");
+        let text = serde_json::to_string_pretty(self).expect("a manifest always serialises");
+        std::fs::write(&tmp, text)
+            .and_then(|_| std::fs::rename(&tmp, &path))
+            .map_err(|source| DatasetError::Write { path, source })
+    }
+}
+
+/// A name that stays inside the dataset folder: one normal path component, no separators.
+pub fn is_plain_file_name(name: &str) -> bool {
+    let mut comps = Path::new(name).components();
+    matches!(comps.next(), Some(Component::Normal(_)))
+        && comps.next().is_none()
+        && !name.contains('\\')
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const EXAMPLE: &str = r#"{ "format": "ffdic-dataset/1", "name": "bench-2026-11-22",
+      "scale_px_per_mm": 26.0, "operator": "kept",
+      "camera": { "width": 2560, "height": 2160, "bit_depth": 16 },
+      "runs": [ { "id": "b-x5mm", "pattern": { "label": "b", "dot_diameter_mm": 0.24, "dot_spacing_mm": 0.36 },
+                  "reference": "b_ref.tif", "deformed": "b_x5mm.tif",
+                  "stage": { "dx_mm": 5.0, "dy_mm": 0.0 } } ] }"#;
+
+    #[test]
+    fn design_example_parses_and_keeps_unknown_fields() {
+        let m: Manifest = serde_json::from_str(EXAMPLE).unwrap();
+        m.validate().unwrap();
+        assert_eq!(m.runs[0].stage.dx_mm, 5.0);
+        assert_eq!(m.extra["operator"], "kept");
+        let back = serde_json::to_string(&m).unwrap();
+        assert!(back.contains("\"operator\":\"kept\""));
+    }
+
+    #[test]
+    fn missing_field_is_named() {
+        let text = EXAMPLE.replace("\"scale_px_per_mm\": 26.0,", "");
+        let err = serde_json::from_str::<Manifest>(&text)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("scale_px_per_mm"), "{err}");
+    }
+
+    #[test]
+    fn file_names_cannot_leave_the_folder() {
+        assert!(is_plain_file_name("a.tif"));
+        for bad in ["../a.tif", "/etc/passwd", "x/a.tif", "", "..", "a\\b.tif"] {
+            assert!(!is_plain_file_name(bad), "{bad}");
+        }
+    }
+}

@@ -1,0 +1,8 @@
+//! The on-disk measurement format `ffdic-dataset/1` (DESIGN.md): a folder with `dataset.json` and
+//! grayscale TIFF frames at the camera's native resolution. Experiments export it; `compare` and
+//! `diagnose` read it, whoever made it. Unknown fields are kept and ignored; a missing required
+//! field is an error naming it.
+
+mod manifest;
+
+pub use manifest::{CameraInfo, DatasetError, Manifest, PatternInfo, Run, StageMove, FORMAT};

@@ -1,0 +1,148 @@
+//! Renders, through a model, the frames a camera on the bench would deliver for an experiment,
+//! and writes them as a dataset (`ffdic-dataset/1`). Deterministic for a seed: every frame's
+//! noise seed is derived from (seed, pattern, frame), every pattern's dots from (seed, pattern).
+
+use super::spec::ExperimentSpec;
+use crate::dataset::{CameraInfo, DatasetError, Manifest, PatternInfo, Run, StageMove};
+use crate::image::{write_tiff_u16, Image, ImageError};
+use crate::model::{render_frame, FrameSpec, ModelConfig, SpecklePattern, TargetDot};
+use std::path::Path;
+
+#[derive(Debug, thiserror::Error)]
+pub enum SimulateError {
+    #[error(transparent)]
+    Image(#[from] ImageError),
+    #[error(transparent)]
+    Dataset(#[from] DatasetError),
+    #[error("cannot create {path}: {source}")]
+    Create {
+        path: std::path::PathBuf,
+        source: std::io::Error,
+    },
+}
+
+/// Mixes seeds (SplitMix64 finaliser) so neighbouring indices give unrelated streams.
+pub fn derive_seed(seed: u64, a: u64, b: u64) -> u64 {
+    let mut z =
+        seed ^ a.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ b.wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// The dots of pattern number `index`, covering the field of view plus every move.
+pub fn pattern_dots(
+    spec: &ExperimentSpec,
+    pattern: &SpecklePattern,
+    index: usize,
+    seed: u64,
+) -> Vec<TargetDot> {
+    let travel = spec
+        .all_moves()
+        .iter()
+        .map(|m| m.dx_mm.abs().max(m.dy_mm.abs()))
+        .fold(0.0, f64::max);
+    pattern.dots(
+        spec.camera.field_mm(travel + 2.0),
+        derive_seed(seed, index as u64, 0xD075),
+    )
+}
+
+/// Renders one frame of pattern `index` at a commanded stage position.
+pub fn render_stage_frame(
+    spec: &ExperimentSpec,
+    model: &ModelConfig,
+    dots: &[TargetDot],
+    (dx_mm, dy_mm): (f64, f64),
+    frame_seed: u64,
+) -> Image {
+    let frame = FrameSpec {
+        stage_dx_mm: dx_mm,
+        stage_dy_mm: dy_mm,
+        moved: dx_mm != 0.0 || dy_mm != 0.0,
+        seed: frame_seed,
+    };
+    render_frame(&spec.camera, &model.effects, dots, &frame)
+}
+
+/// Writes the dataset into `out` (created if needed); `progress(done, total)` after each frame.
+pub fn simulate_dataset(
+    spec: &ExperimentSpec,
+    model: &ModelConfig,
+    seed: u64,
+    out: &Path,
+    progress: &dyn Fn(usize, usize),
+) -> Result<Manifest, SimulateError> {
+    std::fs::create_dir_all(out).map_err(|source| SimulateError::Create {
+        path: out.to_owned(),
+        source,
+    })?;
+    let moves = spec.all_moves();
+    let patterns = spec.patterns();
+    let total = patterns.len() * (1 + spec.repeats + moves.len());
+    let mut done = 0;
+    let mut manifest = Manifest::new(&spec.name, spec.camera.scale_px_per_mm);
+    manifest.camera = Some(CameraInfo {
+        width: spec.camera.width,
+        height: spec.camera.height,
+        bit_depth: 16,
+        extra: Default::default(),
+    });
+    manifest.extra.insert(
+        "simulated_with".into(),
+        serde_json::json!({"model": model.name, "seed": seed}),
+    );
+    for (pi, pattern) in patterns.iter().enumerate() {
+        let dots = pattern_dots(spec, pattern, pi, seed);
+        let mut frame_no = 0u64;
+        let mut shoot = |name: &str, stage: (f64, f64)| -> Result<(), SimulateError> {
+            let img = render_stage_frame(
+                spec,
+                model,
+                &dots,
+                stage,
+                derive_seed(seed, pi as u64, frame_no),
+            );
+            frame_no += 1;
+            write_tiff_u16(&out.join(name), &img)?;
+            done += 1;
+            progress(done, total);
+            Ok(())
+        };
+        let label = &pattern.label;
+        let reference = format!("{label}_ref.tif");
+        shoot(&reference, (0.0, 0.0))?;
+        let repeat: Vec<String> = (1..=spec.repeats)
+            .map(|k| format!("{label}_ref_r{k}.tif"))
+            .collect();
+        for name in &repeat {
+            shoot(name, (0.0, 0.0))?;
+        }
+        for m in &moves {
+            let deformed = format!("{label}_{}.tif", m.id);
+            shoot(&deformed, (m.dx_mm, m.dy_mm))?;
+            manifest.runs.push(Run {
+                id: format!("{label}-{}", m.id),
+                pattern: Some(PatternInfo {
+                    label: label.clone(),
+                    dot_diameter_mm: Some(pattern.dot_diameter_mm),
+                    dot_spacing_mm: Some(pattern.dot_spacing_mm),
+                    extra: [("contrast".to_string(), serde_json::json!(pattern.contrast))]
+                        .into_iter()
+                        .collect(),
+                }),
+                reference: reference.clone(),
+                deformed,
+                stage: StageMove {
+                    dx_mm: m.dx_mm,
+                    dy_mm: m.dy_mm,
+                },
+                repeat: repeat.clone(),
+                exposure_us: None,
+                extra: Default::default(),
+            });
+        }
+    }
+    manifest.write(out)?;
+    Ok(manifest)
+}

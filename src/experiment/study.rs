@@ -1,0 +1,148 @@
+//! The fill-factor study on a dataset (Hijazi, Rawashdeh & Kähler): for every run, reduce the
+//! reference and the moved frame with every scheme, run the same DIC on each reduced pair, and
+//! report the statistics with the increase of each standard deviation over the 100 % scheme —
+//! the paper's Figures 5 (x: u, exx) and 6 (y: v, eyy).
+
+use crate::dataset::{DatasetError, Manifest};
+use crate::dic::{DicError, DicSettings, PreparedReference, Stats, Summary};
+use crate::image::{read_tiff, Image, ImageError};
+use crate::reduce::{reduce, Scheme};
+use serde::Serialize;
+use std::path::Path;
+
+#[derive(Debug, thiserror::Error)]
+pub enum StudyError {
+    #[error(transparent)]
+    Image(#[from] ImageError),
+    #[error(transparent)]
+    Dataset(#[from] DatasetError),
+    #[error("run {run}, scheme {scheme}: {source}")]
+    Dic {
+        run: String,
+        scheme: String,
+        source: DicError,
+    },
+    #[error("run {run}: reference is {ref_w}x{ref_h}, deformed {def_w}x{def_h}")]
+    SizeMismatch {
+        run: String,
+        ref_w: usize,
+        ref_h: usize,
+        def_w: usize,
+        def_h: usize,
+    },
+}
+
+/// Percent increase of each standard deviation over the same run's first (100 %) scheme.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Increase {
+    pub u: f64,
+    pub v: f64,
+    pub exx: f64,
+    pub eyy: f64,
+    pub exy: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct StudyRow {
+    pub run: String,
+    pub pattern: String,
+    pub scheme: String,
+    /// Linear fill factors (x, y) of the scheme.
+    pub fill_factor: (f64, f64),
+    pub summary: Summary,
+    /// None for the baseline scheme itself.
+    pub increase_pct: Option<Increase>,
+}
+
+/// Runs the study over every run of a dataset in `dir`. `progress(done, total)` per pair.
+pub fn analyze_dataset(
+    dir: &Path,
+    manifest: &Manifest,
+    schemes: &[Scheme],
+    dic: &DicSettings,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<Vec<StudyRow>, StudyError> {
+    let total = manifest.runs.len() * schemes.len();
+    let mut rows = Vec::with_capacity(total);
+    let mut cached: Option<(String, Image)> = None;
+    for run in &manifest.runs {
+        // Runs of one pattern share the reference: read it once.
+        let reference = match &cached {
+            Some((name, img)) if *name == run.reference => img.clone(),
+            _ => {
+                let (img, _) = read_tiff(&dir.join(&run.reference))?;
+                cached = Some((run.reference.clone(), img.clone()));
+                img
+            }
+        };
+        let (deformed, _) = read_tiff(&dir.join(&run.deformed))?;
+        if (reference.width(), reference.height()) != (deformed.width(), deformed.height()) {
+            return Err(StudyError::SizeMismatch {
+                run: run.id.clone(),
+                ref_w: reference.width(),
+                ref_h: reference.height(),
+                def_w: deformed.width(),
+                def_h: deformed.height(),
+            });
+        }
+        let pattern = run
+            .pattern
+            .as_ref()
+            .map_or_else(|| run.id.clone(), |p| p.label.clone());
+        let first_row = rows.len();
+        for scheme in schemes {
+            let summary = study_pair(&reference, &deformed, scheme, dic).map_err(|source| {
+                StudyError::Dic {
+                    run: run.id.clone(),
+                    scheme: scheme.name.clone(),
+                    source,
+                }
+            })?;
+            let increase_pct = (rows.len() > first_row).then(|| {
+                let base: &StudyRow = &rows[first_row];
+                increase(&base.summary, &summary)
+            });
+            rows.push(StudyRow {
+                run: run.id.clone(),
+                pattern: pattern.clone(),
+                scheme: scheme.name.clone(),
+                fill_factor: scheme.linear_fill_factor(),
+                summary,
+                increase_pct,
+            });
+            progress(rows.len(), total);
+        }
+    }
+    Ok(rows)
+}
+
+/// DIC of one full-resolution pair after reduction with `scheme`.
+pub fn study_pair(
+    reference: &Image,
+    deformed: &Image,
+    scheme: &Scheme,
+    dic: &DicSettings,
+) -> Result<Summary, DicError> {
+    let r = reduce(reference, scheme).map_err(|e| DicError::Setting {
+        field: "scheme",
+        reason: e.to_string(),
+    })?;
+    let d = reduce(deformed, scheme).map_err(|e| DicError::Setting {
+        field: "scheme",
+        reason: e.to_string(),
+    })?;
+    Ok(PreparedReference::new(&r, dic)?
+        .correlate(&d, None)?
+        .summary)
+}
+
+fn increase(base: &Summary, s: &Summary) -> Increase {
+    let pct = |b: &Stats, x: &Stats| 100.0 * (x.std / b.std - 1.0);
+    Increase {
+        u: pct(&base.u, &s.u),
+        v: pct(&base.v, &s.v),
+        exx: pct(&base.exx, &s.exx),
+        eyy: pct(&base.eyy, &s.eyy),
+        exy: pct(&base.exy, &s.exy),
+    }
+}

@@ -1,0 +1,196 @@
+//! Grouped bar charts, as in the paper's Figures 5 and 6: groups are speckle patterns, series are
+//! fill factors, and a label over each bar gives its change against the first series.
+
+use super::svg::{escape, format_tick, nice_ticks, text_width, PALETTE};
+use std::fmt::Write;
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Series {
+    pub name: String,
+    /// One value per group; NaN draws no bar.
+    pub values: Vec<f64>,
+    /// Text over each bar (e.g. "+13.2 %"), one per group.
+    pub labels: Vec<Option<String>>,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct BarChart {
+    pub title: String,
+    /// Axis label with units, e.g. "std(u) [px]".
+    pub y_label: String,
+    pub groups: Vec<String>,
+    pub series: Vec<Series>,
+}
+
+impl BarChart {
+    /// The chart as a standalone SVG document. Every bar is a `<rect class="bar">` with
+    /// `data-group` and `data-series` attributes, so tests and pages can find them.
+    pub fn to_svg(&self, width_px: u32, height_px: u32) -> String {
+        let (w, h) = (width_px as f64, height_px as f64);
+        let legend_h = 18.0 * self.series.len() as f64 + 8.0;
+        let (left, right, top, bottom) = (78.0, 16.0, 40.0, 40.0 + legend_h);
+        let (pw, ph) = (w - left - right, h - top - bottom);
+        let max = self
+            .series
+            .iter()
+            .flat_map(|s| s.values.iter().copied())
+            .filter(|v| v.is_finite())
+            .fold(0.0f64, f64::max);
+        let min = self
+            .series
+            .iter()
+            .flat_map(|s| s.values.iter().copied())
+            .filter(|v| v.is_finite())
+            .fold(0.0f64, f64::min);
+        // Headroom for the labels over the bars.
+        let ticks = nice_ticks(min, if max > 0.0 { max * 1.12 } else { 1.0 }, 5);
+        let (y0, y1) = (ticks[0], *ticks.last().expect("ticks"));
+        let y_of = |v: f64| top + ph * (1.0 - (v - y0) / (y1 - y0));
+
+        let mut s = String::new();
+        let _ = write!(
+            s,
+            r#"<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {w} {h}" width="{w}" height="{h}" font-family="sans-serif" font-size="12">"#
+        );
+        let _ = write!(
+            s,
+            r#"<rect x="0" y="0" width="{w}" height="{h}" fill="white"/>"#
+        );
+        let _ = write!(
+            s,
+            r#"<text x="{}" y="22" text-anchor="middle" font-size="15" font-weight="bold">{}</text>"#,
+            w / 2.0,
+            escape(&self.title)
+        );
+        for t in &ticks {
+            let y = y_of(*t);
+            let _ = write!(
+                s,
+                r##"<line x1="{left}" x2="{}" y1="{y:.1}" y2="{y:.1}" stroke="#ddd"/><text x="{}" y="{:.1}" text-anchor="end">{}</text>"##,
+                left + pw,
+                left - 6.0,
+                y + 4.0,
+                format_tick(*t)
+            );
+        }
+        let _ = write!(
+            s,
+            r#"<text transform="translate(16,{:.1}) rotate(-90)" text-anchor="middle">{}</text>"#,
+            top + ph / 2.0,
+            escape(&self.y_label)
+        );
+        let ng = self.groups.len().max(1) as f64;
+        let ns = self.series.len().max(1) as f64;
+        let group_w = pw / ng;
+        let bar_w = group_w * 0.8 / ns;
+        for (gi, g) in self.groups.iter().enumerate() {
+            let gx = left + gi as f64 * group_w;
+            let _ = write!(
+                s,
+                r#"<text x="{:.1}" y="{:.1}" text-anchor="middle">{}</text>"#,
+                gx + group_w / 2.0,
+                top + ph + 18.0,
+                escape(g)
+            );
+            for (si, series) in self.series.iter().enumerate() {
+                let v = series.values.get(gi).copied().unwrap_or(f64::NAN);
+                if !v.is_finite() {
+                    continue;
+                }
+                let x = gx + group_w * 0.1 + si as f64 * bar_w;
+                let (ya, yb) = (y_of(v.max(0.0)), y_of(v.min(0.0)));
+                let _ = write!(
+                    s,
+                    r#"<rect class="bar" data-group="{}" data-series="{}" data-value="{v}" x="{x:.2}" y="{ya:.2}" width="{:.2}" height="{:.2}" fill="{}"><title>{}: {}</title></rect>"#,
+                    escape(g),
+                    escape(&series.name),
+                    bar_w * 0.92,
+                    yb - ya,
+                    PALETTE[si % PALETTE.len()],
+                    escape(&series.name),
+                    format_tick(v)
+                );
+                if let Some(Some(label)) = series.labels.get(gi) {
+                    let fs = if text_width(label, 11.0) > bar_w {
+                        9
+                    } else {
+                        11
+                    };
+                    let _ = write!(
+                        s,
+                        r#"<text class="bar-label" x="{:.1}" y="{:.1}" text-anchor="middle" font-size="{fs}">{}</text>"#,
+                        x + bar_w * 0.46,
+                        ya - 4.0,
+                        escape(label)
+                    );
+                }
+            }
+        }
+        let _ = write!(
+            s,
+            r##"<line x1="{left}" x2="{left}" y1="{top}" y2="{:.1}" stroke="#333"/><line x1="{left}" x2="{:.1}" y1="{:.1}" y2="{:.1}" stroke="#333"/>"##,
+            top + ph,
+            left + pw,
+            y_of(0.0f64.clamp(y0, y1)),
+            y_of(0.0f64.clamp(y0, y1))
+        );
+        for (si, series) in self.series.iter().enumerate() {
+            let y = h - legend_h + 4.0 + 18.0 * si as f64;
+            let _ = write!(
+                s,
+                r#"<rect x="{left}" y="{y:.1}" width="12" height="12" fill="{}"/><text x="{}" y="{:.1}">{}</text>"#,
+                PALETTE[si % PALETTE.len()],
+                left + 18.0,
+                y + 10.0,
+                escape(&series.name)
+            );
+        }
+        s.push_str("</svg>\n");
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn chart() -> BarChart {
+        BarChart {
+            title: "Figure <5>".into(),
+            y_label: "std(u) [px]".into(),
+            groups: vec!["a".into(), "b".into(), "c".into()],
+            series: (0..3)
+                .map(|k| Series {
+                    name: format!("s{k}"),
+                    values: vec![
+                        0.01 * (k + 1) as f64,
+                        0.02,
+                        if k == 2 { f64::NAN } else { 0.005 },
+                    ],
+                    labels: vec![None, Some("+13.2 %".into()), None],
+                })
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn one_rect_per_finite_value_with_heights_proportional() {
+        let svg = chart().to_svg(720, 420);
+        assert_eq!(svg.matches(r#"class="bar""#).count(), 8);
+        assert!(svg.contains("Figure &lt;5&gt;"));
+        assert_eq!(svg.matches("+13.2 %").count(), 3);
+        let heights: Vec<f64> = svg
+            .split(r#"class="bar""#)
+            .skip(1)
+            .map(|part| {
+                let h = part.split("height=\"").nth(1).unwrap();
+                h[..h.find('"').unwrap()].parse().unwrap()
+            })
+            .collect();
+        // Group a: s0 = 0.01, s1 = 0.02 → the second bar is twice the first.
+        // Order: group a (s0, s1, s2), group b (s0, s1, s2), group c (s0, s1).
+        assert!((heights[1] / heights[0] - 2.0).abs() < 1e-3, "{heights:?}");
+        assert!((heights[2] / heights[0] - 3.0).abs() < 1e-3);
+        assert_eq!(svg.matches("<svg").count(), svg.matches("</svg>").count());
+    }
+}
