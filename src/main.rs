@@ -19,6 +19,8 @@ struct Cli {
 enum Command {
     /// Run 2D DIC on a reference/deformed image pair.
     Analyze(cli::analyze::AnalyzeArgs),
+    /// Synthesise a lower fill factor from a full-resolution frame.
+    Reduce(cli::reduce::ReduceArgs),
     /// The paper's fill-factor study end to end: Figures 5 and 6.
     Reproduce(cli::reproduce::ReproduceArgs),
     /// Render the frames a camera on the bench would deliver, as a dataset.
@@ -32,8 +34,13 @@ fn main() {
         Err(err) => {
             // One line, like every other error of this binary.
             let text = err.render().to_string();
-            let first = text.lines().next().unwrap_or("invalid arguments");
-            eprintln!("{first}");
+            let message: Vec<&str> = text
+                .lines()
+                .map(str::trim)
+                .take_while(|l| !l.starts_with("Usage:") && !l.starts_with("For more information"))
+                .filter(|l| !l.is_empty())
+                .collect();
+            eprintln!("{}", message.join(" "));
             std::process::exit(2);
         }
     };
@@ -41,6 +48,7 @@ fn main() {
         Command::Analyze(args) => cli::analyze::run(args),
         Command::Simulate(args) => cli::simulate::run(args),
         Command::Reproduce(args) => cli::reproduce::run(args),
+        Command::Reduce(args) => cli::reduce::run(args),
     };
     if let Err(err) = outcome {
         // One line naming the problem: the whole cause chain, joined.

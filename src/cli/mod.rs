@@ -2,6 +2,7 @@
 
 pub mod analyze;
 mod progress;
+pub mod reduce;
 pub mod reproduce;
 pub mod simulate;
 

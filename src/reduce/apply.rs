@@ -105,6 +105,33 @@ mod tests {
         assert_eq!(two.data(), &[7.5, 10.5]);
     }
 
+    /// A linear ramp's box average is the ramp at the box centre, so each reduced pixel must equal
+    /// the ramp at `to_full(i, j)`; a full-resolution shift s then reappears as s / block.
+    #[test]
+    fn reduced_pixel_centres_are_where_the_docs_say() {
+        let ramp = |x: f64, y: f64| 3.0 + 0.75 * x - 0.5 * y;
+        for s in [0.0, 0.3, 0.5, 1.7] {
+            let img = Image::from_fn(24, 18, |c, r| ramp(c as f64 - s, r as f64) as f32);
+            for scheme in Scheme::presets().into_iter().chain([
+                Scheme::from_block("3x3", "1x3", None).unwrap(),
+                Scheme::from_block("3x3", "2x1", Some("1x2")).unwrap(),
+            ]) {
+                let red = reduce(&img, &scheme).unwrap();
+                for j in 0..red.height() {
+                    for i in 0..red.width() {
+                        let (x, y) = scheme.to_full(i as f64, j as f64);
+                        let expect = ramp(x - s, y);
+                        assert!(
+                            (red.get(i, j) as f64 - expect).abs() < 1e-4,
+                            "{} at ({i},{j}) shift {s}",
+                            scheme.name
+                        );
+                    }
+                }
+            }
+        }
+    }
+
     #[test]
     fn u16_path_equals_f32_path() {
         let raw: Vec<u16> = (0..48u16).map(|v| v * 1000 + 7).collect();

@@ -1,0 +1,145 @@
+//! simulate → dataset → reduce → DIC, as `ffdic simulate` and `ffdic reproduce` run it.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn ffdic(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_ffdic"))
+        .args(args)
+        .output()
+        .expect("run ffdic")
+}
+
+fn fixture() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/small.toml")
+}
+
+fn frames(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut v: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap())
+        .filter(|e| e.file_name().to_string_lossy().ends_with(".tif"))
+        .map(|e| {
+            (
+                e.file_name().to_string_lossy().into_owned(),
+                std::fs::read(e.path()).unwrap(),
+            )
+        })
+        .collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn simulate_is_deterministic_for_a_seed_and_writes_a_dataset() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = |name: &str, seed: &str| {
+        let out = tmp.path().join(name);
+        let o = ffdic(&[
+            "simulate",
+            "--experiment",
+            fixture().to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--seed",
+            seed,
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        out
+    };
+    let (a, b, c) = (run("a", "1"), run("b", "1"), run("c", "2"));
+    let (fa, fb, fc) = (frames(&a), frames(&b), frames(&c));
+    // 2 patterns x (reference + 1 repeat + 1 move + 3 steps).
+    assert_eq!(fa.len(), 12);
+    assert_eq!(fa, fb, "same seed, same frames");
+    assert_ne!(fa, fc, "another seed, other noise");
+    let manifest = ffdic::dataset::Manifest::read(&a).unwrap();
+    assert_eq!(manifest.runs.len(), 8);
+    assert_eq!(manifest.runs[0].stage.dx_mm, 1.0);
+    assert_eq!(manifest.runs[0].repeat.len(), 1);
+    assert_eq!(manifest.camera.as_ref().unwrap().width, 640);
+}
+
+#[test]
+fn reproduce_json_has_a_row_per_run_and_scheme_and_recovers_the_motion() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("r");
+    let o = ffdic(&[
+        "reproduce",
+        "--experiment",
+        fixture().to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(o.stderr.is_empty(), "nothing but JSON with --json");
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let rows = doc["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 2 * 4 * 3);
+    for r in rows {
+        for f in ["u", "v", "exx", "eyy", "exy"] {
+            assert!(r[f]["std"].is_f64() && r[f]["mean"].is_f64(), "{r}");
+        }
+        assert_eq!(r["valid"], r["points"]);
+    }
+    // The bench's stage is misaligned by 6.15 mrad: a 1 mm move at 13 px/mm is 6.5 px in the
+    // reduced images, with 0.040 px of y.
+    let first = &rows[0];
+    assert_eq!(
+        (first["pattern"].as_str(), first["scheme"].as_str()),
+        (Some("a"), Some("ff100"))
+    );
+    let u = first["u"]["mean"].as_f64().unwrap();
+    let v = first["v"]["mean"].as_f64().unwrap();
+    let angle: f64 = 0.00615;
+    assert!((u - 6.5 * angle.cos()).abs() < 0.005, "u {u}");
+    assert!((v - 6.5 * angle.sin()).abs() < 0.005, "v {v}");
+    for f in [
+        "study.csv",
+        "study.json",
+        "figure5_u.svg",
+        "figure5_exx.svg",
+        "figure6_v.svg",
+        "figure6_eyy.svg",
+    ] {
+        assert!(out.join(f).is_file(), "{f}");
+    }
+    let svg = std::fs::read_to_string(out.join("figure5_u.svg")).unwrap();
+    // One bar per pattern and scheme.
+    assert_eq!(svg.matches(r#"class="bar""#).count(), 2 * 3);
+}
+
+#[test]
+fn reduce_cli_writes_the_reduced_frame() {
+    let tmp = tempfile::tempdir().unwrap();
+    let src = tmp.path().join("in.tif");
+    let img = ffdic::image::Image::from_fn(10, 6, |c, r| (c * 10 + r) as f32);
+    ffdic::image::write_tiff_u16(&src, &img).unwrap();
+    let out = tmp.path().join("out.tif");
+    let o = ffdic(&[
+        "reduce",
+        src.to_str().unwrap(),
+        "--block",
+        "3x3",
+        "--aperture",
+        "1x3",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (r, _) = ffdic::image::read_tiff(&out).unwrap();
+    assert_eq!((r.width(), r.height()), (3, 2));
+    // Middle column of the first block (col 1), rows 0..3 averaged: 10 + 1 = 11.
+    assert_eq!(r.get(0, 0), 11.0);
+    let bad = ffdic(&[
+        "reduce",
+        src.to_str().unwrap(),
+        "--scheme",
+        "ff75",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("unknown scheme"));
+}
