@@ -96,6 +96,8 @@ fn noise_variance_follows_the_photon_transfer_line() {
             height: 200,
             scale_px_per_mm: 10.0,
             exposure_level: level,
+            principal_dx_px: 0.0,
+            principal_dy_px: 0.0,
         };
         let frame = |seed| FrameSpec {
             stage_dx_mm: 0.0,
@@ -156,6 +158,8 @@ fn every_effect_off_dic_recovers_the_commanded_translation() {
         height: 480,
         scale_px_per_mm: 13.0,
         exposure_level: 0.5,
+        principal_dx_px: 0.0,
+        principal_dy_px: 0.0,
     };
     let pattern = SpecklePattern::preset("b").unwrap();
     let dots = pattern.dots(camera.field_mm(8.0), 7);
@@ -206,6 +210,8 @@ fn fill_factor_lowers_contrast_but_not_the_mean() {
         height: 200,
         scale_px_per_mm: 13.0,
         exposure_level: 0.5,
+        principal_dx_px: 0.0,
+        principal_dy_px: 0.0,
     };
     let dots = SpecklePattern::preset("b")
         .unwrap()

@@ -17,8 +17,8 @@ use rand_distr::{Distribution, Normal, Poisson};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-/// The camera looking at the target: size, scale, exposure. The optical axis meets the sensor
-/// at the image centre ((w-1)/2, (h-1)/2).
+/// The camera looking at the target: size, scale, exposure, principal point (by default the
+/// image centre ((w-1)/2, (h-1)/2)).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Camera {
@@ -28,6 +28,11 @@ pub struct Camera {
     /// White-background level as a fraction of the ADC's full scale.
     #[serde(default = "default_exposure_level")]
     pub exposure_level: f64,
+    /// Principal point (where the optical axis meets the sensor) relative to the image centre, px.
+    #[serde(default)]
+    pub principal_dx_px: f64,
+    #[serde(default)]
+    pub principal_dy_px: f64,
 }
 
 fn default_exposure_level() -> f64 {
