@@ -12,6 +12,7 @@ pub mod image;
 pub mod model;
 pub mod reduce;
 pub mod report;
+pub mod store;
 
 /// The crate version, recorded in every result's settings.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");

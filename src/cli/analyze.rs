@@ -155,7 +155,6 @@ fn write_outputs(dir: &Path, result: &DicResult, args: &AnalyzeArgs) -> Result<(
 }
 
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, bytes).with_context(|| format!("cannot write {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))
+    ffdic::store::write_atomically(path, bytes)
+        .with_context(|| format!("cannot write {}", path.display()))
 }

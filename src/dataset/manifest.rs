@@ -139,10 +139,8 @@ impl Manifest {
     /// Writes `DIR/dataset.json` atomically.
     pub fn write(&self, dir: &Path) -> Result<(), DatasetError> {
         let path = dir.join("dataset.json");
-        let tmp = dir.join(".dataset.json.tmp");
         let text = serde_json::to_string_pretty(self).expect("a manifest always serialises");
-        std::fs::write(&tmp, text)
-            .and_then(|_| std::fs::rename(&tmp, &path))
+        crate::store::write_atomically(&path, text.as_bytes())
             .map_err(|source| DatasetError::Write { path, source })
     }
 }

@@ -4,7 +4,7 @@
 
 use super::{Image, ImageError};
 use std::fs::File;
-use std::io::{BufReader, BufWriter};
+use std::io::{BufReader, Cursor};
 use std::path::Path;
 use tiff::decoder::{Decoder, DecodingResult};
 use tiff::encoder::{colortype, TiffEncoder};
@@ -98,32 +98,18 @@ pub fn write_tiff_u8(path: &Path, image: &Image) -> Result<(), ImageError> {
     })
 }
 
+/// Encodes in memory (the encoder needs Seek), then writes the file atomically.
 fn write_atomically(
     path: &Path,
-    encode: impl FnOnce(&mut BufWriter<File>) -> Result<(), tiff::TiffError>,
+    encode: impl FnOnce(&mut Cursor<Vec<u8>>) -> Result<(), tiff::TiffError>,
 ) -> Result<(), ImageError> {
     let encode_err = |reason: String| ImageError::Encode {
         path: path.to_owned(),
         reason,
     };
-    let file_name = path
-        .file_name()
-        .ok_or_else(|| encode_err("path has no file name".into()))?;
-    let tmp = path.with_file_name(format!(".{}.tmp", file_name.to_string_lossy()));
-    let result = (|| {
-        let file = File::create(&tmp).map_err(|e| encode_err(e.to_string()))?;
-        let mut writer = BufWriter::new(file);
-        encode(&mut writer).map_err(|e| encode_err(e.to_string()))?;
-        let file = writer
-            .into_inner()
-            .map_err(|e| encode_err(e.error().to_string()))?;
-        file.sync_all().map_err(|e| encode_err(e.to_string()))?;
-        std::fs::rename(&tmp, path).map_err(|e| encode_err(e.to_string()))
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
+    let mut buffer = Cursor::new(Vec::new());
+    encode(&mut buffer).map_err(|e| encode_err(e.to_string()))?;
+    crate::store::write_atomically(path, buffer.get_ref()).map_err(|e| encode_err(e.to_string()))
 }
 
 #[cfg(test)]
