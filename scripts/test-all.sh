@@ -23,7 +23,7 @@ fi
 echo "== cargo fmt --check"
 cargo fmt --all --check
 echo "== cargo clippy"
-cargo clippy --all-targets --all-features -- -D warnings
+cargo clippy --workspace --all-targets --all-features -- -D warnings
 echo "== cargo test"
 cargo test --all-features --workspace
 echo "== benchmarks compile (they are run by hand: cargo bench)"

@@ -1,0 +1,40 @@
+use crate::HwResult;
+use serde::{Deserialize, Serialize};
+use std::time::Duration;
+
+/// A position of the translation stage, mm.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct StagePosition {
+    pub x_mm: f64,
+    pub y_mm: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StageInfo {
+    pub model: String,
+    /// Axes the stage has: 1 (x only) or 2 (x and y).
+    pub axes: u8,
+    /// Travel limits per axis, mm.
+    pub travel_x_mm: (f64, f64),
+    pub travel_y_mm: (f64, f64),
+}
+
+/// A motorised translation stage. Blocking; one thread owns it. Moves return once commanded;
+/// `wait_settled` blocks until the stage stands still at its target.
+pub trait Stage: Send {
+    fn info(&self) -> &StageInfo;
+    /// Finds the reference position (required after power-up by most controllers).
+    fn home(&mut self, timeout: Duration) -> HwResult<()>;
+    fn move_absolute(&mut self, target: StagePosition) -> HwResult<()>;
+    fn move_relative(&mut self, dx_mm: f64, dy_mm: f64) -> HwResult<()> {
+        let p = self.position()?;
+        self.move_absolute(StagePosition {
+            x_mm: p.x_mm + dx_mm,
+            y_mm: p.y_mm + dy_mm,
+        })
+    }
+    fn position(&mut self) -> HwResult<StagePosition>;
+    /// Waits until the stage has stopped, then returns where it is.
+    fn wait_settled(&mut self, timeout: Duration) -> HwResult<StagePosition>;
+    fn stop(&mut self) -> HwResult<()>;
+}

@@ -1,0 +1,174 @@
+use crate::bench::SharedBench;
+use ffdic_hw::{
+    Camera, CameraCounters, CameraInfo, CameraSettings, Frame, HwError, HwResult, PixelFormat,
+    StagePosition, TriggerMode,
+};
+use std::time::{Duration, Instant, SystemTime};
+
+/// What the sensor sees: the caller's physics (the root crate plugs in the imaging model).
+pub trait Scene: Send + Sync {
+    /// Sensor size, px.
+    fn size(&self) -> (usize, usize);
+    /// The frame, in DN of `bit_depth` bits, with the target at `position`; `frame_index`
+    /// seeds the noise of this exposure.
+    fn render(
+        &self,
+        position: StagePosition,
+        exposure_us: f64,
+        bit_depth: u8,
+        frame_index: u64,
+    ) -> Vec<u16>;
+}
+
+/// Faults to inject into the mock camera.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct CameraFaults {
+    /// The camera disappears once this many frames have been delivered.
+    pub disconnect_after_frames: Option<u64>,
+    /// Frames with these indices arrive with missing packets (dropped, counted, retried).
+    pub missing_packets_every: Option<u64>,
+    /// The stream stalls: every acquisition times out.
+    pub stalled: bool,
+}
+
+pub struct MockCamera<S: Scene> {
+    info: CameraInfo,
+    scene: S,
+    bench: SharedBench,
+    settings: CameraSettings,
+    counters: CameraCounters,
+    next_frame_id: u64,
+    pub faults: CameraFaults,
+}
+
+impl<S: Scene> MockCamera<S> {
+    pub fn new(scene: S, bench: SharedBench) -> Self {
+        let (w, h) = scene.size();
+        Self {
+            info: CameraInfo {
+                vendor: "ffdic".into(),
+                model: "mock sCMOS".into(),
+                serial: "MOCK-0001".into(),
+                sensor_width: w as u32,
+                sensor_height: h as u32,
+                pixel_formats: vec![PixelFormat::Mono8, PixelFormat::Mono12, PixelFormat::Mono16],
+                hardware_binning: false,
+                hardware_decimation: false,
+            },
+            scene,
+            bench,
+            settings: CameraSettings::default(),
+            counters: CameraCounters::default(),
+            next_frame_id: 0,
+            faults: CameraFaults::default(),
+        }
+    }
+}
+
+impl<S: Scene> Camera for MockCamera<S> {
+    fn info(&self) -> &CameraInfo {
+        &self.info
+    }
+
+    fn settings(&self) -> CameraSettings {
+        self.settings.clone()
+    }
+
+    fn apply(&mut self, s: &CameraSettings) -> HwResult<CameraSettings> {
+        if !(s.exposure_us >= 10.0 && s.exposure_us <= 10_000_000.0) {
+            return Err(HwError::OutOfRange {
+                what: "exposure_us".into(),
+                value: s.exposure_us,
+                min: 10.0,
+                max: 1e7,
+            });
+        }
+        if !(0.0..=24.0).contains(&s.gain_db) {
+            return Err(HwError::OutOfRange {
+                what: "gain_db".into(),
+                value: s.gain_db,
+                min: 0.0,
+                max: 24.0,
+            });
+        }
+        if !self.info.pixel_formats.contains(&s.pixel_format) {
+            return Err(HwError::Unsupported(format!(
+                "pixel format {:?}",
+                s.pixel_format
+            )));
+        }
+        if s.roi.is_some() || s.binning != (1, 1) || s.decimation != (1, 1) {
+            return Err(HwError::Unsupported(
+                "ROI, binning and decimation on the mock camera".into(),
+            ));
+        }
+        self.settings = s.clone();
+        Ok(self.settings.clone())
+    }
+
+    fn acquire(&mut self, count: usize, timeout: Duration) -> HwResult<Vec<Frame>> {
+        let mut frames = Vec::with_capacity(count);
+        while frames.len() < count {
+            if self.faults.stalled {
+                std::thread::sleep(timeout);
+                self.counters.failed += 1;
+                return Err(HwError::Timeout {
+                    what: "frame".into(),
+                    after_ms: timeout.as_millis() as u64,
+                });
+            }
+            if let Some(n) = self.faults.disconnect_after_frames {
+                if self.counters.completed >= n {
+                    return Err(HwError::Disconnected("mock camera unplugged".into()));
+                }
+            }
+            let id = self.next_frame_id;
+            self.next_frame_id += 1;
+            // The exposure sees the target where it is at this moment, moving or not.
+            let position = self
+                .bench
+                .lock()
+                .expect("bench lock")
+                .position_at(Instant::now());
+            if self
+                .faults
+                .missing_packets_every
+                .is_some_and(|k| k > 0 && id % k == k - 1)
+            {
+                self.counters.failed += 1;
+                self.counters.missing_packets += 3;
+                continue;
+            }
+            let (w, h) = self.scene.size();
+            let bit_depth = self.settings.pixel_format.bit_depth();
+            let data = self
+                .scene
+                .render(position, self.settings.exposure_us, bit_depth, id);
+            debug_assert_eq!(data.len(), w * h);
+            self.counters.completed += 1;
+            frames.push(Frame {
+                width: w,
+                height: h,
+                bit_depth,
+                data,
+                frame_id: id,
+                device_timestamp_ns: Some(id * 1_000_000),
+                host_timestamp: SystemTime::now(),
+            });
+        }
+        Ok(frames)
+    }
+
+    fn software_trigger(&mut self) -> HwResult<()> {
+        if self.settings.trigger != TriggerMode::Software {
+            return Err(HwError::Busy(
+                "camera is free-running; set trigger to software first".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    fn counters(&self) -> CameraCounters {
+        self.counters
+    }
+}

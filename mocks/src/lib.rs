@@ -1,0 +1,12 @@
+//! Mock hardware that behaves like the real thing: a stage that takes time to travel and settle
+//! and must be homed after power-up, and a camera that renders — through whatever [`Scene`] the
+//! caller plugs in — what the sensor sees at the stage's position at the moment of exposure.
+//! Faults are injectable. Depends on `ffdic-hw` only: the root crate wires the model in as a Scene.
+
+mod bench;
+mod camera;
+mod stage;
+
+pub use bench::{new_bench, BenchState, Motion, SharedBench};
+pub use camera::{CameraFaults, MockCamera, Scene};
+pub use stage::{MockStage, StageFaults};

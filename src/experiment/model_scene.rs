@@ -1,0 +1,61 @@
+//! The imaging model as the mock camera's scene: the mock bench's truth. The bench model (what the
+//! mock hardware does) is configured apart from any analysis model, so a comparison can hold a
+//! model against a bench that has effects the model lacks.
+
+use crate::model::{render_frame, Camera, ModelConfig, SpecklePattern, TargetDot};
+use ffdic_hw::StagePosition;
+use ffdic_mocks::Scene;
+
+pub struct ModelScene {
+    pub camera: Camera,
+    pub bench: ModelConfig,
+    pub dots: Vec<TargetDot>,
+    pub seed: u64,
+}
+
+impl ModelScene {
+    /// A scene of `pattern` covering the field of view plus `travel_mm` on every side.
+    pub fn new(
+        camera: Camera,
+        bench: ModelConfig,
+        pattern: &SpecklePattern,
+        travel_mm: f64,
+        seed: u64,
+    ) -> Self {
+        let dots = pattern.dots(camera.field_mm(travel_mm + 2.0), seed);
+        Self {
+            camera,
+            bench,
+            dots,
+            seed,
+        }
+    }
+}
+
+impl Scene for ModelScene {
+    fn size(&self) -> (usize, usize) {
+        (self.camera.width, self.camera.height)
+    }
+
+    fn render(
+        &self,
+        p: StagePosition,
+        _exposure_us: f64,
+        bit_depth: u8,
+        frame_index: u64,
+    ) -> Vec<u16> {
+        let frame = crate::model::FrameSpec {
+            stage_dx_mm: p.x_mm,
+            stage_dy_mm: p.y_mm,
+            moved: p.x_mm != 0.0 || p.y_mm != 0.0,
+            seed: super::derive_seed(self.seed, 0xCA3E, frame_index),
+        };
+        let img = render_frame(&self.camera, &self.bench.effects, &self.dots, &frame);
+        // The model renders on a 16-bit scale; narrower formats keep the top bits.
+        let shift = 16 - bit_depth.min(16) as u32;
+        img.data()
+            .iter()
+            .map(|&v| (v.round().clamp(0.0, 65535.0) as u32 >> shift) as u16)
+            .collect()
+    }
+}
