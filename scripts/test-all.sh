@@ -5,8 +5,13 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-# Debian packages the features need; empty until a feature needs a system library.
-APT_PACKAGES=()
+# Debian packages the features and tests need:
+# - aravis: libaravis-dev (+ libusb-1.0-0-dev, which its -dev package forgets), and the fake
+#   GigE Vision camera and CLI tools (aravis-tools, aravis-tools-cli);
+# - v4l2: libclang-dev (bindgen);
+# - the Zaber simulator is checked with zproto, which pulls serialport's libudev feature.
+# - iproute2: the Aravis tests bring up loopback inside their own network namespace.
+APT_PACKAGES=(libaravis-dev libusb-1.0-0-dev aravis-tools-cli aravis-tools libclang-dev libudev-dev pkg-config iproute2)
 missing=()
 for pkg in "${APT_PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
@@ -15,7 +20,7 @@ if [ ${#missing[@]} -gt 0 ]; then
   echo "installing: ${missing[*]}"
   export DEBIAN_FRONTEND=noninteractive
   apt-get update -qq
-  apt-get install -y -qq "${missing[@]}"
+  apt-get install -y -qq --no-install-recommends "${missing[@]}"
 fi
 
 { cargo fmt --version && cargo clippy --version; } >/dev/null 2>&1 || rustup component add rustfmt clippy
