@@ -1,0 +1,50 @@
+use super::ids::RunId;
+use super::record::RunStatus;
+use crate::dataset::DatasetError;
+use std::path::PathBuf;
+
+/// What can go wrong in the run store. The HTTP layer maps these to status codes, so each variant
+/// is one kind of cause: a caller mistake (`BadId`, `BadPath`, `NotFound`, `Finished`,
+/// `Transition`, `Conflict`, `Dataset`) or the machine (`Io`, `Sqlite`, `Corrupt`).
+#[derive(Debug, thiserror::Error)]
+pub enum StoreError {
+    #[error("cannot access {path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("run index: {0}")]
+    Sqlite(#[from] rusqlite::Error),
+    #[error(
+        "'{0}' is not a valid id (1 to 64 characters a-z, 0-9 and '-', not starting with '-')"
+    )]
+    BadId(String),
+    #[error("bad file name: {0}")]
+    BadPath(String),
+    #[error("not found: {0}")]
+    NotFound(String),
+    #[error("run {0} has already ended")]
+    Finished(RunId),
+    #[error("a run cannot go from {from} to {to}")]
+    Transition { from: RunStatus, to: RunStatus },
+    #[error("invalid dataset: {0}")]
+    Dataset(#[from] DatasetError),
+    #[error("conflict: {0}")]
+    Conflict(String),
+    /// An event a caller may not write: a malformed kind, or a terminal kind, which only
+    /// `set_status` writes (it seals the run).
+    #[error("bad event: {0}")]
+    BadEvent(String),
+    /// A file of the store that does not parse: the folder was edited or damaged by hand.
+    #[error("{path} is damaged: {message}")]
+    Corrupt { path: PathBuf, message: String },
+}
+
+pub type Result<T, E = StoreError> = std::result::Result<T, E>;
+
+/// `map_err` helper: an I/O error at `path`.
+pub(crate) fn io(path: impl Into<PathBuf>) -> impl FnOnce(std::io::Error) -> StoreError {
+    let path = path.into();
+    move |source| StoreError::Io { path, source }
+}

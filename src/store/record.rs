@@ -1,0 +1,233 @@
+//! What the store keeps: run records (`run.json`), their events (`events.jsonl`) and dataset
+//! records (`record.json`). Times are RFC 3339 UTC strings with milliseconds, so they sort as text.
+
+use super::ids::{DatasetId, RunId};
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+use std::fmt;
+use std::str::FromStr;
+
+/// Now, as RFC 3339 UTC with milliseconds (`2026-11-22T10:15:00.123Z`).
+pub fn now_rfc3339() -> String {
+    humantime::format_rfc3339_millis(std::time::SystemTime::now()).to_string()
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RunKind {
+    Experiment,
+    Analysis,
+    Comparison,
+    Diagnosis,
+}
+
+impl RunKind {
+    pub const ALL: [RunKind; 4] = [
+        RunKind::Experiment,
+        RunKind::Analysis,
+        RunKind::Comparison,
+        RunKind::Diagnosis,
+    ];
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            RunKind::Experiment => "experiment",
+            RunKind::Analysis => "analysis",
+            RunKind::Comparison => "comparison",
+            RunKind::Diagnosis => "diagnosis",
+        }
+    }
+
+    /// The first part of this kind's run ids.
+    pub fn id_prefix(self) -> &'static str {
+        match self {
+            RunKind::Experiment => "exp",
+            RunKind::Analysis => "ana",
+            RunKind::Comparison => "cmp",
+            RunKind::Diagnosis => "dia",
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RunStatus {
+    Queued,
+    Running,
+    Succeeded,
+    Failed,
+    Cancelled,
+}
+
+impl RunStatus {
+    pub const ALL: [RunStatus; 5] = [
+        RunStatus::Queued,
+        RunStatus::Running,
+        RunStatus::Succeeded,
+        RunStatus::Failed,
+        RunStatus::Cancelled,
+    ];
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            RunStatus::Queued => "queued",
+            RunStatus::Running => "running",
+            RunStatus::Succeeded => "succeeded",
+            RunStatus::Failed => "failed",
+            RunStatus::Cancelled => "cancelled",
+        }
+    }
+
+    pub fn is_terminal(self) -> bool {
+        matches!(
+            self,
+            RunStatus::Succeeded | RunStatus::Failed | RunStatus::Cancelled
+        )
+    }
+
+    /// The only moves: queued → running | cancelled | failed, running → succeeded | failed |
+    /// cancelled. Never backwards, never to itself, and a terminal status is final.
+    pub fn can_become(self, next: RunStatus) -> bool {
+        use RunStatus::*;
+        matches!(
+            (self, next),
+            (Queued, Running | Cancelled | Failed) | (Running, Succeeded | Failed | Cancelled)
+        )
+    }
+}
+
+macro_rules! text_enum {
+    ($t:ty) => {
+        impl fmt::Display for $t {
+            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str(self.as_str())
+            }
+        }
+
+        impl FromStr for $t {
+            type Err = String;
+            fn from_str(s: &str) -> Result<Self, String> {
+                Self::ALL
+                    .into_iter()
+                    .find(|v| v.as_str() == s)
+                    .ok_or_else(|| format!("unknown {} '{s}'", stringify!($t)))
+            }
+        }
+    };
+}
+
+text_enum!(RunKind);
+text_enum!(RunStatus);
+
+/// One run: `runs/{id}/run.json`, rewritten whole on every change until the run has ended.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunRecord {
+    pub id: RunId,
+    pub kind: RunKind,
+    pub status: RunStatus,
+    /// 0 to 1, never decreasing.
+    pub progress: f64,
+    #[serde(default)]
+    pub message: String,
+    pub created_at: String,
+    #[serde(default)]
+    pub started_at: Option<String>,
+    #[serde(default)]
+    pub finished_at: Option<String>,
+    #[serde(default)]
+    pub dataset_id: Option<DatasetId>,
+    /// The request as submitted.
+    #[serde(default)]
+    pub request: Value,
+    #[serde(default)]
+    pub idempotency_key: Option<String>,
+    /// Files the run wrote, relative to its folder, in the order first written.
+    #[serde(default)]
+    pub result_files: Vec<String>,
+}
+
+/// One line of `runs/{id}/events.jsonl`. Ids count 1, 2, 3… within a run.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Event {
+    pub id: u64,
+    pub run_id: RunId,
+    /// `queued`, `started`, `progress`, `stage_moved`, `frame_captured`, `pair_analyzed`,
+    /// `succeeded`, `failed`, `cancelled`, or any other `[a-z0-9_.-]` word.
+    pub kind: String,
+    pub progress: f64,
+    #[serde(default)]
+    pub message: String,
+    pub at: String,
+    #[serde(default)]
+    pub data: Value,
+}
+
+/// A stored dataset: `datasets/{id}/record.json` beside its `dataset.json` and frames.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DatasetRecord {
+    pub id: DatasetId,
+    pub name: String,
+    pub created_at: String,
+    /// `upload` or `experiment:{run id}`.
+    pub source: String,
+    /// Runs in the manifest.
+    pub runs: usize,
+    /// Frame size in pixels.
+    pub width: usize,
+    pub height: usize,
+    /// Every file of the dataset (not `record.json`), relative to its folder, sorted.
+    pub files: Vec<String>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use RunStatus::*;
+
+    #[test]
+    fn transitions_go_forward_only_and_terminal_is_final() {
+        let allowed = [
+            (Queued, Running),
+            (Queued, Cancelled),
+            (Queued, Failed),
+            (Running, Succeeded),
+            (Running, Failed),
+            (Running, Cancelled),
+        ];
+        for from in RunStatus::ALL {
+            for to in RunStatus::ALL {
+                assert_eq!(
+                    from.can_become(to),
+                    allowed.contains(&(from, to)),
+                    "{from} -> {to}"
+                );
+            }
+            if from.is_terminal() {
+                assert!(RunStatus::ALL.iter().all(|&to| !from.can_become(to)));
+            }
+        }
+        assert!(!Queued.is_terminal() && !Running.is_terminal());
+    }
+
+    #[test]
+    fn names_match_serde() {
+        for s in RunStatus::ALL {
+            assert_eq!(serde_json::to_value(s).unwrap(), s.as_str());
+            assert_eq!(s.as_str().parse::<RunStatus>().unwrap(), s);
+        }
+        for k in RunKind::ALL {
+            assert_eq!(serde_json::to_value(k).unwrap(), k.as_str());
+            assert_eq!(k.as_str().parse::<RunKind>().unwrap(), k);
+        }
+        assert!("done".parse::<RunStatus>().is_err());
+    }
+
+    #[test]
+    fn times_sort_as_text() {
+        let a = now_rfc3339();
+        std::thread::sleep(std::time::Duration::from_millis(2));
+        let b = now_rfc3339();
+        assert!(a < b, "{a} {b}");
+        assert!(humantime::parse_rfc3339(&a).is_ok());
+    }
+}

@@ -1,0 +1,654 @@
+//! The run store: one folder per run under `runs/` (the truth) and the SQLite index (a cache).
+//!
+//! Locking: every change to a run happens under that run's own lock, so runs never wait for each
+//! other's file writes; the index connection has one lock of its own, always taken after a run's
+//! lock, never before. `get` and `events` read the folder and take no lock: files are replaced by
+//! rename and events are appended whole, so a reader never sees half a change.
+
+use super::error::{io, Result, StoreError};
+use super::events;
+use super::files::{read_json, remove_dir, sync_dir, visible_subdirs, write_json};
+use super::ids::{DatasetId, RunId};
+use super::index;
+use super::paths::safe_relative_path;
+use super::record::{now_rfc3339, DatasetRecord, Event, RunKind, RunRecord, RunStatus};
+use rusqlite::Connection;
+use serde_json::{json, Value};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, MutexGuard};
+
+pub(crate) const RUNS: &str = "runs";
+pub(crate) const DATASETS: &str = "datasets";
+pub(crate) const RUN_FILE: &str = "run.json";
+pub(crate) const DATASET_RECORD: &str = "record.json";
+/// Prefix of a run folder being created; renamed to the id once complete.
+const NEW_RUN_PREFIX: &str = ".new-";
+pub(crate) const STAGING_PREFIX: &str = ".staging-";
+/// Longest idempotency key kept, in bytes.
+pub const MAX_IDEMPOTENCY_KEY_LEN: usize = 256;
+
+/// What `open` found and repaired.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RecoveryReport {
+    /// Runs left queued or running by an earlier process, now failed.
+    pub failed: Vec<RunId>,
+    /// Runs whose terminal event was written but whose `run.json` was not (a crash in between):
+    /// their status is now the one that event names.
+    pub completed: Vec<RunId>,
+    /// Folders under `runs/` or `datasets/` that could not be read; left alone and not indexed.
+    pub unreadable: Vec<PathBuf>,
+    /// Runs and datasets indexed.
+    pub runs: usize,
+    pub datasets: usize,
+}
+
+/// What [`rebuild_index`] indexed.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RebuildReport {
+    pub runs: usize,
+    pub datasets: usize,
+    /// Folders that could not be read; not indexed.
+    pub unreadable: Vec<PathBuf>,
+}
+
+#[derive(Default)]
+struct RunSlot {
+    /// The id of the run's last event, once known.
+    last_event: Option<u64>,
+}
+
+/// Runs and datasets under one data folder. `Send + Sync`: share it in an `Arc`.
+pub struct RunStore {
+    root: PathBuf,
+    db: Mutex<Connection>,
+    slots: Mutex<HashMap<RunId, Arc<Mutex<RunSlot>>>>,
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    // Every change is a whole-file replacement or one appended line, so a panic elsewhere leaves
+    // nothing half-done behind the lock.
+    m.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// The kinds only [`RunStore::set_status`] writes: the terminal event seals the run.
+fn is_terminal_event(kind: &str) -> Option<RunStatus> {
+    kind.parse::<RunStatus>().ok().filter(|s| s.is_terminal())
+}
+
+fn event_kind_is_valid(kind: &str) -> bool {
+    !kind.is_empty()
+        && kind.len() <= 64
+        && kind.bytes().all(|b| {
+            b.is_ascii_lowercase() || b.is_ascii_digit() || matches!(b, b'_' | b'-' | b'.')
+        })
+}
+
+fn clamp_progress(p: f64) -> Option<f64> {
+    p.is_finite().then(|| p.clamp(0.0, 1.0))
+}
+
+impl RunStore {
+    /// Opens the store in `data_dir` (creating the folders and the index), fails every run an
+    /// earlier process left queued or running, and brings the index in line with the folders.
+    pub fn open(data_dir: impl AsRef<Path>) -> Result<(RunStore, RecoveryReport)> {
+        let root = data_dir.as_ref().to_path_buf();
+        for dir in [root.clone(), root.join(RUNS), root.join(DATASETS)] {
+            std::fs::create_dir_all(&dir).map_err(io(&dir))?;
+        }
+        remove_leftovers(&root.join(RUNS), NEW_RUN_PREFIX)?;
+        remove_leftovers(&root.join(DATASETS), STAGING_PREFIX)?;
+        let mut conn = open_index(&root)?;
+        let found = scan(&root)?;
+        let mut report = RecoveryReport {
+            unreadable: found.unreadable,
+            runs: found.runs.len(),
+            datasets: found.datasets.len(),
+            ..Default::default()
+        };
+        let mut runs = found.runs;
+        for rec in runs.iter_mut().filter(|r| !r.status.is_terminal()) {
+            recover(&root, rec, &mut report)?;
+        }
+        index::replace_all(&mut conn, &runs, &found.datasets)?;
+        let store = RunStore {
+            root,
+            db: Mutex::new(conn),
+            slots: Mutex::new(HashMap::new()),
+        };
+        Ok((store, report))
+    }
+
+    /// The data folder.
+    pub fn data_dir(&self) -> &Path {
+        &self.root
+    }
+
+    /// The folder of run `id` (which may not exist).
+    pub fn run_dir(&self, id: &RunId) -> PathBuf {
+        self.root.join(RUNS).join(id.as_str())
+    }
+
+    /// The folder of dataset `id` (which may not exist).
+    pub fn dataset_dir(&self, id: &DatasetId) -> PathBuf {
+        self.root.join(DATASETS).join(id.as_str())
+    }
+
+    pub(crate) fn db(&self) -> MutexGuard<'_, Connection> {
+        lock(&self.db)
+    }
+
+    fn slot(&self, id: &RunId) -> Arc<Mutex<RunSlot>> {
+        lock(&self.slots).entry(id.clone()).or_default().clone()
+    }
+
+    /// Forgets the lock of an ended run; a later caller gets a fresh one and finds it sealed.
+    fn forget_slot(&self, id: &RunId) {
+        lock(&self.slots).remove(id);
+    }
+
+    /// Queues a new run of `kind` for `request`: writes its folder with `run.json` and a `queued`
+    /// event. With a non-empty `idempotency_key` already used by a run of this kind, returns that
+    /// run and `false` instead, or `Conflict` when it was for a different request.
+    pub fn create_run(
+        &self,
+        kind: RunKind,
+        request: Value,
+        idempotency_key: Option<&str>,
+        dataset_id: Option<DatasetId>,
+    ) -> Result<(RunRecord, bool)> {
+        let key = idempotency_key.filter(|k| !k.is_empty());
+        if let Some(k) = key {
+            if k.len() > MAX_IDEMPOTENCY_KEY_LEN || k.chars().any(char::is_control) {
+                return Err(StoreError::Conflict(format!(
+                    "an idempotency key is at most {MAX_IDEMPOTENCY_KEY_LEN} bytes of printable text"
+                )));
+            }
+        }
+        // The index lock is held throughout, so two requests with one key make one run.
+        let mut db = self.db();
+        if let Some(k) = key {
+            if let Some(id) = index::find_by_key(&db, kind, k)? {
+                let existing = self.get(&id)?;
+                if existing.request != request {
+                    return Err(StoreError::Conflict(format!(
+                        "idempotency key '{k}' was used for a different {kind} request (run {id})"
+                    )));
+                }
+                return Ok((existing, false));
+            }
+        }
+        let runs = self.root.join(RUNS);
+        let id = loop {
+            let id = RunId::generate(kind);
+            if !runs.join(id.as_str()).exists() {
+                break id;
+            }
+        };
+        let now = now_rfc3339();
+        let record = RunRecord {
+            id: id.clone(),
+            kind,
+            status: RunStatus::Queued,
+            progress: 0.0,
+            message: "queued".into(),
+            created_at: now.clone(),
+            started_at: None,
+            finished_at: None,
+            dataset_id,
+            request,
+            idempotency_key: key.map(str::to_string),
+            result_files: Vec::new(),
+        };
+        let event = Event {
+            id: 1,
+            run_id: id.clone(),
+            kind: "queued".into(),
+            progress: 0.0,
+            message: "queued".into(),
+            at: now,
+            data: json!({ "status": RunStatus::Queued }),
+        };
+        // Built under a hidden name and renamed: a run folder always has its run.json.
+        let tmp = runs.join(format!("{NEW_RUN_PREFIX}{id}"));
+        let dir = self.run_dir(&id);
+        let result = (|| {
+            std::fs::create_dir(&tmp).map_err(io(&tmp))?;
+            write_json(&tmp.join(RUN_FILE), &record)?;
+            events::append(&tmp.join(events::FILE), &event)?;
+            let tx = db.transaction()?;
+            index::upsert_run(&tx, &record)?;
+            std::fs::rename(&tmp, &dir).map_err(io(&dir))?;
+            if let Err(e) = tx.commit() {
+                let _ = std::fs::rename(&dir, &tmp);
+                return Err(e.into());
+            }
+            sync_dir(&runs)
+        })();
+        if result.is_err() {
+            let _ = std::fs::remove_dir_all(&tmp);
+        }
+        result?;
+        Ok((record, true))
+    }
+
+    /// Run `id` as its `run.json` says now.
+    pub fn get(&self, id: &RunId) -> Result<RunRecord> {
+        read_json(&self.run_dir(id).join(RUN_FILE))?
+            .ok_or_else(|| StoreError::NotFound(format!("run {id}")))
+    }
+
+    /// Runs newest first, optionally only of one `status` and one `kind`, at most `limit`.
+    pub fn list(
+        &self,
+        status: Option<RunStatus>,
+        kind: Option<RunKind>,
+        limit: usize,
+    ) -> Result<Vec<RunRecord>> {
+        index::list_runs(&self.db(), status, kind, limit)
+    }
+
+    /// Moves run `id` to `next` (see [`RunStatus::can_become`]) with `message`; stamps
+    /// `started_at` / `finished_at`, sets progress 1 on success and writes the matching event
+    /// (`started`, `succeeded`, `failed` or `cancelled`). After a terminal status nothing more can
+    /// be written to the run: its terminal event is its last.
+    pub fn set_status(&self, id: &RunId, next: RunStatus, message: &str) -> Result<RunRecord> {
+        let slot = self.slot(id);
+        let mut slot = lock(&slot);
+        let mut rec = self.get(id)?;
+        if rec.status.is_terminal() {
+            return Err(StoreError::Finished(id.clone()));
+        }
+        if !rec.status.can_become(next) {
+            return Err(StoreError::Transition {
+                from: rec.status,
+                to: next,
+            });
+        }
+        let now = now_rfc3339();
+        rec.status = next;
+        rec.message = message.to_string();
+        if next == RunStatus::Running {
+            rec.started_at = Some(now.clone());
+        }
+        if next == RunStatus::Succeeded {
+            rec.progress = 1.0;
+        }
+        if next.is_terminal() {
+            rec.finished_at = Some(now.clone());
+        }
+        let kind = if next == RunStatus::Running {
+            "started"
+        } else {
+            next.as_str()
+        };
+        // The event first: should the process die before run.json is rewritten, the next open
+        // finds the terminal event and completes the transition it records.
+        self.push_event(
+            &mut slot,
+            &rec,
+            kind,
+            rec.progress,
+            message,
+            json!({ "status": next }),
+            &now,
+        )?;
+        self.save(&rec)?;
+        if next.is_terminal() {
+            drop(slot);
+            self.forget_slot(id);
+        }
+        Ok(rec)
+    }
+
+    /// Records progress (0–1, never lower than before: a lower or non-finite value keeps the
+    /// current one) and `message`. `Finished` once the run has ended.
+    pub fn set_progress(&self, id: &RunId, progress: f64, message: &str) -> Result<RunRecord> {
+        let slot = self.slot(id);
+        let _slot = lock(&slot);
+        let mut rec = self.get(id)?;
+        if rec.status.is_terminal() {
+            return Err(StoreError::Finished(id.clone()));
+        }
+        if let Some(p) = clamp_progress(progress) {
+            rec.progress = rec.progress.max(p);
+        }
+        rec.message = message.to_string();
+        self.save(&rec)?;
+        Ok(rec)
+    }
+
+    /// Appends an event of `kind` (a word of `a-z 0-9 _ - .`, not a terminal status: those are
+    /// `set_status`'s) with the next id. `Finished` once the run has ended.
+    pub fn append_event(
+        &self,
+        id: &RunId,
+        kind: &str,
+        progress: f64,
+        message: &str,
+        data: Value,
+    ) -> Result<Event> {
+        if !event_kind_is_valid(kind) {
+            return Err(StoreError::BadEvent(format!(
+                "'{}' is not an event kind (1 to 64 of a-z, 0-9, '_', '-', '.')",
+                kind.chars().take(64).collect::<String>()
+            )));
+        }
+        if is_terminal_event(kind).is_some() {
+            return Err(StoreError::BadEvent(format!(
+                "'{kind}' events are written by set_status only"
+            )));
+        }
+        let slot = self.slot(id);
+        let mut slot = lock(&slot);
+        let rec = self.get(id)?;
+        if rec.status.is_terminal() {
+            return Err(StoreError::Finished(id.clone()));
+        }
+        let progress = clamp_progress(progress).unwrap_or(rec.progress);
+        self.push_event(
+            &mut slot,
+            &rec,
+            kind,
+            progress,
+            message,
+            data,
+            &now_rfc3339(),
+        )
+    }
+
+    /// Events of run `id` with an id above `after` (all when `None`), oldest first.
+    pub fn events(&self, id: &RunId, after: Option<u64>) -> Result<Vec<Event>> {
+        let dir = self.run_dir(id);
+        if !dir.join(RUN_FILE).is_file() {
+            return Err(StoreError::NotFound(format!("run {id}")));
+        }
+        events::read(&dir.join(events::FILE), after)
+    }
+
+    /// Writes `bytes` to `rel` (see [`safe_relative_path`]) inside run `id`'s folder, atomically,
+    /// and records it in `result_files`. `Finished` once the run has ended; `BadPath` for an
+    /// unsafe name or the store's own `run.json` / `events.jsonl`.
+    pub fn write_file(&self, id: &RunId, rel: &str, bytes: &[u8]) -> Result<PathBuf> {
+        let rel_path = safe_relative_path(rel)?;
+        if rel == RUN_FILE || rel == events::FILE {
+            return Err(StoreError::BadPath(format!("'{rel}' belongs to the store")));
+        }
+        let slot = self.slot(id);
+        let _slot = lock(&slot);
+        let mut rec = self.get(id)?;
+        if rec.status.is_terminal() {
+            return Err(StoreError::Finished(id.clone()));
+        }
+        let path = self.run_dir(id).join(&rel_path);
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent).map_err(io(parent))?;
+        }
+        super::atomic::write_atomically(&path, bytes).map_err(io(&path))?;
+        if !rec.result_files.iter().any(|f| f == rel) {
+            rec.result_files.push(rel.to_string());
+            self.save(&rec)?;
+        }
+        Ok(path)
+    }
+
+    /// The bytes of `rel` inside run `id`'s folder; `NotFound` when there is no such file.
+    pub fn read_file(&self, id: &RunId, rel: &str) -> Result<Vec<u8>> {
+        let path = self.run_dir(id).join(safe_relative_path(rel)?);
+        match std::fs::read(&path) {
+            Ok(bytes) => Ok(bytes),
+            Err(e) if matches!(e.kind(), std::io::ErrorKind::NotFound) || path.is_dir() => Err(
+                StoreError::NotFound(format!("run {id} has no file '{rel}'")),
+            ),
+            Err(e) => Err(StoreError::Io { path, source: e }),
+        }
+    }
+
+    /// Builds and appends an event; the caller holds the run's lock.
+    #[allow(clippy::too_many_arguments)]
+    fn push_event(
+        &self,
+        slot: &mut RunSlot,
+        rec: &RunRecord,
+        kind: &str,
+        progress: f64,
+        message: &str,
+        data: Value,
+        at: &str,
+    ) -> Result<Event> {
+        let path = self.run_dir(&rec.id).join(events::FILE);
+        let last = match slot.last_event {
+            Some(n) => n,
+            None => events::last(&path)?.map_or(0, |e| e.id),
+        };
+        let event = Event {
+            id: last + 1,
+            run_id: rec.id.clone(),
+            kind: kind.to_string(),
+            progress,
+            message: message.to_string(),
+            at: at.to_string(),
+            data,
+        };
+        // Unknown after a failed append (a torn line may or may not hold the id): re-read then.
+        slot.last_event = None;
+        events::append(&path, &event)?;
+        slot.last_event = Some(event.id);
+        Ok(event)
+    }
+
+    /// Rewrites `run.json` (the truth), then the index. An index failure is logged, not
+    /// returned: the change is made, and the next open puts the index right.
+    fn save(&self, rec: &RunRecord) -> Result<()> {
+        write_json(&self.run_dir(&rec.id).join(RUN_FILE), rec)?;
+        if let Err(e) = index::upsert_run(&self.db(), rec) {
+            tracing::warn!(run = %rec.id, "index not updated: {e}");
+        }
+        Ok(())
+    }
+}
+
+/// Deletes the index and recreates it from the folders under `data_dir` (`ffdic store
+/// rebuild`). Runs are indexed as their folders say, without recovery; do not run it while a
+/// daemon has the store open.
+pub fn rebuild_index(data_dir: impl AsRef<Path>) -> Result<RebuildReport> {
+    let root = data_dir.as_ref();
+    if !root.join(RUNS).is_dir() && !root.join(DATASETS).is_dir() {
+        return Err(StoreError::NotFound(format!(
+            "{} holds no runs/ or datasets/ folder",
+            root.display()
+        )));
+    }
+    remove_index(root)?;
+    let mut conn = index::open(&root.join(index::FILE))?;
+    let found = scan(root)?;
+    index::replace_all(&mut conn, &found.runs, &found.datasets)?;
+    Ok(RebuildReport {
+        runs: found.runs.len(),
+        datasets: found.datasets.len(),
+        unreadable: found.unreadable,
+    })
+}
+
+/// Removes the index with its WAL and shared-memory files: a stale WAL beside a new database
+/// would be replayed into it.
+fn remove_index(root: &Path) -> Result<()> {
+    for suffix in ["", "-wal", "-shm"] {
+        let p = root.join(format!("{}{suffix}", index::FILE));
+        match std::fs::remove_file(&p) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(io(&p)(e)),
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
+/// The index, recreated from nothing when the file is not a usable database: it is a cache.
+fn open_index(root: &Path) -> Result<Connection> {
+    let path = root.join(index::FILE);
+    match index::open(&path) {
+        Ok(conn) => Ok(conn),
+        Err(e) => {
+            tracing::warn!(index = %path.display(), "unusable index, recreating it: {e}");
+            remove_index(root)?;
+            index::open(&path)
+        }
+    }
+}
+
+fn remove_leftovers(dir: &Path, prefix: &str) -> Result<()> {
+    for entry in std::fs::read_dir(dir).map_err(io(dir))? {
+        let entry = entry.map_err(io(dir))?;
+        if entry.file_name().to_string_lossy().starts_with(prefix) {
+            tracing::info!(folder = %entry.path().display(), "removing an unfinished folder");
+            remove_dir(&entry.path())?;
+        }
+    }
+    Ok(())
+}
+
+struct Scan {
+    runs: Vec<RunRecord>,
+    datasets: Vec<DatasetRecord>,
+    unreadable: Vec<PathBuf>,
+}
+
+/// Reads every run and dataset record under `root`.
+fn scan(root: &Path) -> Result<Scan> {
+    let mut found = Scan {
+        runs: Vec::new(),
+        datasets: Vec::new(),
+        unreadable: Vec::new(),
+    };
+    let runs = root.join(RUNS);
+    if runs.is_dir() {
+        for (name, dir) in visible_subdirs(&runs)? {
+            match read_record::<RunRecord>(&dir, RUN_FILE) {
+                Some(r) if r.id.as_str() == name => found.runs.push(r),
+                _ => found.unreadable.push(dir),
+            }
+        }
+    }
+    let datasets = root.join(DATASETS);
+    if datasets.is_dir() {
+        for (name, dir) in visible_subdirs(&datasets)? {
+            match read_record::<DatasetRecord>(&dir, DATASET_RECORD) {
+                Some(d) if d.id.as_str() == name => found.datasets.push(d),
+                _ => found.unreadable.push(dir),
+            }
+        }
+    }
+    Ok(found)
+}
+
+fn read_record<T: serde::de::DeserializeOwned>(dir: &Path, file: &str) -> Option<T> {
+    match read_json::<T>(&dir.join(file)) {
+        Ok(Some(r)) => Some(r),
+        Ok(None) => {
+            tracing::warn!(folder = %dir.display(), "no {file}: not indexed");
+            None
+        }
+        Err(e) => {
+            tracing::warn!(folder = %dir.display(), "not indexed: {e}");
+            None
+        }
+    }
+}
+
+/// Ends a run an earlier process left unfinished: completes a terminal transition whose event
+/// was written, else fails the run with the reason and an event.
+fn recover(root: &Path, rec: &mut RunRecord, report: &mut RecoveryReport) -> Result<()> {
+    let dir = root.join(RUNS).join(rec.id.as_str());
+    let log = dir.join(events::FILE);
+    let last = events::last(&log)?;
+    let sealed = last
+        .as_ref()
+        .and_then(|e| is_terminal_event(&e.kind).map(|s| (s, e)))
+        .filter(|(s, _)| rec.status.can_become(*s));
+    if let Some((status, event)) = sealed {
+        rec.status = status;
+        rec.message = event.message.clone();
+        rec.finished_at = Some(event.at.clone());
+        if status == RunStatus::Succeeded {
+            rec.progress = 1.0;
+        }
+        write_json(&dir.join(RUN_FILE), rec)?;
+        report.completed.push(rec.id.clone());
+        return Ok(());
+    }
+    let now = now_rfc3339();
+    let message = format!("the server stopped while this run was {}", rec.status);
+    let event = Event {
+        id: last.map_or(0, |e| e.id) + 1,
+        run_id: rec.id.clone(),
+        kind: RunStatus::Failed.as_str().into(),
+        progress: rec.progress,
+        message: message.clone(),
+        at: now.clone(),
+        data: json!({ "status": RunStatus::Failed, "recovered": true }),
+    };
+    events::append(&log, &event)?;
+    rec.status = RunStatus::Failed;
+    rec.message = message;
+    rec.finished_at = Some(now);
+    write_json(&dir.join(RUN_FILE), rec)?;
+    report.failed.push(rec.id.clone());
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn open_removes_unfinished_folders_and_reports_unreadable_ones() {
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path();
+        for d in [
+            "runs/.new-exp-1",
+            "datasets/.staging-abc",
+            "runs/no-run-json",
+            "runs/exp-2",
+            "runs/Not_An_Id",
+        ] {
+            std::fs::create_dir_all(root.join(d)).unwrap();
+        }
+        std::fs::write(root.join("runs/exp-2/run.json"), b"{ torn").unwrap();
+        std::fs::write(root.join("runs/Not_An_Id/run.json"), b"{}").unwrap();
+        let (store, report) = RunStore::open(root).unwrap();
+        assert!(!root.join("runs/.new-exp-1").exists());
+        assert!(!root.join("datasets/.staging-abc").exists());
+        assert_eq!(report.unreadable.len(), 3, "{report:?}");
+        assert_eq!((report.runs, report.datasets), (0, 0));
+        // Left alone for a person to look at.
+        assert!(root.join("runs/exp-2/run.json").is_file());
+        assert!(store.list(None, None, 10).unwrap().is_empty());
+        let id: RunId = "exp-2".parse().unwrap();
+        assert!(matches!(store.get(&id), Err(StoreError::Corrupt { .. })));
+    }
+
+    #[test]
+    fn event_kinds() {
+        for ok in ["progress", "stage_moved", "frame.captured", "x-1"] {
+            assert!(
+                event_kind_is_valid(ok) && is_terminal_event(ok).is_none(),
+                "{ok}"
+            );
+        }
+        for bad in ["", "Progress", "a b", "a\nb", "data:", &"a".repeat(65)] {
+            assert!(!event_kind_is_valid(bad), "{bad:?}");
+        }
+        assert_eq!(is_terminal_event("cancelled"), Some(RunStatus::Cancelled));
+        assert_eq!(is_terminal_event("running"), None);
+    }
+
+    #[test]
+    fn rebuild_needs_a_data_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        assert!(matches!(
+            rebuild_index(dir.path().join("none")),
+            Err(StoreError::NotFound(_))
+        ));
+        assert!(!dir.path().join("none").exists());
+    }
+}
