@@ -1,0 +1,230 @@
+//! `ffdic compare DATASET`: DIC on the measured frames against the same DIC on the frames the
+//! model renders for the same nominal experiment; the discrepancy per run, scheme and in total;
+//! residual maps and image statistics as SVG with `--out`; every comparison kept in the dataset's
+//! history.
+
+use super::simulate::load_model;
+use super::ProgressBar;
+use anyhow::{Context, Result};
+use clap::Args;
+use ffdic::diagnose::{
+    append_history, compare, comparison_svgs, CompareOptions, Comparison, HistoryEntry,
+    BASELINE_TOML,
+};
+use ffdic::dic::DicSettings;
+use ffdic::model::ModelConfig;
+use ffdic::reduce::Scheme;
+use std::path::PathBuf;
+
+/// How the comparison analyses both sides (shared by compare and diagnose).
+#[derive(Debug, Args)]
+pub struct AnalysisArgs {
+    /// Reduction schemes, comma-separated presets.
+    #[arg(long, default_value = "ff100,ff50,ff25", value_delimiter = ',')]
+    pub schemes: Vec<String>,
+    /// DIC subset size, px (odd).
+    #[arg(long, default_value_t = 41)]
+    pub subset: usize,
+    /// DIC step, px.
+    #[arg(long, default_value_t = 20)]
+    pub step: usize,
+    /// Gaussian pre-filter σ, px (0 = off).
+    #[arg(long, default_value_t = 0.7)]
+    pub prefilter_sigma: f64,
+    /// Seed of the model's speckle layouts and noise.
+    #[arg(long, default_value_t = 0x0FFD_1C5E)]
+    pub seed: u64,
+}
+
+impl AnalysisArgs {
+    pub fn options(&self) -> Result<CompareOptions> {
+        let schemes = self
+            .schemes
+            .iter()
+            .map(|s| Scheme::preset(s.trim()))
+            .collect::<Result<Vec<_>, _>>()?;
+        let dic = DicSettings {
+            subset_px: self.subset,
+            step_px: self.step,
+            prefilter_sigma_px: self.prefilter_sigma,
+            ..DicSettings::default()
+        };
+        dic.validate()?;
+        Ok(CompareOptions {
+            dic,
+            schemes,
+            seed: self.seed,
+        })
+    }
+}
+
+#[derive(Debug, Args)]
+pub struct CompareArgs {
+    /// Dataset folder (format ffdic-dataset/1).
+    pub dataset: PathBuf,
+    /// Analysis model (default: config/models/baseline.toml, embedded).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Print one JSON document and nothing else.
+    #[arg(long)]
+    pub json: bool,
+    /// Write comparison.json and the plots (SVG) into this folder.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Do not record the comparison in DATASET/ffdic-history.jsonl.
+    #[arg(long)]
+    pub no_history: bool,
+    #[command(flatten)]
+    pub analysis: AnalysisArgs,
+}
+
+pub fn load_analysis_model(path: &Option<PathBuf>) -> Result<ModelConfig> {
+    load_model(path, BASELINE_TOML, "config/models/baseline.toml")
+}
+
+/// Appends the comparison to the dataset's history.
+pub fn record(dataset: &std::path::Path, cmp: &Comparison) -> Result<()> {
+    append_history(
+        dataset,
+        &HistoryEntry::now(
+            &cmp.dataset,
+            &cmp.model.name,
+            &cmp.model.version,
+            cmp.discrepancy_px,
+            cmp.model
+                .effects
+                .enabled()
+                .iter()
+                .map(|s| s.to_string())
+                .collect(),
+        ),
+    )?;
+    Ok(())
+}
+
+/// Writes comparison.json and every plot into `out`.
+pub fn write_outputs(out: &std::path::Path, cmp: &Comparison) -> Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    std::fs::write(out.join("comparison.json"), serde_json::to_vec_pretty(cmp)?)?;
+    for (name, svg) in comparison_svgs(cmp) {
+        std::fs::write(out.join(&name), svg).with_context(|| format!("cannot write {name}"))?;
+    }
+    Ok(())
+}
+
+/// The comparison as a table for people.
+pub fn comparison_text(cmp: &Comparison) -> String {
+    let f = |x: f64| format!("{x:.5}");
+    let rows: Vec<Vec<String>> = cmp
+        .runs
+        .iter()
+        .map(|r| {
+            vec![
+                r.id.clone(),
+                r.scheme.clone(),
+                f(r.discrepancy_px),
+                f(r.field_px),
+                f(r.std_px),
+                f(r.mean_diff_px[0]),
+                f(r.mean_diff_px[1]),
+                f(r.measured.summary.u.std),
+                f(r.model.summary.u.std),
+                f(r.measured.summary.v.std),
+                f(r.model.summary.v.std),
+            ]
+        })
+        .collect();
+    let mut s = ffdic::report::text_table(
+        &[
+            "run",
+            "scheme",
+            "D [px]",
+            "field",
+            "std",
+            "Δu mean",
+            "Δv mean",
+            "std u meas",
+            "std u model",
+            "std v meas",
+            "std v model",
+        ],
+        &rows,
+    );
+    let images: Vec<Vec<String>> = cmp
+        .images
+        .iter()
+        .map(|im| {
+            let slope = |p: &[ffdic::diagnose::PtcPoint]| match (p.first(), p.last()) {
+                (Some(a), Some(b)) if b.mean_dn > a.mean_dn => {
+                    format!(
+                        "{:.4}",
+                        (b.variance_dn2 - a.variance_dn2) / (b.mean_dn - a.mean_dn)
+                    )
+                }
+                _ => "—".into(),
+            };
+            vec![
+                im.run
+                    .clone()
+                    .unwrap_or_else(|| format!("{} (reference)", im.pattern)),
+                format!("{:.1}", im.measured.mean_dn),
+                format!("{:.1}", im.model.mean_dn),
+                format!("{:.4}", im.measured.contrast),
+                format!("{:.4}", im.model.contrast),
+                slope(&im.measured.ptc),
+                slope(&im.model.ptc),
+            ]
+        })
+        .collect();
+    s += "\n";
+    s += &ffdic::report::text_table(
+        &[
+            "frame",
+            "mean meas",
+            "mean model",
+            "contrast meas",
+            "contrast model",
+            "noise slope meas",
+            "noise slope model",
+        ],
+        &images,
+    );
+    s += &format!(
+        "\nmodel {} ({}), dataset {}: discrepancy {:.5} px (field {:.5}, std {:.5}); stage misalignment {:.6} rad, travel scale {:.6}\n",
+        cmp.model.name,
+        cmp.model.version,
+        cmp.dataset,
+        cmp.discrepancy_px,
+        cmp.parts.field_px,
+        cmp.parts.std_px,
+        cmp.model.nominal.misalignment_rad,
+        cmp.model.nominal.travel_scale
+    );
+    s
+}
+
+pub fn run(args: &CompareArgs) -> Result<()> {
+    let model = load_analysis_model(&args.model)?;
+    let options = args.analysis.options()?;
+    let bar = ProgressBar::new(!args.json, "comparing");
+    let cmp = compare(&args.dataset, &model, &options, &|d, t| {
+        bar.update(d, t);
+        true
+    })?;
+    bar.finish();
+    if !args.no_history {
+        record(&args.dataset, &cmp)?;
+    }
+    if let Some(out) = &args.out {
+        write_outputs(out, &cmp)?;
+    }
+    if args.json {
+        println!("{}", serde_json::to_string(&cmp)?);
+    } else {
+        print!("{}", comparison_text(&cmp));
+        if let Some(out) = &args.out {
+            println!("comparison.json and plots in {}", out.display());
+        }
+    }
+    Ok(())
+}

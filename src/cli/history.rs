@@ -1,0 +1,70 @@
+//! `ffdic history DATASET`: every comparison of the dataset with its model version and
+//! discrepancy, oldest first, and the fall drawn as SVG.
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use ffdic::diagnose::read_history;
+use ffdic::report::{history_svg, HistoryPoint};
+use std::path::PathBuf;
+
+#[derive(Debug, Args)]
+pub struct HistoryArgs {
+    /// Dataset folder.
+    pub dataset: PathBuf,
+    /// Where to draw the chart (default: DATASET/ffdic-history.svg).
+    #[arg(long)]
+    pub svg: Option<PathBuf>,
+    /// Print the entries as one JSON array and nothing else.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(args: &HistoryArgs) -> Result<()> {
+    let entries = read_history(&args.dataset)?;
+    if entries.is_empty() {
+        bail!(
+            "no comparison recorded for {} yet (run ffdic compare first)",
+            args.dataset.display()
+        );
+    }
+    let points: Vec<HistoryPoint> = entries
+        .iter()
+        .map(|e| HistoryPoint {
+            label: format!("{} {}", e.model, &e.version[..e.version.len().min(6)]),
+            discrepancy_px: e.discrepancy_px,
+        })
+        .collect();
+    let svg_path = args
+        .svg
+        .clone()
+        .unwrap_or_else(|| args.dataset.join("ffdic-history.svg"));
+    let title = format!("Discrepancy of {} over model versions", entries[0].dataset);
+    std::fs::write(&svg_path, history_svg(&title, &points, 760, 460))
+        .with_context(|| format!("cannot write {}", svg_path.display()))?;
+    if args.json {
+        println!("{}", serde_json::to_string(&entries)?);
+        return Ok(());
+    }
+    let first = entries[0].discrepancy_px;
+    let rows: Vec<Vec<String>> = entries
+        .iter()
+        .map(|e| {
+            vec![
+                e.time.clone(),
+                e.model.clone(),
+                e.version.clone(),
+                format!("{:.5}", e.discrepancy_px),
+                format!("{:+.1} %", 100.0 * (e.discrepancy_px / first - 1.0)),
+            ]
+        })
+        .collect();
+    print!(
+        "{}",
+        ffdic::report::text_table(
+            &["time", "model", "version", "discrepancy [px]", "vs first"],
+            &rows
+        )
+    );
+    println!("chart: {}", svg_path.display());
+    Ok(())
+}

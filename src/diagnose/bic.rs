@@ -1,0 +1,176 @@
+//! χ² of a comparison and ΔBIC of a candidate (Schwarz, Ann. Stat. 6 (1978)).
+//!
+//! The observations, each with its standard error:
+//! - field: per run and scheme, the quadratic surface of the field difference (6 coefficients per
+//!   component); its χ² is Σ fitted²/σ² over the points, divided by the covariance inflation of
+//!   overlapping subsets ((subset/step)², at least 1), σ² the noise variance of the difference;
+//! - std: per run and scheme, Δσu and Δσv over SE = √(σm² + σo²)/√(2 n_eff);
+//! - image: per frame, ln of the power-spectrum bins along x and y, the noise variance of each
+//!   photon-transfer bin (the model's curve interpolated at the measured means), the
+//!   mean-intensity map, the contrast.
+//!
+//! The field and std χ² are scaled by N_eff/N for the frames the analyses share (see [`chi2`]).
+//!
+//! ΔBIC = χ²(with the candidate) − χ²(without) + k·ln n, with the noise levels of the
+//! comparison without the candidate held fixed. A candidate is significant when ΔBIC < −10
+//! (very strong evidence, Kass & Raftery, JASA 90 (1995)).
+
+use super::compare::Comparison;
+use super::image_stats::{FrameStats, PtcPoint};
+use crate::dic::DicSettings;
+use serde::{Deserialize, Serialize};
+
+/// ΔBIC below which a candidate counts as found.
+pub const SIGNIFICANT_DELTA_BIC: f64 = -10.0;
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Chi2 {
+    pub field: f64,
+    pub std: f64,
+    pub image: f64,
+    pub total: f64,
+    /// Number of observations (for k·ln n).
+    pub observations: usize,
+}
+
+/// Covariance inflation of neighbouring points whose subsets overlap.
+pub fn inflation(dic: &DicSettings) -> f64 {
+    ((dic.subset_px as f64 / dic.step_px as f64).powi(2)).max(1.0)
+}
+
+fn ptc_at(curve: &[PtcPoint], mean: f64) -> Option<(f64, f64)> {
+    if curve.len() < 2 {
+        return None;
+    }
+    let i = curve
+        .iter()
+        .position(|p| p.mean_dn >= mean)
+        .unwrap_or(curve.len() - 1)
+        .clamp(1, curve.len() - 1);
+    let (a, b) = (curve[i - 1], curve[i]);
+    let t = if b.mean_dn > a.mean_dn {
+        (mean - a.mean_dn) / (b.mean_dn - a.mean_dn)
+    } else {
+        0.0
+    };
+    // Extrapolate at most a little beyond the model's range.
+    if !(-0.5..=1.5).contains(&t) {
+        return None;
+    }
+    Some((
+        a.variance_dn2 + t * (b.variance_dn2 - a.variance_dn2),
+        a.se.max(b.se),
+    ))
+}
+
+/// χ² and observation count of the image statistics of one frame.
+pub fn image_chi2(m: &FrameStats, o: &FrameStats) -> (f64, usize) {
+    let mut c = 0.0;
+    let mut n = 0;
+    let mut add = |d: f64, se: f64| {
+        if d.is_finite() && se > 0.0 && se.is_finite() {
+            c += (d / se).powi(2);
+            n += 1;
+        }
+    };
+    for (a, b) in m
+        .psd_x
+        .iter()
+        .zip(&o.psd_x)
+        .chain(m.psd_y.iter().zip(&o.psd_y))
+    {
+        if a.value > 0.0 && b.value > 0.0 {
+            add(
+                (a.value / b.value).ln(),
+                ((a.se / a.value).powi(2) + (b.se / b.value).powi(2)).sqrt(),
+            );
+        }
+    }
+    for p in &m.ptc {
+        if let Some((v, se)) = ptc_at(&o.ptc, p.mean_dn) {
+            add(p.variance_dn2 - v, (p.se * p.se + se * se).sqrt());
+        }
+    }
+    for ((a, sa), (b, sb)) in m
+        .mean_map
+        .values
+        .iter()
+        .zip(&m.mean_map.se)
+        .zip(o.mean_map.values.iter().zip(&o.mean_map.se))
+    {
+        add(a - b, (sa * sa + sb * sb).sqrt());
+    }
+    add(
+        m.contrast - o.contrast,
+        (m.contrast_se.powi(2) + o.contrast_se.powi(2)).sqrt(),
+    );
+    (c, n)
+}
+
+/// χ² of a comparison; `noise_from` holds the noise levels fixed to another comparison's (the one
+/// without the candidate) so two χ² can be subtracted.
+pub fn chi2(cmp: &Comparison, noise_from: Option<&Comparison>, dic: &DicSettings) -> Chi2 {
+    let infl = inflation(dic);
+    let (mut field, mut std, mut n) = (0.0, 0.0, 0usize);
+    // The analyses are not independent: every run of a pattern shares its reference frame, every
+    // scheme of a run its moved frame; half the noise comes from each. For a disagreement common
+    // to all analyses the χ² summed over N analyses counts it N times where the data hold
+    // N_eff = 1/(½Σ_runs(n_r/N)² + ½Σ_patterns(n_p/N)²) independent looks: scale by N_eff/N.
+    let mut per_run: std::collections::BTreeMap<&str, f64> = Default::default();
+    let mut per_pattern: std::collections::BTreeMap<&str, f64> = Default::default();
+    for r in &cmp.runs {
+        *per_run.entry(r.id.as_str()).or_default() += 1.0;
+        *per_pattern.entry(r.pattern.as_str()).or_default() += 1.0;
+    }
+    let total = cmp.runs.len().max(1) as f64;
+    let conc = |m: &std::collections::BTreeMap<&str, f64>| {
+        m.values().map(|k| (k / total).powi(2)).sum::<f64>()
+    };
+    let n_eff = 1.0 / (0.5 * conc(&per_run) + 0.5 * conc(&per_pattern)).max(1.0 / total);
+    let shared = n_eff / total;
+    for (k, r) in cmp.runs.iter().enumerate() {
+        let d = &r.detail;
+        let var = noise_from
+            .and_then(|b| b.runs.get(k))
+            .map_or(d.residual_var_px2, |b| b.detail.residual_var_px2);
+        if !(var.0 > 0.0 && var.1 > 0.0) || d.common.is_empty() {
+            continue;
+        }
+        let s: f64 = d
+            .common
+            .iter()
+            .map(|p| p.fit_du * p.fit_du / var.0 + p.fit_dv * p.fit_dv / var.1)
+            .sum();
+        field += s / infl;
+        n += 12;
+        let n_eff = (d.points as f64 / infl).max(1.0);
+        for c in 0..2 {
+            let (a, b) = (r.measured.random_px[c], r.model.random_px[c]);
+            let se = ((a * a + b * b) / (2.0 * n_eff)).sqrt();
+            if se > 0.0 && (a - b).is_finite() {
+                std += ((a - b) / se).powi(2);
+                n += 1;
+            }
+        }
+    }
+    field *= shared;
+    std *= shared;
+    let mut image = 0.0;
+    for im in &cmp.images {
+        let (c, k) = image_chi2(&im.measured, &im.model);
+        image += c;
+        n += k;
+    }
+    Chi2 {
+        field,
+        std,
+        image,
+        total: field + std + image,
+        observations: n,
+    }
+}
+
+/// ΔBIC of adding `k` parameters that moved χ² from `before` to `after`.
+pub fn delta_bic(before: &Chi2, after: &Chi2, k: usize) -> f64 {
+    after.total - before.total + k as f64 * (before.observations.max(1) as f64).ln()
+}

@@ -1,0 +1,268 @@
+//! The discrepancy of one run and scheme (definition in the module doc of [`super`]): the
+//! systematic part from a quadratic surface fitted to the difference of the two displacement
+//! fields, the random part from the difference of the two analyses' random errors.
+
+use crate::dic::DicResult;
+use serde::{Deserialize, Serialize};
+
+/// Terms of the quadratic surface: 1, x, y, x², xy, y² in coordinates centred and scaled to the
+/// points' span (conditioning).
+pub const QUADRATIC_TERMS: usize = 6;
+
+/// A least-squares quadratic surface through (x, y, value) samples.
+#[derive(Clone, Debug, PartialEq)]
+pub struct QuadraticFit {
+    /// The fitted value at every sample.
+    pub fitted: Vec<f64>,
+    /// Residual variance, RSS / (n − 6).
+    pub residual_var: f64,
+}
+
+fn terms(x: f64, y: f64, (cx, cy, s): (f64, f64, f64)) -> [f64; QUADRATIC_TERMS] {
+    let (a, b) = ((x - cx) / s, (y - cy) / s);
+    [1.0, a, b, a * a, a * b, b * b]
+}
+
+/// Solves the symmetric positive system `a x = b` (n ≤ 8) by Cholesky; None when singular.
+pub fn solve_spd(a: &[Vec<f64>], b: &[f64]) -> Option<Vec<f64>> {
+    let inv = invert_spd(a)?;
+    Some(
+        inv.iter()
+            .map(|row| row.iter().zip(b).map(|(x, y)| x * y).sum())
+            .collect(),
+    )
+}
+
+/// Inverse of a small symmetric positive-definite matrix (Gauss–Jordan with pivoting).
+pub fn invert_spd(a: &[Vec<f64>]) -> Option<Vec<Vec<f64>>> {
+    let n = a.len();
+    let mut m: Vec<Vec<f64>> = a
+        .iter()
+        .enumerate()
+        .map(|(i, row)| {
+            let mut r = row.clone();
+            r.extend((0..n).map(|j| f64::from(u8::from(i == j))));
+            r
+        })
+        .collect();
+    let scale = (0..n)
+        .map(|i| a[i][i].abs())
+        .fold(0.0, f64::max)
+        .max(1e-300);
+    for col in 0..n {
+        let piv = (col..n).max_by(|&i, &j| m[i][col].abs().total_cmp(&m[j][col].abs()))?;
+        if !(m[piv][col].abs() > 1e-13 * scale) {
+            return None;
+        }
+        m.swap(col, piv);
+        let p = m[col][col];
+        for v in m[col].iter_mut() {
+            *v /= p;
+        }
+        for r in 0..n {
+            if r != col {
+                let f = m[r][col];
+                if f != 0.0 {
+                    let pivot_row = m[col].clone();
+                    for (v, pv) in m[r].iter_mut().zip(pivot_row) {
+                        *v -= f * pv;
+                    }
+                }
+            }
+        }
+    }
+    Some(m.into_iter().map(|r| r[n..].to_vec()).collect())
+}
+
+/// Fits a quadratic surface to `values` at `xy`; None with fewer than 8 samples.
+pub fn quadratic_fit(xy: &[(f64, f64)], values: &[f64]) -> Option<QuadraticFit> {
+    let n = xy.len();
+    if n < QUADRATIC_TERMS + 2 {
+        return None;
+    }
+    let cx = xy.iter().map(|p| p.0).sum::<f64>() / n as f64;
+    let cy = xy.iter().map(|p| p.1).sum::<f64>() / n as f64;
+    let s = xy
+        .iter()
+        .map(|p| (p.0 - cx).abs().max((p.1 - cy).abs()))
+        .fold(1e-9, f64::max);
+    let norm = (cx, cy, s);
+    let mut ata = vec![vec![0.0; QUADRATIC_TERMS]; QUADRATIC_TERMS];
+    let mut atb = vec![0.0; QUADRATIC_TERMS];
+    for (p, v) in xy.iter().zip(values) {
+        let t = terms(p.0, p.1, norm);
+        for i in 0..QUADRATIC_TERMS {
+            atb[i] += t[i] * v;
+            for j in 0..QUADRATIC_TERMS {
+                ata[i][j] += t[i] * t[j];
+            }
+        }
+    }
+    // A degenerate layout (one row or column of points) falls back to a plane or a constant.
+    let coef = solve_spd(&ata, &atb).or_else(|| {
+        let k = 3;
+        let a: Vec<Vec<f64>> = ata[..k].iter().map(|r| r[..k].to_vec()).collect();
+        solve_spd(&a, &atb[..k]).map(|mut c| {
+            c.resize(QUADRATIC_TERMS, 0.0);
+            c
+        })
+    })?;
+    let fitted: Vec<f64> = xy
+        .iter()
+        .map(|p| {
+            terms(p.0, p.1, norm)
+                .iter()
+                .zip(&coef)
+                .map(|(a, b)| a * b)
+                .sum()
+        })
+        .collect();
+    let rss: f64 = fitted
+        .iter()
+        .zip(values)
+        .map(|(f, v)| (v - f).powi(2))
+        .sum();
+    Some(QuadraticFit {
+        fitted,
+        residual_var: rss / (n - QUADRATIC_TERMS) as f64,
+    })
+}
+
+/// The discrepancy of one run and scheme, and the numbers behind it.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct RunDiscrepancy {
+    /// Points valid in both analyses.
+    pub points: usize,
+    /// √(field² + std²), px.
+    pub discrepancy_px: f64,
+    /// Systematic part: RMS of the quadratic surface of the field difference, debiased for the
+    /// noise the surface absorbs, px.
+    pub field_px: f64,
+    /// Random part: √(Δσu² + Δσv²) debiased for the sampling error of the two stds, px.
+    pub std_px: f64,
+    /// Mean of the difference, px (u, v).
+    pub mean_diff_px: (f64, f64),
+    /// Random error (std about the own quadratic surface) of each side, px (u, v).
+    pub measured_random_px: (f64, f64),
+    pub model_random_px: (f64, f64),
+    /// Residual variance of the difference about its surface, px² (u, v): the noise level of the
+    /// field difference.
+    pub residual_var_px2: (f64, f64),
+    /// The fitted surface of the difference at every common point (u, v), and the raw
+    /// difference: the residual map.
+    #[serde(skip)]
+    pub common: Vec<CommonPoint>,
+}
+
+/// A point valid in both analyses.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CommonPoint {
+    pub index: usize,
+    pub x: f64,
+    pub y: f64,
+    pub du: f64,
+    pub dv: f64,
+    pub fit_du: f64,
+    pub fit_dv: f64,
+}
+
+fn random_error(xy: &[(f64, f64)], v: &[f64]) -> f64 {
+    quadratic_fit(xy, v).map_or(f64::NAN, |f| f.residual_var.sqrt())
+}
+
+/// Compares two analyses of the same grid (same image size and settings). `inflation` is the
+/// variance inflation of averages over correlated neighbouring points ((subset/step)², ≥ 1).
+pub fn run_discrepancy(measured: &DicResult, model: &DicResult, inflation: f64) -> RunDiscrepancy {
+    /// (grid index, x, y, measured u, v, model u, v) of a point valid in both.
+    type Pair = (usize, f64, f64, f64, f64, f64, f64);
+    let common: Vec<Pair> = measured
+        .points
+        .iter()
+        .zip(&model.points)
+        .enumerate()
+        .filter(|(_, (a, b))| a.status.is_valid() && b.status.is_valid())
+        .map(|(i, (a, b))| (i, a.x, a.y, a.u, a.v, b.u, b.v))
+        .collect();
+    let xy: Vec<(f64, f64)> = common.iter().map(|c| (c.1, c.2)).collect();
+    let col = |f: fn(&Pair) -> f64| -> Vec<f64> { common.iter().map(f).collect() };
+    let (mu, mv, ou, ov) = (col(|c| c.3), col(|c| c.4), col(|c| c.5), col(|c| c.6));
+    let du: Vec<f64> = mu.iter().zip(&ou).map(|(a, b)| a - b).collect();
+    let dv: Vec<f64> = mv.iter().zip(&ov).map(|(a, b)| a - b).collect();
+    let n = common.len();
+    let nan2 = (f64::NAN, f64::NAN);
+    let (Some(fu), Some(fv)) = (quadratic_fit(&xy, &du), quadratic_fit(&xy, &dv)) else {
+        return RunDiscrepancy {
+            points: n,
+            discrepancy_px: f64::NAN,
+            field_px: f64::NAN,
+            std_px: f64::NAN,
+            mean_diff_px: nan2,
+            measured_random_px: nan2,
+            model_random_px: nan2,
+            residual_var_px2: nan2,
+            common: Vec::new(),
+        };
+    };
+    let nf = n as f64;
+    let p = QUADRATIC_TERMS as f64;
+    let infl = inflation.max(1.0);
+    // E[mean fitted²] of correlated noise is p·σ²·inflation/n per component: remove it.
+    let ms = |f: &QuadraticFit| {
+        f.fitted.iter().map(|x| x * x).sum::<f64>() / nf - p * f.residual_var * infl / nf
+    };
+    let field_px = (ms(&fu) + ms(&fv)).max(0.0).sqrt();
+    let measured_random_px = (random_error(&xy, &mu), random_error(&xy, &mv));
+    let model_random_px = (random_error(&xy, &ou), random_error(&xy, &ov));
+    // A sample std over n_eff independent points has variance σ²/(2 n_eff): remove the
+    // expected square of the difference of two such estimates.
+    let n_eff = (nf / infl).max(1.0);
+    let sq = |a: f64, b: f64| (a - b).powi(2) - (a * a + b * b) / (2.0 * n_eff);
+    let std_px = (sq(measured_random_px.0, model_random_px.0)
+        + sq(measured_random_px.1, model_random_px.1))
+    .max(0.0)
+    .sqrt();
+    RunDiscrepancy {
+        points: n,
+        discrepancy_px: (field_px * field_px + std_px * std_px).sqrt(),
+        field_px,
+        std_px,
+        mean_diff_px: (du.iter().sum::<f64>() / nf, dv.iter().sum::<f64>() / nf),
+        measured_random_px,
+        model_random_px,
+        residual_var_px2: (fu.residual_var, fv.residual_var),
+        common: common
+            .iter()
+            .enumerate()
+            .map(|(k, c)| CommonPoint {
+                index: c.0,
+                x: c.1,
+                y: c.2,
+                du: du[k],
+                dv: dv[k],
+                fit_du: fu.fitted[k],
+                fit_dv: fv.fitted[k],
+            })
+            .collect(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quadratic_surface_is_recovered_exactly() {
+        let xy: Vec<(f64, f64)> = (0..100)
+            .map(|k| ((k % 10) as f64 * 7.0, (k / 10) as f64 * 5.0))
+            .collect();
+        let v: Vec<f64> = xy
+            .iter()
+            .map(|(x, y)| 0.3 + 0.01 * x - 0.02 * y + 1e-4 * x * y - 3e-4 * y * y)
+            .collect();
+        let f = quadratic_fit(&xy, &v).unwrap();
+        for (a, b) in f.fitted.iter().zip(&v) {
+            assert!((a - b).abs() < 1e-9);
+        }
+        assert!(f.residual_var < 1e-18);
+    }
+}

@@ -1,0 +1,597 @@
+//! Image-level candidates: parameters fitted so that the model's frames show the measured image
+//! statistics, by rendering the model's centred analysis crops with fixed seeds (the same speckle
+//! layout and noise for every trial, so the objective is smooth in the parameters) and minimising
+//! the χ² of the statistics the effect acts on. Standard errors from the curvature of χ² at the
+//! minimum (σ² = 2/∂²χ²).
+//!
+//! - `psf_blur` σ: power spectra along x and y of the references (a Gaussian PSF multiplies both
+//!   by exp(−4π²σ²f²)); coarse grid, then golden section.
+//! - `fill_factor` fx, fy: the same spectra (the aperture multiplies the x spectrum by
+//!   sinc²(fx·f), the y spectrum by sinc²(fy·f)); coarse grid, then Nelder–Mead.
+//! - `sensor_noise`: photon transfer, var = mean/gain + (read/gain)² (EMVA 1288): weighted linear
+//!   least squares on the measured noise-against-mean curve from the static repeats, then one
+//!   levelled correction of the slope by the same estimator run on the model's frames;
+//!   `full_well_e` is not identifiable from unsaturated frames and is set to the ADC's full scale
+//!   times the gain (not fitted, no standard error).
+//! - `vignetting` v: weighted least squares of the measured/model mean-intensity map ratio against
+//!   r²/r0² (c·(1 − v r²)).
+//! - `illumination_change` gain, offset: from the moved frames' mean and noise-corrected contrast
+//!   relative to their references, each levelled by the model's own ratio.
+//! - `motion_blur` length (0–4 px) along the largest move: that moved frame's spectra along x and
+//!   y; grid, then golden section.
+
+use super::bic::image_chi2;
+use super::compare::{Comparison, Measurement};
+use super::image_stats::{psd, ptc, FrameStats, STATS_CROP_PX};
+use super::nominal::Scene;
+use crate::model::effects::{
+    FillFactor, IlluminationChange, MotionBlur, PsfBlur, SensorNoise, Vignetting,
+};
+use crate::model::Effects;
+use std::collections::BTreeMap;
+
+/// A fitted candidate: its parameters, their standard errors (fitted ones only), the effects with
+/// it added, and whether any parameter differs from its null value by more than two standard
+/// errors.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImageFit {
+    pub effect: &'static str,
+    pub params: BTreeMap<String, f64>,
+    pub stderr: BTreeMap<String, f64>,
+    pub effects: Effects,
+    pub k: usize,
+    pub beyond_null: bool,
+}
+
+fn spectra_chi2(measured: &[&FrameStats], crops: &[crate::image::Image]) -> f64 {
+    let mut c = 0.0;
+    for (m, img) in measured.iter().zip(crops) {
+        // Spectra only: no noise curve, no mean map, no contrast (NaN is skipped).
+        let empty = super::image_stats::MeanMap {
+            nx: 0,
+            ny: 0,
+            xs: vec![],
+            ys: vec![],
+            values: vec![],
+            se: vec![],
+        };
+        let only = FrameStats {
+            ptc: Vec::new(),
+            mean_map: empty,
+            contrast: f64::NAN,
+            ..(*m).clone()
+        };
+        let o = FrameStats {
+            psd_x: psd(img, true),
+            psd_y: psd(img, false),
+            ..only.clone()
+        };
+        c += image_chi2(&only, &o).0;
+    }
+    c
+}
+
+/// Golden-section minimum of `f` on [a, b] after a coarse grid of `n` points.
+fn minimise_1d(f: &dyn Fn(f64) -> f64, a: f64, b: f64, n: usize) -> f64 {
+    let grid: Vec<(f64, f64)> = (0..n)
+        .map(|i| a + (b - a) * i as f64 / (n - 1) as f64)
+        .map(|x| (x, f(x)))
+        .collect();
+    let best = grid
+        .iter()
+        .enumerate()
+        .min_by(|x, y| x.1 .1.total_cmp(&y.1 .1))
+        .map(|(i, _)| i)
+        .unwrap_or(0);
+    let h = (b - a) / (n - 1) as f64;
+    let (mut lo, mut hi) = ((grid[best].0 - h).max(a), (grid[best].0 + h).min(b));
+    let g = 0.618_033_988_749_895;
+    let (mut x1, mut x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
+    let (mut f1, mut f2) = (f(x1), f(x2));
+    for _ in 0..14 {
+        if f1 < f2 {
+            hi = x2;
+            (x2, f2) = (x1, f1);
+            x1 = hi - g * (hi - lo);
+            f1 = f(x1);
+        } else {
+            lo = x1;
+            (x1, f1) = (x2, f2);
+            x2 = lo + g * (hi - lo);
+            f2 = f(x2);
+        }
+    }
+    let x = if f1 < f2 { x1 } else { x2 };
+    if grid[best].1 < f(x) {
+        grid[best].0
+    } else {
+        x
+    }
+}
+
+/// Nelder–Mead in a box (points clamped), from `start` with initial steps `step`.
+fn nelder_mead(
+    f: &dyn Fn(&[f64]) -> f64,
+    start: &[f64],
+    step: &[f64],
+    lo: &[f64],
+    hi: &[f64],
+    iters: usize,
+) -> Vec<f64> {
+    let n = start.len();
+    let clamp = |x: Vec<f64>| -> Vec<f64> {
+        x.iter()
+            .enumerate()
+            .map(|(i, v)| v.clamp(lo[i], hi[i]))
+            .collect()
+    };
+    let mut simplex: Vec<(Vec<f64>, f64)> = Vec::new();
+    let s0 = clamp(start.to_vec());
+    simplex.push((s0.clone(), f(&s0)));
+    for i in 0..n {
+        let mut p = s0.clone();
+        p[i] += step[i];
+        if p[i] > hi[i] {
+            p[i] = s0[i] - step[i];
+        }
+        let p = clamp(p);
+        let v = f(&p);
+        simplex.push((p, v));
+    }
+    for _ in 0..iters {
+        simplex.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let centroid: Vec<f64> = (0..n)
+            .map(|j| simplex[..n].iter().map(|p| p.0[j]).sum::<f64>() / n as f64)
+            .collect();
+        let worst = simplex[n].clone();
+        let along = |t: f64| {
+            clamp(
+                (0..n)
+                    .map(|j| centroid[j] + t * (worst.0[j] - centroid[j]))
+                    .collect(),
+            )
+        };
+        let r = along(-1.0);
+        let fr = f(&r);
+        if fr < simplex[0].1 {
+            let e = along(-2.0);
+            let fe = f(&e);
+            simplex[n] = if fe < fr { (e, fe) } else { (r, fr) };
+        } else if fr < simplex[n - 1].1 {
+            simplex[n] = (r, fr);
+        } else {
+            let c = along(0.5);
+            let fc = f(&c);
+            if fc < worst.1 {
+                simplex[n] = (c, fc);
+            } else {
+                let best = simplex[0].0.clone();
+                for p in simplex.iter_mut().skip(1) {
+                    p.0 = clamp(
+                        p.0.iter()
+                            .zip(&best)
+                            .map(|(a, b)| b + 0.5 * (a - b))
+                            .collect(),
+                    );
+                    p.1 = f(&p.0);
+                }
+            }
+        }
+        let spread = simplex
+            .iter()
+            .map(|p| (p.1 - simplex[0].1).abs())
+            .fold(0.0, f64::max);
+        if spread < 1e-3 {
+            break;
+        }
+    }
+    simplex.sort_by(|a, b| a.1.total_cmp(&b.1));
+    simplex[0].0.clone()
+}
+
+/// Standard errors from the diagonal curvature of χ² (σ² = 2/∂²χ²), steps `h`, kept in bounds.
+fn curvature_stderr(
+    f: &dyn Fn(&[f64]) -> f64,
+    x: &[f64],
+    h: &[f64],
+    lo: &[f64],
+    hi: &[f64],
+) -> Vec<f64> {
+    let f0 = f(x);
+    (0..x.len())
+        .map(|i| {
+            let mut a = x.to_vec();
+            let mut b = x.to_vec();
+            // A one-sided stencil at a bound.
+            let (da, db) = if x[i] - h[i] < lo[i] {
+                (h[i], 2.0 * h[i])
+            } else if x[i] + h[i] > hi[i] {
+                (-h[i], -2.0 * h[i])
+            } else {
+                (-h[i], h[i])
+            };
+            a[i] += da;
+            b[i] += db;
+            let (fa, fb) = (f(&a), f(&b));
+            let curv = if da < 0.0 && db > 0.0 {
+                (fa - 2.0 * f0 + fb) / (h[i] * h[i])
+            } else {
+                (fb - 2.0 * fa + f0) / (h[i] * h[i])
+            };
+            if curv > 0.0 {
+                (2.0 / curv).sqrt()
+            } else {
+                f64::INFINITY
+            }
+        })
+        .collect()
+}
+
+/// The reference crops of every pattern rendered with `effects`.
+fn reference_crops(
+    meas: &Measurement,
+    before: &Comparison,
+    effects: &Effects,
+) -> Vec<crate::image::Image> {
+    let scene = Scene::new(
+        &before.model.nominal,
+        effects,
+        &meas.manifest,
+        meas.options.seed,
+    );
+    (0..meas.labels.len())
+        .map(|pi| scene.render(pi, (0.0, 0.0), false, 0, Some(STATS_CROP_PX)))
+        .collect()
+}
+
+fn map(pairs: &[(&str, f64)]) -> BTreeMap<String, f64> {
+    pairs.iter().map(|(k, v)| (k.to_string(), *v)).collect()
+}
+
+pub fn fit_psf_blur(meas: &Measurement, before: &Comparison, model: &Effects) -> ImageFit {
+    let measured: Vec<&FrameStats> = meas.reference_stats.iter().collect();
+    let with = |s: f64| Effects {
+        psf_blur: Some(PsfBlur {
+            sigma_px: s.max(0.0),
+        }),
+        ..model.clone()
+    };
+    let obj = |x: &[f64]| spectra_chi2(&measured, &reference_crops(meas, before, &with(x[0])));
+    let sigma = minimise_1d(&|s| obj(&[s]), 0.0, 3.0, 9);
+    let se = curvature_stderr(&obj, &[sigma], &[0.05], &[0.0], &[3.0])[0];
+    ImageFit {
+        effect: "psf_blur",
+        params: map(&[("sigma_px", sigma)]),
+        stderr: map(&[("sigma_px", se)]),
+        effects: with(sigma),
+        k: 1,
+        beyond_null: sigma > 2.0 * se,
+    }
+}
+
+pub fn fit_fill_factor(meas: &Measurement, before: &Comparison, model: &Effects) -> ImageFit {
+    let measured: Vec<&FrameStats> = meas.reference_stats.iter().collect();
+    let with = |fx: f64, fy: f64| Effects {
+        fill_factor: Some(FillFactor {
+            fx: fx.clamp(0.05, 1.0),
+            fy: fy.clamp(0.05, 1.0),
+        }),
+        ..model.clone()
+    };
+    let obj =
+        |x: &[f64]| spectra_chi2(&measured, &reference_crops(meas, before, &with(x[0], x[1])));
+    let mut best = (f64::INFINITY, [1.0, 1.0]);
+    for fx in [0.3, 0.65, 1.0] {
+        for fy in [0.3, 0.65, 1.0] {
+            let v = obj(&[fx, fy]);
+            if v < best.0 {
+                best = (v, [fx, fy]);
+            }
+        }
+    }
+    let (lo, hi) = ([0.05, 0.05], [1.0, 1.0]);
+    let x = nelder_mead(&obj, &best.1, &[0.12, 0.12], &lo, &hi, 40);
+    let se = curvature_stderr(&obj, &x, &[0.04, 0.04], &lo, &hi);
+    ImageFit {
+        effect: "fill_factor",
+        params: map(&[("fx", x[0]), ("fy", x[1])]),
+        stderr: map(&[("fx", se[0]), ("fy", se[1])]),
+        effects: with(x[0], x[1]),
+        k: 2,
+        beyond_null: (1.0 - x[0]) > 2.0 * se[0] || (1.0 - x[1]) > 2.0 * se[1],
+    }
+}
+
+/// Weighted straight line var = a·mean + b over photon-transfer points: (a, b, cov).
+fn ptc_line(points: &[super::image_stats::PtcPoint]) -> Option<(f64, f64, [[f64; 2]; 2])> {
+    let (mut s, mut sx, mut sy, mut sxx, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for p in points {
+        if !(p.se > 0.0) {
+            continue;
+        }
+        let w = 1.0 / (p.se * p.se);
+        s += w;
+        sx += w * p.mean_dn;
+        sy += w * p.variance_dn2;
+        sxx += w * p.mean_dn * p.mean_dn;
+        sxy += w * p.mean_dn * p.variance_dn2;
+    }
+    let det = s * sxx - sx * sx;
+    if !(det > 0.0) {
+        return None;
+    }
+    let a = (s * sxy - sx * sy) / det;
+    let b = (sxx * sy - sx * sxy) / det;
+    // Scale the covariance by the reduced χ² when the points scatter more than their errors.
+    let n = points.len() as f64;
+    let chi: f64 = points
+        .iter()
+        .map(|p| ((p.variance_dn2 - a * p.mean_dn - b) / p.se).powi(2))
+        .sum();
+    let scale = (chi / (n - 2.0).max(1.0)).max(1.0);
+    Some((
+        a,
+        b,
+        [
+            [s / det * scale, -sx / det * scale],
+            [-sx / det * scale, sxx / det * scale],
+        ],
+    ))
+}
+
+pub fn fit_sensor_noise(
+    meas: &Measurement,
+    before: &Comparison,
+    model: &Effects,
+) -> Option<ImageFit> {
+    let points: Vec<_> = meas
+        .reference_stats
+        .iter()
+        .flat_map(|s| s.ptc.iter().copied())
+        .collect();
+    let (a, b, cov) = ptc_line(&points)?;
+    let bits = before.model.nominal.bit_depth;
+    let full_scale = 2f64.powi(bits as i32) - 1.0;
+    let make = |a: f64, b: f64| {
+        let gain = 1.0 / a.max(1e-9);
+        SensorNoise {
+            full_well_e: full_scale * gain,
+            read_noise_e: b.max(0.0).sqrt() * gain,
+            gain,
+        }
+    };
+    let mut sn = make(a, b);
+    let mut a_fit = a;
+    let mut b_fit = b;
+    // Levelled correction: the same estimator on the model's frames with the candidate.
+    if a > 0.0 {
+        let effects = Effects {
+            sensor_noise: Some(sn),
+            ..model.clone()
+        };
+        let scene = Scene::new(
+            &before.model.nominal,
+            &effects,
+            &meas.manifest,
+            meas.options.seed,
+        );
+        let mut model_points = Vec::new();
+        for pi in 0..meas.labels.len() {
+            let r0 = scene.render(pi, (0.0, 0.0), false, 0, Some(STATS_CROP_PX));
+            let r1 = scene.render(pi, (0.0, 0.0), false, 1, Some(STATS_CROP_PX));
+            model_points.extend(ptc(&r0, Some(&r1)));
+        }
+        if let Some((am, bm, _)) = ptc_line(&model_points) {
+            if am > 0.0 {
+                a_fit = a * a / am;
+                b_fit = b + (b - bm);
+                sn = make(a_fit, b_fit);
+            }
+        }
+    }
+    let se_a = cov[0][0].sqrt();
+    let se_b = cov[1][1].sqrt();
+    let gain = sn.gain;
+    let se_gain = se_a / (a_fit * a_fit).max(1e-300);
+    // read = √b / a: δread² = (δb/(2√b a))² + (√b δa/a²)².
+    let sb = b_fit.max(1e-12).sqrt();
+    let se_read =
+        ((se_b / (2.0 * sb * a_fit)).powi(2) + (sb * se_a / (a_fit * a_fit)).powi(2)).sqrt();
+    Some(ImageFit {
+        effect: "sensor_noise",
+        params: map(&[
+            ("gain", gain),
+            ("read_noise_e", sn.read_noise_e),
+            ("full_well_e", sn.full_well_e),
+        ]),
+        stderr: map(&[("gain", se_gain), ("read_noise_e", se_read)]),
+        effects: Effects {
+            sensor_noise: Some(sn),
+            ..model.clone()
+        },
+        k: 2,
+        beyond_null: a_fit > 2.0 * se_a,
+    })
+}
+
+pub fn fit_vignetting(
+    meas: &Measurement,
+    before: &Comparison,
+    model: &Effects,
+) -> Option<ImageFit> {
+    let (w, h) = (meas.width as f64, meas.height as f64);
+    let (cx, cy) = ((w - 1.0) / 2.0, (h - 1.0) / 2.0);
+    let r0 = 0.5 * (w * w + h * h).sqrt();
+    // ratio = c − (c v)·r²: normal equations in (c, cv).
+    let (mut s, mut sx, mut sy, mut sxx, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    let mut pts = Vec::new();
+    for im in before.images.iter().filter(|i| i.run.is_none()) {
+        let (m, o) = (&im.measured.mean_map, &im.model.mean_map);
+        for j in 0..m.ny.min(o.ny) {
+            for i in 0..m.nx.min(o.nx) {
+                let k = j * m.nx + i;
+                let ratio = m.values[k] / o.values[k];
+                let se = ((m.se[k] / m.values[k]).powi(2) + (o.se[k] / o.values[k]).powi(2)).sqrt()
+                    * ratio;
+                if !(se > 0.0 && ratio.is_finite()) {
+                    continue;
+                }
+                let r2 = ((m.xs[i] - cx).powi(2) + (m.ys[j] - cy).powi(2)) / (r0 * r0);
+                let wgt = 1.0 / (se * se);
+                s += wgt;
+                sx += wgt * r2;
+                sy += wgt * ratio;
+                sxx += wgt * r2 * r2;
+                sxy += wgt * r2 * ratio;
+                pts.push((r2, ratio, se));
+            }
+        }
+    }
+    let det = s * sxx - sx * sx;
+    if !(det > 0.0) {
+        return None;
+    }
+    let slope = (s * sxy - sx * sy) / det;
+    let c = (sxx * sy - sx * sxy) / det;
+    let chi: f64 = pts
+        .iter()
+        .map(|(x, y, se)| ((y - c - slope * x) / se).powi(2))
+        .sum();
+    let scale = (chi / (pts.len() as f64 - 2.0).max(1.0)).max(1.0);
+    let se_slope = (s / det * scale).sqrt();
+    let v = -slope / c;
+    let se_v = se_slope / c.abs();
+    let existing = model.vignetting.map_or(0.0, |x| x.v);
+    let _ = meas;
+    Some(ImageFit {
+        effect: "vignetting",
+        params: map(&[("v", v + existing)]),
+        stderr: map(&[("v", se_v)]),
+        effects: Effects {
+            vignetting: Some(Vignetting { v: v + existing }),
+            ..model.clone()
+        },
+        k: 1,
+        beyond_null: v.abs() > 2.0 * se_v,
+    })
+}
+
+pub fn fit_illumination_change(
+    meas: &Measurement,
+    before: &Comparison,
+    model: &Effects,
+) -> Option<ImageFit> {
+    let noise = before.model.nominal.noise_floor_dn.powi(2);
+    let refs: Vec<&super::compare::ImageComparison> =
+        before.images.iter().filter(|i| i.run.is_none()).collect();
+    let (mut gains, mut offsets) = (Vec::new(), Vec::new());
+    for im in before.images.iter().filter(|i| i.run.is_some()) {
+        let Some(r) = refs.iter().find(|r| r.pattern == im.pattern) else {
+            continue;
+        };
+        let sig = |s: &FrameStats| ((s.contrast * s.mean_dn).powi(2) - noise).max(1e-12).sqrt();
+        let g = (sig(&im.measured) / sig(&r.measured)) / (sig(&im.model) / sig(&r.model));
+        let expected_mean = r.measured.mean_dn * im.model.mean_dn / r.model.mean_dn;
+        gains.push(g);
+        offsets.push(im.measured.mean_dn - g * expected_mean);
+    }
+    if gains.is_empty() {
+        return None;
+    }
+    let stats = |v: &[f64]| {
+        let n = v.len() as f64;
+        let m = v.iter().sum::<f64>() / n;
+        let sd = if v.len() > 1 {
+            (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+        } else {
+            0.0
+        };
+        (m, sd / n.sqrt())
+    };
+    let (g, mut se_g) = stats(&gains);
+    let (o, mut se_o) = stats(&offsets);
+    // One run: the contrast's own standard error bounds the gain's.
+    let cse = refs
+        .iter()
+        .map(|r| r.measured.contrast_se / r.measured.contrast)
+        .fold(0.0, f64::max)
+        * 2f64.sqrt();
+    se_g = se_g.max(cse * g);
+    let mean_ref = refs.iter().map(|r| r.measured.mean_dn).sum::<f64>() / refs.len() as f64;
+    se_o = se_o.max(se_g * mean_ref);
+    let _ = meas;
+    Some(ImageFit {
+        effect: "illumination_change",
+        params: map(&[("gain", g), ("offset", o)]),
+        stderr: map(&[("gain", se_g), ("offset", se_o)]),
+        effects: Effects {
+            illumination_change: Some(IlluminationChange { gain: g, offset: o }),
+            ..model.clone()
+        },
+        k: 2,
+        beyond_null: (g - 1.0).abs() > 2.0 * se_g || o.abs() > 2.0 * se_o,
+    })
+}
+
+pub fn fit_motion_blur(
+    meas: &Measurement,
+    before: &Comparison,
+    model: &Effects,
+) -> Option<ImageFit> {
+    let runs = &meas.manifest.runs;
+    // The three largest moves.
+    let mut order: Vec<usize> = (0..runs.len())
+        .filter(|&i| runs[i].stage.dx_mm != 0.0 || runs[i].stage.dy_mm != 0.0)
+        .collect();
+    if order.is_empty() {
+        return None;
+    }
+    order.sort_by(|&a, &b| {
+        let m = |i: usize| runs[i].stage.dx_mm.hypot(runs[i].stage.dy_mm);
+        m(b).total_cmp(&m(a))
+    });
+    // The largest move: blur grows with the stage's speed, and every trial renders the path.
+    order.truncate(1);
+    let first = &runs[order[0]].stage;
+    let angle = first.dy_mm.atan2(first.dx_mm) + before.model.nominal.misalignment_rad;
+    let with = |l: f64| Effects {
+        motion_blur: Some(MotionBlur {
+            length_px: l.max(0.0),
+            angle_rad: angle,
+        }),
+        ..model.clone()
+    };
+    let mrefs: Vec<&FrameStats> = order.iter().map(|&i| &meas.moved_stats[i]).collect();
+    let obj = |x: &[f64]| {
+        let scene = Scene::new(
+            &before.model.nominal,
+            &with(x[0]),
+            &meas.manifest,
+            meas.options.seed,
+        );
+        let crops: Vec<_> = order
+            .iter()
+            .map(|&i| {
+                let r = &runs[i];
+                scene.render(
+                    meas.pattern_of_run[i],
+                    (r.stage.dx_mm, r.stage.dy_mm),
+                    true,
+                    2 + i as u64,
+                    Some(STATS_CROP_PX),
+                )
+            })
+            .collect();
+        spectra_chi2(&mrefs, &crops)
+    };
+    let l = minimise_1d(&|l| obj(&[l]), 0.0, 4.0, 9);
+    let se = curvature_stderr(&obj, &[l], &[0.2], &[0.0], &[4.0])[0];
+    Some(ImageFit {
+        effect: "motion_blur",
+        params: map(&[("length_px", l), ("angle_rad", angle)]),
+        stderr: map(&[("length_px", se)]),
+        effects: with(l),
+        k: 1,
+        beyond_null: l > 2.0 * se,
+    })
+}

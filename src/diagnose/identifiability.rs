@@ -1,0 +1,196 @@
+//! What a dataset can reveal. Some effects leave no trace without the right runs, and some pairs
+//! explain the same residual unless the dataset holds the runs that separate them:
+//!
+//! - `lens_distortion` needs a translation of at least 2 % of the frame width (its field is
+//!   k1·[g(p+T) − g(p)] ∝ T); with translations of one size only, its field on a centred ROI is
+//!   partly a magnification change, so it is confounded with `scale` until translations of
+//!   several sizes (ratio ≥ 1.5) are measured: distortion grows with the move, a scale change
+//!   does not.
+//! - `psf_blur` needs the printed dot size in the manifest: an imaged dot's σ² is the printed σ²
+//!   plus the PSF's (a speckle estimated from the frame already contains the blur). It is
+//!   confounded with `fill_factor` (both low-pass the image) unless sub-pixel step series in x and
+//!   in y are measured: the aperture's bias against the sub-pixel fraction differs per axis.
+//! - `sensor_noise` needs static repeat frames: noise against mean from a single speckle frame is
+//!   entangled with the speckle itself.
+//! - `rotation`, `scale`, `illumination_change`, `motion_blur` need a moved run.
+//! - `fixed_pattern` needs flat-field and dark frames, which `ffdic-dataset/1` has no run for.
+
+use crate::dataset::Manifest;
+use serde::{Deserialize, Serialize};
+
+/// The runs of a dataset as the identifiability rules see them.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DatasetDesign {
+    pub moved_runs: usize,
+    /// Distinct translation sizes, full-resolution px (commanded × scale).
+    pub move_sizes_px: Vec<f64>,
+    /// Largest translation / frame width.
+    pub largest_move_fraction: f64,
+    /// Distinct sub-pixel (< 2 px) moves along x only and along y only.
+    pub subpixel_steps_x: usize,
+    pub subpixel_steps_y: usize,
+    pub has_repeats: bool,
+    pub dot_size_known: bool,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct NotIdentifiable {
+    pub effect: String,
+    pub reason: String,
+    pub runs_to_add: String,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Confounded {
+    pub effects: [String; 2],
+    /// The run that would separate them.
+    pub separate_with: String,
+    /// "design" (the dataset lacks the separating runs) or "data" (both fits explain the same
+    /// residual).
+    pub evidence: String,
+}
+
+fn distinct(mut v: Vec<f64>, rel: f64) -> Vec<f64> {
+    v.sort_by(|a, b| a.total_cmp(b));
+    let mut out: Vec<f64> = Vec::new();
+    for x in v {
+        if out
+            .last()
+            .is_none_or(|l| (x - l).abs() > rel * x.abs().max(1e-9))
+        {
+            out.push(x);
+        }
+    }
+    out
+}
+
+pub fn design_of(manifest: &Manifest, width: usize) -> DatasetDesign {
+    let k = manifest.scale_px_per_mm;
+    let moves: Vec<(f64, f64)> = manifest
+        .runs
+        .iter()
+        .map(|r| (r.stage.dx_mm * k, r.stage.dy_mm * k))
+        .collect();
+    let sizes: Vec<f64> = moves
+        .iter()
+        .map(|m| m.0.hypot(m.1))
+        .filter(|s| *s > 1e-9)
+        .collect();
+    let largest = sizes.iter().copied().fold(0.0, f64::max);
+    let steps = |along_x: bool| {
+        distinct(
+            moves
+                .iter()
+                .filter(|m| {
+                    let (a, b) = if along_x { (m.0, m.1) } else { (m.1, m.0) };
+                    b.abs() < 1e-12 && a.abs() > 1e-9 && a.abs() < 2.0
+                })
+                .map(|m| if along_x { m.0.abs() } else { m.1.abs() })
+                .collect(),
+            0.05,
+        )
+        .len()
+    };
+    DatasetDesign {
+        moved_runs: sizes.len(),
+        move_sizes_px: distinct(sizes, 0.05),
+        largest_move_fraction: largest / width.max(1) as f64,
+        subpixel_steps_x: steps(true),
+        subpixel_steps_y: steps(false),
+        has_repeats: manifest.runs.iter().any(|r| !r.repeat.is_empty()),
+        dot_size_known: manifest.runs.iter().all(|r| {
+            r.pattern
+                .as_ref()
+                .is_some_and(|p| p.dot_diameter_mm.is_some())
+        }),
+    }
+}
+
+pub const SEVERAL_SIZES: &str =
+    "translations of several sizes (e.g. 1/4, 1/2 and all of the largest move): distortion grows with the move, a scale change does not";
+pub const STEP_SERIES: &str =
+    "a sub-pixel step series in x and in y (at least 3 moves below 2 px along each axis, e.g. step_series with dx_step_mm, dy_step_mm)";
+
+impl DatasetDesign {
+    /// Why `effect` cannot be revealed by this dataset, if it cannot.
+    pub fn not_identifiable(&self, effect: &str) -> Option<NotIdentifiable> {
+        let no = |reason: &str, runs: &str| {
+            Some(NotIdentifiable {
+                effect: effect.into(),
+                reason: reason.into(),
+                runs_to_add: runs.into(),
+            })
+        };
+        let moved = "a translation of the target (any run with a stage move)";
+        match effect {
+            "rotation" | "scale" | "illumination_change" | "motion_blur" if self.moved_runs == 0 => {
+                no("no run moves the target", moved)
+            }
+            "lens_distortion" if self.largest_move_fraction < 0.02 => no(
+                "the largest translation is below 2 % of the frame width: distortion's field grows with the move and stays below the noise",
+                "a translation of at least 5 % of the field of view, and translations of several sizes",
+            ),
+            "psf_blur" if !self.dot_size_known => no(
+                "the printed dot size is not in the manifest: a speckle estimated from the frames already contains the blur",
+                "the printed dot diameter (pattern.dot_diameter_mm) of every run, or a run of a pattern with a known dot size",
+            ),
+            "sensor_noise" if !self.has_repeats => no(
+                "no static repeat frames: noise against mean from one speckle frame is entangled with the speckle",
+                "static repeat frames of the reference position (run.repeat), one or more per pattern",
+            ),
+            "fixed_pattern" => no(
+                "PRNU/DSNU need uniform illumination; speckle frames cannot tell a pixel's gain from the pattern",
+                "flat-field frames of a uniform white target at several exposures and dark frames (lens capped)",
+            ),
+            _ => None,
+        }
+    }
+
+    /// Pairs among `candidates` this design cannot separate, with the run that would.
+    pub fn confounded(&self, candidates: &[&str]) -> Vec<Confounded> {
+        let has = |e: &str| candidates.contains(&e);
+        let mut out = Vec::new();
+        let sizes_ok = self.move_sizes_px.len() >= 2
+            && self.move_sizes_px.last().copied().unwrap_or(0.0)
+                >= 1.5
+                    * self
+                        .move_sizes_px
+                        .iter()
+                        .copied()
+                        .find(|s| *s > 2.0)
+                        .unwrap_or(f64::INFINITY);
+        if has("lens_distortion") && has("scale") && !sizes_ok {
+            out.push(Confounded {
+                effects: ["lens_distortion".into(), "scale".into()],
+                separate_with: SEVERAL_SIZES.into(),
+                evidence: "design".into(),
+            });
+        }
+        if has("fill_factor")
+            && has("psf_blur")
+            && (self.subpixel_steps_x < 3 || self.subpixel_steps_y < 3)
+        {
+            out.push(Confounded {
+                effects: ["fill_factor".into(), "psf_blur".into()],
+                separate_with: STEP_SERIES.into(),
+                evidence: "design".into(),
+            });
+        }
+        out
+    }
+}
+
+/// The run that separates two effects, for pairs the data show explaining the same residual.
+pub fn separating_run(a: &str, b: &str) -> String {
+    let pair = |x: &str, y: &str| (a == x && b == y) || (a == y && b == x);
+    if pair("lens_distortion", "scale") {
+        SEVERAL_SIZES.into()
+    } else if pair("fill_factor", "psf_blur") {
+        STEP_SERIES.into()
+    } else if pair("rotation", "lens_distortion") || pair("rotation", "scale") {
+        "translations along x and along y".into()
+    } else {
+        "runs that change one of the two effects alone (see the effects' signatures in DESIGN.md)"
+            .into()
+    }
+}

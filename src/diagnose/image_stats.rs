@@ -1,0 +1,341 @@
+//! Image statistics compared beside DIC: effects that leave a zero-normalised DIC criterion nearly
+//! untouched (vignetting, an illumination change) or act through the image's spectrum and noise
+//! (blur, pixel aperture, photon transfer) show here.
+//!
+//! - mean-intensity map: 8x8 block means of the whole frame relative to the frame mean;
+//! - contrast: std / mean of the centred analysis crop;
+//! - noise against mean (photon transfer, EMVA 1288): from a static repeat frame, per pixel
+//!   m = (a+b)/2, σ² = (a−b)²/2; without one, Immerkær's Laplacian-difference estimator
+//!   (Immerkær, CVIU 64 (1996)) per pixel against the 3x3 local mean — biased by speckle
+//!   structure, which the levelled comparison cancels because the model's frames go through the
+//!   same estimator; binned in quantiles of the mean;
+//! - power spectrum along x (rows) and along y (columns): Hann-windowed periodograms of the crop,
+//!   normalised by the mean², averaged, in log-spaced frequency bins; a pixel aperture fx wide
+//!   multiplies the x spectrum by sinc²(fx·f) and leaves y alone, a Gaussian PSF multiplies both
+//!   by exp(−4π²σ²f²), which is how an anisotropic aperture is told from an isotropic blur.
+//!
+//! Every number carries a standard error from the scatter of independent groups (row blocks,
+//! sub-blocks, pixels), used by the χ² of [`super::bic`].
+
+use crate::image::Image;
+use rustfft::{num_complex::Complex, FftPlanner};
+use serde::{Deserialize, Serialize};
+
+/// Side of the centred crop the spectra and noise are computed on.
+pub const STATS_CROP_PX: usize = 512;
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MeanMap {
+    pub nx: usize,
+    pub ny: usize,
+    /// Block centres, px.
+    pub xs: Vec<f64>,
+    pub ys: Vec<f64>,
+    /// Block mean / frame mean, row-major.
+    pub values: Vec<f64>,
+    pub se: Vec<f64>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PtcPoint {
+    pub mean_dn: f64,
+    pub variance_dn2: f64,
+    pub se: f64,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PsdBin {
+    /// Bin centre, cycles/px.
+    pub f: f64,
+    /// Power per unit frequency relative to the mean², 1/(cycles/px).
+    pub value: f64,
+    pub se: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FrameStats {
+    pub mean_dn: f64,
+    pub contrast: f64,
+    pub contrast_se: f64,
+    pub mean_map: MeanMap,
+    pub ptc: Vec<PtcPoint>,
+    /// Whether the noise came from a static repeat frame.
+    pub ptc_from_repeat: bool,
+    pub psd_x: Vec<PsdBin>,
+    pub psd_y: Vec<PsdBin>,
+}
+
+/// Quantile q in [0, 1] (sorts `v`).
+pub fn percentile(v: &mut [f64], q: f64) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    v[((q * (v.len() - 1) as f64).round() as usize).min(v.len() - 1)]
+}
+
+/// Crops the centred window of at most `side` px.
+pub fn centre_crop(img: &Image, side: usize) -> Image {
+    let (x0, y0, w, h) = super::nominal::centred_crop(img.width(), img.height(), side);
+    img.crop(crate::image::Roi {
+        x: x0,
+        y: y0,
+        width: w,
+        height: h,
+    })
+}
+
+/// Per-pixel (local mean, noise variance estimate) and the effective pixels per independent
+/// estimate.
+fn noise_samples(a: &Image, repeat: Option<&Image>) -> (Vec<(f64, f64)>, f64) {
+    let (w, h) = (a.width(), a.height());
+    let mut out = Vec::with_capacity(w * h);
+    match repeat {
+        Some(b) => {
+            for (x, y) in a.data().iter().zip(b.data()) {
+                let (x, y) = (*x as f64, *y as f64);
+                out.push(((x + y) / 2.0, (x - y) * (x - y) / 2.0));
+            }
+            (out, 1.0)
+        }
+        None => {
+            const M: [[f64; 3]; 3] = [[1.0, -2.0, 1.0], [-2.0, 4.0, -2.0], [1.0, -2.0, 1.0]];
+            for r in 1..h.saturating_sub(1) {
+                for c in 1..w.saturating_sub(1) {
+                    let (mut n, mut m) = (0.0, 0.0);
+                    for (dr, row) in M.iter().enumerate() {
+                        for (dc, k) in row.iter().enumerate() {
+                            let v = a.get(c + dc - 1, r + dr - 1) as f64;
+                            n += k * v;
+                            m += v;
+                        }
+                    }
+                    out.push((m / 9.0, n * n / 36.0));
+                }
+            }
+            (out, 9.0)
+        }
+    }
+}
+
+/// Pooled noise variance (DN²) of a crop: mean of the per-pixel estimates; without a repeat,
+/// over the flattest quarter of the pixels (least speckle structure leaks into the estimate).
+pub fn noise_variance(a: &Image, repeat: Option<&Image>) -> f64 {
+    let a = centre_crop(a, STATS_CROP_PX);
+    let b = repeat.map(|r| centre_crop(r, STATS_CROP_PX));
+    let (samples, _) = noise_samples(&a, b.as_ref());
+    if samples.is_empty() {
+        return 0.0;
+    }
+    if b.is_some() {
+        return samples.iter().map(|s| s.1).sum::<f64>() / samples.len() as f64;
+    }
+    let mut v: Vec<f64> = samples.iter().map(|s| s.1).collect();
+    let q = percentile(&mut v, 0.25);
+    let low: Vec<f64> = v.into_iter().filter(|x| *x <= q).collect();
+    // The lower quarter of a χ²₁-distributed estimate averages to 0.0334 of its mean.
+    let mean_low = low.iter().sum::<f64>() / low.len().max(1) as f64;
+    mean_low / 0.0334
+}
+
+/// Noise variance against mean in ten quantile bins of the mean.
+pub fn ptc(a: &Image, repeat: Option<&Image>) -> Vec<PtcPoint> {
+    let (mut samples, per) = noise_samples(a, repeat);
+    if samples.len() < 100 {
+        return Vec::new();
+    }
+    samples.sort_by(|x, y| x.0.total_cmp(&y.0));
+    let bins = 10;
+    let n = samples.len();
+    // Drop the extreme 1 % on both ends (clipping, overlapping dots).
+    let (lo, hi) = (n / 100, n - n / 100);
+    let per_bin = (hi - lo) / bins;
+    (0..bins)
+        .filter_map(|b| {
+            let chunk = &samples[lo + b * per_bin..lo + (b + 1) * per_bin];
+            if chunk.len() < 10 {
+                return None;
+            }
+            let k = chunk.len() as f64;
+            let m = chunk.iter().map(|s| s.0).sum::<f64>() / k;
+            let v = chunk.iter().map(|s| s.1).sum::<f64>() / k;
+            let sv = (chunk.iter().map(|s| (s.1 - v).powi(2)).sum::<f64>() / (k - 1.0)).sqrt();
+            Some(PtcPoint {
+                mean_dn: m,
+                variance_dn2: v,
+                se: sv / (k / per).sqrt(),
+            })
+        })
+        .collect()
+}
+
+/// Row (along x) or column (along y) spectra of a crop in log-spaced bins.
+/// Power spectrum along x (rows) or y (columns) of a crop.
+pub fn psd(img: &Image, along_x: bool) -> Vec<PsdBin> {
+    let (w, h) = (img.width(), img.height());
+    let (len, count) = if along_x { (w, h) } else { (h, w) };
+    if len < 16 || count < 8 {
+        return Vec::new();
+    }
+    let (mean, _) = img.mean_std();
+    let mean2 = (mean * mean).max(1e-12);
+    let window: Vec<f64> = (0..len)
+        .map(|i| 0.5 - 0.5 * (2.0 * std::f64::consts::PI * i as f64 / len as f64).cos())
+        .collect();
+    let wsum2: f64 = window.iter().map(|x| x * x).sum();
+    let fft = FftPlanner::<f64>::new().plan_fft_forward(len);
+    let nbins = 12usize;
+    let (fmin, fmax) = (2.0 / len as f64, 0.5);
+    let edge = |k: usize| fmin * (fmax / fmin).powf(k as f64 / nbins as f64);
+    let bin_of = |f: f64| -> Option<usize> {
+        if f < fmin || f > fmax {
+            return None;
+        }
+        (0..nbins).find(|&k| f >= edge(k) && f <= edge(k + 1))
+    };
+    let groups = 8usize;
+    // sums[group][bin], counts[bin]
+    let mut sums = vec![vec![0.0f64; nbins]; groups];
+    let mut counts = vec![vec![0usize; nbins]; groups];
+    let mut buf = vec![Complex::new(0.0, 0.0); len];
+    let mut line_values = vec![0.0f64; len];
+    for line in 0..count {
+        let g = line * groups / count;
+        if along_x {
+            for (v, p) in line_values.iter_mut().zip(img.row(line)) {
+                *v = *p as f64;
+            }
+        } else {
+            for (i, v) in line_values.iter_mut().enumerate() {
+                *v = img.data()[i * w + line] as f64;
+            }
+        }
+        let lm = line_values.iter().sum::<f64>() / len as f64;
+        for ((b, v), wv) in buf.iter_mut().zip(&line_values).zip(&window) {
+            *b = Complex::new((v - lm) * wv, 0.0);
+        }
+        fft.process(&mut buf);
+        for (k, b) in buf.iter().enumerate().take(len / 2 + 1).skip(1) {
+            let f = k as f64 / len as f64;
+            if let Some(bin) = bin_of(f) {
+                sums[g][bin] += b.norm_sqr() / wsum2 / mean2;
+                counts[g][bin] += 1;
+            }
+        }
+    }
+    (0..nbins)
+        .filter_map(|b| {
+            let means: Vec<f64> = (0..groups)
+                .filter(|&g| counts[g][b] > 0)
+                .map(|g| sums[g][b] / counts[g][b] as f64)
+                .collect();
+            if means.len() < 2 {
+                return None;
+            }
+            let k = means.len() as f64;
+            let m = means.iter().sum::<f64>() / k;
+            let sd = (means.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (k - 1.0)).sqrt();
+            Some(PsdBin {
+                f: (edge(b) * edge(b + 1)).sqrt(),
+                value: m,
+                se: sd / k.sqrt(),
+            })
+        })
+        .collect()
+}
+
+fn mean_map(img: &Image) -> MeanMap {
+    let (w, h) = (img.width(), img.height());
+    let (n, _) = img.mean_std();
+    let (nx, ny) = (8usize, 8usize);
+    let mut values = Vec::with_capacity(nx * ny);
+    let mut se = Vec::with_capacity(nx * ny);
+    for j in 0..ny {
+        for i in 0..nx {
+            let (c0, c1) = (i * w / nx, (i + 1) * w / nx);
+            let (r0, r1) = (j * h / ny, (j + 1) * h / ny);
+            // Four sub-blocks give the scatter of the block mean.
+            let mut subs = [0.0f64; 4];
+            let mut cnt = [0usize; 4];
+            for r in r0..r1 {
+                let row = img.row(r);
+                let sr = usize::from(r >= (r0 + r1) / 2) * 2;
+                for (c, v) in row.iter().enumerate().take(c1).skip(c0) {
+                    let s = sr + usize::from(c >= (c0 + c1) / 2);
+                    subs[s] += *v as f64;
+                    cnt[s] += 1;
+                }
+            }
+            let means: Vec<f64> = (0..4)
+                .filter(|&s| cnt[s] > 0)
+                .map(|s| subs[s] / cnt[s] as f64)
+                .collect();
+            let m = means.iter().sum::<f64>() / means.len().max(1) as f64;
+            let sd = if means.len() > 1 {
+                (means.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (means.len() - 1) as f64)
+                    .sqrt()
+            } else {
+                0.0
+            };
+            values.push(m / n);
+            se.push(sd / (means.len() as f64).sqrt() / n);
+        }
+    }
+    MeanMap {
+        nx,
+        ny,
+        xs: (0..nx)
+            .map(|i| (i as f64 + 0.5) * w as f64 / nx as f64 - 0.5)
+            .collect(),
+        ys: (0..ny)
+            .map(|j| (j as f64 + 0.5) * h as f64 / ny as f64 - 0.5)
+            .collect(),
+        values,
+        se,
+    }
+}
+
+/// Statistics of one frame: the mean map over `full` (when given, else over the crop), the rest
+/// over the centred crop `crop` with its static repeat crop when there is one.
+pub fn frame_stats(full: Option<&Image>, crop: &Image, repeat_crop: Option<&Image>) -> FrameStats {
+    let (mean, std) = crop.mean_std();
+    let n_eff = (crop.width() * crop.height()) as f64 / 64.0;
+    FrameStats {
+        mean_dn: full.map_or(mean, |f| f.mean_std().0),
+        contrast: std / mean,
+        contrast_se: std / mean / (2.0 * n_eff).sqrt(),
+        mean_map: mean_map(full.unwrap_or(crop)),
+        ptc: ptc(crop, repeat_crop),
+        ptc_from_repeat: repeat_crop.is_some(),
+        psd_x: psd(crop, true),
+        psd_y: psd(crop, false),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn white_noise_has_a_flat_spectrum_and_the_right_variance() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        let n = Normal::new(1000.0, 10.0).unwrap();
+        let a = Image::from_fn(256, 256, |_, _| n.sample(&mut rng) as f32);
+        let b = Image::from_fn(256, 256, |_, _| n.sample(&mut rng) as f32);
+        let v = noise_variance(&a, Some(&b));
+        assert!((v / 100.0 - 1.0).abs() < 0.03, "{v}");
+        let single = noise_variance(&a, None);
+        assert!((single / 100.0 - 1.0).abs() < 0.1, "{single}");
+        let s = frame_stats(None, &a, Some(&b));
+        // White noise: σ²/mean² per unit frequency over 1 cycle/px → 1e-4 everywhere.
+        for bin in &s.psd_x {
+            assert!((bin.value / 1e-4 - 1.0).abs() < 0.2, "{bin:?}");
+        }
+        assert!(s
+            .ptc
+            .iter()
+            .all(|p| (p.variance_dn2 / 100.0 - 1.0).abs() < 0.15));
+    }
+}

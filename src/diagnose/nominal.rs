@@ -1,0 +1,581 @@
+//! The nominal experiment of a dataset and the model's frames for it.
+//!
+//! Speckle: the manifest's pattern fields (`dot_diameter_mm`, `dot_spacing_mm`, and the optional
+//! `contrast`, `edge_softness_mm`) when present; otherwise estimated from the measured reference
+//! as a field of Gaussian dots (a shot-noise process): the autocorrelation along x and y gives the
+//! imaged dot σ (ρ(k) ∝ exp(−k²/4σ²) for k ≥ 1, which skips the noise at lag 0), and the mean
+//! deficit m = 2πσ²ρc and the noise-free variance v = πσ²ρc² give the depth c = 2v/m and the
+//! density ρ. An estimated dot size contains the lens blur and the pixel aperture, which is why
+//! `psf_blur` needs a manifest dot size to be identifiable. The white level is then matched so the
+//! model's mean equals the measured mean.
+//!
+//! Stage: the commanded move, turned by the misalignment angle and scaled by the travel scale that
+//! make the model's mean displacement — computed from the model's own projection, so rotation,
+//! scale and distortion in the model are accounted for — match the measured mean displacement in
+//! least squares over every run and scheme (Gauss–Newton, three steps).
+
+use super::image_stats::{noise_variance, percentile};
+use super::DiagnoseError;
+use crate::dataset::{Manifest, Run};
+use crate::dic::DicResult;
+use crate::experiment::derive_seed;
+use crate::image::Image;
+use crate::model::effects::{Quantization, StageMisalignment};
+use crate::model::{project, render_frame, Camera, Effects, FrameSpec, SpecklePattern, TargetDot};
+use crate::reduce::Scheme;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// `config/models/baseline.toml`: what the paper assumes.
+pub const BASELINE_TOML: &str = include_str!("../../config/models/baseline.toml");
+
+/// The speckle of one pattern label and where its numbers came from.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PatternEstimate {
+    pub pattern: SpecklePattern,
+    /// White (background) level of this pattern's frames in DN, matched to the measured mean.
+    pub white_level_dn: f64,
+    /// "manifest", "estimated" or "manifest+estimated".
+    pub source: String,
+}
+
+/// Everything the model needs beyond its effects to render the dataset's experiment.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Nominal {
+    pub width: usize,
+    pub height: usize,
+    pub bit_depth: u8,
+    pub scale_px_per_mm: f64,
+    /// σ of the signal-independent noise used when the model has no `sensor_noise`, DN.
+    pub noise_floor_dn: f64,
+    /// Fitted stage misalignment (rad) and travel scale (actual / commanded).
+    pub misalignment_rad: f64,
+    pub travel_scale: f64,
+    /// One per distinct pattern label, in order of first appearance.
+    pub patterns: Vec<PatternEstimate>,
+}
+
+impl Nominal {
+    pub fn full_scale_dn(&self) -> f64 {
+        2f64.powi(self.bit_depth as i32) - 1.0
+    }
+
+    /// The effects the renderer gets: the model's, with the fitted misalignment and the dataset's
+    /// ADC unless the model names its own.
+    pub fn render_effects(&self, model: &Effects) -> Effects {
+        let mut e = model.clone();
+        e.stage_misalignment = Some(StageMisalignment {
+            angle_rad: self.misalignment_rad,
+        });
+        if e.quantization.is_none() {
+            e.quantization = Some(Quantization {
+                bits: self.bit_depth as u32,
+            });
+        }
+        e
+    }
+
+    /// The full-frame camera for pattern `pattern` (its white level sets the exposure).
+    pub fn camera(&self, pattern: usize) -> Camera {
+        let white = self
+            .patterns
+            .get(pattern)
+            .map_or(0.5 * self.full_scale_dn(), |p| p.white_level_dn);
+        Camera {
+            width: self.width,
+            height: self.height,
+            scale_px_per_mm: self.scale_px_per_mm,
+            exposure_level: white / self.full_scale_dn(),
+            principal_dx_px: 0.0,
+            principal_dy_px: 0.0,
+        }
+    }
+
+    /// The actual stage move for a commanded one, mm, before the misalignment turns it.
+    pub fn scaled_move(&self, dx_mm: f64, dy_mm: f64) -> (f64, f64) {
+        (dx_mm * self.travel_scale, dy_mm * self.travel_scale)
+    }
+}
+
+/// The centred crop window (x0, y0, w, h) of at most `side` px per axis, with the same centre as
+/// the frame (so a crop renders with the frame's optical axis).
+pub fn centred_crop(width: usize, height: usize, side: usize) -> (usize, usize, usize, usize) {
+    let fit = |n: usize| {
+        let c = side.min(n);
+        // Same parity as n keeps the centre exactly.
+        let c = if (n - c) % 2 == 1 { c - 1 } else { c };
+        ((n - c) / 2, c)
+    };
+    let (x0, w) = fit(width);
+    let (y0, h) = fit(height);
+    (x0, y0, w, h)
+}
+
+/// The model's frames for a dataset: the nominal experiment, the model's effects, the dots of
+/// every pattern (fixed seed).
+pub struct Scene {
+    pub nominal: Nominal,
+    pub effects: Effects,
+    dots: Vec<Vec<TargetDot>>,
+    seed: u64,
+}
+
+impl Scene {
+    pub fn new(nominal: &Nominal, model: &Effects, manifest: &Manifest, seed: u64) -> Self {
+        let travel = manifest
+            .runs
+            .iter()
+            .map(|r| r.stage.dx_mm.abs().max(r.stage.dy_mm.abs()))
+            .fold(0.0, f64::max)
+            * nominal.travel_scale.abs().max(1.0);
+        let camera = nominal.camera(0);
+        let dots = nominal
+            .patterns
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                p.pattern.dots(
+                    camera.field_mm(travel + 2.0),
+                    derive_seed(seed, i as u64, 0xD075),
+                )
+            })
+            .collect();
+        Self {
+            nominal: nominal.clone(),
+            effects: nominal.render_effects(model),
+            dots,
+            seed,
+        }
+    }
+
+    /// Renders pattern `pattern` at a commanded stage position; `frame` numbers the exposure (its
+    /// noise seed); `crop` renders only the centred window of that size.
+    pub fn render(
+        &self,
+        pattern: usize,
+        (dx_mm, dy_mm): (f64, f64),
+        moved: bool,
+        frame: u64,
+        crop: Option<usize>,
+    ) -> Image {
+        let n = &self.nominal;
+        let mut camera = n.camera(pattern);
+        let mut effects = self.effects.clone();
+        if let Some(side) = crop {
+            let (_, _, w, h) = centred_crop(n.width, n.height, side);
+            let full_r0 = camera.half_diagonal_px();
+            camera.width = w;
+            camera.height = h;
+            let crop_r0 = camera.half_diagonal_px();
+            if let Some(d) = effects.lens_distortion.as_mut() {
+                if d.norm_radius_px <= 0.0 {
+                    d.norm_radius_px = full_r0;
+                }
+            }
+            if let Some(v) = effects.vignetting.as_mut() {
+                v.v *= (crop_r0 / full_r0).powi(2);
+            }
+        }
+        let (sx, sy) = n.scaled_move(dx_mm, dy_mm);
+        let seed = derive_seed(self.seed, 0xF7A3 + pattern as u64, frame);
+        let spec = FrameSpec {
+            stage_dx_mm: sx,
+            stage_dy_mm: sy,
+            moved,
+            seed,
+        };
+        let all = &self.dots[pattern];
+        // A crop sees a small part of the target: hand the renderer only the dots near it (in mm,
+        // with room for the move, the dots' reach and a generous allowance for distortion).
+        let near: Vec<TargetDot>;
+        let dots: &[TargetDot] = if crop.is_some() {
+            let reach = all.iter().map(|d| d.sigma_mm).fold(0.0, f64::max) * 6.0;
+            let (x0, y0, x1, y1) = camera.field_mm(2.0 + reach);
+            let (pad_x, pad_y) = (0.05 * (x1 - x0), 0.05 * (y1 - y0));
+            let (mx, my) = (sx, sy);
+            near = all
+                .iter()
+                .filter(|d| {
+                    let (x, y) = (d.x_mm + mx, d.y_mm + my);
+                    x > x0 - pad_x && x < x1 + pad_x && y > y0 - pad_y && y < y1 + pad_y
+                })
+                .copied()
+                .collect();
+            &near
+        } else {
+            all
+        };
+        if effects.sensor_noise.is_some() || n.noise_floor_dn <= 0.0 {
+            return render_frame(&camera, &effects, dots, &spec);
+        }
+        // The dataset's own sensor: signal-independent noise, then the ADC.
+        let bits = effects.quantization.take().map_or(16, |q| q.bits);
+        let full = 2f64.powi(bits as i32) - 1.0;
+        camera.exposure_level *= n.full_scale_dn() / 65535.0;
+        let mut img = render_frame(&camera, &effects, dots, &spec);
+        let sigma = n.noise_floor_dn;
+        let w = img.width();
+        img.data_mut()
+            .par_chunks_mut(w)
+            .enumerate()
+            .for_each(|(row, line)| {
+                let mut rng = ChaCha8Rng::seed_from_u64(
+                    seed ^ (row as u64 + 1).wrapping_mul(0xA24B_AED4_963E_E407),
+                );
+                let normal = Normal::new(0.0, sigma).expect("finite sigma");
+                for v in line.iter_mut() {
+                    let x = *v as f64 + normal.sample(&mut rng);
+                    *v = x.round().clamp(0.0, full) as f32;
+                }
+            });
+        img
+    }
+
+    /// The model's geometric displacement (full-resolution px) at a reference-image position for
+    /// a commanded move: the target point seen at `p` in the reference, projected in the moved
+    /// frame. Exact for every geometric effect of the model (no rendering, no DIC).
+    pub fn geometric_displacement(&self, (dx_mm, dy_mm): (f64, f64), p: (f64, f64)) -> (f64, f64) {
+        let camera = self.nominal.camera(0);
+        let (sx, sy) = self.nominal.scaled_move(dx_mm, dy_mm);
+        let reference = FrameSpec {
+            stage_dx_mm: 0.0,
+            stage_dy_mm: 0.0,
+            moved: false,
+            seed: 0,
+        };
+        let moved = FrameSpec {
+            stage_dx_mm: sx,
+            stage_dy_mm: sy,
+            moved: true,
+            seed: 0,
+        };
+        let (cx, cy) = camera.centre();
+        let s = camera.scale_px_per_mm;
+        // Invert the reference projection by fixed-point iteration (distortion is small).
+        let (mut x, mut y) = ((p.0 - cx) / s, (p.1 - cy) / s);
+        for _ in 0..6 {
+            let (qx, qy) = project(&camera, &self.effects, &reference, x, y);
+            x += (p.0 - qx) / s;
+            y += (p.1 - qy) / s;
+        }
+        let (qx, qy) = project(&camera, &self.effects, &moved, x, y);
+        (qx - p.0, qy - p.1)
+    }
+}
+
+/// One DIC analysis of the measurement to fit the stage against.
+pub struct StageObservation<'a> {
+    pub pattern: usize,
+    pub commanded: (f64, f64),
+    pub scheme: &'a Scheme,
+    pub result: &'a DicResult,
+}
+
+/// Fits the misalignment angle and travel scale (see the module doc). Leaves them unchanged when
+/// no run moves.
+pub fn fit_stage(
+    nominal: &mut Nominal,
+    model: &Effects,
+    manifest: &Manifest,
+    obs: &[StageObservation],
+) {
+    // Mean measured displacement (full px) and the valid positions of each analysis.
+    /// (commanded move, measured mean displacement, valid positions), full-resolution px.
+    type Observed = ((f64, f64), (f64, f64), Vec<(f64, f64)>);
+    let data: Vec<Observed> = obs
+        .iter()
+        .filter_map(|o| {
+            let bx = o.scheme.x.block as f64;
+            let by = o.scheme.y.block as f64;
+            let valid: Vec<_> = o
+                .result
+                .points
+                .iter()
+                .filter(|p| p.status.is_valid())
+                .collect();
+            if valid.is_empty() {
+                return None;
+            }
+            let n = valid.len() as f64;
+            let mu = valid.iter().map(|p| p.u).sum::<f64>() / n * bx;
+            let mv = valid.iter().map(|p| p.v).sum::<f64>() / n * by;
+            // Every valid position: a subsample would weigh a quadratic field differently from
+            // the measured mean.
+            let pos = valid.iter().map(|p| o.scheme.to_full(p.x, p.y)).collect();
+            Some((o.commanded, (mu, mv), pos))
+        })
+        .collect();
+    let moves: f64 = data.iter().map(|d| d.0 .0.powi(2) + d.0 .1.powi(2)).sum();
+    if data.is_empty() || moves < 1e-18 {
+        return;
+    }
+    for _ in 0..3 {
+        let scene = Scene {
+            nominal: nominal.clone(),
+            effects: nominal.render_effects(model),
+            dots: Vec::new(),
+            seed: 0,
+        };
+        // Normal equations for (δ ln travel_scale, δθ).
+        let (mut a11, mut a12, mut a22, mut b1, mut b2) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for (cmd, meas, pos) in &data {
+            let n = pos.len() as f64;
+            let (mut mx, mut my) = (0.0, 0.0);
+            for &p in pos {
+                let (u, v) = scene.geometric_displacement(*cmd, p);
+                mx += u / n;
+                my += v / n;
+            }
+            // The actual move in px: derivative of the mean with respect to ln(scale) and angle.
+            let (sx, sy) = nominal.scaled_move(cmd.0, cmd.1);
+            let (s, c) = nominal.misalignment_rad.sin_cos();
+            let k = nominal.scale_px_per_mm;
+            let t = (k * (c * sx - s * sy), k * (s * sx + c * sy));
+            let j1 = t;
+            let j2 = (-t.1, t.0);
+            let e = (meas.0 - mx, meas.1 - my);
+            a11 += j1.0 * j1.0 + j1.1 * j1.1;
+            a12 += j1.0 * j2.0 + j1.1 * j2.1;
+            a22 += j2.0 * j2.0 + j2.1 * j2.1;
+            b1 += j1.0 * e.0 + j1.1 * e.1;
+            b2 += j2.0 * e.0 + j2.1 * e.1;
+        }
+        let det = a11 * a22 - a12 * a12;
+        if !(det.abs() > 1e-12 * (a11 * a22).max(1e-300)) {
+            break;
+        }
+        let dk = (a22 * b1 - a12 * b2) / det;
+        let dth = (a11 * b2 - a12 * b1) / det;
+        nominal.travel_scale *= dk.exp();
+        nominal.misalignment_rad += dth;
+        if dk.abs() < 1e-10 && dth.abs() < 1e-10 {
+            break;
+        }
+    }
+    let _ = manifest;
+}
+
+/// The speckle of a run's pattern from its manifest fields, with whatever is missing estimated
+/// from the measured reference `crop` (white level `white_dn`, pooled noise variance `noise_var`).
+pub fn pattern_for(
+    run: &Run,
+    crop: &Image,
+    white_dn: f64,
+    noise_var: f64,
+    scale_px_per_mm: f64,
+) -> PatternEstimate {
+    let info = run.pattern.as_ref();
+    let label = info.map_or_else(|| run.reference.clone(), |p| p.label.clone());
+    let extra = |key: &str| info.and_then(|p| p.extra.get(key)).and_then(|v| v.as_f64());
+    let diameter = info.and_then(|p| p.dot_diameter_mm);
+    let spacing = info.and_then(|p| p.dot_spacing_mm);
+    let contrast = extra("contrast");
+    let softness = extra("edge_softness_mm").unwrap_or(0.0);
+    if let (Some(d), Some(s), Some(c)) = (diameter, spacing, contrast) {
+        return PatternEstimate {
+            pattern: SpecklePattern {
+                label,
+                dot_diameter_mm: d,
+                dot_spacing_mm: s,
+                contrast: c,
+                edge_softness_mm: softness,
+            },
+            source: "manifest".into(),
+            white_level_dn: white_dn,
+        };
+    }
+    let est = estimate_speckle(crop, white_dn, noise_var);
+    let fwhm = 2.354_820_045_030_949;
+    // Imaged σ (px) → mm; with a manifest diameter, keep it.
+    let sigma_mm = match diameter {
+        Some(d) => ((d / fwhm).powi(2) + softness.powi(2)).sqrt(),
+        None => est.sigma_px / scale_px_per_mm,
+    };
+    let sigma_px = sigma_mm * scale_px_per_mm;
+    let (c, rho) = match (contrast, spacing) {
+        (Some(c), Some(s)) => (c, 1.0 / (s * scale_px_per_mm).powi(2)),
+        (None, Some(s)) => {
+            let rho = 1.0 / (s * scale_px_per_mm).powi(2);
+            (
+                (est.deficit / (2.0 * std::f64::consts::PI * sigma_px * sigma_px * rho))
+                    .clamp(0.02, 1.0),
+                rho,
+            )
+        }
+        (c, None) => {
+            let c =
+                c.unwrap_or_else(|| (2.0 * est.variance / est.deficit.max(1e-6)).clamp(0.02, 1.0));
+            let rho = est.deficit / (2.0 * std::f64::consts::PI * sigma_px * sigma_px * c);
+            (c, rho.max(1e-6))
+        }
+    };
+    let spacing_mm = spacing.unwrap_or(1.0 / (rho.sqrt() * scale_px_per_mm));
+    let (dot_diameter_mm, edge_softness_mm) = match diameter {
+        Some(d) => (d, softness),
+        None => (sigma_mm * fwhm, 0.0),
+    };
+    let all_missing = diameter.is_none() && spacing.is_none() && contrast.is_none();
+    PatternEstimate {
+        pattern: SpecklePattern {
+            label,
+            dot_diameter_mm,
+            dot_spacing_mm: spacing_mm,
+            contrast: c,
+            edge_softness_mm,
+        },
+        source: if all_missing {
+            "estimated"
+        } else {
+            "manifest+estimated"
+        }
+        .into(),
+        white_level_dn: white_dn,
+    }
+}
+
+/// Moments of a speckle frame relative to its white level.
+struct SpeckleMoments {
+    /// Imaged dot σ, px.
+    sigma_px: f64,
+    /// 1 − mean/white.
+    deficit: f64,
+    /// Noise-free variance / white².
+    variance: f64,
+}
+
+fn estimate_speckle(img: &Image, white: f64, noise_var: f64) -> SpeckleMoments {
+    let (w, h) = (img.width(), img.height());
+    let (mean, std) = img.mean_std();
+    let var = (std * std - noise_var).max(1e-12);
+    // Normalised autocovariance along x and y at lags 1..=8.
+    let lag_cov = |k: usize, along_x: bool| -> f64 {
+        let mut acc = 0.0;
+        let mut n = 0usize;
+        for r in 0..h - if along_x { 0 } else { k } {
+            for c in 0..w - if along_x { k } else { 0 } {
+                let a = img.get(c, r) as f64 - mean;
+                let b = if along_x {
+                    img.get(c + k, r)
+                } else {
+                    img.get(c, r + k)
+                } as f64
+                    - mean;
+                acc += a * b;
+                n += 1;
+            }
+        }
+        acc / n.max(1) as f64
+    };
+    // ln ρ(k) = const − k²/(4σ²): least squares over lags with ρ above 10 % of var.
+    let mut fits = Vec::new();
+    for along_x in [true, false] {
+        let (mut sx, mut sy, mut sxx, mut sxy, mut n) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for k in 1..=12usize {
+            let c = lag_cov(k, along_x) / var;
+            if !(c > 0.1) {
+                break;
+            }
+            let (x, y) = ((k * k) as f64, c.ln());
+            sx += x;
+            sy += y;
+            sxx += x * x;
+            sxy += x * y;
+            n += 1.0;
+        }
+        if n >= 2.0 {
+            let slope = (n * sxy - sx * sy) / (n * sxx - sx * sx);
+            if slope < 0.0 {
+                fits.push((-1.0 / (4.0 * slope)).sqrt());
+            }
+        } else if n == 1.0 {
+            // Only lag 1 above threshold: a small dot.
+            fits.push((-1.0 / (4.0 * (sy - 0.0))).abs().sqrt().min(1.0));
+        }
+    }
+    let sigma_px = if fits.is_empty() {
+        1.0
+    } else {
+        fits.iter().sum::<f64>() / fits.len() as f64
+    };
+    SpeckleMoments {
+        sigma_px: sigma_px.clamp(0.3, 50.0),
+        deficit: (1.0 - mean / white).max(1e-4),
+        variance: var / (white * white),
+    }
+}
+
+/// First guess of the white level: a high percentile of the 3x3-smoothed frame.
+pub fn white_level_guess(img: &Image) -> f64 {
+    let (w, h) = (img.width(), img.height());
+    let mut smooth = Vec::with_capacity(w * h);
+    for r in 1..h.saturating_sub(1) {
+        for c in 1..w.saturating_sub(1) {
+            let mut s = 0.0;
+            for dr in 0..3 {
+                for dc in 0..3 {
+                    s += img.get(c + dc - 1, r + dr - 1) as f64;
+                }
+            }
+            smooth.push(s / 9.0);
+        }
+    }
+    percentile(&mut smooth, 0.995).max(1.0)
+}
+
+/// Pooled noise variance of a measured reference (its static repeat when given).
+pub fn pooled_noise_variance(reference: &Image, repeat: Option<&Image>) -> f64 {
+    noise_variance(reference, repeat)
+}
+
+/// The validated pattern index of every run (pattern labels in order of first appearance).
+pub fn pattern_indices(manifest: &Manifest) -> (Vec<String>, Vec<usize>) {
+    let mut labels: Vec<String> = Vec::new();
+    let idx = manifest
+        .runs
+        .iter()
+        .map(|r| {
+            let label = r
+                .pattern
+                .as_ref()
+                .map_or_else(|| r.reference.clone(), |p| p.label.clone());
+            match labels.iter().position(|l| *l == label) {
+                Some(i) => i,
+                None => {
+                    labels.push(label);
+                    labels.len() - 1
+                }
+            }
+        })
+        .collect();
+    (labels, idx)
+}
+
+/// Checks that a frame pair can be compared.
+pub fn check_sizes(run: &Run, a: &Image, b: &Image) -> Result<(), DiagnoseError> {
+    if (a.width(), a.height()) != (b.width(), b.height()) {
+        return Err(DiagnoseError::Frames {
+            run: run.id.clone(),
+            message: format!(
+                "reference is {}x{}, deformed {}x{}",
+                a.width(),
+                a.height(),
+                b.width(),
+                b.height()
+            ),
+        });
+    }
+    if a.width() < 64 || a.height() < 64 {
+        return Err(DiagnoseError::Frames {
+            run: run.id.clone(),
+            message: format!(
+                "frames of {}x{} px are too small to compare",
+                a.width(),
+                a.height()
+            ),
+        });
+    }
+    Ok(())
+}

@@ -1,0 +1,220 @@
+//! Where the model fails: the residual map of each run and scheme (measured − model displacement
+//! at every point of interest), its profiles against position, the mean residual against the
+//! sub-pixel fraction of the motion (interpolation bias is periodic in it: Schreier, Braasch &
+//! Sutton, Opt. Eng. 39 (2000)), and the image statistics side by side — as data and as SVG.
+
+use super::compare::Comparison;
+use super::discrepancy::RunDiscrepancy;
+use crate::dic::DicResult;
+use crate::report::{Heatmap, Mark, XyPlot, XySeries};
+use serde::{Deserialize, Serialize};
+
+/// The residual field of one run and scheme on the DIC grid, px of the analysed image.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ResidualMap {
+    /// Grid positions (px of the analysed image).
+    pub xs: Vec<f64>,
+    pub ys: Vec<f64>,
+    /// Row-major over the grid; NaN (null in JSON) where either analysis has no valid point.
+    pub du: Vec<f64>,
+    pub dv: Vec<f64>,
+    /// Mean residual per grid column: (x, Δu, Δv); per grid row: (y, Δu, Δv).
+    pub profile_x: Vec<[f64; 3]>,
+    pub profile_y: Vec<[f64; 3]>,
+}
+
+pub fn residual_map(measured: &DicResult, d: &RunDiscrepancy) -> ResidualMap {
+    let xs: Vec<f64> = measured.grid.xs.iter().map(|&x| x as f64).collect();
+    let ys: Vec<f64> = measured.grid.ys.iter().map(|&y| y as f64).collect();
+    let n = xs.len() * ys.len();
+    let mut du = vec![f64::NAN; n];
+    let mut dv = vec![f64::NAN; n];
+    for p in &d.common {
+        if p.index < n {
+            du[p.index] = p.du;
+            dv[p.index] = p.dv;
+        }
+    }
+    let profile = |along_x: bool| -> Vec<[f64; 3]> {
+        let (outer, inner) = if along_x {
+            (xs.len(), ys.len())
+        } else {
+            (ys.len(), xs.len())
+        };
+        (0..outer)
+            .filter_map(|a| {
+                let (mut su, mut sv, mut k) = (0.0, 0.0, 0.0);
+                for b in 0..inner {
+                    let idx = if along_x {
+                        b * xs.len() + a
+                    } else {
+                        a * xs.len() + b
+                    };
+                    if du[idx].is_finite() {
+                        su += du[idx];
+                        sv += dv[idx];
+                        k += 1.0;
+                    }
+                }
+                (k > 0.0).then(|| [if along_x { xs[a] } else { ys[a] }, su / k, sv / k])
+            })
+            .collect()
+    };
+    ResidualMap {
+        profile_x: profile(true),
+        profile_y: profile(false),
+        xs,
+        ys,
+        du,
+        dv,
+    }
+}
+
+fn file_safe(s: &str) -> String {
+    s.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// Every plot of a comparison as (file name, SVG text).
+pub fn comparison_svgs(cmp: &Comparison) -> Vec<(String, String)> {
+    let mut out = Vec::new();
+    for r in &cmp.runs {
+        for (comp, values) in [("u", &r.residual.du), ("v", &r.residual.dv)] {
+            let map = Heatmap {
+                title: format!(
+                    "Residual Δ{comp} (measured − model), run {}, {}",
+                    r.id, r.scheme
+                ),
+                x_label: "x [px]".into(),
+                y_label: "y [px]".into(),
+                value_label: format!("Δ{comp} [px]"),
+                xs: r.residual.xs.clone(),
+                ys: r.residual.ys.clone(),
+                values: values.clone(),
+                diverging: true,
+            };
+            out.push((
+                format!(
+                    "residual_{}_{}_{comp}.svg",
+                    file_safe(&r.id),
+                    file_safe(&r.scheme)
+                ),
+                map.to_svg(640, 520),
+            ));
+        }
+    }
+    for (name, along_x) in [("x", true), ("y", false)] {
+        let mut plot = XyPlot::new(
+            &format!("Residual against {name}"),
+            &format!("{name} [px]"),
+            "mean residual [px]",
+        );
+        plot.zero_line = true;
+        for r in &cmp.runs {
+            let prof = if along_x {
+                &r.residual.profile_x
+            } else {
+                &r.residual.profile_y
+            };
+            for (k, comp) in [(1usize, "u"), (2, "v")] {
+                plot.series.push(XySeries {
+                    name: format!("Δ{comp} {} {}", r.id, r.scheme),
+                    points: prof.iter().map(|p| (p[0], p[k])).collect(),
+                    mark: Mark::LinePoints,
+                });
+            }
+        }
+        out.push((
+            format!("residual_vs_{name}.svg"),
+            plot.to_svg(760, 460 + 16 * plot.series.len() as u32),
+        ));
+    }
+    let mut frac = XyPlot::new(
+        "Mean residual against sub-pixel fraction",
+        "sub-pixel fraction of the measured displacement [px]",
+        "mean residual [px]",
+    );
+    frac.zero_line = true;
+    for (k, comp) in [(0usize, "u"), (1, "v")] {
+        let mut pts: Vec<(f64, f64)> = cmp
+            .runs
+            .iter()
+            .map(|r| (r.subpixel_fraction[k], r.mean_diff_px[k]))
+            .collect();
+        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        frac.series.push(XySeries {
+            name: format!("Δ{comp} against fraction of {comp}"),
+            points: pts,
+            mark: Mark::Points,
+        });
+    }
+    out.push(("residual_vs_fraction.svg".into(), frac.to_svg(700, 460)));
+    for im in &cmp.images {
+        let tag = match &im.run {
+            Some(run) => format!("moved_{}", file_safe(run)),
+            None => format!("reference_{}", file_safe(&im.pattern)),
+        };
+        let mut spec = XyPlot::new(
+            &format!("Power spectrum, {tag}"),
+            "f [cycles/px]",
+            "P / mean² [1/(cycles/px)]",
+        );
+        spec.log_x = true;
+        spec.log_y = true;
+        for (name, s) in [
+            ("along x, measured", &im.measured.psd_x),
+            ("along x, model", &im.model.psd_x),
+            ("along y, measured", &im.measured.psd_y),
+            ("along y, model", &im.model.psd_y),
+        ] {
+            spec.series.push(XySeries {
+                name: name.into(),
+                points: s.iter().map(|b| (b.f, b.value)).collect(),
+                mark: Mark::LinePoints,
+            });
+        }
+        out.push((format!("spectrum_{tag}.svg"), spec.to_svg(700, 520)));
+        if im.run.is_none() {
+            let mut ptc = XyPlot::new(
+                &format!("Noise against mean, {tag}"),
+                "mean [DN]",
+                "noise variance [DN²]",
+            );
+            for (name, s) in [("measured", &im.measured.ptc), ("model", &im.model.ptc)] {
+                ptc.series.push(XySeries {
+                    name: name.into(),
+                    points: s.iter().map(|p| (p.mean_dn, p.variance_dn2)).collect(),
+                    mark: Mark::LinePoints,
+                });
+            }
+            out.push((format!("noise_vs_mean_{tag}.svg"), ptc.to_svg(700, 460)));
+            let ratio: Vec<f64> = im
+                .measured
+                .mean_map
+                .values
+                .iter()
+                .zip(&im.model.mean_map.values)
+                .map(|(a, b)| a / b - 1.0)
+                .collect();
+            let map = Heatmap {
+                title: format!("Mean intensity, measured / model − 1, {tag}"),
+                x_label: "x [px]".into(),
+                y_label: "y [px]".into(),
+                value_label: "relative difference [1]".into(),
+                xs: im.measured.mean_map.xs.clone(),
+                ys: im.measured.mean_map.ys.clone(),
+                values: ratio,
+                diverging: true,
+            };
+            out.push((format!("mean_map_{tag}.svg"), map.to_svg(640, 520)));
+        }
+    }
+    out
+}

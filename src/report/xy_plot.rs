@@ -1,0 +1,242 @@
+//! Scatter and line plots of (x, y) series: residual against position, residual against sub-pixel
+//! fraction, power spectra, noise against mean, the history of a discrepancy. Linear or
+//! logarithmic axes, a legend, axis labels with units.
+
+use super::svg::{escape, format_tick, nice_ticks, PALETTE};
+use std::fmt::Write;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mark {
+    Points,
+    Line,
+    LinePoints,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct XySeries {
+    pub name: String,
+    /// Non-finite points (and non-positive ones on a log axis) are skipped.
+    pub points: Vec<(f64, f64)>,
+    pub mark: Mark,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct XyPlot {
+    pub title: String,
+    /// Axis labels with units, e.g. "sub-pixel fraction of u [px]".
+    pub x_label: String,
+    pub y_label: String,
+    pub series: Vec<XySeries>,
+    pub log_x: bool,
+    pub log_y: bool,
+    /// Draw a horizontal line at y = 0 (residual plots).
+    pub zero_line: bool,
+    /// Optional text under each x tick instead of numbers (categorical x: index -> label).
+    pub x_tick_labels: Vec<(f64, String)>,
+}
+
+impl XyPlot {
+    pub fn new(title: &str, x_label: &str, y_label: &str) -> Self {
+        Self {
+            title: title.into(),
+            x_label: x_label.into(),
+            y_label: y_label.into(),
+            series: Vec::new(),
+            log_x: false,
+            log_y: false,
+            zero_line: false,
+            x_tick_labels: Vec::new(),
+        }
+    }
+
+    fn usable(&self, (x, y): (f64, f64)) -> bool {
+        x.is_finite() && y.is_finite() && (!self.log_x || x > 0.0) && (!self.log_y || y > 0.0)
+    }
+
+    /// The plot as a standalone SVG document. Every point is a `<circle class="point">`, every
+    /// line a `<polyline class="line">`.
+    pub fn to_svg(&self, width_px: u32, height_px: u32) -> String {
+        let (w, h) = (width_px as f64, height_px as f64);
+        let legend_h = 16.0 * self.series.len() as f64 + 6.0;
+        let (left, right, top, bottom) = (78.0, 20.0, 40.0, 48.0 + legend_h);
+        let (pw, ph) = (w - left - right, h - top - bottom);
+        let tx = |v: f64| if self.log_x { v.log10() } else { v };
+        let ty = |v: f64| if self.log_y { v.log10() } else { v };
+        let pts: Vec<(f64, f64)> = self
+            .series
+            .iter()
+            .flat_map(|s| s.points.iter().copied())
+            .filter(|p| self.usable(*p))
+            .map(|(x, y)| (tx(x), ty(y)))
+            .collect();
+        let bounds = |it: &mut dyn Iterator<Item = f64>| {
+            it.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(v), b.max(v))
+            })
+        };
+        let (mut x0, mut x1) = bounds(&mut pts.iter().map(|p| p.0));
+        let (mut y0, mut y1) = bounds(&mut pts.iter().map(|p| p.1).chain(
+            if self.zero_line && !self.log_y {
+                Some(0.0)
+            } else {
+                None
+            },
+        ));
+        if !x0.is_finite() {
+            (x0, x1) = (0.0, 1.0);
+        }
+        if !y0.is_finite() {
+            (y0, y1) = (0.0, 1.0);
+        }
+        let xt = if self.log_x {
+            (x0.floor() as i64..=x1.ceil() as i64)
+                .map(|k| k as f64)
+                .collect()
+        } else {
+            nice_ticks(x0, x1, 6)
+        };
+        let yt = if self.log_y {
+            (y0.floor() as i64..=y1.ceil() as i64)
+                .map(|k| k as f64)
+                .collect()
+        } else {
+            nice_ticks(y0, y1, 5)
+        };
+        let (x0, x1) = (xt[0].min(x0), xt[xt.len() - 1].max(x1));
+        let (y0, y1) = (yt[0].min(y0), yt[yt.len() - 1].max(y1));
+        let (x1, y1) = (
+            if x1 > x0 { x1 } else { x0 + 1.0 },
+            if y1 > y0 { y1 } else { y0 + 1.0 },
+        );
+        let sx = |x: f64| left + pw * (x - x0) / (x1 - x0);
+        let sy = |y: f64| top + ph * (1.0 - (y - y0) / (y1 - y0));
+        let label = |v: f64, log: bool| {
+            if log {
+                format_tick(10f64.powf(v))
+            } else {
+                format_tick(v)
+            }
+        };
+        let mut s = String::new();
+        let _ = write!(
+            s,
+            r#"<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {w} {h}" width="{w}" height="{h}" font-family="sans-serif" font-size="12"><rect x="0" y="0" width="{w}" height="{h}" fill="white"/>"#
+        );
+        let _ = write!(
+            s,
+            r#"<text x="{}" y="22" text-anchor="middle" font-size="15" font-weight="bold">{}</text>"#,
+            w / 2.0,
+            escape(&self.title)
+        );
+        for &t in &yt {
+            let y = sy(t);
+            let _ = write!(
+                s,
+                r##"<line x1="{left}" x2="{:.1}" y1="{y:.1}" y2="{y:.1}" stroke="#e4e4e4"/><text x="{:.1}" y="{:.1}" text-anchor="end">{}</text>"##,
+                left + pw,
+                left - 6.0,
+                y + 4.0,
+                label(t, self.log_y)
+            );
+        }
+        if self.x_tick_labels.is_empty() {
+            for &t in &xt {
+                let x = sx(t);
+                let _ = write!(
+                    s,
+                    r##"<line x1="{x:.1}" x2="{x:.1}" y1="{top}" y2="{:.1}" stroke="#e4e4e4"/><text x="{x:.1}" y="{:.1}" text-anchor="middle">{}</text>"##,
+                    top + ph,
+                    top + ph + 16.0,
+                    label(t, self.log_x)
+                );
+            }
+        } else {
+            for (t, text) in &self.x_tick_labels {
+                let _ = write!(
+                    s,
+                    r#"<text x="{:.1}" y="{:.1}" text-anchor="middle" font-size="10">{}</text>"#,
+                    sx(tx(*t)),
+                    top + ph + 16.0,
+                    escape(text)
+                );
+            }
+        }
+        if self.zero_line && !self.log_y && y0 < 0.0 && y1 > 0.0 {
+            let _ = write!(
+                s,
+                r##"<line x1="{left}" x2="{:.1}" y1="{1:.1}" y2="{1:.1}" stroke="#888" stroke-dasharray="4 3"/>"##,
+                left + pw,
+                sy(0.0)
+            );
+        }
+        let _ = write!(
+            s,
+            r##"<rect x="{left}" y="{top}" width="{pw}" height="{ph}" fill="none" stroke="#333"/>"##
+        );
+        let _ = write!(
+            s,
+            r#"<text x="{:.1}" y="{:.1}" text-anchor="middle">{}</text><text transform="translate(16,{:.1}) rotate(-90)" text-anchor="middle">{}</text>"#,
+            left + pw / 2.0,
+            top + ph + 34.0,
+            escape(&self.x_label),
+            top + ph / 2.0,
+            escape(&self.y_label)
+        );
+        for (k, series) in self.series.iter().enumerate() {
+            let colour = PALETTE[k % PALETTE.len()];
+            let p: Vec<(f64, f64)> = series
+                .points
+                .iter()
+                .copied()
+                .filter(|p| self.usable(*p))
+                .map(|(x, y)| (sx(tx(x)), sy(ty(y))))
+                .collect();
+            if matches!(series.mark, Mark::Line | Mark::LinePoints) && p.len() > 1 {
+                let path: Vec<String> = p.iter().map(|(x, y)| format!("{x:.1},{y:.1}")).collect();
+                let _ = write!(
+                    s,
+                    r#"<polyline class="line" points="{}" fill="none" stroke="{colour}" stroke-width="1.6"/>"#,
+                    path.join(" ")
+                );
+            }
+            if matches!(series.mark, Mark::Points | Mark::LinePoints) {
+                for (x, y) in &p {
+                    let _ = write!(
+                        s,
+                        r#"<circle class="point" cx="{x:.1}" cy="{y:.1}" r="2.6" fill="{colour}"/>"#
+                    );
+                }
+            }
+            let ly = h - legend_h + 2.0 + 16.0 * k as f64;
+            let _ = write!(
+                s,
+                r#"<rect x="{left}" y="{ly:.1}" width="12" height="10" fill="{colour}"/><text x="{:.1}" y="{:.1}">{}</text>"#,
+                left + 18.0,
+                ly + 9.0,
+                escape(&series.name)
+            );
+        }
+        s.push_str("</svg>\n");
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn points_lines_and_log_axes() {
+        let mut p = XyPlot::new("PSD", "f [cycles/px]", "P [1/px]");
+        p.log_y = true;
+        p.series.push(XySeries {
+            name: "measured".into(),
+            points: vec![(0.1, 1.0), (0.2, 0.1), (0.3, -1.0)],
+            mark: Mark::LinePoints,
+        });
+        let svg = p.to_svg(600, 400);
+        assert_eq!(svg.matches(r#"class="point""#).count(), 2);
+        assert_eq!(svg.matches(r#"class="line""#).count(), 1);
+        assert!(svg.contains("f [cycles/px]"));
+    }
+}

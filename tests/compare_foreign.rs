@@ -1,0 +1,94 @@
+//! `compare` on a dataset ffdic did not make: 8-bit frames of 256x256 px, no camera block, no
+//! pattern fields (the speckle is estimated from the measured reference), no repeats.
+
+use ffdic::diagnose::{compare, CompareOptions, BASELINE_TOML};
+use ffdic::experiment::{simulate_dataset, ExperimentSpec, MoveSpec, PatternSpec};
+use ffdic::image::{read_tiff, write_tiff_u8, Image};
+use ffdic::model::effects::{SensorNoise, StageMisalignment};
+use ffdic::model::{Camera, Effects, ModelConfig};
+use std::path::Path;
+
+#[test]
+fn eight_bit_small_frames_without_optional_fields() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = ExperimentSpec {
+        name: "foreign".into(),
+        seed: 3,
+        camera: Camera {
+            width: 256,
+            height: 256,
+            scale_px_per_mm: 13.0,
+            exposure_level: 0.5,
+            principal_dx_px: 0.0,
+            principal_dy_px: 0.0,
+        },
+        patterns: vec![PatternSpec::Preset("a".into())],
+        moves: vec![MoveSpec {
+            id: "x1".into(),
+            dx_mm: 1.0,
+            dy_mm: 0.0,
+        }],
+        step_series: vec![],
+        repeats: 0,
+        schemes: vec![],
+        dic: Default::default(),
+    };
+    let bench = ModelConfig {
+        name: "bench".into(),
+        description: String::new(),
+        effects: Effects {
+            stage_misalignment: Some(StageMisalignment { angle_rad: 0.005 }),
+            sensor_noise: Some(SensorNoise {
+                full_well_e: 30000.0,
+                read_noise_e: 2.0,
+                gain: 0.46,
+            }),
+            ..Effects::default()
+        },
+    };
+    simulate_dataset(&spec, &bench, 3, dir.path(), &|_, _| {}).unwrap();
+    // Rewrite as 8-bit frames and strip every optional field.
+    for name in ["a_ref.tif", "a_x1.tif"] {
+        let path = dir.path().join(name);
+        let (img, _) = read_tiff(&path).unwrap();
+        let scaled =
+            Image::from_vec(256, 256, img.data().iter().map(|v| v / 257.0).collect()).unwrap();
+        write_tiff_u8(&path, &scaled).unwrap();
+    }
+    let manifest = r#"{ "format": "ffdic-dataset/1", "name": "foreign", "scale_px_per_mm": 13.0, "lab": "elsewhere",
+        "runs": [ { "id": "x1", "reference": "a_ref.tif", "deformed": "a_x1.tif", "stage": { "dx_mm": 1.0, "dy_mm": 0.0 } } ] }"#;
+    std::fs::write(dir.path().join("dataset.json"), manifest).unwrap();
+    let model = ModelConfig::from_toml(BASELINE_TOML, Path::new("baseline.toml")).unwrap();
+    let cmp = compare(dir.path(), &model, &CompareOptions::default(), &|_, _| true).unwrap();
+    let n = &cmp.model.nominal;
+    assert_eq!(n.bit_depth, 8);
+    assert_eq!(n.patterns[0].source, "estimated");
+    println!(
+        "estimated speckle {:?}, white {:.1} DN",
+        n.patterns[0].pattern, n.patterns[0].white_level_dn
+    );
+    // The estimate lands near the printed pattern a (0.5 mm dots at 0.75 mm).
+    let p = &n.patterns[0].pattern;
+    assert!((p.dot_diameter_mm / 0.5 - 1.0).abs() < 0.35, "{p:?}");
+    assert_eq!(cmp.runs.len(), 3);
+    for r in &cmp.runs {
+        assert!(
+            r.discrepancy_px.is_finite() && r.measured.summary.valid > 0,
+            "{r:?}"
+        );
+        println!("{} {}: D {:.5} px", r.id, r.scheme, r.discrepancy_px);
+    }
+    // The move (13 px at full resolution, 6.5 px reduced) is recovered by the fitted stage.
+    assert!(
+        (n.misalignment_rad - 0.005).abs() < 0.002,
+        "{}",
+        n.misalignment_rad
+    );
+    let json = serde_json::to_value(&cmp).unwrap();
+    for key in ["model", "discrepancy_px", "runs"] {
+        assert!(json.get(key).is_some(), "{key}");
+    }
+    for key in ["id", "scheme", "discrepancy_px", "measured", "model"] {
+        assert!(json["runs"][0].get(key).is_some(), "{key}");
+    }
+}
