@@ -5,13 +5,16 @@
 // fail such checks, which `x <= limit` would let through.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod api;
 pub mod dataset;
+pub mod diagnose;
 pub mod dic;
 pub mod experiment;
 pub mod image;
 pub mod model;
 pub mod reduce;
 pub mod report;
+pub mod service;
 pub mod store;
 
 /// The crate version, recorded in every result's settings.

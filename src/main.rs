@@ -25,6 +25,16 @@ enum Command {
     Reproduce(cli::reproduce::ReproduceArgs),
     /// Render the frames a camera on the bench would deliver, as a dataset.
     Simulate(cli::simulate::SimulateArgs),
+    /// The daemon: bench actor, experiments over HTTP, run store.
+    Serve(cli::serve::ServeArgs),
+    /// Maintain the run store.
+    Store(cli::store::StoreArgs),
+    /// DIC of a dataset's frames against the same DIC on the model's frames.
+    Compare(cli::compare::CompareArgs),
+    /// Fit the effects the model lacks and name the one that is missing.
+    Diagnose(cli::diagnose::DiagnoseArgs),
+    /// The discrepancy of a dataset over model versions.
+    History(cli::history::HistoryArgs),
 }
 
 fn main() {
@@ -49,6 +59,11 @@ fn main() {
         Command::Simulate(args) => cli::simulate::run(args),
         Command::Reproduce(args) => cli::reproduce::run(args),
         Command::Reduce(args) => cli::reduce::run(args),
+        Command::Serve(args) => cli::serve::run(args),
+        Command::Store(args) => cli::store::run(args),
+        Command::Compare(args) => cli::compare::run(args),
+        Command::Diagnose(args) => cli::diagnose::run(args),
+        Command::History(args) => cli::history::run(args),
     };
     if let Err(err) = outcome {
         // One line naming the problem: the whole cause chain, joined.

@@ -63,13 +63,13 @@ fn simulate_is_deterministic_for_a_seed_and_writes_a_dataset() {
 #[test]
 fn reproduce_json_has_a_row_per_run_and_scheme_and_recovers_the_motion() {
     let tmp = tempfile::tempdir().unwrap();
-    let out = tmp.path().join("r");
+    let data = tmp.path().join("data");
     let o = ffdic(&[
         "reproduce",
         "--experiment",
         fixture().to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
+        "--data",
+        data.to_str().unwrap(),
         "--json",
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -95,17 +95,26 @@ fn reproduce_json_has_a_row_per_run_and_scheme_and_recovers_the_motion() {
     let angle: f64 = 0.00615;
     assert!((u - 6.5 * angle.cos()).abs() < 0.005, "u {u}");
     assert!((v - 6.5 * angle.sin()).abs() < 0.005, "v {v}");
+    // The run went through the service: a run folder in the data folder like any other.
+    let out = std::path::PathBuf::from(doc["folder"].as_str().unwrap());
+    assert!(out.starts_with(&data), "{}", out.display());
+    let record: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("run.json")).unwrap()).unwrap();
+    assert_eq!(record["status"], "succeeded");
+    assert_eq!(record["id"], doc["run"]);
     for f in [
-        "study.csv",
-        "study.json",
-        "figure5_u.svg",
-        "figure5_exx.svg",
-        "figure6_v.svg",
-        "figure6_eyy.svg",
+        "results/study.csv",
+        "results/study.json",
+        "plots/figure5_u.svg",
+        "plots/figure5_exx.svg",
+        "plots/figure6_v.svg",
+        "plots/figure6_eyy.svg",
+        "frames/dataset.json",
+        "frames/a_ref.tif",
     ] {
         assert!(out.join(f).is_file(), "{f}");
     }
-    let svg = std::fs::read_to_string(out.join("figure5_u.svg")).unwrap();
+    let svg = std::fs::read_to_string(out.join("plots/figure5_u.svg")).unwrap();
     // One bar per pattern and scheme.
     assert_eq!(svg.matches(r#"class="bar""#).count(), 2 * 3);
 }

@@ -1,9 +1,15 @@
 //! The `ffdic` command line: one file per subcommand.
 
 pub mod analyze;
+pub mod compare;
+pub mod diagnose;
+pub mod history;
+mod logging;
 mod progress;
 pub mod reduce;
 pub mod reproduce;
+pub mod serve;
 pub mod simulate;
+pub mod store;
 
 pub use progress::ProgressBar;

@@ -1,28 +1,31 @@
-//! `ffdic reproduce`: the paper's study end to end — simulate the bench's frames, reduce them to
-//! 100 / 50 / 25 % fill factor, run DIC at the paper's settings, and show Figures 5 and 6.
+//! `ffdic reproduce`: the paper's study end to end through the same service a lab's clients use —
+//! the experiment runner and the bench actor on the mock bench (the model renders what the sensor
+//! sees at the mock stage's position), the frames reduced to 100 / 50 / 25 % fill factor, DIC at
+//! the paper's settings — then Figures 5 and 6. The run lands in the data folder like any other,
+//! so `ffdic serve` shows it.
 
-use super::simulate::{load_experiment, load_model, PAPER_BENCH_TOML};
+use super::simulate::{load_experiment, load_model};
 use super::ProgressBar;
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::Args;
-use ffdic::experiment::{analyze_dataset, simulate_dataset, Increase, StudyRow};
-use ffdic::reduce::Scheme;
-use ffdic::report::{csv, text_table, BarChart, Series};
-use serde_json::json;
-use std::path::{Path, PathBuf};
+use ffdic::experiment::{figures_text, rows_json, ExperimentRequest, SchemeSpec, StudyRow};
+use ffdic::service::{mock_bench, CameraConfig, DaemonConfig, Service, PAPER_BENCH_TOML};
+use ffdic::store::RunStatus;
+use std::path::PathBuf;
+use std::time::Duration;
 
 #[derive(Debug, Args)]
 pub struct ReproduceArgs {
     /// Experiment file (default: the embedded paper study, config/experiments/paper.toml).
     #[arg(long)]
     pub experiment: Option<PathBuf>,
-    /// Model of the bench that renders the frames (default: config/models/paper-bench.toml).
+    /// Model of the mock bench's truth (default: config/models/paper-bench.toml).
     #[arg(long)]
     pub bench_model: Option<PathBuf>,
-    /// Output folder: the dataset, study.csv, study.json and the SVG figures.
-    #[arg(long, default_value = "data/reproduce")]
-    pub out: PathBuf,
-    /// Seed of the speckle layout and the noise (default: the experiment's).
+    /// Data folder the run is stored in (as `ffdic serve` would).
+    #[arg(long, default_value = "data")]
+    pub data: PathBuf,
+    /// Seed of the speckle layouts (default: the experiment's).
     #[arg(long)]
     pub seed: Option<u64>,
     /// Print the table as one JSON document and nothing else.
@@ -32,250 +35,78 @@ pub struct ReproduceArgs {
 
 pub fn run(args: &ReproduceArgs) -> Result<()> {
     let spec = load_experiment(&args.experiment)?;
-    let bench = load_model(
+    let truth = load_model(
         &args.bench_model,
         PAPER_BENCH_TOML,
         "config/models/paper-bench.toml",
     )?;
-    let schemes: Vec<Scheme> = spec
-        .schemes
-        .iter()
-        .map(|name| Scheme::preset(name))
-        .collect::<Result<_, _>>()?;
-    let seed = args.seed.unwrap_or(spec.seed);
-    let dataset_dir = args.out.join("dataset");
-
-    let bar = ProgressBar::new(!args.json, "rendering frames");
-    let manifest = simulate_dataset(&spec, &bench, seed, &dataset_dir, &|d, t| bar.update(d, t))?;
+    let mut config = DaemonConfig::embedded();
+    config.data_dir = args.data.clone();
+    config.bench.scale_px_per_mm = spec.camera.scale_px_per_mm;
+    config.camera = CameraConfig::Mock {
+        width: spec.camera.width,
+        height: spec.camera.height,
+        exposure_level: spec.camera.exposure_level,
+        bench_model: truth.name.clone(),
+    };
+    // A fast mock stage: travel time is not what this study measures.
+    let hardware = mock_bench(spec.camera.clone(), truth, 200.0, Duration::from_millis(5));
+    let (service, _) = Service::start(config, hardware)?;
+    let request = ExperimentRequest {
+        name: spec.name.clone(),
+        patterns: spec.patterns.clone(),
+        moves: spec.moves.clone(),
+        step_series: spec.step_series.clone(),
+        repeats: spec.repeats,
+        settle_ms: 0,
+        schemes: spec
+            .schemes
+            .iter()
+            .cloned()
+            .map(SchemeSpec::Preset)
+            .collect(),
+        dic: spec.dic.clone(),
+        seed: args.seed.unwrap_or(spec.seed),
+        ..ExperimentRequest::default()
+    };
+    let (record, _) = service.submit_experiment(&request, None)?;
+    let bar = ProgressBar::new(!args.json, "capturing and correlating");
+    let record = loop {
+        let r = service.store.get(&record.id)?;
+        bar.update((r.progress * 1000.0) as usize, 1000);
+        if r.status.is_terminal() {
+            break r;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
     bar.finish();
-    let bar = ProgressBar::new(!args.json, "reducing and correlating");
-    let rows = analyze_dataset(&dataset_dir, &manifest, &schemes, &spec.dic, &|d, t| {
-        bar.update(d, t)
-    })?;
-    bar.finish();
-
-    write_outputs(&args.out, &rows)?;
+    service.stop(Duration::from_secs(5));
+    if record.status != RunStatus::Succeeded {
+        bail!(
+            "experiment {} {:?}: {}",
+            record.id,
+            record.status,
+            record.message
+        );
+    }
+    let run_dir = service.store.run_dir(&record.id);
+    let rows_path = run_dir.join("results/rows.json");
+    let rows: Vec<StudyRow> = serde_json::from_slice(
+        &std::fs::read(&rows_path)
+            .with_context(|| format!("cannot read {}", rows_path.display()))?,
+    )?;
     if args.json {
-        println!("{}", rows_json(&rows));
+        let mut doc = rows_json(&rows);
+        doc["run"] = serde_json::json!(record.id.to_string());
+        doc["folder"] = serde_json::json!(run_dir.display().to_string());
+        println!("{doc}");
     } else {
         print!("{}", figures_text(&rows));
         println!(
-            "\nwrote {} (dataset, study.csv, study.json, figure5_*.svg, figure6_*.svg)",
-            args.out.display()
+            "\nrun {} in {} (frames/ as ffdic-dataset/1, results/study.csv, study.json, plots/figure5_*.svg, figure6_*.svg)",
+            record.id,
+            run_dir.display()
         );
     }
     Ok(())
-}
-
-/// `{"rows":[{"pattern","scheme","u":{"mean","std"},...}]}` as the issue specifies.
-pub fn rows_json(rows: &[StudyRow]) -> serde_json::Value {
-    let ms = |s: &ffdic::dic::Stats| json!({"mean": s.mean, "std": s.std});
-    json!({
-        "rows": rows.iter().map(|r| json!({
-            "run": r.run,
-            "pattern": r.pattern,
-            "scheme": r.scheme,
-            "fill_factor": [r.fill_factor.0, r.fill_factor.1],
-            "valid": r.summary.valid,
-            "points": r.summary.points,
-            "u": ms(&r.summary.u), "v": ms(&r.summary.v),
-            "exx": ms(&r.summary.exx), "eyy": ms(&r.summary.eyy), "exy": ms(&r.summary.exy),
-            "increase_pct": r.increase_pct,
-        })).collect::<Vec<_>>()
-    })
-}
-
-/// One reported statistic: its label with units, how to read it, and its % increase.
-struct Metric {
-    label: &'static str,
-    value: fn(&StudyRow) -> f64,
-    scale: f64,
-    increase: fn(&Increase) -> f64,
-}
-
-const STD_U: Metric = Metric {
-    label: "std(u) [px]",
-    value: |r| r.summary.u.std,
-    scale: 1.0,
-    increase: |i| i.u,
-};
-const STD_V: Metric = Metric {
-    label: "std(v) [px]",
-    value: |r| r.summary.v.std,
-    scale: 1.0,
-    increase: |i| i.v,
-};
-const STD_EXX: Metric = Metric {
-    label: "std(exx) [µε]",
-    value: |r| r.summary.exx.std,
-    scale: 1e6,
-    increase: |i| i.exx,
-};
-const STD_EYY: Metric = Metric {
-    label: "std(eyy) [µε]",
-    value: |r| r.summary.eyy.std,
-    scale: 1e6,
-    increase: |i| i.eyy,
-};
-const STD_EXY: Metric = Metric {
-    label: "std(exy) [µε]",
-    value: |r| r.summary.exy.std,
-    scale: 1e6,
-    increase: |i| i.exy,
-};
-
-/// Figures 5 and 6 (and the shear) as terminal tables.
-pub fn figures_text(rows: &[StudyRow]) -> String {
-    let table = |title: &str, metrics: &[&Metric]| {
-        let mut headers = vec!["pattern", "scheme"];
-        for m in metrics {
-            headers.push(m.label);
-            headers.push("Δ vs 100 %");
-        }
-        let body: Vec<Vec<String>> = rows
-            .iter()
-            .map(|r| {
-                let mut row = vec![r.pattern.clone(), r.scheme.clone()];
-                for m in metrics {
-                    let v = (m.value)(r) * m.scale;
-                    row.push(if m.scale == 1.0 {
-                        format!("{v:.5}")
-                    } else {
-                        format!("{v:.1}")
-                    });
-                    row.push(
-                        r.increase_pct
-                            .map_or("—".into(), |i| format!("{:+.1} %", (m.increase)(&i))),
-                    );
-                }
-                row
-            })
-            .collect();
-        format!("\n{title}\n{}", text_table(&headers, &body))
-    };
-    let mean_u = rows.iter().map(|r| r.summary.u.mean).sum::<f64>() / rows.len().max(1) as f64;
-    let mean_v = rows.iter().map(|r| r.summary.v.mean).sum::<f64>() / rows.len().max(1) as f64;
-    table("Figure 5 — error of the x translation (std over the ROI)", &[&STD_U, &STD_EXX])
-        + &table("Figure 6 — error of the small y component (std over the ROI)", &[&STD_V, &STD_EYY])
-        + &table("Shear", &[&STD_EXY])
-        + &format!("\nmean motion over all rows: u = {mean_u:.4} px, v = {mean_v:.4} px (reduced images)\n")
-}
-
-fn write_outputs(dir: &Path, rows: &[StudyRow]) -> Result<()> {
-    let headers = [
-        "run", "pattern", "scheme", "fill_x", "fill_y", "valid", "points", "u_mean", "u_std",
-        "v_mean", "v_std", "exx_mean", "exx_std", "eyy_mean", "eyy_std", "exy_mean", "exy_std",
-    ];
-    let body: Vec<Vec<String>> = rows
-        .iter()
-        .map(|r| {
-            let s = &r.summary;
-            vec![
-                r.run.clone(),
-                r.pattern.clone(),
-                r.scheme.clone(),
-                r.fill_factor.0.to_string(),
-                r.fill_factor.1.to_string(),
-                s.valid.to_string(),
-                s.points.to_string(),
-                s.u.mean.to_string(),
-                s.u.std.to_string(),
-                s.v.mean.to_string(),
-                s.v.std.to_string(),
-                s.exx.mean.to_string(),
-                s.exx.std.to_string(),
-                s.eyy.mean.to_string(),
-                s.eyy.std.to_string(),
-                s.exy.mean.to_string(),
-                s.exy.std.to_string(),
-            ]
-        })
-        .collect();
-    write(dir, "study.csv", &csv(&headers, &body))?;
-    write(
-        dir,
-        "study.json",
-        &serde_json::to_string_pretty(&rows_json(rows))?,
-    )?;
-    let charts = [
-        (
-            "figure5_u.svg",
-            "Figure 5a — displacement error, x move",
-            &STD_U,
-        ),
-        (
-            "figure5_exx.svg",
-            "Figure 5b — strain error, x move",
-            &STD_EXX,
-        ),
-        (
-            "figure6_v.svg",
-            "Figure 6a — displacement error, y component",
-            &STD_V,
-        ),
-        (
-            "figure6_eyy.svg",
-            "Figure 6b — strain error, y component",
-            &STD_EYY,
-        ),
-    ];
-    let mut groups: Vec<String> = Vec::new();
-    let mut schemes: Vec<String> = Vec::new();
-    for r in rows {
-        if !groups.contains(&r.pattern) {
-            groups.push(r.pattern.clone());
-        }
-        if !schemes.contains(&r.scheme) {
-            schemes.push(r.scheme.clone());
-        }
-    }
-    for (file, title, metric) in charts {
-        let series = schemes
-            .iter()
-            .map(|scheme| {
-                let pick =
-                    |g: &String| rows.iter().find(|r| &r.pattern == g && &r.scheme == scheme);
-                Series {
-                    name: scheme_label(scheme),
-                    values: groups
-                        .iter()
-                        .map(|g| pick(g).map_or(f64::NAN, |r| (metric.value)(r) * metric.scale))
-                        .collect(),
-                    labels: groups
-                        .iter()
-                        .map(|g| {
-                            pick(g).and_then(|r| {
-                                r.increase_pct
-                                    .map(|i| format!("{:+.1} %", (metric.increase)(&i)))
-                            })
-                        })
-                        .collect(),
-                }
-            })
-            .collect();
-        let chart = BarChart {
-            title: title.to_string(),
-            y_label: metric.label.to_string(),
-            groups: groups.iter().map(|g| format!("pattern {g}")).collect(),
-            series,
-        };
-        write(dir, file, &chart.to_svg(720, 420))?;
-    }
-    Ok(())
-}
-
-fn scheme_label(name: &str) -> String {
-    match name {
-        "ff100" => "100 % (2x2 binned)".into(),
-        "ff50" => "50 % (rows binned, columns subsampled)".into(),
-        "ff25" => "25 % (subsampled)".into(),
-        other => other.into(),
-    }
-}
-
-fn write(dir: &Path, name: &str, text: &str) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    let path = dir.join(name);
-    ffdic::store::write_atomically(&path, text.as_bytes())
-        .with_context(|| format!("cannot write {}", path.display()))
 }

@@ -24,7 +24,7 @@ pub struct SimulateArgs {
 }
 
 /// The paper's bench, embedded so the default needs no file.
-pub const PAPER_BENCH_TOML: &str = include_str!("../../config/models/paper-bench.toml");
+pub use ffdic::service::PAPER_BENCH_TOML;
 
 pub fn load_experiment(path: &Option<PathBuf>) -> Result<ExperimentSpec> {
     Ok(match path {

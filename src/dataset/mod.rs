@@ -5,4 +5,6 @@
 
 mod manifest;
 
-pub use manifest::{CameraInfo, DatasetError, Manifest, PatternInfo, Run, StageMove, FORMAT};
+pub use manifest::{
+    is_plain_file_name, CameraInfo, DatasetError, Manifest, PatternInfo, Run, StageMove, FORMAT,
+};

@@ -55,7 +55,7 @@ impl DicSettings {
     /// Checks everything that does not depend on the images.
     pub fn validate(&self) -> Result<(), DicError> {
         let bad = |field: &'static str, reason: String| Err(DicError::Setting { field, reason });
-        if self.subset_px < 5 || self.subset_px % 2 == 0 {
+        if self.subset_px < 5 || self.subset_px.is_multiple_of(2) {
             return bad(
                 "subset",
                 format!(
@@ -67,7 +67,7 @@ impl DicSettings {
         if self.step_px == 0 {
             return bad("step", "step must be at least 1 px".into());
         }
-        if self.strain_window < 3 || self.strain_window % 2 == 0 {
+        if self.strain_window < 3 || self.strain_window.is_multiple_of(2) {
             return bad(
                 "strain_window",
                 format!(

@@ -1,12 +1,24 @@
-//! Experiments: a spec (patterns, moves, schemes, DIC settings), simulated or captured frames,
-//! the exported dataset, and the fill-factor study run on it.
+//! Experiments: a spec (patterns, moves, schemes, DIC settings), the bench actor that owns the
+//! hardware, the runner that captures and analyses, simulated frames, the exported dataset, and
+//! the fill-factor study run on it.
 
+mod bench;
+mod figures;
 mod model_scene;
+mod request;
+mod runner;
 mod simulate;
 mod spec;
 mod study;
 
+pub use bench::{
+    BenchError, BenchHandle, BenchHardware, BenchLease, BenchStatus, CameraStatus, Owner,
+    StageStatus, TargetMount,
+};
+pub use figures::{figure_svgs, figures_text, rows_json, study_csv};
 pub use model_scene::ModelScene;
+pub use request::{ExperimentPlan, ExperimentRequest, FieldError, SchemeSpec};
+pub use runner::{run_experiment, BenchTimeouts, ExperimentOutcome, RunSink, RunnerError};
 pub use simulate::{
     derive_seed, pattern_dots, render_stage_frame, simulate_dataset, SimulateError,
 };

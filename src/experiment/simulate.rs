@@ -127,9 +127,15 @@ pub fn simulate_dataset(
                     label: label.clone(),
                     dot_diameter_mm: Some(pattern.dot_diameter_mm),
                     dot_spacing_mm: Some(pattern.dot_spacing_mm),
-                    extra: [("contrast".to_string(), serde_json::json!(pattern.contrast))]
-                        .into_iter()
-                        .collect(),
+                    extra: [
+                        ("contrast".to_string(), serde_json::json!(pattern.contrast)),
+                        (
+                            "edge_softness_mm".to_string(),
+                            serde_json::json!(pattern.edge_softness_mm),
+                        ),
+                    ]
+                    .into_iter()
+                    .collect(),
                 }),
                 reference: reference.clone(),
                 deformed,

@@ -7,7 +7,7 @@ use crate::dataset::{DatasetError, Manifest};
 use crate::dic::{DicError, DicSettings, PreparedReference, Stats, Summary};
 use crate::image::{read_tiff, Image, ImageError};
 use crate::reduce::{reduce, Scheme};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 #[derive(Debug, thiserror::Error)]
@@ -22,6 +22,8 @@ pub enum StudyError {
         scheme: String,
         source: DicError,
     },
+    #[error("cancelled")]
+    Cancelled,
     #[error("run {run}: reference is {ref_w}x{ref_h}, deformed {def_w}x{def_h}")]
     SizeMismatch {
         run: String,
@@ -33,7 +35,7 @@ pub enum StudyError {
 }
 
 /// Percent increase of each standard deviation over the same run's first (100 %) scheme.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Increase {
     pub u: f64,
     pub v: f64,
@@ -42,7 +44,7 @@ pub struct Increase {
     pub exy: f64,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StudyRow {
     pub run: String,
     pub pattern: String,
@@ -54,13 +56,14 @@ pub struct StudyRow {
     pub increase_pct: Option<Increase>,
 }
 
-/// Runs the study over every run of a dataset in `dir`. `progress(done, total)` per pair.
+/// Runs the study over every run of a dataset in `dir`. `progress(done, total)` after each pair;
+/// it returns whether to go on (false stops with [`StudyError::Cancelled`]).
 pub fn analyze_dataset(
     dir: &Path,
     manifest: &Manifest,
     schemes: &[Scheme],
     dic: &DicSettings,
-    progress: &(dyn Fn(usize, usize) + Sync),
+    progress: &(dyn Fn(usize, usize) -> bool + Sync),
 ) -> Result<Vec<StudyRow>, StudyError> {
     let total = manifest.runs.len() * schemes.len();
     let mut rows = Vec::with_capacity(total);
@@ -110,7 +113,9 @@ pub fn analyze_dataset(
                 summary,
                 increase_pct,
             });
-            progress(rows.len(), total);
+            if !progress(rows.len(), total) {
+                return Err(StudyError::Cancelled);
+            }
         }
     }
     Ok(rows)

@@ -11,4 +11,4 @@ mod tiff_io;
 pub use error::ImageError;
 pub use gray::Image;
 pub use roi::Roi;
-pub use tiff_io::{read_tiff, write_tiff_u16, write_tiff_u8, TiffInfo};
+pub use tiff_io::{read_tiff, tiff_u16_bytes, write_tiff_u16, write_tiff_u8, TiffInfo};

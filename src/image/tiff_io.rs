@@ -82,6 +82,18 @@ pub fn write_tiff_u16(path: &Path, image: &Image) -> Result<(), ImageError> {
     })
 }
 
+/// A 16-bit grayscale TIFF in memory (camera frames for HTTP responses and run folders).
+pub fn tiff_u16_bytes(width: usize, height: usize, data: &[u16]) -> Result<Vec<u8>, ImageError> {
+    let mut buffer = Cursor::new(Vec::new());
+    TiffEncoder::new(&mut buffer)
+        .and_then(|mut e| e.write_image::<colortype::Gray16>(width as u32, height as u32, data))
+        .map_err(|e| ImageError::Encode {
+            path: "<memory>".into(),
+            reason: e.to_string(),
+        })?;
+    Ok(buffer.into_inner())
+}
+
 /// Writes 8-bit grey values, rounding and clamping to 0..=255.
 pub fn write_tiff_u8(path: &Path, image: &Image) -> Result<(), ImageError> {
     let data: Vec<u8> = image

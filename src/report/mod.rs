@@ -3,8 +3,16 @@
 //! so nothing depends on system fonts and every asset ships in the binary.
 
 mod bar_chart;
+mod heatmap;
+mod history_chart;
+mod png;
 mod svg;
 mod table;
+mod xy_plot;
 
 pub use bar_chart::{BarChart, Series};
+pub use heatmap::Heatmap;
+pub use history_chart::{history_svg, HistoryPoint};
+pub use png::png_quicklook;
 pub use table::{csv, text_table};
+pub use xy_plot::{Mark, XyPlot, XySeries};

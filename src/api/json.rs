@@ -1,0 +1,121 @@
+//! The JSON body extractor: malformed JSON is 400, a wrong type or an unknown field is 422 naming
+//! the field (serde_path_to_error gives its path), an oversized body is 413 — each as a problem.
+
+use super::problem::ApiError;
+use axum::body::Bytes;
+use axum::extract::{FromRequest, Request};
+use axum::http::{header, StatusCode};
+use serde::de::DeserializeOwned;
+
+pub struct ApiJson<T>(pub T);
+
+impl<S, T> FromRequest<S> for ApiJson<T>
+where
+    S: Send + Sync,
+    T: DeserializeOwned,
+{
+    type Rejection = ApiError;
+
+    async fn from_request(req: Request, state: &S) -> Result<Self, Self::Rejection> {
+        let is_json = req
+            .headers()
+            .get(header::CONTENT_TYPE)
+            .and_then(|v| v.to_str().ok())
+            .map(|v| {
+                let v = v.to_ascii_lowercase();
+                v.starts_with("application/json") || v.contains("+json")
+            });
+        let bytes = Bytes::from_request(req, state).await.map_err(|e| {
+            if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
+                ApiError::new(
+                    StatusCode::PAYLOAD_TOO_LARGE,
+                    "too-large",
+                    "the request body is larger than this endpoint accepts",
+                )
+            } else {
+                ApiError::bad_request(format!("cannot read the body: {e}"))
+            }
+        })?;
+        // An empty body with no content type means "all defaults".
+        let bytes = if bytes.is_empty() {
+            Bytes::from_static(b"{}")
+        } else {
+            if is_json == Some(false) {
+                return Err(ApiError::new(
+                    StatusCode::UNSUPPORTED_MEDIA_TYPE,
+                    "unsupported-media-type",
+                    "send JSON (Content-Type: application/json)",
+                ));
+            }
+            bytes
+        };
+        parse(&bytes).map(ApiJson)
+    }
+}
+
+/// Parses JSON, naming the field at fault.
+pub fn parse<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
+    let de = &mut serde_json::Deserializer::from_slice(bytes);
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        let path = e.path().to_string();
+        let inner = e.into_inner();
+        match inner.classify() {
+            serde_json::error::Category::Data => {
+                let field = if path == "." {
+                    unknown_field(&inner.to_string()).unwrap_or_else(|| "body".into())
+                } else {
+                    path
+                };
+                ApiError::invalid(field, strip_position(&inner.to_string()))
+            }
+            _ => ApiError::bad_request(format!("malformed JSON: {inner}")),
+        }
+    })
+}
+
+/// serde names an unknown field in its message (``unknown field `foo` ``); the path stops at
+/// its parent.
+fn unknown_field(message: &str) -> Option<String> {
+    let rest = message.strip_prefix("unknown field `")?;
+    Some(rest[..rest.find('`')?].to_string())
+}
+
+fn strip_position(message: &str) -> String {
+    match message.rfind(" at line ") {
+        Some(i) => message[..i].to_string(),
+        None => message.to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Debug, serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct Body {
+        a: u32,
+        inner: Option<Inner>,
+    }
+
+    #[derive(Debug, serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct Inner {
+        b: f64,
+    }
+
+    #[test]
+    fn problems_name_the_field() {
+        let e = parse::<Body>(br#"{"a":"x"}"#).unwrap_err();
+        assert_eq!((e.status.as_u16(), e.field.as_deref()), (422, Some("a")));
+        let e = parse::<Body>(br#"{"a":1,"inner":{"b":true}}"#).unwrap_err();
+        assert_eq!(e.field.as_deref(), Some("inner.b"));
+        let e = parse::<Body>(br#"{"a":1,"zz":2}"#).unwrap_err();
+        assert_eq!(e.status.as_u16(), 422);
+        assert!(e.detail.contains("zz"), "{}", e.detail);
+        let e = parse::<Body>(br#"{"a":1"#).unwrap_err();
+        assert_eq!(e.status.as_u16(), 400);
+    }
+}

@@ -1,0 +1,125 @@
+//! The camera: its state, its settings (`PATCH` applies and answers with what the camera really
+//! set), and a snapshot as a 16-bit TIFF or, for a quick look, an 8-bit PNG.
+
+use super::blocking;
+use crate::api::json::ApiJson;
+use crate::api::problem::{ApiError, ApiResult, Problem};
+use crate::experiment::Owner;
+use crate::service::Service;
+use axum::extract::{Query, State};
+use axum::http::header;
+use axum::response::{IntoResponse, Response};
+use axum::Json;
+use ffdic_hw::{CameraSettings, PixelFormat, SensorRoi};
+use serde::Deserialize;
+use serde_json::Value;
+use std::time::Duration;
+
+#[utoipa::path(get, path = "/camera", tag = "bench",
+    responses((status = 200, description = "Camera info, settings and counters", body = Object),
+              (status = 503, body = Problem), (status = 504, body = Problem)))]
+pub async fn get_camera(State(svc): State<Service>) -> ApiResult<Json<Value>> {
+    let bench = svc.bench.clone();
+    let status = blocking(move || bench.status()).await??;
+    Ok(Json(
+        serde_json::to_value(status.camera).expect("camera status serialises"),
+    ))
+}
+
+/// The settings to change; absent fields keep their value.
+#[derive(Debug, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CameraPatch {
+    pub exposure_us: Option<f64>,
+    pub gain_db: Option<f64>,
+    #[schema(value_type = Option<String>)]
+    pub pixel_format: Option<PixelFormat>,
+    /// A sensor region `{x, y, width, height}`; `null` is the whole sensor.
+    #[serde(default, deserialize_with = "present")]
+    #[schema(value_type = Option<Object>)]
+    pub roi: Option<Option<SensorRoi>>,
+    /// Hardware binning `[horizontal, vertical]`.
+    pub binning: Option<(u32, u32)>,
+}
+
+/// Tells `"roi": null` (clear it) from no `roi` at all (keep it).
+fn present<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<Option<SensorRoi>>, D::Error> {
+    Ok(Some(Option::deserialize(d)?))
+}
+
+#[utoipa::path(patch, path = "/camera", tag = "bench", request_body = CameraPatch,
+    responses((status = 200, description = "What the camera really set", body = Object),
+              (status = 409, description = "An experiment holds the bench", body = Problem),
+              (status = 422, body = Problem), (status = 503, body = Problem)))]
+pub async fn patch_camera(
+    State(svc): State<Service>,
+    ApiJson(patch): ApiJson<CameraPatch>,
+) -> ApiResult<Json<CameraSettings>> {
+    for (field, v) in [
+        ("exposure_us", patch.exposure_us),
+        ("gain_db", patch.gain_db),
+    ] {
+        if v.is_some_and(|v| !v.is_finite()) {
+            return Err(ApiError::invalid(field, "must be a finite number"));
+        }
+    }
+    let bench = svc.bench.clone();
+    let applied = blocking(move || {
+        let current = bench.status()?.camera.settings;
+        let next = CameraSettings {
+            exposure_us: patch.exposure_us.unwrap_or(current.exposure_us),
+            gain_db: patch.gain_db.unwrap_or(current.gain_db),
+            pixel_format: patch.pixel_format.unwrap_or(current.pixel_format),
+            roi: patch.roi.unwrap_or(current.roi),
+            binning: patch.binning.unwrap_or(current.binning),
+            ..current
+        };
+        bench.apply_camera(Owner::Direct, next)
+    })
+    .await??;
+    Ok(Json(applied))
+}
+
+#[derive(Debug, Deserialize, utoipa::IntoParams)]
+pub struct SnapshotQuery {
+    /// `tiff` (16-bit, the default) or `png` (8-bit, stretched for a quick look).
+    pub format: Option<String>,
+}
+
+#[utoipa::path(post, path = "/camera/snapshot", tag = "bench", params(SnapshotQuery),
+    responses((status = 200, description = "One frame", content_type = "image/tiff"),
+              (status = 409, body = Problem), (status = 503, body = Problem), (status = 504, body = Problem)))]
+pub async fn snapshot(
+    State(svc): State<Service>,
+    Query(q): Query<SnapshotQuery>,
+) -> ApiResult<Response> {
+    let png = match q.format.as_deref() {
+        None | Some("tiff") => false,
+        Some("png") => true,
+        Some(other) => {
+            return Err(ApiError::invalid(
+                "format",
+                format!("'{other}': tiff or png"),
+            ))
+        }
+    };
+    let bench = svc.bench.clone();
+    let timeout = Duration::from_millis(svc.config.bench.frame_timeout_ms);
+    let frame = blocking(move || bench.capture(Owner::Direct, 1, timeout))
+        .await??
+        .pop()
+        .ok_or_else(|| ApiError::unavailable("the camera delivered no frame"))?;
+    let (bytes, mime) = blocking(move || {
+        if png {
+            crate::report::png_quicklook(frame.width, frame.height, &frame.data)
+                .map(|b| (b, "image/png"))
+        } else {
+            crate::image::tiff_u16_bytes(frame.width, frame.height, &frame.data)
+                .map(|b| (b, "image/tiff"))
+                .map_err(|e| e.to_string())
+        }
+    })
+    .await?
+    .map_err(|e| ApiError::internal("encoding the snapshot", e))?;
+    Ok(([(header::CONTENT_TYPE, mime)], bytes).into_response())
+}

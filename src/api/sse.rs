@@ -1,0 +1,107 @@
+//! Server-sent events of one run: every stored event after `Last-Event-ID` first, then the live
+//! ones as they happen, each with its `id:` so a client that reconnects resumes where it stopped;
+//! the stream ends after the run's terminal event, or when the server shuts down.
+
+use crate::service::Service;
+use crate::store::{Event as RunEvent, RunId};
+use axum::http::HeaderMap;
+use axum::response::sse::{Event, KeepAlive, Sse};
+use axum::response::IntoResponse;
+use std::convert::Infallible;
+use std::time::Duration;
+use tokio::sync::{broadcast, mpsc};
+use tokio_stream::wrappers::ReceiverStream;
+
+/// An SSE response (the stream with its keep-alives).
+pub type SseResponse = axum::response::Response;
+
+const TERMINAL: [&str; 3] = ["succeeded", "failed", "cancelled"];
+
+pub fn last_event_id(headers: &HeaderMap) -> Option<u64> {
+    headers
+        .get("last-event-id")
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.trim().parse().ok())
+}
+
+fn to_sse(e: &RunEvent) -> Event {
+    Event::default()
+        .id(e.id.to_string())
+        .event(e.kind.clone())
+        .data(serde_json::to_string(e).expect("an event serialises"))
+}
+
+pub fn stream(svc: Service, id: RunId, after: Option<u64>) -> SseResponse {
+    let (tx, rx) = mpsc::channel(64);
+    tokio::spawn(async move {
+        // Subscribe before reading the log, so nothing falls between the two.
+        let mut live = svc.jobs.subscribe(&id);
+        let mut last = after.unwrap_or(0);
+        let mut ended = false;
+        if !replay(&svc, &id, &mut last, &mut ended, &tx).await {
+            return;
+        }
+        let shutdown = svc.shutdown.clone();
+        while !ended {
+            let Some(rx) = live.as_mut() else {
+                // The run ended before we subscribed: the log has everything.
+                let _ = replay(&svc, &id, &mut last, &mut ended, &tx).await;
+                return;
+            };
+            tokio::select! {
+                _ = shutdown.cancelled() => return,
+                _ = tx.closed() => return,
+                got = rx.recv() => match got {
+                    Ok(e) if e.id > last => {
+                        last = e.id;
+                        ended = TERMINAL.contains(&e.kind.as_str());
+                        if tx.send(Ok(to_sse(&e))).await.is_err() {
+                            return;
+                        }
+                    }
+                    Ok(_) => {}
+                    // Fell behind, or the run ended: the log is the truth.
+                    Err(broadcast::error::RecvError::Lagged(_)) => {
+                        if !replay(&svc, &id, &mut last, &mut ended, &tx).await {
+                            return;
+                        }
+                    }
+                    Err(broadcast::error::RecvError::Closed) => live = None,
+                }
+            }
+        }
+    });
+    Sse::new(ReceiverStream::new(rx))
+        .keep_alive(
+            KeepAlive::new()
+                .interval(Duration::from_secs(10))
+                .text("keep-alive"),
+        )
+        .into_response()
+}
+
+/// Sends the stored events after `last`; false when the client has gone.
+async fn replay(
+    svc: &Service,
+    id: &RunId,
+    last: &mut u64,
+    ended: &mut bool,
+    tx: &mpsc::Sender<Result<Event, Infallible>>,
+) -> bool {
+    let store = svc.store.clone();
+    let key = id.clone();
+    let after = *last;
+    let events = tokio::task::spawn_blocking(move || store.events(&key, Some(after)))
+        .await
+        .ok()
+        .and_then(Result::ok)
+        .unwrap_or_default();
+    for e in events {
+        *last = e.id;
+        *ended = TERMINAL.contains(&e.kind.as_str());
+        if tx.send(Ok(to_sse(&e))).await.is_err() {
+            return false;
+        }
+    }
+    true
+}

@@ -1,0 +1,87 @@
+//! `ffdic serve`: the daemon. With no config it runs the embedded default — the mock bench, data
+//! under ./data, 127.0.0.1:8080. SIGINT/SIGTERM stop it within 10 s: no new work, the running
+//! experiment cancelled cooperatively and written as cancelled, the stage stopped.
+
+use anyhow::{Context, Result};
+use clap::Args;
+use ffdic::service::{open_bench, DaemonConfig, Service};
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::Duration;
+use tokio_util::sync::CancellationToken;
+
+#[derive(Debug, Args)]
+pub struct ServeArgs {
+    /// Daemon config (default: the embedded config/ffdic.toml).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Address to listen on, overriding the config (port 0 picks a free port).
+    #[arg(long)]
+    pub listen: Option<SocketAddr>,
+    /// Data folder, overriding the config.
+    #[arg(long)]
+    pub data: Option<PathBuf>,
+}
+
+/// Time the running job gets to notice its cancellation and write itself as cancelled.
+const SHUTDOWN_GRACE: Duration = Duration::from_secs(8);
+
+pub fn run(args: &ServeArgs) -> Result<()> {
+    super::logging::init();
+    let mut config = match &args.config {
+        Some(p) => DaemonConfig::load(p)?,
+        None => DaemonConfig::embedded(),
+    };
+    if let Some(l) = args.listen {
+        config.listen = l;
+    }
+    if let Some(d) = &args.data {
+        config.data_dir = d.clone();
+    }
+    let addr = config.listen;
+    // Refuse an open address without a token before touching hardware or data.
+    ffdic::api::check_bind(addr, config.token().as_deref())?;
+    let hardware = open_bench(&config)?;
+    let (service, recovery) = Service::start(config, hardware)?;
+    for id in &recovery.failed {
+        tracing::warn!(run = %id, "left unfinished by an earlier server: marked failed");
+    }
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")?;
+    runtime.block_on(async {
+        let listener = tokio::net::TcpListener::bind(addr)
+            .await
+            .with_context(|| format!("cannot listen on {addr}"))?;
+        let bound = listener.local_addr()?;
+        // The first line on stdout is the address: scripts and tests that asked for port 0 read it.
+        println!("listening on http://{bound}");
+        let shutdown = service.shutdown.clone();
+        tokio::spawn(wait_for_signal(shutdown.clone()));
+        let app = ffdic::api::app(service.clone(), axum::Router::new());
+        ffdic::api::run(listener, app, shutdown).await?;
+        anyhow::Ok(())
+    })?;
+    tracing::info!("stopping: cancelling running work");
+    service.stop(SHUTDOWN_GRACE);
+    tracing::info!("stopped");
+    Ok(())
+}
+
+async fn wait_for_signal(shutdown: CancellationToken) {
+    let ctrl_c = tokio::signal::ctrl_c();
+    #[cfg(unix)]
+    {
+        let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+            .expect("install the SIGTERM handler");
+        tokio::select! {
+            _ = ctrl_c => {},
+            _ = term.recv() => {},
+        }
+    }
+    #[cfg(not(unix))]
+    let _ = ctrl_c.await;
+    tracing::info!("signal received: shutting down");
+    shutdown.cancel();
+}

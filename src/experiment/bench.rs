@@ -1,0 +1,422 @@
+//! The bench actor: one thread alone owns the camera and the stage; everybody else — the
+//! experiment runner, the HTTP handlers — sends it commands over a channel and waits for the
+//! reply (the pattern of strand-braid's `cam_arg_task`). Driver calls block, so the actor lives on
+//! a thread of its own, never on the async runtime.
+//!
+//! While an experiment holds the bench (a [`BenchLease`]), direct control is refused with
+//! [`BenchError::Busy`]: a person nudging the stage mid-experiment would corrupt the measurement.
+
+use crate::model::SpecklePattern;
+use ffdic_hw::{
+    Camera, CameraCounters, CameraInfo, CameraSettings, Frame, HwError, Stage, StageInfo,
+    StagePosition,
+};
+use serde::Serialize;
+use std::sync::mpsc;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+/// Puts a speckle target in front of the camera. The mock bench swaps the scene it renders; on a
+/// real bench a person mounts the one target by hand, and there is no mount.
+pub trait TargetMount: Send {
+    fn mount(&mut self, label: &str, pattern: &SpecklePattern, seed: u64) -> Result<(), HwError>;
+}
+
+/// What the bench actor owns.
+pub struct BenchHardware {
+    pub camera: Box<dyn Camera>,
+    pub stage: Option<Box<dyn Stage>>,
+    pub targets: Option<Box<dyn TargetMount>>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    #[error(transparent)]
+    Hw(#[from] HwError),
+    #[error("the bench is held by run {holder}")]
+    Busy { holder: String },
+    #[error("no stage is configured")]
+    NoStage,
+    #[error("this bench has no target changer: mount the target by hand and name one pattern")]
+    NoTargetMount,
+    #[error("the bench did not answer within {after_ms} ms")]
+    Unresponsive { after_ms: u64 },
+    #[error("the bench actor has stopped")]
+    Stopped,
+}
+
+/// The state of the bench as one snapshot.
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchStatus {
+    pub camera: CameraStatus,
+    pub stage: Option<StageStatus>,
+    /// The run holding the bench, if any.
+    pub holder: Option<String>,
+    /// The target in front of the camera (mock bench) or `None` when unknown.
+    pub target: Option<String>,
+    pub has_target_mount: bool,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct CameraStatus {
+    pub info: CameraInfo,
+    pub settings: CameraSettings,
+    pub counters: CameraCounters,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct StageStatus {
+    pub info: StageInfo,
+    pub position: Option<StagePosition>,
+    pub homed: bool,
+    /// Why the position could not be read, if it could not.
+    pub error: Option<String>,
+}
+
+/// Who sends a command: a person or client directly, or the run that holds the bench.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Owner {
+    Direct,
+    Run(String),
+}
+
+enum Command {
+    Status,
+    ApplyCamera(CameraSettings),
+    Capture {
+        count: usize,
+        timeout: Duration,
+    },
+    Home {
+        timeout: Duration,
+    },
+    MoveTo {
+        target: StagePosition,
+        settle_timeout: Duration,
+    },
+    MoveBy {
+        dx_mm: f64,
+        dy_mm: f64,
+        settle_timeout: Duration,
+    },
+    StopStage,
+    Mount {
+        label: String,
+        pattern: Box<SpecklePattern>,
+        seed: u64,
+    },
+}
+
+enum Reply {
+    Status(Box<BenchStatus>),
+    Settings(CameraSettings),
+    Frames(Vec<Frame>),
+    Position(StagePosition),
+    Done,
+}
+
+struct Request {
+    owner: Owner,
+    command: Command,
+    reply: mpsc::SyncSender<Result<Reply, BenchError>>,
+}
+
+/// A cloneable handle to the bench actor. Every call blocks until the actor answers; async
+/// callers wrap it in `spawn_blocking`.
+#[derive(Clone)]
+pub struct BenchHandle {
+    tx: mpsc::Sender<Request>,
+    holder: Arc<Mutex<Option<String>>>,
+    /// How long a caller waits for the actor before giving up (it may be inside a long capture).
+    reply_timeout: Duration,
+}
+
+/// The bench held by one run; released when dropped.
+pub struct BenchLease {
+    handle: BenchHandle,
+    pub run_id: String,
+}
+
+impl Drop for BenchLease {
+    fn drop(&mut self) {
+        let mut h = self.handle.holder.lock().expect("holder lock");
+        if h.as_deref() == Some(self.run_id.as_str()) {
+            *h = None;
+        }
+    }
+}
+
+impl BenchHandle {
+    /// Starts the actor thread, which owns `hardware` until every handle is dropped.
+    pub fn spawn(hardware: BenchHardware, reply_timeout: Duration) -> Self {
+        let (tx, rx) = mpsc::channel::<Request>();
+        let holder = Arc::new(Mutex::new(None));
+        let actor_holder = holder.clone();
+        std::thread::Builder::new()
+            .name("bench-actor".into())
+            .spawn(move || Actor::new(hardware, actor_holder).serve(rx))
+            .expect("spawn the bench actor thread");
+        Self {
+            tx,
+            holder,
+            reply_timeout,
+        }
+    }
+
+    /// Takes the bench for `run_id`; direct control gets `Busy` until the lease is dropped.
+    pub fn hold(&self, run_id: &str) -> Result<BenchLease, BenchError> {
+        let mut h = self.holder.lock().expect("holder lock");
+        if let Some(other) = h.as_ref() {
+            return Err(BenchError::Busy {
+                holder: other.clone(),
+            });
+        }
+        *h = Some(run_id.to_string());
+        Ok(BenchLease {
+            handle: self.clone(),
+            run_id: run_id.to_string(),
+        })
+    }
+
+    pub fn holder(&self) -> Option<String> {
+        self.holder.lock().expect("holder lock").clone()
+    }
+
+    fn call(&self, owner: Owner, command: Command, wait: Duration) -> Result<Reply, BenchError> {
+        let (reply, rx) = mpsc::sync_channel(1);
+        self.tx
+            .send(Request {
+                owner,
+                command,
+                reply,
+            })
+            .map_err(|_| BenchError::Stopped)?;
+        match rx.recv_timeout(wait) {
+            Ok(result) => result,
+            Err(mpsc::RecvTimeoutError::Timeout) => Err(BenchError::Unresponsive {
+                after_ms: wait.as_millis() as u64,
+            }),
+            Err(mpsc::RecvTimeoutError::Disconnected) => Err(BenchError::Stopped),
+        }
+    }
+
+    pub fn status(&self) -> Result<BenchStatus, BenchError> {
+        match self.call(Owner::Direct, Command::Status, self.reply_timeout)? {
+            Reply::Status(s) => Ok(*s),
+            _ => unreachable!("status answers with a status"),
+        }
+    }
+
+    pub fn apply_camera(
+        &self,
+        owner: Owner,
+        settings: CameraSettings,
+    ) -> Result<CameraSettings, BenchError> {
+        match self.call(owner, Command::ApplyCamera(settings), self.reply_timeout)? {
+            Reply::Settings(s) => Ok(s),
+            _ => unreachable!("apply answers with settings"),
+        }
+    }
+
+    /// `count` frames, each within `timeout`.
+    pub fn capture(
+        &self,
+        owner: Owner,
+        count: usize,
+        timeout: Duration,
+    ) -> Result<Vec<Frame>, BenchError> {
+        let wait = self.reply_timeout + timeout * count as u32;
+        match self.call(owner, Command::Capture { count, timeout }, wait)? {
+            Reply::Frames(f) => Ok(f),
+            _ => unreachable!("capture answers with frames"),
+        }
+    }
+
+    pub fn home(&self, owner: Owner, timeout: Duration) -> Result<(), BenchError> {
+        self.call(
+            owner,
+            Command::Home { timeout },
+            self.reply_timeout + timeout,
+        )
+        .map(|_| ())
+    }
+
+    /// Moves to `target` and waits until the stage has settled there.
+    pub fn move_to(
+        &self,
+        owner: Owner,
+        target: StagePosition,
+        settle_timeout: Duration,
+    ) -> Result<StagePosition, BenchError> {
+        let cmd = Command::MoveTo {
+            target,
+            settle_timeout,
+        };
+        match self.call(owner, cmd, self.reply_timeout + settle_timeout)? {
+            Reply::Position(p) => Ok(p),
+            _ => unreachable!("a move answers with a position"),
+        }
+    }
+
+    pub fn move_by(
+        &self,
+        owner: Owner,
+        dx_mm: f64,
+        dy_mm: f64,
+        settle_timeout: Duration,
+    ) -> Result<StagePosition, BenchError> {
+        let cmd = Command::MoveBy {
+            dx_mm,
+            dy_mm,
+            settle_timeout,
+        };
+        match self.call(owner, cmd, self.reply_timeout + settle_timeout)? {
+            Reply::Position(p) => Ok(p),
+            _ => unreachable!("a move answers with a position"),
+        }
+    }
+
+    pub fn stop_stage(&self, owner: Owner) -> Result<(), BenchError> {
+        self.call(owner, Command::StopStage, self.reply_timeout)
+            .map(|_| ())
+    }
+
+    pub fn mount(
+        &self,
+        owner: Owner,
+        label: &str,
+        pattern: &SpecklePattern,
+        seed: u64,
+    ) -> Result<(), BenchError> {
+        let cmd = Command::Mount {
+            label: label.to_string(),
+            pattern: Box::new(pattern.clone()),
+            seed,
+        };
+        self.call(owner, cmd, self.reply_timeout).map(|_| ())
+    }
+}
+
+struct Actor {
+    hw: BenchHardware,
+    holder: Arc<Mutex<Option<String>>>,
+    homed: bool,
+    target: Option<String>,
+}
+
+impl Actor {
+    fn new(hw: BenchHardware, holder: Arc<Mutex<Option<String>>>) -> Self {
+        Self {
+            hw,
+            holder,
+            homed: false,
+            target: None,
+        }
+    }
+
+    fn serve(mut self, rx: mpsc::Receiver<Request>) {
+        // Ends when every handle is gone: the stage is left stopped.
+        while let Ok(req) = rx.recv() {
+            let result = self
+                .admit(&req.owner, &req.command)
+                .and_then(|()| self.run(req.command));
+            // The caller may have given up waiting; that is its business.
+            let _ = req.reply.send(result);
+        }
+        if let Some(stage) = self.hw.stage.as_mut() {
+            let _ = stage.stop();
+        }
+    }
+
+    /// Reads are always allowed; anything that changes the bench needs the holder's lease.
+    fn admit(&self, owner: &Owner, command: &Command) -> Result<(), BenchError> {
+        if matches!(command, Command::Status) {
+            return Ok(());
+        }
+        let holder = self.holder.lock().expect("holder lock").clone();
+        match (holder, owner) {
+            (None, _) => Ok(()),
+            (Some(h), Owner::Run(r)) if &h == r => Ok(()),
+            // A stop is a safety action: anyone may stop the stage.
+            (Some(_), Owner::Direct) if matches!(command, Command::StopStage) => Ok(()),
+            (Some(h), _) => Err(BenchError::Busy { holder: h }),
+        }
+    }
+
+    fn stage(&mut self) -> Result<&mut Box<dyn Stage>, BenchError> {
+        self.hw.stage.as_mut().ok_or(BenchError::NoStage)
+    }
+
+    fn run(&mut self, command: Command) -> Result<Reply, BenchError> {
+        Ok(match command {
+            Command::Status => Reply::Status(Box::new(self.status())),
+            Command::ApplyCamera(s) => Reply::Settings(self.hw.camera.apply(&s)?),
+            Command::Capture { count, timeout } => {
+                Reply::Frames(self.hw.camera.acquire(count, timeout)?)
+            }
+            Command::Home { timeout } => {
+                self.stage()?.home(timeout)?;
+                self.homed = true;
+                Reply::Done
+            }
+            Command::MoveTo {
+                target,
+                settle_timeout,
+            } => {
+                let stage = self.stage()?;
+                stage.move_absolute(target)?;
+                Reply::Position(stage.wait_settled(settle_timeout)?)
+            }
+            Command::MoveBy {
+                dx_mm,
+                dy_mm,
+                settle_timeout,
+            } => {
+                let stage = self.stage()?;
+                stage.move_relative(dx_mm, dy_mm)?;
+                Reply::Position(stage.wait_settled(settle_timeout)?)
+            }
+            Command::StopStage => {
+                self.stage()?.stop()?;
+                Reply::Done
+            }
+            Command::Mount {
+                label,
+                pattern,
+                seed,
+            } => {
+                let mount = self.hw.targets.as_mut().ok_or(BenchError::NoTargetMount)?;
+                mount.mount(&label, &pattern, seed)?;
+                self.target = Some(label);
+                Reply::Done
+            }
+        })
+    }
+
+    fn status(&mut self) -> BenchStatus {
+        let homed = self.homed;
+        let stage = self.hw.stage.as_mut().map(|s| {
+            let (position, error) = match s.position() {
+                Ok(p) => (Some(p), None),
+                Err(e) => (None, Some(e.to_string())),
+            };
+            StageStatus {
+                info: s.info().clone(),
+                position,
+                homed,
+                error,
+            }
+        });
+        BenchStatus {
+            camera: CameraStatus {
+                info: self.hw.camera.info().clone(),
+                settings: self.hw.camera.settings(),
+                counters: self.hw.camera.counters(),
+            },
+            stage,
+            holder: self.holder.lock().expect("holder lock").clone(),
+            target: self.target.clone(),
+            has_target_mount: self.hw.targets.is_some(),
+        }
+    }
+}

@@ -1,0 +1,214 @@
+//! The paper's Figures 5 and 6 from a study: terminal tables, CSV, JSON and SVG bar charts.
+//! Shared by `ffdic reproduce`, the experiment runner and the API, so all show the same numbers.
+
+use super::study::{Increase, StudyRow};
+use crate::report::{csv, text_table, BarChart, Series};
+use serde_json::json;
+
+/// `{"rows":[{"pattern","scheme","u":{"mean","std"},...}]}` as the issue specifies.
+pub fn rows_json(rows: &[StudyRow]) -> serde_json::Value {
+    let ms = |s: &crate::dic::Stats| json!({"mean": s.mean, "std": s.std});
+    json!({
+        "rows": rows.iter().map(|r| json!({
+            "run": r.run,
+            "pattern": r.pattern,
+            "scheme": r.scheme,
+            "fill_factor": [r.fill_factor.0, r.fill_factor.1],
+            "valid": r.summary.valid,
+            "points": r.summary.points,
+            "u": ms(&r.summary.u), "v": ms(&r.summary.v),
+            "exx": ms(&r.summary.exx), "eyy": ms(&r.summary.eyy), "exy": ms(&r.summary.exy),
+            "increase_pct": r.increase_pct,
+        })).collect::<Vec<_>>()
+    })
+}
+
+/// One reported statistic: its label with units, how to read it, and its % increase.
+struct Metric {
+    label: &'static str,
+    value: fn(&StudyRow) -> f64,
+    scale: f64,
+    increase: fn(&Increase) -> f64,
+}
+
+const STD_U: Metric = Metric {
+    label: "std(u) [px]",
+    value: |r| r.summary.u.std,
+    scale: 1.0,
+    increase: |i| i.u,
+};
+const STD_V: Metric = Metric {
+    label: "std(v) [px]",
+    value: |r| r.summary.v.std,
+    scale: 1.0,
+    increase: |i| i.v,
+};
+const STD_EXX: Metric = Metric {
+    label: "std(exx) [µε]",
+    value: |r| r.summary.exx.std,
+    scale: 1e6,
+    increase: |i| i.exx,
+};
+const STD_EYY: Metric = Metric {
+    label: "std(eyy) [µε]",
+    value: |r| r.summary.eyy.std,
+    scale: 1e6,
+    increase: |i| i.eyy,
+};
+const STD_EXY: Metric = Metric {
+    label: "std(exy) [µε]",
+    value: |r| r.summary.exy.std,
+    scale: 1e6,
+    increase: |i| i.exy,
+};
+
+/// Figures 5 and 6 (and the shear) as terminal tables.
+pub fn figures_text(rows: &[StudyRow]) -> String {
+    let table = |title: &str, metrics: &[&Metric]| {
+        let mut headers = vec!["pattern", "scheme"];
+        for m in metrics {
+            headers.push(m.label);
+            headers.push("Δ vs 100 %");
+        }
+        let body: Vec<Vec<String>> = rows
+            .iter()
+            .map(|r| {
+                let mut row = vec![r.pattern.clone(), r.scheme.clone()];
+                for m in metrics {
+                    let v = (m.value)(r) * m.scale;
+                    row.push(if m.scale == 1.0 {
+                        format!("{v:.5}")
+                    } else {
+                        format!("{v:.1}")
+                    });
+                    row.push(
+                        r.increase_pct
+                            .map_or("—".into(), |i| format!("{:+.1} %", (m.increase)(&i))),
+                    );
+                }
+                row
+            })
+            .collect();
+        format!("\n{title}\n{}", text_table(&headers, &body))
+    };
+    let mean_u = rows.iter().map(|r| r.summary.u.mean).sum::<f64>() / rows.len().max(1) as f64;
+    let mean_v = rows.iter().map(|r| r.summary.v.mean).sum::<f64>() / rows.len().max(1) as f64;
+    table("Figure 5 — error of the x translation (std over the ROI)", &[&STD_U, &STD_EXX])
+        + &table("Figure 6 — error of the small y component (std over the ROI)", &[&STD_V, &STD_EYY])
+        + &table("Shear", &[&STD_EXY])
+        + &format!("\nmean motion over all rows: u = {mean_u:.4} px, v = {mean_v:.4} px (reduced images)\n")
+}
+
+/// The study as CSV, one row per run and scheme.
+pub fn study_csv(rows: &[StudyRow]) -> String {
+    let headers = [
+        "run", "pattern", "scheme", "fill_x", "fill_y", "valid", "points", "u_mean", "u_std",
+        "v_mean", "v_std", "exx_mean", "exx_std", "eyy_mean", "eyy_std", "exy_mean", "exy_std",
+    ];
+    let body: Vec<Vec<String>> = rows
+        .iter()
+        .map(|r| {
+            let s = &r.summary;
+            vec![
+                r.run.clone(),
+                r.pattern.clone(),
+                r.scheme.clone(),
+                r.fill_factor.0.to_string(),
+                r.fill_factor.1.to_string(),
+                s.valid.to_string(),
+                s.points.to_string(),
+                s.u.mean.to_string(),
+                s.u.std.to_string(),
+                s.v.mean.to_string(),
+                s.v.std.to_string(),
+                s.exx.mean.to_string(),
+                s.exx.std.to_string(),
+                s.eyy.mean.to_string(),
+                s.eyy.std.to_string(),
+                s.exy.mean.to_string(),
+                s.exy.std.to_string(),
+            ]
+        })
+        .collect();
+    csv(&headers, &body)
+}
+
+/// Figures 5 and 6 as SVG bar charts: `(file name, svg)`, the % increase over 100 % above
+/// every bar as in the paper.
+pub fn figure_svgs(rows: &[StudyRow]) -> Vec<(&'static str, String)> {
+    let charts = [
+        (
+            "figure5_u.svg",
+            "Figure 5a — displacement error, x move",
+            &STD_U,
+        ),
+        (
+            "figure5_exx.svg",
+            "Figure 5b — strain error, x move",
+            &STD_EXX,
+        ),
+        (
+            "figure6_v.svg",
+            "Figure 6a — displacement error, y component",
+            &STD_V,
+        ),
+        (
+            "figure6_eyy.svg",
+            "Figure 6b — strain error, y component",
+            &STD_EYY,
+        ),
+    ];
+    let mut groups: Vec<String> = Vec::new();
+    let mut schemes: Vec<String> = Vec::new();
+    for r in rows {
+        if !groups.contains(&r.pattern) {
+            groups.push(r.pattern.clone());
+        }
+        if !schemes.contains(&r.scheme) {
+            schemes.push(r.scheme.clone());
+        }
+    }
+    let mut out = Vec::new();
+    for (file, title, metric) in charts {
+        let series = schemes
+            .iter()
+            .map(|scheme| {
+                let pick =
+                    |g: &String| rows.iter().find(|r| &r.pattern == g && &r.scheme == scheme);
+                Series {
+                    name: scheme_label(scheme),
+                    values: groups
+                        .iter()
+                        .map(|g| pick(g).map_or(f64::NAN, |r| (metric.value)(r) * metric.scale))
+                        .collect(),
+                    labels: groups
+                        .iter()
+                        .map(|g| {
+                            pick(g).and_then(|r| {
+                                r.increase_pct
+                                    .map(|i| format!("{:+.1} %", (metric.increase)(&i)))
+                            })
+                        })
+                        .collect(),
+                }
+            })
+            .collect();
+        let chart = BarChart {
+            title: title.to_string(),
+            y_label: metric.label.to_string(),
+            groups: groups.iter().map(|g| format!("pattern {g}")).collect(),
+            series,
+        };
+        out.push((file, chart.to_svg(720, 420)));
+    }
+    out
+}
+
+fn scheme_label(name: &str) -> String {
+    match name {
+        "ff100" => "100 % (2x2 binned)".into(),
+        "ff50" => "50 % (rows binned, columns subsampled)".into(),
+        "ff25" => "25 % (subsampled)".into(),
+        other => other.into(),
+    }
+}

@@ -1,0 +1,279 @@
+//! The daemon's configuration (`config/ffdic.toml`, embedded as the default): which camera and
+//! stage, where the data lives, where to listen, and the safety settings. Unknown keys are
+//! refused with the key named, so a typo never silently falls back to a default.
+
+use crate::model::{Camera as ModelCamera, ModelConfig};
+use serde::{Deserialize, Serialize};
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+
+/// The embedded default: mock camera and mock stage, data under `./data`, loopback.
+pub const DEFAULT_CONFIG_TOML: &str = include_str!("../../config/ffdic.toml");
+/// The embedded mock bench's truth (the paper's bench).
+pub const PAPER_BENCH_TOML: &str = include_str!("../../config/models/paper-bench.toml");
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DaemonConfig {
+    /// Run folders, uploaded datasets and the SQLite index.
+    pub data_dir: PathBuf,
+    pub listen: SocketAddr,
+    /// Bearer token for mutating requests; `FFDIC_TOKEN` in the environment overrides it. Required
+    /// whenever `listen` is not a loopback address.
+    #[serde(default)]
+    pub auth_token: Option<String>,
+    /// Origins allowed by CORS; empty (the default) sends no CORS headers at all.
+    #[serde(default)]
+    pub cors_origins: Vec<String>,
+    /// Largest JSON request body, bytes.
+    #[serde(default = "default_max_json_bytes")]
+    pub max_json_bytes: usize,
+    /// Largest dataset upload, bytes.
+    #[serde(default = "default_max_upload_bytes")]
+    pub max_upload_bytes: usize,
+    pub bench: BenchConfig,
+    pub camera: CameraConfig,
+    pub stage: StageConfig,
+}
+
+fn default_max_json_bytes() -> usize {
+    64 * 1024
+}
+
+fn default_max_upload_bytes() -> usize {
+    2 * 1024 * 1024 * 1024
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BenchConfig {
+    /// Magnification of the bench: image px per mm on the target.
+    pub scale_px_per_mm: f64,
+    #[serde(default = "default_frame_timeout_ms")]
+    pub frame_timeout_ms: u64,
+    #[serde(default = "default_settle_timeout_ms")]
+    pub settle_timeout_ms: u64,
+    #[serde(default = "default_home_timeout_ms")]
+    pub home_timeout_ms: u64,
+}
+
+fn default_frame_timeout_ms() -> u64 {
+    20_000
+}
+fn default_settle_timeout_ms() -> u64 {
+    60_000
+}
+fn default_home_timeout_ms() -> u64 {
+    120_000
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum CameraConfig {
+    /// Renders, through the model, what the sensor sees at the mock stage's position.
+    Mock {
+        width: usize,
+        height: usize,
+        #[serde(default = "default_exposure_level")]
+        exposure_level: f64,
+        /// The bench's truth: `paper-bench` (embedded) or a model file.
+        #[serde(default = "default_bench_model")]
+        bench_model: String,
+    },
+    /// A GenICam camera through Aravis (build with `--features aravis`).
+    Aravis {
+        /// Device id or IP address.
+        device: String,
+        #[serde(default = "default_buffers")]
+        buffers: usize,
+    },
+    /// A V4L2 camera (build with `--features v4l2`).
+    V4l2 {
+        device: PathBuf,
+        #[serde(default = "default_buffers")]
+        buffers: usize,
+    },
+}
+
+fn default_exposure_level() -> f64 {
+    0.5
+}
+fn default_bench_model() -> String {
+    "paper-bench".into()
+}
+fn default_buffers() -> usize {
+    8
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum StageConfig {
+    /// A simulated stage with travel time and settling.
+    Mock {
+        #[serde(default = "default_speed")]
+        speed_mm_s: f64,
+        #[serde(default = "default_settle_ms")]
+        settle_ms: u64,
+    },
+    /// Newport SMC100 / CONEX-CC on a serial port (ASCII protocol).
+    Smc100(ffdic_stage::Smc100Config),
+    /// Zaber ASCII on a serial port.
+    Zaber(ffdic_stage::ZaberConfig),
+    /// Thorlabs APT (binary protocol) on a serial port.
+    Apt(ffdic_stage::AptConfig),
+    /// No stage: snapshots only; experiments need a stage.
+    None,
+}
+
+fn default_speed() -> f64 {
+    25.0
+}
+fn default_settle_ms() -> u64 {
+    20
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("cannot read {path}: {source}")]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: {message}")]
+    Parse { path: PathBuf, message: String },
+    #[error("bench model {name}: {message}")]
+    BenchModel { name: String, message: String },
+}
+
+impl DaemonConfig {
+    pub fn from_toml(text: &str, origin: &Path) -> Result<Self, ConfigError> {
+        let parse = |message: String| ConfigError::Parse {
+            path: origin.to_owned(),
+            message,
+        };
+        let config: DaemonConfig =
+            toml::from_str(text).map_err(|e| parse(e.message().to_string()))?;
+        if !(config.bench.scale_px_per_mm > 0.0) {
+            return Err(parse("bench.scale_px_per_mm must be positive".into()));
+        }
+        if let CameraConfig::Mock { width, height, .. } = config.camera {
+            if width < 64 || height < 64 {
+                return Err(parse("camera: the mock sensor is at least 64x64 px".into()));
+            }
+        }
+        Ok(config)
+    }
+
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.to_owned(),
+            source,
+        })?;
+        Self::from_toml(&text, path)
+    }
+
+    /// The embedded default.
+    pub fn embedded() -> Self {
+        Self::from_toml(DEFAULT_CONFIG_TOML, Path::new("config/ffdic.toml"))
+            .expect("the embedded config is valid")
+    }
+
+    /// The token in force: the environment's `FFDIC_TOKEN`, else the file's.
+    pub fn token(&self) -> Option<String> {
+        std::env::var("FFDIC_TOKEN")
+            .ok()
+            .filter(|t| !t.is_empty())
+            .or_else(|| self.auth_token.clone().filter(|t| !t.is_empty()))
+    }
+
+    /// The mock camera's geometry as the model sees it.
+    pub fn mock_geometry(&self) -> Option<ModelCamera> {
+        match &self.camera {
+            CameraConfig::Mock {
+                width,
+                height,
+                exposure_level,
+                ..
+            } => Some(ModelCamera {
+                width: *width,
+                height: *height,
+                scale_px_per_mm: self.bench.scale_px_per_mm,
+                exposure_level: *exposure_level,
+                principal_dx_px: 0.0,
+                principal_dy_px: 0.0,
+            }),
+            _ => None,
+        }
+    }
+}
+
+/// A bench model by embedded name or file path.
+pub fn load_bench_model(name: &str) -> Result<ModelConfig, ConfigError> {
+    let fail = |message: String| ConfigError::BenchModel {
+        name: name.to_string(),
+        message,
+    };
+    match name {
+        "paper-bench" => ModelConfig::from_toml(
+            PAPER_BENCH_TOML,
+            Path::new("config/models/paper-bench.toml"),
+        )
+        .map_err(|e| fail(e.to_string())),
+        path => ModelConfig::load(Path::new(path)).map_err(|e| fail(e.to_string())),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn embedded_default_is_the_mock_bench_on_loopback() {
+        let c = DaemonConfig::embedded();
+        assert!(c.listen.ip().is_loopback());
+        assert_eq!(c.listen.port(), 8080);
+        assert!(matches!(c.camera, CameraConfig::Mock { .. }));
+        assert!(matches!(c.stage, StageConfig::Mock { .. }));
+        assert_eq!(c.data_dir, PathBuf::from("data"));
+    }
+
+    #[test]
+    fn unknown_keys_are_named() {
+        let text = DEFAULT_CONFIG_TOML.replace("data_dir", "data_dri");
+        let err = DaemonConfig::from_toml(&text, Path::new("x.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("data_dri"), "{err}");
+    }
+
+    #[test]
+    fn lab_examples_parse_into_their_drivers() {
+        let aravis = include_str!("../../config/lab-aravis.toml");
+        let c = DaemonConfig::from_toml(aravis, Path::new("lab-aravis.toml")).unwrap();
+        assert!(matches!(c.camera, CameraConfig::Aravis { .. }));
+        match &c.stage {
+            StageConfig::Smc100(s) => {
+                assert_eq!(s.port, "/dev/ttyUSB0");
+                assert_eq!(s.baud, 57_600);
+            }
+            other => panic!("expected smc100, got {other:?}"),
+        }
+        let v4l2 = include_str!("../../config/lab-v4l2.toml");
+        let c = DaemonConfig::from_toml(v4l2, Path::new("lab-v4l2.toml")).unwrap();
+        assert!(matches!(c.camera, CameraConfig::V4l2 { .. }));
+        match &c.stage {
+            StageConfig::Zaber(z) => assert_eq!(z.microsteps_per_mm, 20_997.375),
+            other => panic!("expected zaber, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn unknown_stage_keys_are_named() {
+        let text = include_str!("../../config/lab-v4l2.toml")
+            .replace("microsteps_per_mm", "microsteps_mm");
+        let err = DaemonConfig::from_toml(&text, Path::new("x.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("microsteps_mm"), "{err}");
+    }
+}

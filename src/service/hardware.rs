@@ -1,0 +1,167 @@
+//! Opens the camera and the stage the configuration names and hands them to the bench actor.
+//! The mock bench wires the imaging model in as the mock camera's scene, with a target changer
+//! that swaps the speckle pattern in front of it.
+
+use super::config::{load_bench_model, CameraConfig, ConfigError, DaemonConfig, StageConfig};
+use crate::experiment::{BenchHardware, ModelScene, TargetMount};
+use crate::model::{Camera as ModelCamera, ModelConfig, SpecklePattern};
+use ffdic_hw::{Camera, HwError, Stage, StagePosition};
+use ffdic_mocks::{new_bench, MockCamera, MockStage, Scene, SharedBench};
+use std::sync::{Arc, RwLock};
+use std::time::Duration;
+
+#[derive(Debug, thiserror::Error)]
+pub enum HardwareError {
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    #[error("camera: {0}")]
+    Camera(HwError),
+    #[error("stage: {0}")]
+    Stage(HwError),
+    #[error("this ffdic was built without the `{0}` feature (cargo build --features {0})")]
+    FeatureMissing(&'static str),
+}
+
+/// How far the mock target extends beyond the field of view on every side, mm: the stage's
+/// travel, so every reachable position shows speckle.
+const MOCK_TARGET_MARGIN_MM: f64 = 26.0;
+
+/// The mock scene behind a lock, so the target changer can swap the pattern the camera sees.
+#[derive(Clone)]
+pub struct SwappableScene(Arc<RwLock<ModelScene>>);
+
+impl Scene for SwappableScene {
+    fn size(&self) -> (usize, usize) {
+        self.0.read().expect("scene lock").size()
+    }
+
+    fn render(&self, p: StagePosition, exposure_us: f64, bit_depth: u8, index: u64) -> Vec<u16> {
+        self.0
+            .read()
+            .expect("scene lock")
+            .render(p, exposure_us, bit_depth, index)
+    }
+}
+
+struct MockTargets {
+    scene: SwappableScene,
+}
+
+impl TargetMount for MockTargets {
+    fn mount(&mut self, _label: &str, pattern: &SpecklePattern, seed: u64) -> Result<(), HwError> {
+        let mut s = self.scene.0.write().expect("scene lock");
+        s.dots = pattern.dots(s.camera.field_mm(MOCK_TARGET_MARGIN_MM), seed);
+        s.seed = seed;
+        Ok(())
+    }
+}
+
+/// The mock bench: model geometry, the bench's truth, a stage and camera sharing one position.
+pub fn mock_bench(
+    geometry: ModelCamera,
+    truth: ModelConfig,
+    speed_mm_s: f64,
+    settle: Duration,
+) -> BenchHardware {
+    let bench = new_bench();
+    let (camera, targets) = mock_camera(geometry, truth, bench.clone());
+    BenchHardware {
+        camera,
+        stage: Some(Box::new(MockStage::new(bench, speed_mm_s, settle))),
+        targets: Some(targets),
+    }
+}
+
+fn mock_camera(
+    geometry: ModelCamera,
+    truth: ModelConfig,
+    bench: SharedBench,
+) -> (Box<dyn Camera>, Box<dyn TargetMount>) {
+    let pattern = SpecklePattern::preset("b").expect("preset b exists");
+    let scene = SwappableScene(Arc::new(RwLock::new(ModelScene::new(
+        geometry,
+        truth,
+        &pattern,
+        MOCK_TARGET_MARGIN_MM,
+        1,
+    ))));
+    (
+        Box::new(MockCamera::new(scene.clone(), bench)),
+        Box::new(MockTargets { scene }),
+    )
+}
+
+/// Opens what `config` names.
+pub fn open_bench(config: &DaemonConfig) -> Result<BenchHardware, HardwareError> {
+    let shared = new_bench();
+    let (camera, targets): (Box<dyn Camera>, Option<Box<dyn TargetMount>>) = match &config.camera {
+        CameraConfig::Mock { bench_model, .. } => {
+            let geometry = config.mock_geometry().expect("mock camera has a geometry");
+            let (c, t) = mock_camera(geometry, load_bench_model(bench_model)?, shared.clone());
+            (c, Some(t))
+        }
+        CameraConfig::Aravis { device, buffers } => (open_aravis(device, *buffers)?, None),
+        CameraConfig::V4l2 { device, buffers } => (open_v4l2(device, *buffers)?, None),
+    };
+    let stage: Option<Box<dyn Stage>> = match &config.stage {
+        StageConfig::Mock {
+            speed_mm_s,
+            settle_ms,
+        } => Some(Box::new(MockStage::new(
+            shared,
+            *speed_mm_s,
+            Duration::from_millis(*settle_ms),
+        ))),
+        StageConfig::Smc100(c) => Some(open_serial_stage(ffdic_stage::StageConfig::Smc100(
+            c.clone(),
+        ))?),
+        StageConfig::Zaber(c) => Some(open_serial_stage(ffdic_stage::StageConfig::Zaber(
+            c.clone(),
+        ))?),
+        StageConfig::Apt(c) => Some(open_serial_stage(ffdic_stage::StageConfig::Apt(c.clone()))?),
+        StageConfig::None => None,
+    };
+    Ok(BenchHardware {
+        camera,
+        stage,
+        targets,
+    })
+}
+
+fn open_serial_stage(config: ffdic_stage::StageConfig) -> Result<Box<dyn Stage>, HardwareError> {
+    ffdic_stage::open_stage(&config).map_err(HardwareError::Stage)
+}
+
+#[cfg(feature = "aravis")]
+fn open_aravis(device: &str, buffers: usize) -> Result<Box<dyn Camera>, HardwareError> {
+    let config = ffdic_aravis::AravisConfig {
+        device: device.to_string(),
+        buffers,
+        ..Default::default()
+    };
+    Ok(Box::new(
+        ffdic_aravis::AravisCamera::open_with(&config).map_err(HardwareError::Camera)?,
+    ))
+}
+
+#[cfg(not(feature = "aravis"))]
+fn open_aravis(_: &str, _: usize) -> Result<Box<dyn Camera>, HardwareError> {
+    Err(HardwareError::FeatureMissing("aravis"))
+}
+
+#[cfg(feature = "v4l2")]
+fn open_v4l2(device: &std::path::Path, buffers: usize) -> Result<Box<dyn Camera>, HardwareError> {
+    let config = ffdic_v4l2::V4l2Config {
+        device: device.to_owned(),
+        buffers,
+        ..Default::default()
+    };
+    Ok(Box::new(
+        ffdic_v4l2::V4l2Camera::open(&config).map_err(HardwareError::Camera)?,
+    ))
+}
+
+#[cfg(not(feature = "v4l2"))]
+fn open_v4l2(_: &std::path::Path, _: usize) -> Result<Box<dyn Camera>, HardwareError> {
+    Err(HardwareError::FeatureMissing("v4l2"))
+}

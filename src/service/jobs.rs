@@ -1,0 +1,302 @@
+//! Long work as jobs: experiments on the bench, analyses, comparisons and diagnoses of datasets.
+//! A job is a run in the store; it is queued, then one worker per lane runs it — one experiment at
+//! a time on the bench lane, others wait their turn — and its events go to the run's log and to
+//! live subscribers (SSE). Cancellation is cooperative: the work checks its token between steps.
+
+use crate::experiment::RunSink;
+use crate::store::{DatasetId, Event, RunId, RunKind, RunRecord, RunStatus, RunStore, StoreError};
+use serde_json::Value;
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::{mpsc, Arc, Mutex};
+use std::time::Duration;
+use tokio::sync::broadcast;
+use tokio_util::sync::CancellationToken;
+
+/// Jobs that need the bench run on one lane, compute-only jobs on the other, so an analysis of an
+/// uploaded dataset never waits for an experiment (and never takes the bench).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Lane {
+    Bench,
+    Compute,
+}
+
+/// What a job reports when it ends well: a message and the files it wrote.
+pub struct JobOutput {
+    pub message: String,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum JobError {
+    #[error("cancelled")]
+    Cancelled,
+    #[error("{0}")]
+    Failed(String),
+}
+
+pub type Work = Box<dyn FnOnce(&JobContext) -> Result<JobOutput, JobError> + Send>;
+
+struct Queued {
+    id: RunId,
+    work: Work,
+}
+
+struct Live {
+    cancel: CancellationToken,
+    events: broadcast::Sender<Event>,
+}
+
+/// The context a job runs in; also the experiment runner's [`RunSink`].
+pub struct JobContext {
+    pub run_id: RunId,
+    store: Arc<RunStore>,
+    events: broadcast::Sender<Event>,
+    cancel: CancellationToken,
+}
+
+impl JobContext {
+    pub fn store(&self) -> &RunStore {
+        &self.store
+    }
+
+    pub fn is_cancelled(&self) -> bool {
+        self.cancel.is_cancelled()
+    }
+}
+
+impl RunSink for JobContext {
+    fn event(&self, kind: &str, progress: f64, message: &str, data: Value) {
+        let _ = self.store.set_progress(&self.run_id, progress, message);
+        match self
+            .store
+            .append_event(&self.run_id, kind, progress, message, data)
+        {
+            Ok(e) => {
+                let _ = self.events.send(e);
+            }
+            Err(err) => tracing::warn!(run = %self.run_id, "event not stored: {err}"),
+        }
+    }
+
+    fn write(&self, rel: &str, bytes: &[u8]) -> Result<PathBuf, String> {
+        self.store
+            .write_file(&self.run_id, rel, bytes)
+            .map_err(|e| e.to_string())
+    }
+
+    fn cancelled(&self) -> bool {
+        self.cancel.is_cancelled()
+    }
+}
+
+pub struct Jobs {
+    store: Arc<RunStore>,
+    live: Arc<Mutex<HashMap<RunId, Live>>>,
+    lanes: Mutex<HashMap<Lane, mpsc::Sender<Queued>>>,
+    workers: Mutex<Vec<std::thread::JoinHandle<()>>>,
+}
+
+impl Jobs {
+    pub fn start(store: Arc<RunStore>) -> Arc<Self> {
+        let jobs = Arc::new(Self {
+            store,
+            live: Arc::new(Mutex::new(HashMap::new())),
+            lanes: Mutex::new(HashMap::new()),
+            workers: Mutex::new(Vec::new()),
+        });
+        for lane in [Lane::Bench, Lane::Compute] {
+            let (tx, rx) = mpsc::channel::<Queued>();
+            let store = jobs.store.clone();
+            let live = jobs.live.clone();
+            let handle = std::thread::Builder::new()
+                .name(format!("jobs-{lane:?}").to_lowercase())
+                .spawn(move || worker(rx, store, live))
+                .expect("spawn a job worker");
+            jobs.lanes.lock().expect("lanes").insert(lane, tx);
+            jobs.workers.lock().expect("workers").push(handle);
+        }
+        jobs
+    }
+
+    pub fn store(&self) -> &Arc<RunStore> {
+        &self.store
+    }
+
+    /// Queues `work` as a new run, or returns the run an earlier request with the same
+    /// idempotency key made (`false`: nothing new was queued).
+    pub fn submit(
+        &self,
+        kind: RunKind,
+        lane: Lane,
+        request: Value,
+        idempotency_key: Option<&str>,
+        dataset_id: Option<DatasetId>,
+        work: Work,
+    ) -> Result<(RunRecord, bool), StoreError> {
+        let (record, created) =
+            self.store
+                .create_run(kind, request, idempotency_key, dataset_id)?;
+        if !created {
+            return Ok((record, false));
+        }
+        let (events, _) = broadcast::channel(256);
+        self.live.lock().expect("live").insert(
+            record.id.clone(),
+            Live {
+                cancel: CancellationToken::new(),
+                events,
+            },
+        );
+        let sent = self
+            .lanes
+            .lock()
+            .expect("lanes")
+            .get(&lane)
+            .map(|tx| {
+                tx.send(Queued {
+                    id: record.id.clone(),
+                    work,
+                })
+                .is_ok()
+            })
+            .unwrap_or(false);
+        if !sent {
+            let _ = self.store.set_status(
+                &record.id,
+                RunStatus::Failed,
+                "the server is shutting down and takes no more work",
+            );
+        }
+        Ok((self.store.get(&record.id)?, true))
+    }
+
+    /// Live events of a run still queued or running (`None` once it has ended).
+    pub fn subscribe(&self, id: &RunId) -> Option<broadcast::Receiver<Event>> {
+        self.live
+            .lock()
+            .expect("live")
+            .get(id)
+            .map(|l| l.events.subscribe())
+    }
+
+    /// Asks a run to stop. A queued run is cancelled at once; a running one at its next check.
+    pub fn cancel(&self, id: &RunId) -> Result<RunRecord, StoreError> {
+        let record = self.store.get(id)?;
+        if record.status.is_terminal() {
+            return Err(StoreError::Finished(id.clone()));
+        }
+        if let Some(live) = self.live.lock().expect("live").get(id) {
+            live.cancel.cancel();
+        }
+        if record.status == RunStatus::Queued {
+            let r =
+                self.store
+                    .set_status(id, RunStatus::Cancelled, "cancelled before it started")?;
+            self.publish_terminal(id);
+            return Ok(r);
+        }
+        self.store.get(id)
+    }
+
+    fn publish_terminal(&self, id: &RunId) {
+        publish_last(&self.store, &self.live, id);
+    }
+
+    /// Stops taking work, cancels every run, and waits up to `grace` for the workers.
+    pub fn shutdown(&self, grace: Duration) {
+        self.lanes.lock().expect("lanes").clear();
+        let ids: Vec<RunId> = self.live.lock().expect("live").keys().cloned().collect();
+        for id in ids {
+            if let Ok(r) = self.store.get(&id) {
+                if r.status == RunStatus::Queued {
+                    let _ = self.store.set_status(
+                        &id,
+                        RunStatus::Cancelled,
+                        "cancelled: the server shut down",
+                    );
+                }
+            }
+            if let Some(l) = self.live.lock().expect("live").get(&id) {
+                l.cancel.cancel();
+            }
+        }
+        let deadline = std::time::Instant::now() + grace;
+        let handles: Vec<_> = self.workers.lock().expect("workers").drain(..).collect();
+        for h in handles {
+            while !h.is_finished() && std::time::Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            if h.is_finished() {
+                let _ = h.join();
+            }
+        }
+    }
+}
+
+/// Sends the run's last stored event to live subscribers and forgets the run.
+fn publish_last(store: &RunStore, live: &Mutex<HashMap<RunId, Live>>, id: &RunId) {
+    let entry = live.lock().expect("live").remove(id);
+    if let (Some(l), Ok(events)) = (entry, store.events(id, None)) {
+        if let Some(last) = events.last() {
+            let _ = l.events.send(last.clone());
+        }
+    }
+}
+
+fn worker(
+    rx: mpsc::Receiver<Queued>,
+    store: Arc<RunStore>,
+    live: Arc<Mutex<HashMap<RunId, Live>>>,
+) {
+    while let Ok(job) = rx.recv() {
+        let Some((cancel, events)) = live
+            .lock()
+            .expect("live")
+            .get(&job.id)
+            .map(|l| (l.cancel.clone(), l.events.clone()))
+        else {
+            continue;
+        };
+        // Cancelled while queued: already written as such.
+        if cancel.is_cancelled() {
+            if let Ok(r) = store.get(&job.id) {
+                if !r.status.is_terminal() {
+                    let _ = store.set_status(&job.id, RunStatus::Cancelled, "cancelled");
+                }
+            }
+            publish_last(&store, &live, &job.id);
+            continue;
+        }
+        if let Err(e) = store.set_status(&job.id, RunStatus::Running, "running") {
+            tracing::warn!(run = %job.id, "cannot start: {e}");
+            publish_last(&store, &live, &job.id);
+            continue;
+        }
+        if let Ok(events_so_far) = store.events(&job.id, None) {
+            if let Some(last) = events_so_far.last() {
+                let _ = events.send(last.clone());
+            }
+        }
+        let ctx = JobContext {
+            run_id: job.id.clone(),
+            store: store.clone(),
+            events,
+            cancel: cancel.clone(),
+        };
+        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| (job.work)(&ctx)));
+        let (status, message) = match outcome {
+            Ok(Ok(out)) => (RunStatus::Succeeded, out.message),
+            Ok(Err(JobError::Cancelled)) => (RunStatus::Cancelled, "cancelled".to_string()),
+            Ok(Err(JobError::Failed(m))) => (RunStatus::Failed, m),
+            Err(_) => (
+                RunStatus::Failed,
+                "internal error: the job panicked (see the server log)".to_string(),
+            ),
+        };
+        if let Err(e) = store.set_status(&job.id, status, &message) {
+            tracing::warn!(run = %job.id, "cannot record the end: {e}");
+        }
+        tracing::info!(run = %job.id, ?status, "{message}");
+        publish_last(&store, &live, &job.id);
+    }
+}

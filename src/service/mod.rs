@@ -1,0 +1,140 @@
+//! The service behind `ffdic serve` and `ffdic reproduce`: the configuration, the run store, the
+//! bench actor and the job lanes, wired together. The HTTP layer (`api/`) and the CLI call this;
+//! neither runs an experiment any other way.
+
+mod config;
+mod hardware;
+mod jobs;
+mod work;
+
+pub use config::{
+    load_bench_model, BenchConfig, CameraConfig, ConfigError, DaemonConfig, StageConfig,
+    DEFAULT_CONFIG_TOML, PAPER_BENCH_TOML,
+};
+pub use hardware::{mock_bench, open_bench, HardwareError, SwappableScene};
+pub use jobs::{JobContext, JobError, JobOutput, Jobs, Lane, Work};
+pub use work::AnalysisRequest;
+
+use crate::experiment::{BenchHandle, BenchHardware, BenchTimeouts, ExperimentRequest};
+use crate::store::{DatasetId, RecoveryReport, RunRecord, RunStore, StoreError};
+use std::sync::Arc;
+use std::time::Duration;
+
+#[derive(Debug, thiserror::Error)]
+pub enum ServiceError {
+    #[error(transparent)]
+    Store(#[from] StoreError),
+    #[error(transparent)]
+    Hardware(#[from] HardwareError),
+}
+
+/// Everything a request handler needs; cheap to clone.
+#[derive(Clone)]
+pub struct Service {
+    pub config: Arc<DaemonConfig>,
+    pub store: Arc<RunStore>,
+    pub jobs: Arc<Jobs>,
+    pub bench: BenchHandle,
+    /// Whether the bench can change targets itself (the mock bench); set at start.
+    pub has_target_mount: bool,
+    pub has_stage: bool,
+    /// Cancelled when the server shuts down: live streams end with it.
+    pub shutdown: tokio_util::sync::CancellationToken,
+}
+
+impl Service {
+    /// Opens the store (recovering runs a crash left unfinished), starts the bench actor on
+    /// `hardware` and the job lanes.
+    pub fn start(
+        config: DaemonConfig,
+        hardware: BenchHardware,
+    ) -> Result<(Self, RecoveryReport), ServiceError> {
+        let (store, recovery) = RunStore::open(&config.data_dir)?;
+        let store = Arc::new(store);
+        let has_target_mount = hardware.targets.is_some();
+        let has_stage = hardware.stage.is_some();
+        let bench = BenchHandle::spawn(hardware, Duration::from_secs(30));
+        let jobs = Jobs::start(store.clone());
+        Ok((
+            Self {
+                config: Arc::new(config),
+                store,
+                jobs,
+                bench,
+                has_target_mount,
+                has_stage,
+                shutdown: tokio_util::sync::CancellationToken::new(),
+            },
+            recovery,
+        ))
+    }
+
+    pub fn timeouts(&self) -> BenchTimeouts {
+        let b = &self.config.bench;
+        BenchTimeouts {
+            frame: Duration::from_millis(b.frame_timeout_ms),
+            settle: Duration::from_millis(b.settle_timeout_ms),
+            home: Duration::from_millis(b.home_timeout_ms),
+        }
+    }
+
+    /// Queues an experiment on the bench lane (validated first: a bad request queues nothing).
+    pub fn submit_experiment(
+        &self,
+        request: &ExperimentRequest,
+        idempotency_key: Option<&str>,
+    ) -> Result<(RunRecord, bool), SubmitError> {
+        let plan = request.plan(self.has_target_mount)?;
+        if !self.has_stage {
+            return Err(SubmitError::NoStage);
+        }
+        let work = work::experiment(self.clone(), plan);
+        let body = serde_json::to_value(request).expect("a request serialises");
+        Ok(self.jobs.submit(
+            crate::store::RunKind::Experiment,
+            Lane::Bench,
+            body,
+            idempotency_key,
+            None,
+            work,
+        )?)
+    }
+
+    /// Queues the fill-factor study of a stored dataset on the compute lane.
+    pub fn submit_analysis(
+        &self,
+        dataset: &DatasetId,
+        request: &AnalysisRequest,
+        idempotency_key: Option<&str>,
+    ) -> Result<(RunRecord, bool), SubmitError> {
+        let plan = request.plan()?;
+        self.store.get_dataset(dataset)?;
+        let work = work::analysis(self.clone(), dataset.clone(), plan);
+        let body = serde_json::to_value(request).expect("a request serialises");
+        Ok(self.jobs.submit(
+            crate::store::RunKind::Analysis,
+            Lane::Compute,
+            body,
+            idempotency_key,
+            Some(dataset.clone()),
+            work,
+        )?)
+    }
+
+    /// Stops taking work, cancels what runs (cooperatively), stops the stage.
+    pub fn stop(&self, grace: Duration) {
+        self.shutdown.cancel();
+        self.jobs.shutdown(grace);
+        let _ = self.bench.stop_stage(crate::experiment::Owner::Direct);
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum SubmitError {
+    #[error(transparent)]
+    Field(#[from] crate::experiment::FieldError),
+    #[error("no stage is configured: experiments need one")]
+    NoStage,
+    #[error(transparent)]
+    Store(#[from] StoreError),
+}

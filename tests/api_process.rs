@@ -1,0 +1,129 @@
+//! `ffdic serve` as a process: killed mid-run and restarted (the run is failed with the reason,
+//! earlier runs intact), SIGTERM mid-run (cancelled, stage stopped, exit within 10 s), and a
+//! non-loopback address without a token refused.
+
+#[path = "common/daemon.rs"]
+mod daemon;
+
+use daemon::{client, small_config_toml, small_request, wait_terminal, wait_until, ServeProcess};
+use serde_json::Value;
+use std::time::{Duration, Instant};
+
+fn config_file(dir: &std::path::Path) -> String {
+    let data = dir.join("data");
+    let path = dir.join("ffdic.toml");
+    std::fs::write(&path, small_config_toml(&data)).unwrap();
+    path.display().to_string()
+}
+
+async fn start_experiment(server: &ServeProcess, moves: usize) -> String {
+    let r: Value = client()
+        .post(server.url("/experiments"))
+        .json(&small_request(moves))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    server.url(&format!("/experiments/{}", r["id"].as_str().unwrap()))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn killed_mid_run_the_run_is_failed_after_restart_and_earlier_runs_are_intact() {
+    let tmp = tempfile::tempdir().unwrap();
+    let config = config_file(tmp.path());
+    let mut server = ServeProcess::spawn(&["--config", &config]);
+    let done_url = start_experiment(&server, 1).await;
+    let done = wait_terminal(&done_url).await;
+    assert_eq!(done["status"], "succeeded");
+    let done_id = done["id"].as_str().unwrap().to_string();
+    let run_json = tmp.path().join("data/runs").join(&done_id).join("run.json");
+    let before = std::fs::read(&run_json).unwrap();
+
+    let url = start_experiment(&server, 8).await;
+    wait_until(&url, |r| r["status"] == "running").await;
+    server.child.kill().unwrap(); // SIGKILL: no chance to clean up
+    server.child.wait().unwrap();
+
+    let restarted = ServeProcess::spawn(&["--config", &config]);
+    let url = url.replace(&server.base, &restarted.base);
+    let r: Value = client()
+        .get(&url)
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(r["status"], "failed", "{r}");
+    assert!(
+        r["message"].as_str().unwrap().contains("stopped"),
+        "the reason is given: {r}"
+    );
+    assert_eq!(
+        std::fs::read(&run_json).unwrap(),
+        before,
+        "a finished run is never rewritten"
+    );
+    let old: Value = client()
+        .get(done_url.replace(&server.base, &restarted.base))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(old["status"], "succeeded");
+    let mut restarted = restarted;
+    restarted.child.kill().unwrap();
+    restarted.child.wait().unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sigterm_cancels_the_running_experiment_and_exits_within_ten_seconds() {
+    let tmp = tempfile::tempdir().unwrap();
+    let config = config_file(tmp.path());
+    let mut server = ServeProcess::spawn(&["--config", &config]);
+    let url = start_experiment(&server, 20).await;
+    wait_until(&url, |r| r["progress"].as_f64().unwrap_or(0.0) > 0.0).await;
+    let id = url.rsplit('/').next().unwrap().to_string();
+    let t0 = Instant::now();
+    let status = std::process::Command::new("kill")
+        .args(["-TERM", &server.child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let exit = loop {
+        if let Some(s) = server.child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(10),
+            "still running after 10 s"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(exit.success(), "{exit:?}");
+    let record: Value = serde_json::from_slice(
+        &std::fs::read(tmp.path().join("data/runs").join(&id).join("run.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(record["status"], "cancelled", "{record}");
+}
+
+#[test]
+fn a_non_loopback_address_without_a_token_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let config = config_file(tmp.path());
+    // Refused before anything binds: no traffic leaves loopback.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_ffdic"))
+        .args(["serve", "--config", &config, "--listen", "0.0.0.0:0"])
+        .env_remove("FFDIC_TOKEN")
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("token"), "{err}");
+    assert!(out.stdout.is_empty(), "nothing was served");
+}

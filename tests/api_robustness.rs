@@ -1,0 +1,341 @@
+//! Bad requests get problem documents and change nothing; uploads land whole or not at all; the
+//! OpenAPI document matches its checked-in snapshot and lists every route; the token guards every
+//! mutating request.
+
+#[path = "common/daemon.rs"]
+mod daemon;
+
+use daemon::{client, small_config, wait_terminal, TestServer};
+use serde_json::{json, Value};
+use std::path::Path;
+
+fn tree(dir: &Path) -> Vec<String> {
+    let mut out = Vec::new();
+    if let Ok(entries) = std::fs::read_dir(dir) {
+        for e in entries.flatten() {
+            let p = e.path();
+            out.push(p.display().to_string());
+            if p.is_dir() {
+                out.extend(tree(&p));
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+async fn problem(resp: reqwest::Response, status: u16) -> Value {
+    assert_eq!(resp.status().as_u16(), status);
+    assert_eq!(
+        resp.headers()["content-type"],
+        "application/problem+json",
+        "status {status}"
+    );
+    let p: Value = resp.json().await.unwrap();
+    assert_eq!(p["status"], status);
+    assert!(p["title"].is_string() && p["detail"].is_string(), "{p}");
+    p
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_requests_are_problems_and_write_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let server = TestServer::start(small_config(tmp.path())).await;
+    let c = client();
+    let runs = tmp.path().join("runs");
+    let datasets = tmp.path().join("datasets");
+    let before = (tree(&runs), tree(&datasets));
+    let post = |body: &'static str| {
+        c.post(server.url("/experiments"))
+            .header("content-type", "application/json")
+            .body(body)
+            .send()
+    };
+
+    problem(post("{\"patterns\": [").await.unwrap(), 400).await;
+    let p = problem(post(r#"{"frames_averaged": "two"}"#).await.unwrap(), 422).await;
+    assert_eq!(p["field"], "frames_averaged");
+    let p = problem(post(r#"{"framez": 1}"#).await.unwrap(), 422).await;
+    assert!(p["detail"].as_str().unwrap().contains("framez"), "{p}");
+    let p = problem(post(r#"{"dic": {"subset_px": 40}}"#).await.unwrap(), 422).await;
+    assert_eq!(p["field"], "dic.subset");
+    let p = problem(post(r#"{"patterns": ["q"]}"#).await.unwrap(), 422).await;
+    assert_eq!(p["field"], "patterns[0]");
+    let huge = format!("{{\"name\": \"{}\"}}", "x".repeat(200_000));
+    problem(
+        c.post(server.url("/experiments"))
+            .header("content-type", "application/json")
+            .body(huge)
+            .send()
+            .await
+            .unwrap(),
+        413,
+    )
+    .await;
+    problem(
+        c.post(server.url("/experiments"))
+            .header("content-type", "text/plain")
+            .body("{}")
+            .send()
+            .await
+            .unwrap(),
+        415,
+    )
+    .await;
+
+    // Bad ids and names reach nothing outside the data folder.
+    for path in [
+        "/experiments/..%2F..%2Fetc",
+        "/experiments/NOT-AN-ID",
+        "/experiments/exp-20260101T000000-aaaaaa",
+        "/jobs/%2Fetc%2Fpasswd",
+        "/datasets/..",
+    ] {
+        problem(c.get(server.url(path)).send().await.unwrap(), 404).await;
+    }
+    problem(
+        c.get(server.url("/experiments?status=bogus"))
+            .send()
+            .await
+            .unwrap(),
+        422,
+    )
+    .await;
+
+    // Uploads: a path-traversal file name, a corrupt TIFF, a manifest naming a missing frame.
+    let manifest = json!({"format": "ffdic-dataset/1", "name": "up", "scale_px_per_mm": 13.0,
+        "runs": [{"id": "r1", "reference": "ref.tif", "deformed": "def.tif",
+                  "stage": {"dx_mm": 0.5, "dy_mm": 0.0}}]})
+    .to_string();
+    let good_tiff = {
+        let img = ffdic::image::Image::from_fn(96, 80, |c, r| ((c * 37 + r * 11) % 200) as f32);
+        let data: Vec<u16> = img.data().iter().map(|&v| v as u16).collect();
+        ffdic::image::tiff_u16_bytes(96, 80, &data).unwrap()
+    };
+    let part = |name: &str, bytes: Vec<u8>| {
+        reqwest::multipart::Part::bytes(bytes).file_name(name.to_string())
+    };
+    let traversal = reqwest::multipart::Form::new()
+        .part(
+            "dataset.json",
+            part("dataset.json", manifest.clone().into_bytes()),
+        )
+        .part("x", part("../../evil.tif", good_tiff.clone()));
+    let p = problem(
+        c.post(server.url("/datasets"))
+            .multipart(traversal)
+            .send()
+            .await
+            .unwrap(),
+        422,
+    )
+    .await;
+    assert_eq!(p["field"], "file");
+    let corrupt = reqwest::multipart::Form::new()
+        .part(
+            "dataset.json",
+            part("dataset.json", manifest.clone().into_bytes()),
+        )
+        .part("ref.tif", part("ref.tif", good_tiff.clone()))
+        .part(
+            "def.tif",
+            part("def.tif", good_tiff[..good_tiff.len() / 2].to_vec()),
+        );
+    let p = problem(
+        c.post(server.url("/datasets"))
+            .multipart(corrupt)
+            .send()
+            .await
+            .unwrap(),
+        422,
+    )
+    .await;
+    assert!(p["detail"].as_str().unwrap().contains("def.tif"), "{p}");
+    let missing = reqwest::multipart::Form::new()
+        .part(
+            "dataset.json",
+            part("dataset.json", manifest.clone().into_bytes()),
+        )
+        .part("ref.tif", part("ref.tif", good_tiff.clone()));
+    problem(
+        c.post(server.url("/datasets"))
+            .multipart(missing)
+            .send()
+            .await
+            .unwrap(),
+        422,
+    )
+    .await;
+    assert!(!tmp.path().join("evil.tif").exists());
+    assert_eq!((tree(&runs), tree(&datasets)), before, "nothing written");
+
+    // …and the server keeps serving: a good upload lands, and its analysis runs as a job.
+    let good = reqwest::multipart::Form::new()
+        .part("dataset.json", part("dataset.json", manifest.into_bytes()))
+        .part("ref.tif", part("ref.tif", good_tiff.clone()))
+        .part("def.tif", part("def.tif", good_tiff));
+    let r = c
+        .post(server.url("/datasets"))
+        .multipart(good)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 201);
+    let ds: Value = r.json().await.unwrap();
+    let ds_id = ds["id"].as_str().unwrap();
+    let r = c
+        .post(server.url(&format!("/datasets/{ds_id}/analyses")))
+        .json(&json!({"schemes": ["ff100"], "dic": {"subset_px": 15, "step_px": 8, "strain_window": 3}}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let job_url = format!(
+        "{}{}",
+        server.base,
+        r.headers()["location"].to_str().unwrap()
+    );
+    let job = wait_terminal(&job_url).await;
+    assert_eq!(job["status"], "succeeded", "{job}");
+    let rows: Value = c
+        .get(format!("{job_url}/files/results/study.json"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    // The two frames are identical: no motion.
+    let u = rows["rows"][0]["u"]["mean"].as_f64().unwrap();
+    assert!(u.abs() < 1e-3, "{rows}");
+    problem(
+        c.get(format!("{job_url}/files/..%2Frun.json/x"))
+            .send()
+            .await
+            .unwrap(),
+        404,
+    )
+    .await;
+    assert_eq!(
+        c.get(server.url("/health")).send().await.unwrap().status(),
+        200
+    );
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn openapi_matches_its_snapshot_and_lists_every_route() {
+    let tmp = tempfile::tempdir().unwrap();
+    let server = TestServer::start(small_config(tmp.path())).await;
+    let doc: Value = client()
+        .get(server.url("/openapi.json"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let paths = doc["paths"].as_object().unwrap();
+    for (path, methods) in [
+        ("/api/v1/health", &["get"][..]),
+        ("/api/v1/status", &["get"]),
+        ("/api/v1/camera", &["get", "patch"]),
+        ("/api/v1/camera/snapshot", &["post"]),
+        ("/api/v1/stage", &["get"]),
+        ("/api/v1/stage/moves", &["post"]),
+        ("/api/v1/experiments", &["get", "post"]),
+        ("/api/v1/experiments/{id}", &["get"]),
+        ("/api/v1/experiments/{id}/cancel", &["post"]),
+        ("/api/v1/experiments/{id}/events", &["get"]),
+        ("/api/v1/experiments/{id}/results", &["get"]),
+        ("/api/v1/experiments/{id}/results.csv", &["get"]),
+        ("/api/v1/experiments/{id}/frames/{name}", &["get"]),
+        ("/api/v1/experiments/{id}/plots/{name}", &["get"]),
+        ("/api/v1/datasets", &["get", "post"]),
+        ("/api/v1/datasets/{id}", &["get"]),
+        ("/api/v1/datasets/{id}/analyses", &["post"]),
+        ("/api/v1/jobs/{id}", &["get"]),
+        ("/api/v1/jobs/{id}/cancel", &["post"]),
+        ("/api/v1/jobs/{id}/events", &["get"]),
+        ("/api/v1/jobs/{id}/files/{folder}/{name}", &["get"]),
+    ] {
+        let entry = paths
+            .get(path)
+            .unwrap_or_else(|| panic!("{path} missing from the OpenAPI document"));
+        for m in methods {
+            assert!(entry.get(*m).is_some(), "{m} {path} missing");
+        }
+    }
+    let snapshot = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/snapshots/openapi.json");
+    let text = serde_json::to_string_pretty(&doc).unwrap() + "\n";
+    if std::env::var_os("UPDATE_SNAPSHOTS").is_some() {
+        std::fs::write(&snapshot, &text).unwrap();
+    }
+    let expected = std::fs::read_to_string(&snapshot)
+        .expect("tests/snapshots/openapi.json (UPDATE_SNAPSHOTS=1 writes it)");
+    assert!(
+        expected == text,
+        "the OpenAPI document changed: review it and run with UPDATE_SNAPSHOTS=1"
+    );
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_token_guards_every_mutating_request() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut config = small_config(tmp.path());
+    config.auth_token = Some("s3cret-token".into());
+    let server = TestServer::start(config).await;
+    let c = client();
+    let p = problem(
+        c.post(server.url("/experiments"))
+            .json(&json!({}))
+            .send()
+            .await
+            .unwrap(),
+        401,
+    )
+    .await;
+    assert!(
+        !p["detail"].as_str().unwrap().contains("s3cret"),
+        "never leak the token"
+    );
+    problem(
+        c.patch(server.url("/camera"))
+            .bearer_auth("wrong")
+            .json(&json!({"exposure_us": 1000.0}))
+            .send()
+            .await
+            .unwrap(),
+        401,
+    )
+    .await;
+    problem(
+        c.post(server.url("/stage/moves"))
+            .json(&json!({"dx_mm": 1.0}))
+            .send()
+            .await
+            .unwrap(),
+        401,
+    )
+    .await;
+    assert!(tree(&tmp.path().join("runs")).is_empty());
+    // Reads stay open; the right token passes.
+    assert_eq!(
+        c.get(server.url("/experiments"))
+            .send()
+            .await
+            .unwrap()
+            .status(),
+        200
+    );
+    let ok = c
+        .patch(server.url("/camera"))
+        .bearer_auth("s3cret-token")
+        .json(&json!({"exposure_us": 1000.0}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(ok.status(), 200);
+    server.stop().await;
+}
