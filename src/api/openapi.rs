@@ -2,7 +2,7 @@
 //! so the document cannot drift from the router (a test checks it against a snapshot).
 
 use super::problem::Problem;
-use super::routes::{camera, datasets, experiments, jobs, stage, system};
+use super::routes::{camera, datasets, experiments, jobs, models, stage, system};
 use crate::service::Service;
 use utoipa::OpenApi;
 use utoipa_axum::router::OpenApiRouter;
@@ -23,6 +23,7 @@ use utoipa_axum::routes;
         (name = "experiments", description = "Translation experiments on the bench"),
         (name = "datasets", description = "Measurements in format ffdic-dataset/1"),
         (name = "jobs", description = "Any run: experiments, analyses, comparisons, diagnoses"),
+        (name = "models", description = "Analysis models: embedded and added by users"),
     )
 )]
 struct ApiDoc;
@@ -52,6 +53,12 @@ pub fn router(max_upload_bytes: usize) -> OpenApiRouter<Service> {
         .routes(routes!(datasets::list))
         .routes(routes!(datasets::get))
         .routes(routes!(datasets::analyse))
+        .routes(routes!(datasets::compare))
+        .routes(routes!(datasets::diagnose))
+        .routes(routes!(datasets::history))
+        .routes(routes!(datasets::history_svg))
+        .routes(routes!(models::list, models::add))
+        .routes(routes!(models::get))
         .routes(routes!(jobs::get_job))
         .routes(routes!(jobs::cancel_job))
         .routes(routes!(jobs::job_events))

@@ -3,8 +3,7 @@
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use ffdic::diagnose::read_history;
-use ffdic::report::{history_svg, HistoryPoint};
+use ffdic::diagnose::{history_chart, read_history};
 use std::path::PathBuf;
 
 #[derive(Debug, Args)]
@@ -27,19 +26,11 @@ pub fn run(args: &HistoryArgs) -> Result<()> {
             args.dataset.display()
         );
     }
-    let points: Vec<HistoryPoint> = entries
-        .iter()
-        .map(|e| HistoryPoint {
-            label: format!("{} {}", e.model, &e.version[..e.version.len().min(6)]),
-            discrepancy_px: e.discrepancy_px,
-        })
-        .collect();
     let svg_path = args
         .svg
         .clone()
         .unwrap_or_else(|| args.dataset.join("ffdic-history.svg"));
-    let title = format!("Discrepancy of {} over model versions", entries[0].dataset);
-    std::fs::write(&svg_path, history_svg(&title, &points, 760, 460))
+    std::fs::write(&svg_path, history_chart(&entries))
         .with_context(|| format!("cannot write {}", svg_path.display()))?;
     if args.json {
         println!("{}", serde_json::to_string(&entries)?);

@@ -73,7 +73,9 @@ pub use compare::{
 };
 pub use diagnose::{diagnose, diagnose_prepared, Candidate, Diagnosis};
 pub use discrepancy::{quadratic_fit, run_discrepancy, RunDiscrepancy};
-pub use history::{append_history, history_path, read_history, HistoryEntry, HISTORY_FILE};
+pub use history::{
+    append_history, history_chart, history_path, read_history, HistoryEntry, HISTORY_FILE,
+};
 pub use identifiability::{design_of, Confounded, DatasetDesign, NotIdentifiable};
 pub use image_stats::{FrameStats, MeanMap, PsdBin, PtcPoint};
 pub use nominal::{Nominal, BASELINE_TOML};

@@ -213,14 +213,10 @@ pub fn load_bench_model(name: &str) -> Result<ModelConfig, ConfigError> {
         name: name.to_string(),
         message,
     };
-    match name {
-        "paper-bench" => ModelConfig::from_toml(
-            PAPER_BENCH_TOML,
-            Path::new("config/models/paper-bench.toml"),
-        )
-        .map_err(|e| fail(e.to_string())),
-        path => ModelConfig::load(Path::new(path)).map_err(|e| fail(e.to_string())),
+    if let Some(m) = super::models::embedded_model(name) {
+        return Ok(m);
     }
+    ModelConfig::load(Path::new(name)).map_err(|e| fail(e.to_string()))
 }
 
 #[cfg(test)]

@@ -5,6 +5,7 @@
 mod config;
 mod hardware;
 mod jobs;
+mod models;
 mod work;
 
 pub use config::{
@@ -13,7 +14,11 @@ pub use config::{
 };
 pub use hardware::{mock_bench, open_bench, HardwareError, SwappableScene};
 pub use jobs::{JobContext, JobError, JobOutput, Jobs, Lane, Work};
-pub use work::AnalysisRequest;
+pub use models::{
+    embedded_model, ModelDetail, ModelSource, ModelStoreError, ModelSummary, NewModel,
+    EMBEDDED_MODELS, PAPER_BENCH_DISTORTION_TOML,
+};
+pub use work::{AnalysisRequest, CompareRequest};
 
 use crate::experiment::{BenchHandle, BenchHardware, BenchTimeouts, ExperimentRequest};
 use crate::store::{DatasetId, RecoveryReport, RunRecord, RunStore, StoreError};
@@ -113,6 +118,69 @@ impl Service {
         let body = serde_json::to_value(request).expect("a request serialises");
         Ok(self.jobs.submit(
             crate::store::RunKind::Analysis,
+            Lane::Compute,
+            body,
+            idempotency_key,
+            Some(dataset.clone()),
+            work,
+        )?)
+    }
+
+    /// Queues a comparison of a stored dataset with a model on the compute lane.
+    pub fn submit_comparison(
+        &self,
+        dataset: &DatasetId,
+        request: &CompareRequest,
+        idempotency_key: Option<&str>,
+    ) -> Result<(RunRecord, bool), SubmitError> {
+        self.submit_model_job(
+            crate::store::RunKind::Comparison,
+            dataset,
+            request,
+            idempotency_key,
+        )
+    }
+
+    /// Queues a diagnosis of a stored dataset against a model on the compute lane.
+    pub fn submit_diagnosis(
+        &self,
+        dataset: &DatasetId,
+        request: &CompareRequest,
+        idempotency_key: Option<&str>,
+    ) -> Result<(RunRecord, bool), SubmitError> {
+        self.submit_model_job(
+            crate::store::RunKind::Diagnosis,
+            dataset,
+            request,
+            idempotency_key,
+        )
+    }
+
+    fn submit_model_job(
+        &self,
+        kind: crate::store::RunKind,
+        dataset: &DatasetId,
+        request: &CompareRequest,
+        idempotency_key: Option<&str>,
+    ) -> Result<(RunRecord, bool), SubmitError> {
+        let options = request.options()?;
+        let model = self.model_config(&request.model).map_err(|e| match e {
+            ModelStoreError::Store(s) => SubmitError::Store(s),
+            other => SubmitError::Field(crate::experiment::FieldError {
+                field: "model".into(),
+                reason: other.to_string(),
+            }),
+        })?;
+        self.store.get_dataset(dataset)?;
+        let work = match kind {
+            crate::store::RunKind::Diagnosis => {
+                work::diagnosis(self.clone(), dataset.clone(), model, options)
+            }
+            _ => work::comparison(self.clone(), dataset.clone(), model, options),
+        };
+        let body = serde_json::to_value(request).expect("a request serialises");
+        Ok(self.jobs.submit(
+            kind,
             Lane::Compute,
             body,
             idempotency_key,

@@ -3,11 +3,16 @@
 use super::jobs::{JobContext, JobError, JobOutput, Work};
 use super::Service;
 use crate::dataset::Manifest;
+use crate::diagnose::{
+    append_history, compare, comparison_svgs, diagnose, CompareOptions, Comparison, DiagnoseError,
+    HistoryEntry,
+};
 use crate::dic::DicSettings;
 use crate::experiment::{
     analyze_dataset, figure_svgs, rows_json, run_experiment, study_csv, ExperimentPlan,
     ExperimentRequest, FieldError, RunSink, RunnerError, SchemeSpec, StudyError,
 };
+use crate::model::ModelConfig;
 use crate::reduce::Scheme;
 use crate::store::DatasetId;
 use serde::{Deserialize, Serialize};
@@ -130,6 +135,165 @@ pub fn analysis(service: Service, dataset: DatasetId, plan: AnalysisPlan) -> Wor
         }
         Ok(JobOutput {
             message: format!("{} rows from dataset {dataset}", rows.len()),
+        })
+    })
+}
+
+/// `POST /datasets/{id}/comparisons` and `/diagnoses`: which model, and how both sides are
+/// analysed; every field has a default (the baseline model, the paper's schemes and DIC).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct CompareRequest {
+    /// A name from `GET /models`.
+    pub model: String,
+    #[schema(value_type = Vec<Object>)]
+    pub schemes: Vec<SchemeSpec>,
+    #[schema(value_type = Object)]
+    pub dic: DicSettings,
+    /// Seed of the model's speckle layouts and noise (fixed: a comparison is reproducible).
+    pub seed: u64,
+}
+
+impl Default for CompareRequest {
+    fn default() -> Self {
+        let a = AnalysisRequest::default();
+        Self {
+            model: "baseline".into(),
+            schemes: a.schemes,
+            dic: a.dic,
+            seed: CompareOptions::default().seed,
+        }
+    }
+}
+
+impl CompareRequest {
+    pub fn options(&self) -> Result<CompareOptions, FieldError> {
+        let plan = AnalysisRequest {
+            schemes: self.schemes.clone(),
+            dic: self.dic.clone(),
+        }
+        .plan()?;
+        Ok(CompareOptions {
+            dic: plan.dic,
+            schemes: plan.schemes,
+            seed: self.seed,
+        })
+    }
+}
+
+/// Reports progress as events, at most about a hundred per job (each event is a synced append).
+fn progress_reporter<'a>(
+    ctx: &'a JobContext,
+    what: &'a str,
+) -> impl Fn(usize, usize) -> bool + Sync + 'a {
+    let last = std::sync::Mutex::new(-1.0f64);
+    move |done: usize, total: usize| {
+        let p = done as f64 / total.max(1) as f64;
+        let mut last = last.lock().expect("progress lock");
+        if p - *last >= 0.01 || done == total {
+            *last = p;
+            ctx.event(
+                "progress",
+                p.min(1.0),
+                &format!("{what}: {done} of {total}"),
+                json!({ "done": done, "total": total }),
+            );
+        }
+        !ctx.cancelled()
+    }
+}
+
+fn diagnose_failure(e: DiagnoseError) -> JobError {
+    match e {
+        DiagnoseError::Cancelled => JobError::Cancelled,
+        other => fail(other),
+    }
+}
+
+/// Writes a comparison's JSON and plots into the job's folder and records it in the dataset's
+/// history.
+fn keep_comparison(
+    ctx: &JobContext,
+    dataset_dir: &std::path::Path,
+    cmp: &Comparison,
+) -> Result<(), JobError> {
+    let text = serde_json::to_vec_pretty(cmp).map_err(fail)?;
+    ctx.write("results/comparison.json", &text).map_err(fail)?;
+    for (name, svg) in comparison_svgs(cmp) {
+        ctx.write(&format!("plots/{name}"), svg.as_bytes())
+            .map_err(fail)?;
+    }
+    append_history(
+        dataset_dir,
+        &HistoryEntry::now(
+            &cmp.dataset,
+            &cmp.model.name,
+            &cmp.model.version,
+            cmp.discrepancy_px,
+            cmp.model
+                .effects
+                .enabled()
+                .iter()
+                .map(|s| s.to_string())
+                .collect(),
+        ),
+    )
+    .map_err(fail)
+}
+
+pub fn comparison(
+    service: Service,
+    dataset: DatasetId,
+    model: ModelConfig,
+    options: CompareOptions,
+) -> Work {
+    Box::new(move |ctx: &JobContext| {
+        let dir = service.store.dataset_dir(&dataset);
+        let report = progress_reporter(ctx, "analyses (measured and model)");
+        let cmp = compare(&dir, &model, &options, &report).map_err(diagnose_failure)?;
+        keep_comparison(ctx, &dir, &cmp)?;
+        Ok(JobOutput {
+            message: format!(
+                "discrepancy {:.5} px against model {} ({})",
+                cmp.discrepancy_px, cmp.model.name, cmp.model.version
+            ),
+        })
+    })
+}
+
+pub fn diagnosis(
+    service: Service,
+    dataset: DatasetId,
+    model: ModelConfig,
+    options: CompareOptions,
+) -> Work {
+    Box::new(move |ctx: &JobContext| {
+        let dir = service.store.dataset_dir(&dataset);
+        let report = progress_reporter(ctx, "candidate fits");
+        let d = diagnose(&dir, &model, &options, &report).map_err(diagnose_failure)?;
+        let text = serde_json::to_vec_pretty(&d).map_err(fail)?;
+        ctx.write("results/diagnosis.json", &text).map_err(fail)?;
+        if let Some(winner) = &d.winner_model {
+            ctx.write("results/winner-model.toml", winner.to_toml().as_bytes())
+                .map_err(fail)?;
+        }
+        if let Some(before) = &d.before {
+            for (name, svg) in comparison_svgs(before) {
+                ctx.write(&format!("plots/{name}"), svg.as_bytes())
+                    .map_err(fail)?;
+            }
+        }
+        Ok(JobOutput {
+            message: match &d.after {
+                Some(after) => format!(
+                    "verdict {}: discrepancy {:.5} px → {:.5} px with it added",
+                    d.verdict, d.discrepancy_px, after.discrepancy_px
+                ),
+                None => format!(
+                    "verdict {}: no candidate explains the discrepancy of {:.5} px",
+                    d.verdict, d.discrepancy_px
+                ),
+            },
         })
     })
 }

@@ -7,6 +7,7 @@
 //! data/runs/{id}/events.jsonl    one Event per line, append-only, synced per append
 //! data/runs/{id}/frames/ …       what the runner writes through RunStore::write_file
 //! data/datasets/{id}/            dataset.json + frames (ffdic-dataset/1) and record.json
+//! data/models/{name}.toml        analysis models users added (never rewritten)
 //! ```
 //!
 //! A run moves queued → running → succeeded | failed | cancelled (or straight from queued to
@@ -21,6 +22,7 @@ mod events;
 mod files;
 mod ids;
 mod index;
+mod models;
 mod paths;
 mod record;
 mod run_store;
@@ -29,6 +31,7 @@ pub use atomic::write_atomically;
 pub use datasets::StagingDir;
 pub use error::{Result, StoreError};
 pub use ids::{DatasetId, RunId, MAX_ID_LEN};
+pub use models::{is_model_name, ModelSaved, MAX_MODEL_NAME_LEN};
 pub use paths::{safe_relative_path, MAX_COMPONENT_LEN, MAX_DEPTH};
 pub use record::{now_rfc3339, DatasetRecord, Event, RunKind, RunRecord, RunStatus};
 pub use run_store::{

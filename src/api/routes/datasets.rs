@@ -10,8 +10,9 @@ use super::experiments::{accepted, idempotency_key};
 use crate::api::json::ApiJson;
 use crate::api::problem::{ApiError, ApiResult, Problem};
 use crate::dataset::{is_plain_file_name, Manifest};
+use crate::diagnose::{history_chart, read_history, HistoryEntry};
 use crate::image::read_tiff;
-use crate::service::{AnalysisRequest, Service};
+use crate::service::{AnalysisRequest, CompareRequest, Service};
 use crate::store::{DatasetId, DatasetRecord};
 use axum::extract::{Multipart, Path, State};
 use axum::http::{header, HeaderMap, StatusCode};
@@ -191,4 +192,90 @@ pub async fn analyse(
         blocking(move || s.submit_analysis(&id, &request, key.as_deref())).await??;
     let location = format!("/api/v1/jobs/{}", record.id);
     Ok(accepted(record, created, location))
+}
+
+#[utoipa::path(post, path = "/datasets/{id}/comparisons", tag = "datasets", request_body = CompareRequest,
+    params(("id" = String, Path, description = "Dataset id"),
+           ("Idempotency-Key" = Option<String>, Header, description = "Repeat-safe submission")),
+    responses((status = 202, description = "Queued as a job; Location names it. Its results/comparison.json and plots/*.svg hold the comparison, which the dataset's history keeps", body = Object),
+              (status = 404, body = Problem), (status = 422, body = Problem)))]
+pub async fn compare(
+    State(svc): State<Service>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+    ApiJson(request): ApiJson<CompareRequest>,
+) -> ApiResult<Response> {
+    let id = dataset_id(&id)?;
+    let key = idempotency_key(&headers)?;
+    let s = svc.clone();
+    let (record, created) =
+        blocking(move || s.submit_comparison(&id, &request, key.as_deref())).await??;
+    let location = format!("/api/v1/jobs/{}", record.id);
+    Ok(accepted(record, created, location))
+}
+
+#[utoipa::path(post, path = "/datasets/{id}/diagnoses", tag = "datasets", request_body = CompareRequest,
+    params(("id" = String, Path, description = "Dataset id"),
+           ("Idempotency-Key" = Option<String>, Header, description = "Repeat-safe submission")),
+    responses((status = 202, description = "Queued as a job; Location names it. Its results/diagnosis.json ranks the candidates; results/winner-model.toml is the model with the verdict added", body = Object),
+              (status = 404, body = Problem), (status = 422, body = Problem)))]
+pub async fn diagnose(
+    State(svc): State<Service>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+    ApiJson(request): ApiJson<CompareRequest>,
+) -> ApiResult<Response> {
+    let id = dataset_id(&id)?;
+    let key = idempotency_key(&headers)?;
+    let s = svc.clone();
+    let (record, created) =
+        blocking(move || s.submit_diagnosis(&id, &request, key.as_deref())).await??;
+    let location = format!("/api/v1/jobs/{}", record.id);
+    Ok(accepted(record, created, location))
+}
+
+/// `GET /datasets/{id}/history`: every comparison of the dataset, oldest first.
+#[derive(serde::Serialize, utoipa::ToSchema)]
+pub struct History {
+    pub dataset: String,
+    #[schema(value_type = Vec<Object>)]
+    pub entries: Vec<HistoryEntry>,
+}
+
+async fn read_dataset_history(svc: &Service, raw: &str) -> ApiResult<Vec<HistoryEntry>> {
+    let id = dataset_id(raw)?;
+    let store = svc.store.clone();
+    blocking(move || -> ApiResult<Vec<HistoryEntry>> {
+        store.get_dataset(&id)?;
+        read_history(&store.dataset_dir(&id))
+            .map_err(|e| ApiError::internal("reading a dataset's history", e))
+    })
+    .await?
+}
+
+#[utoipa::path(get, path = "/datasets/{id}/history", tag = "datasets",
+    params(("id" = String, Path, description = "Dataset id")),
+    responses((status = 200, body = History), (status = 404, body = Problem)))]
+pub async fn history(
+    State(svc): State<Service>,
+    Path(id): Path<String>,
+) -> ApiResult<Json<History>> {
+    let entries = read_dataset_history(&svc, &id).await?;
+    Ok(Json(History {
+        dataset: id,
+        entries,
+    }))
+}
+
+#[utoipa::path(get, path = "/datasets/{id}/history.svg", tag = "datasets",
+    params(("id" = String, Path, description = "Dataset id")),
+    responses((status = 200, description = "The discrepancy across model versions", content_type = "image/svg+xml", body = String),
+              (status = 404, body = Problem)))]
+pub async fn history_svg(
+    State(svc): State<Service>,
+    Path(id): Path<String>,
+) -> ApiResult<Response> {
+    let entries = read_dataset_history(&svc, &id).await?;
+    let svg = history_chart(&entries);
+    Ok(([(header::CONTENT_TYPE, "image/svg+xml")], svg).into_response())
 }

@@ -4,6 +4,7 @@ pub mod camera;
 pub mod datasets;
 pub mod experiments;
 pub mod jobs;
+pub mod models;
 pub mod stage;
 pub mod system;
 

@@ -1,0 +1,305 @@
+//! The model against a measurement over HTTP (issue 6's API): upload a dataset whose bench has a
+//! lens distortion the baseline lacks, compare, diagnose, add the winner as a model, compare again
+//! — and the dataset's history shows the discrepancy fall.
+
+#[path = "common/daemon.rs"]
+mod daemon;
+
+use daemon::{client, small_config, wait_terminal, TestServer};
+use ffdic::dic::DicSettings;
+use ffdic::experiment::{simulate_dataset, ExperimentSpec, MoveSpec, PatternSpec};
+use ffdic::model::effects::{LensDistortion, SensorNoise, StageMisalignment};
+use ffdic::model::{Camera, Effects, ModelConfig};
+use ffdic::reduce::{AxisScheme, Scheme};
+use serde_json::{json, Value};
+use std::path::Path;
+
+const K1: f64 = -0.003;
+
+/// 512x512 frames at 13 px/mm of pattern a, moved 2 and 4 mm in x and 3 mm in y (translations of
+/// several sizes: distortion is told from scale), on a bench with a radial distortion.
+fn simulate(dir: &Path) {
+    let mv = |id: &str, dx_mm: f64, dy_mm: f64| MoveSpec {
+        id: id.into(),
+        dx_mm,
+        dy_mm,
+    };
+    let spec = ExperimentSpec {
+        name: "distorted".into(),
+        seed: 11,
+        camera: Camera {
+            width: 512,
+            height: 512,
+            scale_px_per_mm: 13.0,
+            exposure_level: 0.5,
+            principal_dx_px: 0.0,
+            principal_dy_px: 0.0,
+        },
+        patterns: vec![PatternSpec::Preset("a".into())],
+        moves: vec![mv("x2", 2.0, 0.0), mv("x4", 4.0, 0.0), mv("y3", 0.0, 3.0)],
+        step_series: vec![],
+        repeats: 1,
+        schemes: vec![],
+        dic: DicSettings::default(),
+    };
+    let bench = ModelConfig {
+        name: "bench-distorted".into(),
+        description: String::new(),
+        effects: Effects {
+            stage_misalignment: Some(StageMisalignment { angle_rad: 0.004 }),
+            lens_distortion: Some(LensDistortion {
+                k1: K1,
+                k2: 0.0,
+                p1: 0.0,
+                p2: 0.0,
+                centre_dx_px: 0.0,
+                centre_dy_px: 0.0,
+                norm_radius_px: 0.0,
+            }),
+            // Signal-independent noise, as the baseline assumes: distortion is the one hidden effect.
+            sensor_noise: Some(SensorNoise {
+                full_well_e: 1e10,
+                read_noise_e: 150.0 * 1e4,
+                gain: 1e4,
+            }),
+            ..Effects::default()
+        },
+    };
+    simulate_dataset(&spec, &bench, spec.seed, dir, &|_, _| {}).unwrap();
+}
+
+async fn upload(server: &TestServer, dir: &Path) -> Value {
+    let mut form = reqwest::multipart::Form::new();
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        let part =
+            reqwest::multipart::Part::bytes(std::fs::read(&path).unwrap()).file_name(name.clone());
+        form = form.part(name, part);
+    }
+    let resp = client()
+        .post(server.url("/datasets"))
+        .multipart(form)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), 201);
+    resp.json().await.unwrap()
+}
+
+/// The analysis both sides get: native resolution, small subsets.
+fn analysis(model: &str) -> Value {
+    let one = AxisScheme {
+        block: 1,
+        first: 0,
+        active: 1,
+    };
+    json!({
+        "model": model,
+        "schemes": [Scheme::new("native", one, one).unwrap()],
+        "dic": {"subset_px": 21, "step_px": 10, "strain_window": 5}
+    })
+}
+
+/// Posts a job, checks 202 + Location, waits for it and returns its record.
+async fn run_job(server: &TestServer, path: &str, body: &Value) -> Value {
+    let resp = client()
+        .post(server.url(path))
+        .json(body)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), 202, "{}", resp.text().await.unwrap());
+    let location = resp.headers()["location"].to_str().unwrap().to_string();
+    assert!(location.starts_with("/api/v1/jobs/"), "{location}");
+    let record = wait_terminal(&format!("{}{location}", server.base)).await;
+    assert_eq!(record["status"], "succeeded", "{record}");
+    record
+}
+
+async fn job_file(server: &TestServer, job: &Value, rel: &str) -> reqwest::Response {
+    let resp = client()
+        .get(server.url(&format!(
+            "/jobs/{}/files/{rel}",
+            job["id"].as_str().unwrap()
+        )))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), 200, "{rel}");
+    resp
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn compare_diagnose_add_the_winner_and_the_history_falls() {
+    let data = tempfile::tempdir().unwrap();
+    let frames = tempfile::tempdir().unwrap();
+    simulate(frames.path());
+    let server = TestServer::start(small_config(data.path())).await;
+    let dataset = upload(&server, frames.path()).await;
+    let id = dataset["id"].as_str().unwrap();
+
+    // The models a comparison can name: the embedded ones, baseline first.
+    let models: Value = client()
+        .get(server.url("/models"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(models[0]["name"], "baseline");
+    assert_eq!(models[0]["source"], "embedded");
+
+    let before = run_job(
+        &server,
+        &format!("/datasets/{id}/comparisons"),
+        &analysis("baseline"),
+    )
+    .await;
+    let cmp: Value = job_file(&server, &before, "results/comparison.json")
+        .await
+        .json()
+        .await
+        .unwrap();
+    let before_px = cmp["discrepancy_px"].as_f64().unwrap();
+    assert_eq!(cmp["runs"].as_array().unwrap().len(), 3);
+    let svgs: Vec<&str> = before["result_files"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|f| f.as_str().filter(|f| f.starts_with("plots/")))
+        .collect();
+    assert!(!svgs.is_empty(), "{before}");
+    let svg = job_file(&server, &before, svgs[0])
+        .await
+        .text()
+        .await
+        .unwrap();
+    assert!(
+        svg.starts_with("<svg") || svg.starts_with("<?xml"),
+        "{svgs:?}"
+    );
+
+    let diag = run_job(
+        &server,
+        &format!("/datasets/{id}/diagnoses"),
+        &analysis("baseline"),
+    )
+    .await;
+    let d: Value = job_file(&server, &diag, "results/diagnosis.json")
+        .await
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(d["verdict"], "lens_distortion", "{d}");
+    let winner = job_file(&server, &diag, "results/winner-model.toml")
+        .await
+        .text()
+        .await
+        .unwrap();
+
+    // One click: the winner becomes a model version; the same model twice is harmless, another
+    // model under its name is a conflict, and an embedded name is reserved.
+    let add = |toml: String| {
+        client()
+            .post(server.url("/models"))
+            .json(&json!({ "toml": toml }))
+            .send()
+    };
+    let resp = add(winner.clone()).await.unwrap();
+    assert_eq!(resp.status(), 201);
+    let added: Value = resp.json().await.unwrap();
+    let name = added["name"].as_str().unwrap().to_string();
+    assert!(
+        added["effects"]
+            .as_array()
+            .unwrap()
+            .contains(&json!("lens_distortion")),
+        "{added}"
+    );
+    assert_eq!(add(winner.clone()).await.unwrap().status(), 200);
+    assert_eq!(
+        add(format!("{winner}\n[effects.psf_blur]\nsigma_px = 0.5\n"))
+            .await
+            .unwrap()
+            .status(),
+        409
+    );
+    assert_eq!(
+        add(winner.replace(&name, "baseline"))
+            .await
+            .unwrap()
+            .status(),
+        409
+    );
+    let bad = add("name = \"x\"\n[effects.psf_blurr]\nsigma_px = 1\n".into())
+        .await
+        .unwrap();
+    assert_eq!(bad.status(), 422);
+    assert!(bad.text().await.unwrap().contains("psf_blurr"));
+    let detail: Value = client()
+        .get(server.url(&format!("/models/{name}")))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(detail["source"], "stored");
+    assert_eq!(detail["toml"], winner);
+
+    let after = run_job(
+        &server,
+        &format!("/datasets/{id}/comparisons"),
+        &analysis(&name),
+    )
+    .await;
+    let cmp: Value = job_file(&server, &after, "results/comparison.json")
+        .await
+        .json()
+        .await
+        .unwrap();
+    let after_px = cmp["discrepancy_px"].as_f64().unwrap();
+    println!("discrepancy {before_px:.5} px with baseline, {after_px:.5} px with {name}");
+    assert!(after_px <= before_px / 3.0, "{before_px} → {after_px}");
+
+    let history: Value = client()
+        .get(server.url(&format!("/datasets/{id}/history")))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let entries = history["entries"].as_array().unwrap();
+    assert_eq!(entries.len(), 2, "{history}");
+    assert_eq!(entries[0]["model"], "baseline");
+    assert_eq!(entries[1]["model"], name.as_str());
+    assert!(entries[1]["discrepancy_px"].as_f64() < entries[0]["discrepancy_px"].as_f64());
+    let chart = client()
+        .get(server.url(&format!("/datasets/{id}/history.svg")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(chart.headers()["content-type"], "image/svg+xml");
+
+    // A model that does not exist, and a dataset that does not: named problems, nothing queued.
+    let resp = client()
+        .post(server.url(&format!("/datasets/{id}/comparisons")))
+        .json(&json!({"model": "nope"}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), 422);
+    let problem: Value = resp.json().await.unwrap();
+    assert_eq!(problem["field"], "model", "{problem}");
+    let resp = client()
+        .post(server.url("/datasets/ds-nope/diagnoses"))
+        .json(&json!({}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), 404);
+    server.stop().await;
+}
