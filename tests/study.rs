@@ -114,6 +114,20 @@ fn reproduce_json_has_a_row_per_run_and_scheme_and_recovers_the_motion() {
     ] {
         assert!(out.join(f).is_file(), "{f}");
     }
+    // Then the model against the measurement: baseline comparison, diagnosis, and — when an
+    // effect is missing — the comparison again with it added, which must be lower.
+    let story = &doc["model"];
+    let baseline_px = story["baseline_px"].as_f64().unwrap();
+    assert!(baseline_px.is_finite() && baseline_px >= 0.0, "{story}");
+    let verdict = story["verdict"].as_str().unwrap();
+    let jobs = story["jobs"].as_array().unwrap();
+    if verdict == "none" {
+        assert_eq!(jobs.len(), 2, "{story}");
+    } else {
+        assert_eq!(jobs.len(), 3, "{story}");
+        assert!(story["after_px"].as_f64().unwrap() < baseline_px, "{story}");
+    }
+    println!("reproduce on the fixture: {story}");
     let svg = std::fs::read_to_string(out.join("plots/figure5_u.svg")).unwrap();
     // One bar per pattern and scheme.
     assert_eq!(svg.matches(r#"class="bar""#).count(), 2 * 3);

@@ -8,9 +8,13 @@ use super::simulate::{load_experiment, load_model};
 use super::ProgressBar;
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use ffdic::diagnose::Diagnosis;
 use ffdic::experiment::{figures_text, rows_json, ExperimentRequest, SchemeSpec, StudyRow};
-use ffdic::service::{mock_bench, CameraConfig, DaemonConfig, Service, PAPER_BENCH_TOML};
-use ffdic::store::RunStatus;
+use ffdic::service::{
+    mock_bench, CameraConfig, CompareRequest, DaemonConfig, NewModel, Service,
+    PAPER_BENCH_DISTORTION_TOML,
+};
+use ffdic::store::{RunId, RunRecord, RunStatus};
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -19,7 +23,8 @@ pub struct ReproduceArgs {
     /// Experiment file (default: the embedded paper study, config/experiments/paper.toml).
     #[arg(long)]
     pub experiment: Option<PathBuf>,
-    /// Model of the mock bench's truth (default: config/models/paper-bench.toml).
+    /// Model of the mock bench's truth (default: config/models/paper-bench-distortion.toml, the
+    /// paper's bench with a mild lens distortion the baseline analysis model lacks).
     #[arg(long)]
     pub bench_model: Option<PathBuf>,
     /// Data folder the run is stored in (as `ffdic serve` would).
@@ -31,14 +36,17 @@ pub struct ReproduceArgs {
     /// Print the table as one JSON document and nothing else.
     #[arg(long)]
     pub json: bool,
+    /// Stop after the study: no comparison with the baseline model, no diagnosis.
+    #[arg(long)]
+    pub no_model: bool,
 }
 
 pub fn run(args: &ReproduceArgs) -> Result<()> {
     let spec = load_experiment(&args.experiment)?;
     let truth = load_model(
         &args.bench_model,
-        PAPER_BENCH_TOML,
-        "config/models/paper-bench.toml",
+        PAPER_BENCH_DISTORTION_TOML,
+        "config/models/paper-bench-distortion.toml",
     )?;
     let mut config = DaemonConfig::embedded();
     config.data_dir = args.data.clone();
@@ -70,25 +78,18 @@ pub fn run(args: &ReproduceArgs) -> Result<()> {
         ..ExperimentRequest::default()
     };
     let (record, _) = service.submit_experiment(&request, None)?;
-    let bar = ProgressBar::new(!args.json, "capturing and correlating");
-    let record = loop {
-        let r = service.store.get(&record.id)?;
-        bar.update((r.progress * 1000.0) as usize, 1000);
-        if r.status.is_terminal() {
-            break r;
-        }
-        std::thread::sleep(Duration::from_millis(100));
+    let record = wait(
+        &service,
+        &record.id,
+        "capturing and correlating",
+        !args.json,
+    )?;
+    let story = if args.no_model {
+        None
+    } else {
+        Some(model_story(&service, &record.id, &spec, !args.json)?)
     };
-    bar.finish();
     service.stop(Duration::from_secs(5));
-    if record.status != RunStatus::Succeeded {
-        bail!(
-            "experiment {} {:?}: {}",
-            record.id,
-            record.status,
-            record.message
-        );
-    }
     let run_dir = service.store.run_dir(&record.id);
     let rows_path = run_dir.join("results/rows.json");
     let rows: Vec<StudyRow> = serde_json::from_slice(
@@ -99,6 +100,9 @@ pub fn run(args: &ReproduceArgs) -> Result<()> {
         let mut doc = rows_json(&rows);
         doc["run"] = serde_json::json!(record.id.to_string());
         doc["folder"] = serde_json::json!(run_dir.display().to_string());
+        if let Some(story) = &story {
+            doc["model"] = serde_json::to_value(story)?;
+        }
         println!("{doc}");
     } else {
         print!("{}", figures_text(&rows));
@@ -107,6 +111,166 @@ pub fn run(args: &ReproduceArgs) -> Result<()> {
             record.id,
             run_dir.display()
         );
+        if let Some(story) = &story {
+            print!("{}", story_text(story));
+        }
     }
     Ok(())
+}
+
+/// Waits for run `id` with a progress bar; an error unless it succeeded.
+fn wait(service: &Service, id: &RunId, what: &'static str, show: bool) -> Result<RunRecord> {
+    let bar = ProgressBar::new(show, what);
+    let record = loop {
+        let r = service.store.get(id)?;
+        bar.update((r.progress * 1000.0) as usize, 1000);
+        if r.status.is_terminal() {
+            break r;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    bar.finish();
+    if record.status != RunStatus::Succeeded {
+        bail!(
+            "{what}: run {} {:?}: {}",
+            record.id,
+            record.status,
+            record.message
+        );
+    }
+    Ok(record)
+}
+
+/// The model against the measurement, as a user would do it on the dashboard: compare the
+/// captured frames with the baseline, diagnose, add the winner as a model, compare again.
+#[derive(Debug, serde::Serialize)]
+struct ModelStory {
+    dataset: String,
+    baseline_px: f64,
+    verdict: String,
+    /// The winner's fitted parameters and standard errors.
+    params: std::collections::BTreeMap<String, f64>,
+    stderr: std::collections::BTreeMap<String, f64>,
+    delta_bic: Option<f64>,
+    /// The model with the winner added, and the discrepancy against it.
+    model: Option<String>,
+    after_px: Option<f64>,
+    /// Jobs: comparison, diagnosis, comparison with the winner.
+    jobs: Vec<String>,
+}
+
+fn model_story(
+    service: &Service,
+    experiment: &RunId,
+    spec: &ffdic::experiment::ExperimentSpec,
+    show: bool,
+) -> Result<ModelStory> {
+    let source = format!("experiment:{experiment}");
+    let dataset = service
+        .store
+        .list_datasets()?
+        .into_iter()
+        .find(|d| d.source == source)
+        .with_context(|| format!("experiment {experiment} registered no dataset"))?;
+    let request = CompareRequest {
+        schemes: spec
+            .schemes
+            .iter()
+            .cloned()
+            .map(SchemeSpec::Preset)
+            .collect(),
+        dic: spec.dic.clone(),
+        ..CompareRequest::default()
+    };
+    let mut jobs = Vec::new();
+    let mut comparison = |request: &CompareRequest, what: &'static str| -> Result<f64> {
+        let (job, _) = service.submit_comparison(&dataset.id, request, None)?;
+        wait(service, &job.id, what, show)?;
+        jobs.push(job.id.to_string());
+        let cmp: serde_json::Value = serde_json::from_slice(
+            &service
+                .store
+                .read_file(&job.id, "results/comparison.json")?,
+        )?;
+        cmp["discrepancy_px"]
+            .as_f64()
+            .context("comparison.json has no discrepancy_px")
+    };
+    let baseline_px = comparison(&request, "comparing with the baseline model")?;
+    let (job, _) = service.submit_diagnosis(&dataset.id, &request, None)?;
+    wait(service, &job.id, "diagnosing", show)?;
+    let diagnosis: Diagnosis =
+        serde_json::from_slice(&service.store.read_file(&job.id, "results/diagnosis.json")?)?;
+    let diagnosis_job = job.id.to_string();
+    let winner = diagnosis
+        .candidates
+        .iter()
+        .find(|c| c.effect == diagnosis.verdict)
+        .cloned();
+    let (model, after_px) = match &winner {
+        None => (None, None),
+        Some(_) => {
+            let toml = String::from_utf8(
+                service
+                    .store
+                    .read_file(&job.id, "results/winner-model.toml")?,
+            )?;
+            let (added, _) = service.add_model(&NewModel { toml })?;
+            let name = added.summary.name;
+            let after = comparison(
+                &CompareRequest {
+                    model: name.clone(),
+                    ..request.clone()
+                },
+                "comparing with the winner added",
+            )?;
+            (Some(name), Some(after))
+        }
+    };
+    jobs.insert(1, diagnosis_job);
+    Ok(ModelStory {
+        dataset: dataset.id.to_string(),
+        baseline_px,
+        verdict: diagnosis.verdict.clone(),
+        params: winner
+            .as_ref()
+            .map(|c| c.params.clone())
+            .unwrap_or_default(),
+        stderr: winner
+            .as_ref()
+            .map(|c| c.stderr.clone())
+            .unwrap_or_default(),
+        delta_bic: winner.as_ref().map(|c| c.delta_bic),
+        model,
+        after_px,
+        jobs,
+    })
+}
+
+fn story_text(s: &ModelStory) -> String {
+    let mut t = format!(
+        "\nmodel against measurement (dataset {}):\n  baseline model: discrepancy {:.5} px\n",
+        s.dataset, s.baseline_px
+    );
+    match (&s.model, s.after_px) {
+        (Some(model), Some(after)) => {
+            let params: Vec<String> = s
+                .params
+                .iter()
+                .map(|(k, v)| match s.stderr.get(k) {
+                    Some(se) => format!("{k} = {v:.4e} ± {se:.1e}"),
+                    None => format!("{k} = {v:.4e}"),
+                })
+                .collect();
+            t += &format!(
+                "  diagnosis: missing effect {} ({}; ΔBIC {:.1})\n  with it added ({model}): discrepancy {after:.5} px\n",
+                s.verdict,
+                params.join(", "),
+                s.delta_bic.unwrap_or(f64::NAN)
+            );
+        }
+        _ => t += "  diagnosis: no significant missing effect (verdict none)\n",
+    }
+    t += &format!("  jobs: {}\n", s.jobs.join(", "));
+    t
 }

@@ -145,7 +145,10 @@ fn geometric_candidate(
             _ => "lens_distortion",
         },
         params: [(name.to_string(), fit.value)].into_iter().collect(),
-        stderr: [(name.to_string(), fit.stderr)].into_iter().collect(),
+        stderr: [(name.to_string(), fit.stderr)]
+            .into_iter()
+            .filter(|(_, se)| se.is_finite())
+            .collect(),
         effects: geometric_fit_effects(model, param, fit.value),
         k: 1,
         beyond_null: fit.value.abs() > 2.0 * fit.stderr,
@@ -232,7 +235,13 @@ pub fn diagnose_prepared(
         candidates.push(Candidate {
             effect: fit.effect.to_string(),
             params: fit.params.clone(),
-            stderr: fit.stderr.clone(),
+            // A parameter whose error could not be estimated has no entry (JSON has no NaN).
+            stderr: fit
+                .stderr
+                .iter()
+                .filter(|(_, se)| se.is_finite())
+                .map(|(k, se)| (k.clone(), *se))
+                .collect(),
             discrepancy_px,
             delta_bic: delta,
             significant: recomputed && fit.beyond_null && delta < SIGNIFICANT_DELTA_BIC,
