@@ -11,11 +11,15 @@ cd "$(dirname "$0")/.."
 # - v4l2: libclang-dev (bindgen);
 # - the Zaber simulator is checked with zproto, which pulls serialport's libudev feature.
 # - iproute2: the Aravis tests bring up loopback inside their own network namespace.
-APT_PACKAGES=(libaravis-dev libusb-1.0-0-dev aravis-tools-cli aravis-tools libclang-dev libudev-dev pkg-config iproute2)
+# - chromium, nodejs, npm: the dashboard's end-to-end test (tests/dashboard_browser.rs) drives
+#   headless Chromium with playwright-core, pinned in tests/browser/package-lock.json.
+APT_PACKAGES=(libaravis-dev libusb-1.0-0-dev aravis-tools-cli aravis-tools libclang-dev libudev-dev pkg-config iproute2 chromium)
 missing=()
 for pkg in "${APT_PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
 done
+# Node.js may come from elsewhere (NodeSource ships npm inside its nodejs): check the commands.
+{ command -v node && command -v npm; } >/dev/null 2>&1 || missing+=(nodejs npm)
 if [ ${#missing[@]} -gt 0 ]; then
   echo "installing: ${missing[*]}"
   export DEBIAN_FRONTEND=noninteractive
@@ -24,6 +28,12 @@ if [ ${#missing[@]} -gt 0 ]; then
 fi
 
 { cargo fmt --version && cargo clippy --version; } >/dev/null 2>&1 || rustup component add rustfmt clippy
+
+# The browser test's driver (no browser download: it uses /usr/bin/chromium).
+if [ ! -d tests/browser/node_modules ]; then
+  echo "== npm ci --prefix tests/browser"
+  npm ci --prefix tests/browser --no-audit --no-fund
+fi
 
 echo "== cargo fmt --check"
 cargo fmt --all --check

@@ -6,6 +6,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod api;
+pub mod dashboard;
 pub mod dataset;
 pub mod diagnose;
 pub mod dic;

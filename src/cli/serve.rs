@@ -59,7 +59,7 @@ pub fn run(args: &ServeArgs) -> Result<()> {
         println!("listening on http://{bound}");
         let shutdown = service.shutdown.clone();
         tokio::spawn(wait_for_signal(shutdown.clone()));
-        let app = ffdic::api::app(service.clone(), axum::Router::new());
+        let app = ffdic::api::app(service.clone(), ffdic::dashboard::router());
         ffdic::api::run(listener, app, shutdown).await?;
         anyhow::Ok(())
     })?;

@@ -212,7 +212,10 @@ pub fn diagnose_prepared(
         };
         let with = ModelConfig {
             name: format!("{}+{}", model.name, fit.effect),
-            description: model.description.clone(),
+            description: format!(
+                "{} with {} added, fitted by ffdic diagnose on dataset {}",
+                model.name, fit.effect, meas.manifest.name
+            ),
             effects: fit.effects.clone(),
         };
         let (discrepancy_px, delta, recomputed, after) = if fit.beyond_null {

@@ -4,6 +4,7 @@
 
 mod bench;
 mod figures;
+mod maps;
 mod model_scene;
 mod request;
 mod runner;
@@ -16,6 +17,7 @@ pub use bench::{
     StageStatus, TargetMount,
 };
 pub use figures::{figure_svgs, figures_text, rows_json, study_csv};
+pub use maps::{field_map_svgs, map_file_name};
 pub use model_scene::ModelScene;
 pub use request::{ExperimentPlan, ExperimentRequest, FieldError, SchemeSpec};
 pub use runner::{run_experiment, BenchTimeouts, ExperimentOutcome, RunSink, RunnerError};
@@ -23,4 +25,7 @@ pub use simulate::{
     derive_seed, pattern_dots, render_stage_frame, simulate_dataset, SimulateError,
 };
 pub use spec::{ExperimentSpec, MoveSpec, PatternSpec, SpecError, StepSeries, PAPER_TOML};
-pub use study::{analyze_dataset, study_pair, Increase, StudyError, StudyRow};
+pub use study::{
+    analyze_dataset, analyze_dataset_with, study_pair, study_pair_result, Increase, ResultHook,
+    StudyError, StudyRow,
+};

@@ -8,8 +8,9 @@
 
 use super::bench::{BenchError, BenchHandle, BenchLease, Owner};
 use super::figures::{figure_svgs, rows_json, study_csv};
+use super::maps::field_map_svgs;
 use super::request::ExperimentPlan;
-use super::study::{analyze_dataset, StudyError, StudyRow};
+use super::study::{analyze_dataset_with, StudyError, StudyRow};
 use crate::dataset::{CameraInfo, Manifest, PatternInfo, Run, StageMove};
 use crate::image::{tiff_u16_bytes, ImageError};
 use ffdic_hw::{CameraSettings, Frame, StagePosition};
@@ -269,7 +270,35 @@ fn capture_and_analyse(
     );
 
     check()?;
-    let rows = analyze_dataset(
+    // u, v and strain maps of each pattern's first run, with every scheme.
+    let first_runs: Vec<&str> = plan
+        .patterns
+        .iter()
+        .filter_map(|p| {
+            manifest
+                .runs
+                .iter()
+                .find(|r| r.pattern.as_ref().is_some_and(|i| i.label == p.label))
+                .map(|r| r.id.as_str())
+        })
+        .collect();
+    let maps: std::sync::Mutex<Result<Vec<String>, String>> = std::sync::Mutex::new(Ok(Vec::new()));
+    let draw_maps = |run: &Run, scheme: &crate::reduce::Scheme, result: &crate::dic::DicResult| {
+        if !first_runs.contains(&run.id.as_str()) {
+            return;
+        }
+        let pattern = run.pattern.as_ref().map_or("", |p| p.label.as_str());
+        let mut written = maps.lock().expect("map list");
+        for (file, svg) in field_map_svgs(result, &run.id, pattern, &scheme.name) {
+            let rel = format!("plots/{file}");
+            match (&mut *written, sink.write(&rel, svg.as_bytes())) {
+                (Ok(list), Ok(_)) => list.push(rel),
+                (Ok(_), Err(e)) => *written = Err(e),
+                (Err(_), _) => {}
+            }
+        }
+    };
+    let rows = analyze_dataset_with(
         &frames_dir,
         &manifest,
         &plan.schemes,
@@ -283,11 +312,16 @@ fn capture_and_analyse(
             );
             !sink.cancelled()
         },
+        &draw_maps,
     )
     .map_err(|e| match e {
         StudyError::Cancelled => RunnerError::Cancelled,
         other => RunnerError::Study(other),
     })?;
+    let map_files = maps
+        .into_inner()
+        .expect("map list")
+        .map_err(RunnerError::Write)?;
 
     let json_text = serde_json::to_string_pretty(&rows_json(&rows)).expect("rows serialise");
     write("results/study.json".into(), json_text.as_bytes())?;
@@ -298,6 +332,7 @@ fn capture_and_analyse(
     for (file, svg) in figure_svgs(&rows) {
         write(format!("plots/{file}"), svg.as_bytes())?;
     }
+    files.extend(map_files);
     Ok(ExperimentOutcome {
         manifest,
         frames_dir,

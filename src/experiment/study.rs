@@ -3,8 +3,8 @@
 //! report the statistics with the increase of each standard deviation over the 100 % scheme —
 //! the paper's Figures 5 (x: u, exx) and 6 (y: v, eyy).
 
-use crate::dataset::{DatasetError, Manifest};
-use crate::dic::{DicError, DicSettings, PreparedReference, Stats, Summary};
+use crate::dataset::{DatasetError, Manifest, Run};
+use crate::dic::{DicError, DicResult, DicSettings, PreparedReference, Stats, Summary};
 use crate::image::{read_tiff, Image, ImageError};
 use crate::reduce::{reduce, Scheme};
 use serde::{Deserialize, Serialize};
@@ -65,6 +65,22 @@ pub fn analyze_dataset(
     dic: &DicSettings,
     progress: &(dyn Fn(usize, usize) -> bool + Sync),
 ) -> Result<Vec<StudyRow>, StudyError> {
+    analyze_dataset_with(dir, manifest, schemes, dic, progress, &|_, _, _| {})
+}
+
+/// What [`analyze_dataset_with`] shows each full DIC result to (the run, the scheme, the fields),
+/// before it keeps only the summary: the experiment runner draws its u, v and strain maps from it.
+pub type ResultHook<'a> = dyn Fn(&Run, &Scheme, &DicResult) + Sync + 'a;
+
+/// [`analyze_dataset`], handing every pair's full result to `on_result`.
+pub fn analyze_dataset_with(
+    dir: &Path,
+    manifest: &Manifest,
+    schemes: &[Scheme],
+    dic: &DicSettings,
+    progress: &(dyn Fn(usize, usize) -> bool + Sync),
+    on_result: &ResultHook<'_>,
+) -> Result<Vec<StudyRow>, StudyError> {
     let total = manifest.runs.len() * schemes.len();
     let mut rows = Vec::with_capacity(total);
     let mut cached: Option<(String, Image)> = None;
@@ -94,13 +110,16 @@ pub fn analyze_dataset(
             .map_or_else(|| run.id.clone(), |p| p.label.clone());
         let first_row = rows.len();
         for scheme in schemes {
-            let summary = study_pair(&reference, &deformed, scheme, dic).map_err(|source| {
-                StudyError::Dic {
-                    run: run.id.clone(),
-                    scheme: scheme.name.clone(),
-                    source,
-                }
-            })?;
+            let result =
+                study_pair_result(&reference, &deformed, scheme, dic).map_err(|source| {
+                    StudyError::Dic {
+                        run: run.id.clone(),
+                        scheme: scheme.name.clone(),
+                        source,
+                    }
+                })?;
+            on_result(run, scheme, &result);
+            let summary = result.summary;
             let increase_pct = (rows.len() > first_row).then(|| {
                 let base: &StudyRow = &rows[first_row];
                 increase(&base.summary, &summary)
@@ -128,6 +147,16 @@ pub fn study_pair(
     scheme: &Scheme,
     dic: &DicSettings,
 ) -> Result<Summary, DicError> {
+    Ok(study_pair_result(reference, deformed, scheme, dic)?.summary)
+}
+
+/// [`study_pair`] with the whole result: every point's displacement and strain.
+pub fn study_pair_result(
+    reference: &Image,
+    deformed: &Image,
+    scheme: &Scheme,
+    dic: &DicSettings,
+) -> Result<DicResult, DicError> {
     let r = reduce(reference, scheme).map_err(|e| DicError::Setting {
         field: "scheme",
         reason: e.to_string(),
@@ -136,9 +165,7 @@ pub fn study_pair(
         field: "scheme",
         reason: e.to_string(),
     })?;
-    Ok(PreparedReference::new(&r, dic)?
-        .correlate(&d, None)?
-        .summary)
+    PreparedReference::new(&r, dic)?.correlate(&d, None)
 }
 
 fn increase(base: &Summary, s: &Summary) -> Increase {

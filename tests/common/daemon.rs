@@ -74,7 +74,7 @@ impl TestServer {
         let (service, _) = Service::start(config, hardware).unwrap();
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let base = format!("http://{}", listener.local_addr().unwrap());
-        let app = ffdic::api::app(service.clone(), axum::Router::new());
+        let app = ffdic::api::app(service.clone(), ffdic::dashboard::router());
         let shutdown = service.shutdown.clone();
         let task = tokio::spawn(async move {
             ffdic::api::run(listener, app, shutdown).await.unwrap();

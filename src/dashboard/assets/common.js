@@ -1,0 +1,211 @@
+// Shared helpers: the API client, DOM building, formatting, following a run to its end.
+
+export const API = "/api/v1";
+const TOKEN_KEY = "ffdic-token";
+
+/** Headers for a request: the bearer token if the user gave one (only needed off loopback). */
+function authHeaders(extra = {}) {
+  const token = localStorage.getItem(TOKEN_KEY);
+  return token ? { ...extra, Authorization: `Bearer ${token}` } : extra;
+}
+
+/** An API error with the problem+json detail when there is one. */
+export class ApiError extends Error {
+  constructor(status, problem) {
+    const detail = problem && (problem.detail || problem.title);
+    super(detail ? `${status}: ${detail}` : `HTTP ${status}`);
+    this.status = status;
+    this.problem = problem;
+  }
+}
+
+async function check(resp) {
+  if (resp.ok) return resp;
+  let problem = null;
+  try { problem = await resp.json(); } catch (_) { /* not JSON */ }
+  throw new ApiError(resp.status, problem);
+}
+
+/** GET/POST/PATCH `path` under /api/v1; `body` is sent as JSON unless it is FormData. */
+export async function api(path, { method = "GET", body, raw = false } = {}) {
+  const init = { method, headers: authHeaders() };
+  if (body instanceof FormData) {
+    init.body = body;
+  } else if (body !== undefined) {
+    init.body = JSON.stringify(body);
+    init.headers["Content-Type"] = "application/json";
+  }
+  const resp = await check(await fetch(API + path, init));
+  if (raw) return resp;
+  if (resp.status === 204) return null;
+  return resp.json();
+}
+
+export async function apiText(path) {
+  return (await api(path, { raw: true })).text();
+}
+
+/** Builds an element: el("a", {href: "/"}, "home", child…). */
+export function el(tag, attrs = {}, ...children) {
+  const node = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs || {})) {
+    if (v === undefined || v === null || v === false) continue;
+    if (k === "class") node.className = v;
+    else if (k.startsWith("on")) node.addEventListener(k.slice(2), v);
+    else if (k === "dataset") Object.assign(node.dataset, v);
+    else node.setAttribute(k, v === true ? "" : v);
+  }
+  for (const c of children.flat()) {
+    if (c === undefined || c === null || c === false) continue;
+    node.append(c instanceof Node ? c : document.createTextNode(String(c)));
+  }
+  return node;
+}
+
+export function $(sel, root = document) { return root.querySelector(sel); }
+export function $$(sel, root = document) { return [...root.querySelectorAll(sel)]; }
+
+export function clear(node, ...children) {
+  node.replaceChildren(...children.flat().filter((c) => c !== null && c !== undefined));
+  return node;
+}
+
+/** A number with `digits` significant digits, or "—". */
+export function num(v, digits = 4) {
+  if (v === null || v === undefined || !Number.isFinite(Number(v))) return "—";
+  const x = Number(v);
+  if (x === 0) return "0";
+  const a = Math.abs(x);
+  if (a >= 1e5 || a < 1e-4) return x.toExponential(digits - 1);
+  return Number(x.toPrecision(digits)).toString();
+}
+
+export function pct(progress) {
+  return `${Math.round(100 * Math.max(0, Math.min(1, progress || 0)))} %`;
+}
+
+export function when(iso) {
+  if (!iso) return "—";
+  const d = new Date(iso);
+  return Number.isNaN(d.getTime()) ? iso : d.toLocaleString();
+}
+
+export function badge(status) {
+  return el("span", { class: `badge ${status}`, "data-status": status }, status);
+}
+
+export const TERMINAL = ["succeeded", "failed", "cancelled"];
+
+/** Known event kinds of runs and jobs (EventSource only delivers named events one listens to). */
+const EVENT_KINDS = [
+  "message", "queued", "started", "progress", "homing", "camera_set", "target_mounted",
+  "stage_moved", "frame_captured", "dataset_written", "pair_analyzed", "dataset_registered",
+  "measurement_loaded", "compared", "fitted", "candidate_fitted", "diagnosed", "written",
+  "succeeded", "failed", "cancelled",
+];
+
+/**
+ * Follows a run or job: its events over SSE (`eventsUrl`), with a poll of `recordUrl` as a
+ * safety net for event kinds this page does not know. Calls `onEvent(event)` for every event
+ * and resolves with the final record once the run is terminal.
+ */
+export function follow(recordUrl, eventsUrl, onEvent, onRecord) {
+  return new Promise((resolve) => {
+    let done = false;
+    let source = null;
+    let timer = null;
+    const finish = async () => {
+      if (done) return;
+      done = true;
+      if (source) source.close();
+      clearInterval(timer);
+      const record = await api(recordUrl);
+      if (onRecord) onRecord(record);
+      resolve(record);
+    };
+    const poll = async () => {
+      try {
+        const record = await api(recordUrl);
+        if (onRecord && !done) onRecord(record);
+        if (TERMINAL.includes(record.status)) finish();
+      } catch (_) { /* keep trying */ }
+    };
+    try {
+      source = new EventSource(API + eventsUrl);
+      const handler = (msg) => {
+        let data = null;
+        try { data = JSON.parse(msg.data); } catch (_) { return; }
+        if (onEvent) onEvent(data);
+        if (TERMINAL.includes(data.kind || msg.type)) finish();
+      };
+      for (const kind of EVENT_KINDS) source.addEventListener(kind, handler);
+      source.onerror = () => { if (!done) poll(); };
+    } catch (_) { /* polling only */ }
+    timer = setInterval(poll, 2000);
+    poll();
+  });
+}
+
+/** A progress bar with its percentage: returns {node, set(progress, status)}. */
+export function progressBar(id) {
+  const fill = el("div", { class: "fill" });
+  const bar = el("div", {
+    class: "progress", id, role: "progressbar",
+    "aria-valuemin": "0", "aria-valuemax": "100", "aria-valuenow": "0",
+  }, fill);
+  const text = el("span", { class: "pct", id: `${id}-text` }, "0 %");
+  const node = el("div", { class: "progress-line" }, bar, text);
+  let shown = 0;
+  return {
+    node,
+    set(progress, status) {
+      // Progress never goes back (events may arrive after a poll).
+      shown = Math.max(shown, Math.max(0, Math.min(1, progress || 0)));
+      if (status === "succeeded") shown = 1;
+      fill.style.width = `${(100 * shown).toFixed(1)}%`;
+      bar.setAttribute("aria-valuenow", String(Math.round(100 * shown)));
+      bar.className = `progress ${status || ""}`;
+      text.textContent = pct(shown);
+    },
+  };
+}
+
+/** Fetches an SVG the server drew and puts it inline in `container` (so it scales with the page). */
+export async function inlineSvg(container, url) {
+  const resp = await fetch(url, { headers: authHeaders() });
+  if (!resp.ok) throw new ApiError(resp.status, null);
+  const text = await resp.text();
+  const doc = new DOMParser().parseFromString(text, "image/svg+xml");
+  const svg = doc.documentElement;
+  if (svg.nodeName !== "svg") throw new Error(`${url} is not an SVG`);
+  // Scale with the container, keep the drawing's proportions.
+  svg.removeAttribute("width");
+  svg.removeAttribute("height");
+  svg.setAttribute("preserveAspectRatio", "xMidYMid meet");
+  clear(container, document.importNode(svg, true));
+  container.dataset.loaded = "true";
+  return container;
+}
+
+/** Shows an error under `node` (or clears it with null). */
+export function showError(node, err) {
+  if (!node) return;
+  node.textContent = err ? (err.message || String(err)) : "";
+}
+
+/** The header's token box: stored in this browser only, sent as a bearer token. */
+export function setupToken() {
+  const box = document.getElementById("token");
+  if (!box) return;
+  box.value = localStorage.getItem(TOKEN_KEY) || "";
+  box.addEventListener("change", () => {
+    if (box.value) localStorage.setItem(TOKEN_KEY, box.value.trim());
+    else localStorage.removeItem(TOKEN_KEY);
+  });
+}
+
+/** The last path segment of the page URL (an experiment's or a dataset's id). */
+export function pageId() {
+  const parts = location.pathname.split("/").filter(Boolean);
+  return decodeURIComponent(parts[parts.length - 1] || "");
+}

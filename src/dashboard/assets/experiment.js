@@ -1,0 +1,129 @@
+// One experiment: live progress over SSE, then Figures 5 and 6, the study, maps and downloads.
+import { api, el, $, clear, num, when, badge, showError, setupToken, follow, progressBar, inlineSvg, pageId, TERMINAL, API } from "./common.js";
+
+setupToken();
+const id = pageId();
+const base = `/experiments/${encodeURIComponent(id)}`;
+const bar = progressBar("progress");
+$("#progress-slot").append(bar.node);
+$("#run-id").textContent = id;
+document.title = `ffdic — experiment ${id}`;
+
+function showRecord(r) {
+  clear($("#run-status"), badge(r.status));
+  bar.set(r.progress, r.status);
+  $("#run-message").textContent = r.message || "";
+  const req = r.request || {};
+  const schemes = (req.schemes || []).map((s) => (typeof s === "string" ? s : s.name));
+  const patterns = (req.patterns || []).map((p) => (typeof p === "string" ? p : p.label));
+  const dic = req.dic || {};
+  clear($("#run-info"), [
+    ["name", req.name || "—"],
+    ["patterns", patterns.join(", ") || "—"],
+    ["moves", (req.moves || []).map((m) => `${m.id} (${m.dx_mm}, ${m.dy_mm}) mm`).join("; ") || "—"],
+    ["schemes", schemes.join(", ") || "—"],
+    ["DIC", `subset ${dic.subset_px ?? "—"} px, step ${dic.step_px ?? "—"} px, strain window ${dic.strain_window ?? "—"}`],
+    ["created", when(r.created_at)],
+    ["started", when(r.started_at)],
+    ["finished", when(r.finished_at)],
+  ].flatMap(([k, v]) => [el("dt", {}, k), el("dd", {}, v)]));
+  $("#cancel-btn").classList.toggle("hidden", TERMINAL.includes(r.status));
+}
+
+function onEvent(e) {
+  bar.set(e.progress, e.kind === "succeeded" ? "succeeded" : undefined);
+  if (e.message) $("#run-message").textContent = e.message;
+  const list = $("#events");
+  list.append(el("li", { "data-kind": e.kind }, el("span", { class: "mono" }, e.kind), " — ", e.message || ""));
+  while (list.children.length > 200) list.firstElementChild.remove();
+  list.scrollTop = list.scrollHeight;
+}
+
+const FIGURES = ["figure5_u", "figure5_exx", "figure6_v", "figure6_eyy"];
+
+async function showResults(r) {
+  $("#results").classList.remove("hidden");
+  await Promise.all(FIGURES.map((f) =>
+    inlineSvg($(`#${f}`), `${API}${base}/plots/${f}.svg`).catch((e) => clear($(`#${f}`), el("p", { class: "error" }, `${f}: ${e.message}`)))));
+
+  // The study as a table.
+  try {
+    const study = await api(`${base}/results`);
+    const head = ["pattern", "scheme", "valid points", "std u [px]", "std v [px]", "std εxx [µε]", "std εyy [µε]", "Δ std u", "Δ std εxx"];
+    const inc = (row, k) => (row.increase_pct ? `${row.increase_pct[k] >= 0 ? "+" : ""}${row.increase_pct[k].toFixed(1)} %` : "—");
+    clear($("#study-table"), el("table", {},
+      el("thead", {}, el("tr", {}, head.map((h, i) => el("th", { class: i > 1 ? "num" : "" }, h)))),
+      el("tbody", {}, study.rows.map((row) => el("tr", {},
+        el("td", {}, row.pattern), el("td", {}, row.scheme),
+        el("td", { class: "num" }, `${row.valid} / ${row.points}`),
+        el("td", { class: "num" }, num(row.u.std)), el("td", { class: "num" }, num(row.v.std)),
+        el("td", { class: "num" }, num(row.exx.std * 1e6)), el("td", { class: "num" }, num(row.eyy.std * 1e6)),
+        el("td", { class: "num" }, inc(row, "u")), el("td", { class: "num" }, inc(row, "exx")))))));
+  } catch (e) {
+    clear($("#study-table"), el("p", { class: "error" }, e.message));
+  }
+
+  // Maps: map_{pattern}_{scheme}_{field}.svg, chosen by pattern and scheme.
+  const maps = (r.result_files || [])
+    .map((f) => /^plots\/map_(.+)_([^_]+)_(u|v|exx)\.svg$/.exec(f))
+    .filter(Boolean)
+    .map((m) => ({ file: m[0].slice("plots/".length), pattern: m[1], scheme: m[2], field: m[3] }));
+  const patterns = [...new Set(maps.map((m) => m.pattern))];
+  const schemes = [...new Set(maps.map((m) => m.scheme))];
+  if (!maps.length) {
+    clear($("#maps"), el("p", { class: "muted" }, "this run has no maps"));
+  } else {
+    const pick = (name, values) => el("label", {}, name,
+      el("select", { id: `map-${name}` }, values.map((v) => el("option", { value: v }, v))));
+    clear($("#map-pickers"), pick("pattern", patterns), pick("scheme", schemes));
+    const draw = async () => {
+      const [p, s] = [$("#map-pattern").value, $("#map-scheme").value];
+      const chosen = ["u", "v", "exx"].map((f) => maps.find((m) => m.pattern === p && m.scheme === s && m.field === f)).filter(Boolean);
+      const boxes = chosen.map((m) => el("div", { class: "figure map", "data-field": m.field }));
+      clear($("#maps"), boxes);
+      await Promise.all(chosen.map((m, i) => inlineSvg(boxes[i], `${API}${base}/plots/${m.file}`)));
+    };
+    $("#map-pattern").addEventListener("change", draw);
+    $("#map-scheme").addEventListener("change", draw);
+    await draw();
+  }
+
+  // Downloads.
+  const frames = (r.result_files || []).filter((f) => f.startsWith("frames/")).map((f) => f.slice(7));
+  const link = (href, text) => el("li", {}, el("a", { href, download: "" }, text));
+  const datasets = await api("/datasets").catch(() => []);
+  const ds = datasets.find((d) => d.source === `experiment:${id}`);
+  clear($("#downloads"),
+    el("ul", { class: "links" },
+      link(`${API}${base}/results.csv`, "study.csv (CSV)"),
+      link(`${API}${base}/results`, "study.json (JSON)"),
+      FIGURES.map((f) => link(`${API}${base}/plots/${f}.svg`, `${f}.svg`))),
+    el("h3", {}, `Frames (16-bit TIFF) and manifest`),
+    el("ul", { class: "links" }, frames.map((f) => link(`${API}${base}/frames/${encodeURIComponent(f)}`, f))),
+    ds ? el("p", {}, "The frames are also dataset ", el("a", { href: `/datasets/${ds.id}` }, ds.id), ": compare them with a model and diagnose there.") : null);
+  $("#results").dataset.loaded = "true";
+}
+
+$("#cancel-btn").addEventListener("click", async () => {
+  try {
+    showRecord(await api(`${base}/cancel`, { method: "POST" }));
+  } catch (e) {
+    showError($("#run-error"), e);
+  }
+});
+
+async function main() {
+  try {
+    showRecord(await api(base));
+  } catch (e) {
+    showError($("#run-error"), e);
+    return;
+  }
+  const final = await follow(base, `${base}/events`, onEvent, showRecord);
+  showRecord(final);
+  if (final.status === "succeeded") await showResults(final);
+  else showError($("#run-error"), `the experiment ${final.status}: ${final.message || ""}`);
+}
+
+main();
+

@@ -1,0 +1,271 @@
+// Home: the bench (state, snapshot with histogram, exposure and gain), experiments, datasets.
+import { api, el, $, clear, num, pct, when, badge, showError, setupToken } from "./common.js";
+import { histogramSvg } from "./charts.js";
+
+setupToken();
+
+// ---------- bench ----------
+
+function kv(node, pairs) {
+  clear(node, pairs.flatMap(([k, v]) => [el("dt", {}, k), el("dd", {}, v)]));
+}
+
+async function loadBench() {
+  try {
+    const status = await api("/status");
+    const b = status.bench;
+    const cam = b.camera;
+    kv($("#camera-state"), [
+      ["camera", `${cam.info.vendor} ${cam.info.model} (${cam.info.serial})`],
+      ["sensor", `${cam.info.sensor_width} × ${cam.info.sensor_height} px`],
+      ["exposure", `${num(cam.settings.exposure_us)} µs`],
+      ["gain", `${num(cam.settings.gain_db)} dB`],
+      ["pixel format", String(cam.settings.pixel_format)],
+      ["binning", (cam.settings.binning || []).join(" × ")],
+      ["frames", cam.counters ? `${cam.counters.completed} completed, ${cam.counters.failed} failed, ${cam.counters.missing_packets} packets missing` : "—"],
+    ]);
+    const form = $("#camera-form");
+    if (document.activeElement?.form !== form) {
+      form.exposure_us.value = cam.settings.exposure_us;
+      form.gain_db.value = cam.settings.gain_db;
+    }
+    const st = b.stage;
+    kv($("#stage-state"), st ? [
+      ["stage", st.info.model],
+      ["position", st.position ? `x ${num(st.position.x_mm, 5)} mm, y ${num(st.position.y_mm, 5)} mm` : "unknown"],
+      ["homed", st.homed === undefined ? "—" : (st.homed ? "yes" : "no")],
+      ["travel x", `${st.info.travel_x_mm[0]} … ${st.info.travel_x_mm[1]} mm`],
+      ["travel y", `${st.info.travel_y_mm[0]} … ${st.info.travel_y_mm[1]} mm`],
+    ] : [["stage", "none configured"]]);
+    kv($("#queue-state"), [
+      ["held by", b.holder ? el("a", { href: `/experiments/${b.holder}` }, b.holder) : "nobody"],
+      ["target", b.target || "—"],
+      ["queued", String(status.experiments_queued)],
+      ["running", String(status.experiments_running)],
+      ["data", el("span", { class: "mono" }, status.data_dir)],
+    ]);
+  } catch (e) {
+    kv($("#camera-state"), [["error", e.message]]);
+  }
+}
+
+/** Decodes an uncompressed 8/16-bit grey baseline TIFF (what the daemon writes). */
+function decodeTiff(buf) {
+  const dv = new DataView(buf);
+  const le = dv.getUint16(0) === 0x4949;
+  const u16 = (o) => dv.getUint16(o, le);
+  const u32 = (o) => dv.getUint32(o, le);
+  if (u16(2) !== 42) throw new Error("not a TIFF");
+  const ifd = u32(4);
+  const n = u16(ifd);
+  const tags = {};
+  for (let i = 0; i < n; i++) {
+    const e = ifd + 2 + 12 * i;
+    const [tag, type, count] = [u16(e), u16(e + 2), u32(e + 4)];
+    const size = type === 3 ? 2 : 4;
+    const at = count * size > 4 ? u32(e + 8) : e + 8;
+    const vals = [];
+    for (let k = 0; k < count; k++) vals.push(size === 2 ? u16(at + 2 * k) : u32(at + 4 * k));
+    tags[tag] = vals;
+  }
+  const [w, h, bits] = [tags[256][0], tags[257][0], (tags[258] || [8])[0]];
+  if ((tags[259] || [1])[0] !== 1) throw new Error("compressed TIFF");
+  const out = new Uint16Array(w * h);
+  let p = 0;
+  tags[273].forEach((off, s) => {
+    const bytes = tags[279][s];
+    const step = bits === 16 ? 2 : 1;
+    for (let b = 0; b + step <= bytes && p < out.length; b += step) {
+      out[p++] = bits === 16 ? dv.getUint16(off + b, le) : dv.getUint8(off + b);
+    }
+  });
+  return { width: w, height: h, bits, data: out };
+}
+
+async function snapshot() {
+  const btn = $("#snapshot-btn");
+  btn.disabled = true;
+  showError($("#snapshot-error"), null);
+  try {
+    const resp = await api("/camera/snapshot", { method: "POST", raw: true });
+    const img = decodeTiff(await resp.arrayBuffer());
+    const sorted = Uint16Array.from(img.data).sort();
+    const q = (f) => sorted[Math.min(sorted.length - 1, Math.floor(f * sorted.length))];
+    const [lo, hi] = [q(0.005), Math.max(q(0.995), q(0.005) + 1)];
+    const canvas = $("#snapshot");
+    canvas.width = img.width;
+    canvas.height = img.height;
+    const ctx = canvas.getContext("2d");
+    const rgba = ctx.createImageData(img.width, img.height);
+    let sum = 0, sat = 0, max = 0;
+    const full = img.bits === 16 ? 65535 : 255;
+    for (let i = 0; i < img.data.length; i++) {
+      const v = img.data[i];
+      sum += v;
+      if (v >= full) sat++;
+      if (v > max) max = v;
+      const g = Math.max(0, Math.min(255, Math.round((255 * (v - lo)) / (hi - lo))));
+      rgba.data.set([g, g, g, 255], 4 * i);
+    }
+    ctx.putImageData(rgba, 0, 0);
+    // Histogram over the 16-bit range the frame uses (bins of a power of two).
+    const top = Math.max(256, 2 ** Math.ceil(Math.log2(max + 1)));
+    const bins = 128;
+    const width = top / bins;
+    const counts = new Array(bins).fill(0);
+    for (const v of img.data) counts[Math.min(bins - 1, Math.floor(v / width))]++;
+    clear($("#histogram"), histogramSvg(counts, width, top, "DN", "Histogram of the snapshot"));
+    const mean = sum / img.data.length;
+    kv($("#snapshot-stats"), [
+      ["size", `${img.width} × ${img.height} px, ${img.bits} bit`],
+      ["mean", `${num(mean)} DN`],
+      ["0.5 … 99.5 %", `${lo} … ${hi} DN`],
+      ["saturated", `${sat} px (${num((100 * sat) / img.data.length, 2)} %)`],
+      ["taken", new Date().toLocaleTimeString()],
+    ]);
+    $("#snapshot").dataset.loaded = "true";
+  } catch (e) {
+    showError($("#snapshot-error"), e);
+  } finally {
+    btn.disabled = false;
+  }
+}
+
+$("#snapshot-btn").addEventListener("click", snapshot);
+
+$("#camera-form").addEventListener("submit", async (ev) => {
+  ev.preventDefault();
+  const f = ev.target;
+  showError($("#camera-error"), null);
+  $("#camera-notice").textContent = "";
+  try {
+    const applied = await api("/camera", {
+      method: "PATCH",
+      body: { exposure_us: Number(f.exposure_us.value), gain_db: Number(f.gain_db.value) },
+    });
+    $("#camera-notice").textContent = `camera set: ${num(applied.exposure_us)} µs, ${num(applied.gain_db)} dB`;
+    f.exposure_us.value = applied.exposure_us;
+    f.gain_db.value = applied.gain_db;
+    await loadBench();
+    await snapshot();
+  } catch (e) {
+    showError($("#camera-error"), e);
+  }
+});
+
+// ---------- experiments ----------
+
+async function loadExperiments() {
+  try {
+    const runs = await api("/experiments?limit=50");
+    const rows = runs.map((r) => el("tr", { "data-id": r.id },
+      el("td", {}, el("a", { href: `/experiments/${r.id}`, class: "mono" }, r.id)),
+      el("td", {}, (r.request && r.request.name) || ""),
+      el("td", {}, badge(r.status)),
+      el("td", { class: "num" }, pct(r.progress)),
+      el("td", {}, when(r.created_at)),
+      el("td", { class: "small muted" }, r.message || "")));
+    clear($("#experiment-list"), rows.length ? rows : [el("tr", {}, el("td", { colspan: 6, class: "muted" }, "no experiment yet: start one below"))]);
+  } catch (e) {
+    clear($("#experiment-list"), el("tr", {}, el("td", { colspan: 6, class: "error" }, e.message)));
+  }
+}
+
+function parseMoves(text) {
+  const moves = [];
+  for (const [i, line] of text.split("\n").entries()) {
+    const t = line.trim();
+    if (!t || t.startsWith("#")) continue;
+    const parts = t.split(/[\s,;]+/);
+    if (parts.length !== 3 || !parts.slice(1).every((p) => Number.isFinite(Number(p)))) {
+      throw new Error(`moves, line ${i + 1}: write "id dx_mm dy_mm", e.g. "x5mm 5.0 0.0"`);
+    }
+    moves.push({ id: parts[0], dx_mm: Number(parts[1]), dy_mm: Number(parts[2]) });
+  }
+  return moves;
+}
+
+$("#experiment-form").addEventListener("submit", async (ev) => {
+  ev.preventDefault();
+  const f = ev.target;
+  const err = $("#experiment-error");
+  showError(err, null);
+  try {
+    const checked = (name) => [...f.querySelectorAll(`input[name=${name}]:checked`)].map((i) => i.value);
+    const body = {
+      name: f.run_name.value.trim(),
+      patterns: checked("pattern"),
+      schemes: checked("scheme"),
+      moves: parseMoves(f.moves.value),
+      step_series: [],
+      repeats: Number(f.repeats.value),
+      frames_averaged: Number(f.frames_averaged.value),
+      settle_ms: Number(f.settle_ms.value),
+      dic: {
+        subset_px: Number(f.subset_px.value),
+        step_px: Number(f.step_px.value),
+        strain_window: Number(f.strain_window.value),
+        prefilter_sigma_px: Number(f.prefilter_sigma_px.value),
+      },
+    };
+    $("#start-experiment").disabled = true;
+    const run = await api("/experiments", { method: "POST", body });
+    location.href = `/experiments/${run.id}`;
+  } catch (e) {
+    showError(err, e);
+    $("#start-experiment").disabled = false;
+  }
+});
+
+// ---------- datasets ----------
+
+async function loadDatasets() {
+  try {
+    const list = await api("/datasets");
+    const rows = list.map((d) => {
+      const m = /^experiment:(.+)$/.exec(d.source || "");
+      return el("tr", { "data-id": d.id },
+        el("td", {}, el("a", { href: `/datasets/${d.id}`, class: "mono" }, d.id)),
+        el("td", {}, d.name),
+        el("td", {}, m ? el("a", { href: `/experiments/${m[1]}` }, `experiment ${m[1]}`) : d.source),
+        el("td", { class: "num" }, String(d.runs)),
+        el("td", { class: "num" }, `${d.width} × ${d.height}`),
+        el("td", {}, when(d.created_at)));
+    });
+    clear($("#dataset-list"), rows.length ? rows : [el("tr", {}, el("td", { colspan: 6, class: "muted" }, "no dataset yet: upload one below, or run an experiment"))]);
+  } catch (e) {
+    clear($("#dataset-list"), el("tr", {}, el("td", { colspan: 6, class: "error" }, e.message)));
+  }
+}
+
+$("#upload-form").addEventListener("submit", async (ev) => {
+  ev.preventDefault();
+  const files = [...$("#upload-files").files];
+  const err = $("#upload-error");
+  showError(err, null);
+  if (!files.some((f) => f.name === "dataset.json")) {
+    showError(err, "select dataset.json together with its TIFF frames");
+    return;
+  }
+  const form = new FormData();
+  // One part per file, named by its file name (what the API expects).
+  for (const f of files) form.append(f.name, f, f.name);
+  const total = files.reduce((a, f) => a + f.size, 0);
+  $("#upload-status").textContent = `uploading ${files.length} files (${num(total / 1e6, 3)} MB)…`;
+  $("#upload-btn").disabled = true;
+  try {
+    const record = await api("/datasets", { method: "POST", body: form });
+    location.href = `/datasets/${record.id}`;
+  } catch (e) {
+    showError(err, e);
+    $("#upload-status").textContent = "";
+    $("#upload-btn").disabled = false;
+  }
+});
+
+loadBench();
+loadExperiments();
+loadDatasets();
+snapshot();
+setInterval(() => { loadBench(); loadExperiments(); }, 4000);
+
