@@ -75,6 +75,19 @@ async fn a_whole_experiment_over_http() {
     let record = wait_terminal(&server.url(&format!("/experiments/{id}"))).await;
     assert_eq!(record["status"], "succeeded");
     assert_eq!(record["progress"], 1.0);
+    // The frames are a dataset of their own, linked from the run.
+    let dataset = record["dataset_id"]
+        .as_str()
+        .expect("the run names its dataset");
+    let ds: Value = c
+        .get(server.url(&format!("/datasets/{dataset}")))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(ds["source"], format!("experiment:{id}"));
 
     // Results: a row per run and scheme, the commanded move recovered (0.5 mm at 6.5 px/mm
     // reduced = 3.25 px per step, turned by the bench's 6.15 mrad stage misalignment).

@@ -90,6 +90,9 @@ pub fn experiment(service: Service, plan: ExperimentPlan) -> Work {
                 &format!("experiment:{}", ctx.run_id),
             )
             .map_err(fail)?;
+        ctx.store()
+            .set_dataset(&ctx.run_id, &dataset.id)
+            .map_err(fail)?;
         ctx.event(
             "dataset_registered",
             1.0,

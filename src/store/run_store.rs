@@ -318,6 +318,20 @@ impl RunStore {
         Ok(rec)
     }
 
+    /// Links the dataset a running run made (an experiment's frames) to its record, so clients
+    /// find it from the run. `Finished` once the run has ended.
+    pub fn set_dataset(&self, id: &RunId, dataset: &DatasetId) -> Result<RunRecord> {
+        let slot = self.slot(id);
+        let _slot = lock(&slot);
+        let mut rec = self.get(id)?;
+        if rec.status.is_terminal() {
+            return Err(StoreError::Finished(id.clone()));
+        }
+        rec.dataset_id = Some(dataset.clone());
+        self.save(&rec)?;
+        Ok(rec)
+    }
+
     /// Appends an event of `kind` (a word of `a-z 0-9 _ - .`, not a terminal status: those are
     /// `set_status`'s) with the next id. `Finished` once the run has ended.
     pub fn append_event(
