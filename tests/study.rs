@@ -114,19 +114,20 @@ fn reproduce_json_has_a_row_per_run_and_scheme_and_recovers_the_motion() {
     ] {
         assert!(out.join(f).is_file(), "{f}");
     }
-    // Then the model against the measurement: baseline comparison, diagnosis, and — when an
-    // effect is missing — the comparison again with it added, which must be lower.
+    // Then the model against the measurement: baseline comparison, diagnosis, the winner added
+    // and compared again. The fixture's bench (paper-bench-distortion) has shot noise the
+    // baseline lacks (it assumes a signal-independent noise), and the fixture has the static
+    // repeat frames that make it identifiable; its distortion is negligible on 640 px frames.
+    // Shot noise leaves the displacement discrepancy at its noise floor (so no fall is asserted
+    // here); the noise-against-mean statistics find it.
     let story = &doc["model"];
     let baseline_px = story["baseline_px"].as_f64().unwrap();
     assert!(baseline_px.is_finite() && baseline_px >= 0.0, "{story}");
-    let verdict = story["verdict"].as_str().unwrap();
-    let jobs = story["jobs"].as_array().unwrap();
-    if verdict == "none" {
-        assert_eq!(jobs.len(), 2, "{story}");
-    } else {
-        assert_eq!(jobs.len(), 3, "{story}");
-        assert!(story["after_px"].as_f64().unwrap() < baseline_px, "{story}");
-    }
+    assert_eq!(story["verdict"], "sensor_noise", "{story}");
+    let gain = story["params"]["gain"].as_f64().unwrap();
+    assert!((gain - 0.46).abs() <= 0.25 * 0.46, "gain {gain} e-/DN, truth 0.46");
+    assert_eq!(story["jobs"].as_array().unwrap().len(), 3, "{story}");
+    assert!(story["after_px"].as_f64().unwrap().is_finite(), "{story}");
     println!("reproduce on the fixture: {story}");
     let svg = std::fs::read_to_string(out.join("plots/figure5_u.svg")).unwrap();
     // One bar per pattern and scheme.

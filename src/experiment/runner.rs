@@ -11,7 +11,7 @@ use super::figures::{figure_svgs, rows_json, study_csv};
 use super::maps::field_map_svgs;
 use super::request::ExperimentPlan;
 use super::study::{analyze_dataset_with, StudyError, StudyRow};
-use crate::dataset::{CameraInfo, Manifest, PatternInfo, Run, StageMove};
+use crate::dataset::{CameraInfo, Manifest, Run, StageMove};
 use crate::image::{tiff_u16_bytes, ImageError};
 use ffdic_hw::{CameraSettings, Frame, StagePosition};
 use serde_json::{json, Value};
@@ -218,14 +218,7 @@ fn capture_and_analyse(
             shoot(deformed.clone(), at, &mut write)?;
             manifest.runs.push(Run {
                 id: format!("{label}-{}", m.id),
-                pattern: Some(PatternInfo {
-                    label: label.clone(),
-                    dot_diameter_mm: Some(pattern.dot_diameter_mm),
-                    dot_spacing_mm: Some(pattern.dot_spacing_mm),
-                    extra: [("contrast".to_string(), json!(pattern.contrast))]
-                        .into_iter()
-                        .collect(),
-                }),
+                pattern: Some(super::simulate::pattern_info(&label, pattern)),
                 reference: reference.clone(),
                 deformed,
                 stage: StageMove {

@@ -123,20 +123,7 @@ pub fn simulate_dataset(
             shoot(&deformed, (m.dx_mm, m.dy_mm))?;
             manifest.runs.push(Run {
                 id: format!("{label}-{}", m.id),
-                pattern: Some(PatternInfo {
-                    label: label.clone(),
-                    dot_diameter_mm: Some(pattern.dot_diameter_mm),
-                    dot_spacing_mm: Some(pattern.dot_spacing_mm),
-                    extra: [
-                        ("contrast".to_string(), serde_json::json!(pattern.contrast)),
-                        (
-                            "edge_softness_mm".to_string(),
-                            serde_json::json!(pattern.edge_softness_mm),
-                        ),
-                    ]
-                    .into_iter()
-                    .collect(),
-                }),
+                pattern: Some(pattern_info(&label, &pattern)),
                 reference: reference.clone(),
                 deformed,
                 stage: StageMove {
@@ -151,4 +138,23 @@ pub fn simulate_dataset(
     }
     manifest.write(out)?;
     Ok(manifest)
+}
+
+/// What a dataset records of the speckle in front of the camera: every parameter of the pattern,
+/// so a comparison renders the same print (`compare` falls back to estimating what is missing).
+pub(crate) fn pattern_info(label: &str, pattern: &crate::model::SpecklePattern) -> PatternInfo {
+    PatternInfo {
+        label: label.to_string(),
+        dot_diameter_mm: Some(pattern.dot_diameter_mm),
+        dot_spacing_mm: Some(pattern.dot_spacing_mm),
+        extra: [
+            ("contrast".to_string(), serde_json::json!(pattern.contrast)),
+            (
+                "edge_softness_mm".to_string(),
+                serde_json::json!(pattern.edge_softness_mm),
+            ),
+        ]
+        .into_iter()
+        .collect(),
+    }
 }
