@@ -125,7 +125,10 @@ fn reproduce_json_has_a_row_per_run_and_scheme_and_recovers_the_motion() {
     assert!(baseline_px.is_finite() && baseline_px >= 0.0, "{story}");
     assert_eq!(story["verdict"], "sensor_noise", "{story}");
     let gain = story["params"]["gain"].as_f64().unwrap();
-    assert!((gain - 0.46).abs() <= 0.25 * 0.46, "gain {gain} e-/DN, truth 0.46");
+    assert!(
+        (gain - 0.46).abs() <= 0.25 * 0.46,
+        "gain {gain} e-/DN, truth 0.46"
+    );
     assert_eq!(story["jobs"].as_array().unwrap().len(), 3, "{story}");
     assert!(story["after_px"].as_f64().unwrap().is_finite(), "{story}");
     println!("reproduce on the fixture: {story}");

@@ -123,7 +123,7 @@ pub fn simulate_dataset(
             shoot(&deformed, (m.dx_mm, m.dy_mm))?;
             manifest.runs.push(Run {
                 id: format!("{label}-{}", m.id),
-                pattern: Some(pattern_info(&label, &pattern)),
+                pattern: Some(pattern_info(label, pattern)),
                 reference: reference.clone(),
                 deformed,
                 stage: StageMove {
