@@ -84,21 +84,7 @@ pub fn load_analysis_model(path: &Option<PathBuf>) -> Result<ModelConfig> {
 
 /// Appends the comparison to the dataset's history.
 pub fn record(dataset: &std::path::Path, cmp: &Comparison) -> Result<()> {
-    append_history(
-        dataset,
-        &HistoryEntry::now(
-            &cmp.dataset,
-            &cmp.model.name,
-            &cmp.model.version,
-            cmp.discrepancy_px,
-            cmp.model
-                .effects
-                .enabled()
-                .iter()
-                .map(|s| s.to_string())
-                .collect(),
-        ),
-    )?;
+    append_history(dataset, &HistoryEntry::of(cmp))?;
     Ok(())
 }
 

@@ -39,6 +39,22 @@ impl HistoryEntry {
             effects,
         }
     }
+
+    /// The history entry of a comparison made now.
+    pub fn of(cmp: &super::Comparison) -> Self {
+        Self::now(
+            &cmp.dataset,
+            &cmp.model.name,
+            &cmp.model.version,
+            cmp.discrepancy_px,
+            cmp.model
+                .effects
+                .enabled()
+                .iter()
+                .map(|s| s.to_string())
+                .collect(),
+        )
+    }
 }
 
 pub fn history_path(dataset_dir: &Path) -> PathBuf {

@@ -226,22 +226,7 @@ fn keep_comparison(
         ctx.write(&format!("plots/{name}"), svg.as_bytes())
             .map_err(fail)?;
     }
-    append_history(
-        dataset_dir,
-        &HistoryEntry::now(
-            &cmp.dataset,
-            &cmp.model.name,
-            &cmp.model.version,
-            cmp.discrepancy_px,
-            cmp.model
-                .effects
-                .enabled()
-                .iter()
-                .map(|s| s.to_string())
-                .collect(),
-        ),
-    )
-    .map_err(fail)
+    append_history(dataset_dir, &HistoryEntry::of(cmp)).map_err(fail)
 }
 
 pub fn comparison(

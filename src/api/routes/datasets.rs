@@ -13,7 +13,7 @@ use crate::dataset::{is_plain_file_name, Manifest};
 use crate::diagnose::{history_chart, read_history, HistoryEntry};
 use crate::image::read_tiff;
 use crate::service::{AnalysisRequest, CompareRequest, Service};
-use crate::store::{DatasetId, DatasetRecord};
+use crate::store::{DatasetId, DatasetRecord, RunKind};
 use axum::extract::{Multipart, Path, State};
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
@@ -205,13 +205,7 @@ pub async fn compare(
     headers: HeaderMap,
     ApiJson(request): ApiJson<CompareRequest>,
 ) -> ApiResult<Response> {
-    let id = dataset_id(&id)?;
-    let key = idempotency_key(&headers)?;
-    let s = svc.clone();
-    let (record, created) =
-        blocking(move || s.submit_comparison(&id, &request, key.as_deref())).await??;
-    let location = format!("/api/v1/jobs/{}", record.id);
-    Ok(accepted(record, created, location))
+    submit_model_job(svc, RunKind::Comparison, &id, &headers, request).await
 }
 
 #[utoipa::path(post, path = "/datasets/{id}/diagnoses", tag = "datasets", request_body = CompareRequest,
@@ -225,11 +219,24 @@ pub async fn diagnose(
     headers: HeaderMap,
     ApiJson(request): ApiJson<CompareRequest>,
 ) -> ApiResult<Response> {
-    let id = dataset_id(&id)?;
-    let key = idempotency_key(&headers)?;
-    let s = svc.clone();
-    let (record, created) =
-        blocking(move || s.submit_diagnosis(&id, &request, key.as_deref())).await??;
+    submit_model_job(svc, RunKind::Diagnosis, &id, &headers, request).await
+}
+
+/// Queues a comparison or a diagnosis of dataset `raw_id`: 202 + Location of the job.
+async fn submit_model_job(
+    svc: Service,
+    kind: RunKind,
+    raw_id: &str,
+    headers: &HeaderMap,
+    request: CompareRequest,
+) -> ApiResult<Response> {
+    let id = dataset_id(raw_id)?;
+    let key = idempotency_key(headers)?;
+    let (record, created) = blocking(move || match kind {
+        RunKind::Diagnosis => svc.submit_diagnosis(&id, &request, key.as_deref()),
+        _ => svc.submit_comparison(&id, &request, key.as_deref()),
+    })
+    .await??;
     let location = format!("/api/v1/jobs/{}", record.id);
     Ok(accepted(record, created, location))
 }
