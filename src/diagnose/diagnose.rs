@@ -5,9 +5,10 @@
 //! simulation fits with fixed seeds or closed forms on image statistics ([`super::fit_image`]).
 //!
 //! A candidate is significant when its ΔBIC is below −10 and a fitted parameter lies more than two
-//! standard errors from "no effect". The verdict is the significant candidate with the largest
-//! drop of the discrepancy (the most negative ΔBIC when none lowers it, as for effects DIC does
-//! not see), `none` when no candidate is significant. A candidate whose parameter is within two
+//! standard errors from "no effect". The verdict is the significant candidate with the most
+//! negative ΔBIC (Schwarz's criterion decides; the drop of the discrepancy is reported beside it,
+//! because an image-level effect can be certain from the image statistics while the displacement
+//! discrepancy stays at its floor), `none` when no candidate is significant. A candidate whose parameter is within two
 //! standard errors of no effect is not re-rendered: adding nothing changes nothing, so its
 //! discrepancy is the model's and its ΔBIC the bare parameter penalty k·ln n (`recomputed`
 //! false). Effects the dataset cannot reveal are listed with the runs to add, not fitted; pairs
@@ -262,12 +263,7 @@ pub fn diagnose_prepared(
     by_drop.sort_by(|a, b| b.drop_px.total_cmp(&a.drop_px));
     let ranking_by_drop = by_drop.iter().map(|c| c.effect.clone()).collect();
     let significant: Vec<&Candidate> = candidates.iter().filter(|c| c.significant).collect();
-    let winner = significant
-        .iter()
-        .filter(|c| c.drop_px > 0.0)
-        .max_by(|a, b| a.drop_px.total_cmp(&b.drop_px))
-        .or_else(|| significant.first())
-        .map(|c| c.effect.clone());
+    let winner = significant.first().map(|c| c.effect.clone());
     let fitted: Vec<&str> = candidates.iter().map(|c| c.effect.as_str()).collect();
     let mut confounded = design.confounded(&fitted);
     // Data: a second significant candidate explaining nearly as much as the winner.
