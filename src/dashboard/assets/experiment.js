@@ -91,8 +91,10 @@ async function showResults(r) {
   // Downloads.
   const frames = (r.result_files || []).filter((f) => f.startsWith("frames/")).map((f) => f.slice(7));
   const link = (href, text) => el("li", {}, el("a", { href, download: "" }, text));
-  const datasets = await api("/datasets").catch(() => []);
-  const ds = datasets.find((d) => d.source === `experiment:${id}`);
+  // The run names the dataset its frames became (runs stored before that field: look it up).
+  const ds = r.dataset_id
+    ? { id: r.dataset_id }
+    : (await api("/datasets").catch(() => [])).find((d) => d.source === `experiment:${id}`);
   clear($("#downloads"),
     el("ul", { class: "links" },
       link(`${API}${base}/results.csv`, "study.csv (CSV)"),
