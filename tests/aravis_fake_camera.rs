@@ -98,13 +98,16 @@ fn dic_recovers_a_stage_move_through_gige_vision() {
         std::path::Path::new("inline"),
     )
     .unwrap();
-    let scene = Arc::new(ModelScene::new(
-        model_camera,
-        bench_model,
-        &SpecklePattern::preset("b").unwrap(),
-        2.0,
-        5,
-    ));
+    let scene = Arc::new(
+        ModelScene::new(
+            model_camera,
+            bench_model,
+            &SpecklePattern::preset("b").unwrap(),
+            2.0,
+            5,
+        )
+        .unwrap(),
+    );
     let bench = new_bench();
     let mut stage = MockStage::new(bench.clone(), 50.0, Duration::from_millis(5));
     stage.home(Duration::from_secs(1)).unwrap();

@@ -39,7 +39,8 @@ fn commanded_move_is_recovered_through_mock_hardware() {
         &SpecklePattern::preset("b").unwrap(),
         2.0,
         5,
-    );
+    )
+    .unwrap();
     let bench = new_bench();
     let mut stage = MockStage::new(bench.clone(), 50.0, Duration::from_millis(5));
     let mut camera = MockCamera::new(scene, bench);

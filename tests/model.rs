@@ -162,7 +162,7 @@ fn every_effect_off_dic_recovers_the_commanded_translation() {
         principal_dy_px: 0.0,
     };
     let pattern = SpecklePattern::preset("b").unwrap();
-    let dots = pattern.dots(camera.field_mm(8.0), 7);
+    let dots = pattern.dots(camera.field_mm(8.0), 7).unwrap();
     let effects = Effects::default();
     let reference = render_frame(
         &camera,
@@ -215,7 +215,8 @@ fn fill_factor_lowers_contrast_but_not_the_mean() {
     };
     let dots = SpecklePattern::preset("b")
         .unwrap()
-        .dots(camera.field_mm(2.0), 3);
+        .dots(camera.field_mm(2.0), 3)
+        .unwrap();
     let frame = FrameSpec {
         stage_dx_mm: 0.0,
         stage_dy_mm: 0.0,

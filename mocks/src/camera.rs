@@ -5,6 +5,10 @@ use ffdic_hw::{
 };
 use std::time::{Duration, Instant, SystemTime};
 
+/// The mock sensor's exposure range, µs (a PCO Edge 5.5 offers 10 µs to 10 s).
+pub const MIN_EXPOSURE_US: f64 = 10.0;
+pub const MAX_EXPOSURE_US: f64 = 10_000_000.0;
+
 /// What the sensor sees: the caller's physics (the root crate plugs in the imaging model).
 pub trait Scene: Send + Sync {
     /// Sensor size, px.
@@ -54,6 +58,7 @@ impl<S: Scene> MockCamera<S> {
                 pixel_formats: vec![PixelFormat::Mono8, PixelFormat::Mono12, PixelFormat::Mono16],
                 hardware_binning: false,
                 hardware_decimation: false,
+                exposure_range_us: Some((MIN_EXPOSURE_US, MAX_EXPOSURE_US)),
             },
             scene,
             bench,
@@ -75,12 +80,12 @@ impl<S: Scene> Camera for MockCamera<S> {
     }
 
     fn apply(&mut self, s: &CameraSettings) -> HwResult<CameraSettings> {
-        if !(s.exposure_us >= 10.0 && s.exposure_us <= 10_000_000.0) {
+        if !(s.exposure_us >= MIN_EXPOSURE_US && s.exposure_us <= MAX_EXPOSURE_US) {
             return Err(HwError::OutOfRange {
                 what: "exposure_us".into(),
                 value: s.exposure_us,
-                min: 10.0,
-                max: 1e7,
+                min: MIN_EXPOSURE_US,
+                max: MAX_EXPOSURE_US,
             });
         }
         if !(0.0..=24.0).contains(&s.gain_db) {

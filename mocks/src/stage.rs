@@ -70,7 +70,7 @@ impl Stage for MockStage {
     fn move_absolute(&mut self, target: StagePosition) -> HwResult<()> {
         self.check("move")?;
         if !self.homed {
-            return Err(HwError::Protocol(
+            return Err(HwError::NotReferenced(
                 "stage not referenced: home it first".into(),
             ));
         }

@@ -27,7 +27,7 @@ fn stage_needs_homing_respects_limits_and_takes_time() {
     };
     assert!(matches!(
         stage.move_absolute(target),
-        Err(HwError::Protocol(_))
+        Err(HwError::NotReferenced(_))
     ));
     stage.home(Duration::from_secs(1)).unwrap();
     assert!(matches!(

@@ -97,7 +97,7 @@ fn exercise_motion(stage: &mut dyn Stage, sim: &StageSim) {
 
     // Power-up: not referenced, so moves are refused with a clear message.
     match stage.move_absolute(at(1.0, y(1.0))) {
-        Err(HwError::Protocol(m)) => assert!(m.contains("home first"), "{m}"),
+        Err(HwError::NotReferenced(m)) => assert!(m.contains("home first"), "{m}"),
         other => panic!("move before homing: {other:?}"),
     }
     assert!(!sim.busy(), "the refused move must not have started");

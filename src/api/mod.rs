@@ -3,22 +3,27 @@
 //! requests, body limits and request ids. No numerics here: handlers call the service.
 
 mod auth;
+mod guard;
 mod json;
 mod openapi;
 mod problem;
 mod routes;
+mod server;
 mod sse;
 
 pub use problem::{ApiError, Problem};
 
-use crate::service::Service;
+use crate::service::{HttpLimits, Service};
 use axum::extract::DefaultBodyLimit;
 use axum::http::{HeaderName, HeaderValue, Method};
 use axum::Router;
 use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
 use tokio_util::sync::CancellationToken;
 use tower_http::cors::{AllowOrigin, CorsLayer};
 use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
+use tower_http::timeout::RequestBodyTimeoutLayer;
 use tower_http::trace::TraceLayer;
 
 const REQUEST_ID: &str = "x-request-id";
@@ -28,8 +33,24 @@ const REQUEST_ID: &str = "x-request-id";
 pub fn app(service: Service, extra: Router<Service>) -> Router {
     let (api, spec) = openapi::router(service.config.max_upload_bytes).split_for_parts();
     let spec_json = serde_json::to_string_pretty(&spec).expect("the OpenAPI document serialises");
-    let token = service.config.token();
+    let auth = auth::AuthConfig {
+        token: service.config.token(),
+        reads_need_token: service.config.reads_need_token(),
+    };
     let max_json = service.config.max_json_bytes;
+    let guard = Arc::new(guard::GuardConfig {
+        allowed_hosts: service
+            .config
+            .allowed_hosts
+            .iter()
+            .map(|h| h.trim().to_ascii_lowercase())
+            .collect(),
+        cors_origins: service.config.cors_origins.clone(),
+        max_json_bytes: max_json,
+        max_upload_bytes: service.config.max_upload_bytes,
+        request_timeout: Duration::from_millis(service.config.http.request_timeout_ms),
+    });
+    let body_timeout = Duration::from_millis(service.config.http.body_read_timeout_ms);
     let cors = cors_layer(&service.config.cors_origins);
     let request_id = HeaderName::from_static(REQUEST_ID);
 
@@ -44,12 +65,23 @@ pub fn app(service: Service, extra: Router<Service>) -> Router {
         )
         .merge(extra)
         .fallback(|| async { ApiError::not_found("no such route") })
+        .method_not_allowed_fallback(|| async {
+            ApiError::new(
+                axum::http::StatusCode::METHOD_NOT_ALLOWED,
+                "method-not-allowed",
+                "this route does not take that method (the Allow header lists those it takes)",
+            )
+        })
         .layer(axum::middleware::from_fn_with_state(
-            token,
+            Arc::new(auth),
             auth::require_token,
         ))
         .layer(DefaultBodyLimit::max(max_json))
+        .layer(RequestBodyTimeoutLayer::new(body_timeout))
         .with_state(service);
+    // Outside the routes: CORS answers preflights, the guard sees every request (the
+    // fallbacks' too) and turns every error into a problem document.
+    router = router.layer(axum::middleware::from_fn_with_state(guard, guard::guard));
     if let Some(cors) = cors {
         router = router.layer(cors);
     }
@@ -102,17 +134,16 @@ pub fn check_bind(addr: SocketAddr, token: Option<&str>) -> Result<(), ServeErro
     Ok(())
 }
 
-/// Serves `app` on `listener` until `shutdown` is cancelled, then stops taking requests and lets
-/// the running ones finish (SSE streams end with the server).
+/// Serves `app` on `listener` until `shutdown` is cancelled, then stops taking requests and
+/// gives the open ones `limits.drain_ms` to finish (SSE streams end with a terminal event).
 pub async fn run(
     listener: tokio::net::TcpListener,
     app: Router,
     shutdown: CancellationToken,
+    limits: &HttpLimits,
 ) -> Result<(), ServeError> {
     let addr = listener.local_addr()?;
     tracing::info!("listening on http://{addr}");
-    axum::serve(listener, app)
-        .with_graceful_shutdown(async move { shutdown.cancelled().await })
-        .await?;
+    server::serve(listener, app, shutdown, limits).await?;
     Ok(())
 }

@@ -130,6 +130,9 @@ impl From<HwError> for ApiError {
                 "unsupported",
                 e.to_string(),
             ),
+            HwError::NotReferenced(_) => {
+                Self::new(StatusCode::CONFLICT, "stage-not-referenced", e.to_string())
+            }
             HwError::Protocol(_) => {
                 Self::new(StatusCode::BAD_GATEWAY, "hardware-protocol", e.to_string())
             }
@@ -145,6 +148,7 @@ impl From<BenchError> for ApiError {
             BenchError::NoStage | BenchError::NoTargetMount | BenchError::Stopped => {
                 Self::unavailable(e.to_string())
             }
+            BenchError::Panicked(_) => Self::internal("a bench command", e),
             BenchError::Unresponsive { .. } => Self::new(
                 StatusCode::GATEWAY_TIMEOUT,
                 "hardware-timeout",

@@ -58,7 +58,7 @@ pub fn run(args: &ReproduceArgs) -> Result<()> {
         bench_model: truth.name.clone(),
     };
     // A fast mock stage: travel time is not what this study measures.
-    let hardware = mock_bench(spec.camera.clone(), truth, 200.0, Duration::from_millis(5));
+    let hardware = mock_bench(spec.camera.clone(), truth, 200.0, Duration::from_millis(5))?;
     let (service, _) = Service::start(config, hardware)?;
     let request = ExperimentRequest {
         name: spec.name.clone(),

@@ -60,7 +60,7 @@ pub fn run(args: &ServeArgs) -> Result<()> {
         let shutdown = service.shutdown.clone();
         tokio::spawn(wait_for_signal(shutdown.clone()));
         let app = ffdic::api::app(service.clone(), ffdic::dashboard::router());
-        ffdic::api::run(listener, app, shutdown).await?;
+        ffdic::api::run(listener, app, shutdown, &service.config.http).await?;
         anyhow::Ok(())
     })?;
     tracing::info!("stopping: cancelling running work");

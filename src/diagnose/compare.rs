@@ -294,7 +294,7 @@ pub fn load_measurement(
 
 /// The nominal experiment of `model` for this measurement: the stage fitted, the white levels
 /// matched (one centred crop render per pattern).
-pub fn calibrate(meas: &Measurement, model: &ModelConfig) -> Nominal {
+pub fn calibrate(meas: &Measurement, model: &ModelConfig) -> Result<Nominal, DiagnoseError> {
     let mut nominal = meas.nominal.clone();
     let obs: Vec<StageObservation> = meas
         .manifest
@@ -315,7 +315,7 @@ pub fn calibrate(meas: &Measurement, model: &ModelConfig) -> Nominal {
         })
         .collect();
     fit_stage(&mut nominal, &model.effects, &meas.manifest, &obs);
-    let scene = Scene::new(&nominal, &model.effects, &meas.manifest, meas.options.seed);
+    let scene = Scene::new(&nominal, &model.effects, &meas.manifest, meas.options.seed)?;
     for (pi, crop) in meas.reference_crops.iter().enumerate() {
         let img = scene.render(pi, (0.0, 0.0), false, 0, Some(STATS_CROP_PX));
         let (m_model, _) = img.mean_std();
@@ -324,7 +324,7 @@ pub fn calibrate(meas: &Measurement, model: &ModelConfig) -> Nominal {
             nominal.patterns[pi].white_level_dn *= m_meas / m_model;
         }
     }
-    nominal
+    Ok(nominal)
 }
 
 /// Renders and analyses the model's side and compares. `progress` counts run × scheme analyses.
@@ -334,8 +334,8 @@ pub fn compare_prepared(
     progress: Progress,
 ) -> Result<Comparison, DiagnoseError> {
     let opts = &meas.options;
-    let nominal = calibrate(meas, model);
-    let scene = Scene::new(&nominal, &model.effects, &meas.manifest, opts.seed);
+    let nominal = calibrate(meas, model)?;
+    let scene = Scene::new(&nominal, &model.effects, &meas.manifest, opts.seed)?;
     let runs = &meas.manifest.runs;
     let total = runs.len() * opts.schemes.len();
     let done = AtomicUsize::new(0);

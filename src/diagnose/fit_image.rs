@@ -227,6 +227,10 @@ fn curvature_stderr(
         .collect()
 }
 
+/// The comparison before a fit built a scene from the same nominal model and manifest, and the
+/// target's size depends on nothing else: building it again cannot fail.
+const TARGET_BUILT: &str = "the comparison before this fit built the same target";
+
 /// The reference crops of every pattern rendered with `effects`.
 fn reference_crops(
     meas: &Measurement,
@@ -238,7 +242,8 @@ fn reference_crops(
         effects,
         &meas.manifest,
         meas.options.seed,
-    );
+    )
+    .expect(TARGET_BUILT);
     (0..meas.labels.len())
         .map(|pi| scene.render(pi, (0.0, 0.0), false, 0, Some(STATS_CROP_PX)))
         .collect()
@@ -374,7 +379,8 @@ pub fn fit_sensor_noise(
             &effects,
             &meas.manifest,
             meas.options.seed,
-        );
+        )
+        .expect(TARGET_BUILT);
         let mut model_points = Vec::new();
         for pi in 0..meas.labels.len() {
             let r0 = scene.render(pi, (0.0, 0.0), false, 0, Some(STATS_CROP_PX));
@@ -568,7 +574,8 @@ pub fn fit_motion_blur(
             &with(x[0]),
             &meas.manifest,
             meas.options.seed,
-        );
+        )
+        .expect(TARGET_BUILT);
         let crops: Vec<_> = order
             .iter()
             .map(|&i| {

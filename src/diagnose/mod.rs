@@ -98,6 +98,9 @@ pub enum DiagnoseError {
     Image(#[from] ImageError),
     #[error(transparent)]
     Model(#[from] ModelError),
+    /// The runs' moves (or the fitted travel) need a target larger than a layout may hold.
+    #[error("the model cannot render this dataset: {0}")]
+    Target(#[from] crate::model::TooManyDots),
     #[error(transparent)]
     Reduce(#[from] ReduceError),
     #[error("run {run}, scheme {scheme}: {source}")]

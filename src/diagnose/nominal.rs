@@ -21,7 +21,9 @@ use crate::dic::DicResult;
 use crate::experiment::derive_seed;
 use crate::image::Image;
 use crate::model::effects::{Quantization, StageMisalignment};
-use crate::model::{project, render_frame, Camera, Effects, FrameSpec, SpecklePattern, TargetDot};
+use crate::model::{
+    project, render_frame, Camera, Effects, FrameSpec, SpecklePattern, TargetDot, TooManyDots,
+};
 use crate::reduce::Scheme;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -124,7 +126,14 @@ pub struct Scene {
 }
 
 impl Scene {
-    pub fn new(nominal: &Nominal, model: &Effects, manifest: &Manifest, seed: u64) -> Self {
+    /// Errs when the target the runs need (field of view plus the largest move) would hold more
+    /// dots than a layout may: a manifest's moves are input, and size this allocation.
+    pub fn new(
+        nominal: &Nominal,
+        model: &Effects,
+        manifest: &Manifest,
+        seed: u64,
+    ) -> Result<Self, TooManyDots> {
         let travel = manifest
             .runs
             .iter()
@@ -142,13 +151,13 @@ impl Scene {
                     derive_seed(seed, i as u64, 0xD075),
                 )
             })
-            .collect();
-        Self {
+            .collect::<Result<_, _>>()?;
+        Ok(Self {
             nominal: nominal.clone(),
             effects: nominal.render_effects(model),
             dots,
             seed,
-        }
+        })
     }
 
     /// Renders pattern `pattern` at a commanded stage position; `frame` numbers the exposure (its

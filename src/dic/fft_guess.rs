@@ -31,7 +31,9 @@ pub fn global_offset(
     let ky = h.min(MAX_WINDOW_PX);
     let rx = cx.saturating_sub(kx / 2).min(w - kx);
     let ry = cy.saturating_sub(ky / 2).min(h - ky);
-    let m = max_motion_px;
+    // A motion larger than the image leaves no overlap to find: clamping keeps the L x L frame
+    // (L ≈ window + 2m) from growing with a careless setting.
+    let m = max_motion_px.min(w.max(h));
     let l = fast_fft_len(kx.max(ky) + 2 * m);
 
     let (ref_mean, ref_std) = reference.crop(Roi::new(rx, ry, kx, ky)).mean_std();

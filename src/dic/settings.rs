@@ -33,6 +33,16 @@ pub struct DicSettings {
 /// Side of the default ROI (the paper's 800x800 centred region).
 pub const DEFAULT_ROI_SIDE_PX: usize = 800;
 
+/// Upper bounds of the settings that size memory or work. Each is far beyond any useful analysis
+/// and far below what would exhaust a lab PC: a request cannot ask for a 16k x 16k FFT
+/// (`max_motion_px`), a subset larger than a camera, or millions of iterations per point.
+pub const MAX_SUBSET_PX: usize = 1001;
+pub const MAX_STEP_PX: usize = 10_000;
+pub const MAX_STRAIN_WINDOW: usize = 101;
+pub const MAX_ITERATIONS: u32 = 1_000;
+pub const MAX_MOTION_PX: usize = 4_096;
+pub const MAX_SEARCH_RADIUS_PX: usize = 256;
+
 impl Default for DicSettings {
     fn default() -> Self {
         Self {
@@ -55,23 +65,27 @@ impl DicSettings {
     /// Checks everything that does not depend on the images.
     pub fn validate(&self) -> Result<(), DicError> {
         let bad = |field: &'static str, reason: String| Err(DicError::Setting { field, reason });
-        if self.subset_px < 5 || self.subset_px.is_multiple_of(2) {
+        if self.subset_px < 5 || self.subset_px.is_multiple_of(2) || self.subset_px > MAX_SUBSET_PX
+        {
             return bad(
                 "subset",
                 format!(
-                    "subset size must be odd and at least 5, got {}",
+                    "subset size must be odd, 5 to {MAX_SUBSET_PX}, got {}",
                     self.subset_px
                 ),
             );
         }
-        if self.step_px == 0 {
-            return bad("step", "step must be at least 1 px".into());
+        if !(1..=MAX_STEP_PX).contains(&self.step_px) {
+            return bad("step", format!("step must be 1 to {MAX_STEP_PX} px"));
         }
-        if self.strain_window < 3 || self.strain_window.is_multiple_of(2) {
+        if self.strain_window < 3
+            || self.strain_window.is_multiple_of(2)
+            || self.strain_window > MAX_STRAIN_WINDOW
+        {
             return bad(
                 "strain_window",
                 format!(
-                    "strain window must be odd and at least 3, got {}",
+                    "strain window must be odd, 3 to {MAX_STRAIN_WINDOW}, got {}",
                     self.strain_window
                 ),
             );
@@ -79,14 +93,28 @@ impl DicSettings {
         if !(0.0..=5.0).contains(&self.prefilter_sigma_px) {
             return bad("prefilter_sigma_px", "must lie in [0, 5] px".into());
         }
-        if !(self.convergence_px > 0.0) {
-            return bad("convergence_px", "must be positive".into());
+        if !(self.convergence_px > 0.0 && self.convergence_px <= 1.0) {
+            return bad("convergence_px", "must lie in (0, 1] px".into());
         }
-        if self.max_iterations == 0 {
-            return bad("max_iterations", "must be at least 1".into());
+        if !(1..=MAX_ITERATIONS).contains(&self.max_iterations) {
+            return bad("max_iterations", format!("must be 1 to {MAX_ITERATIONS}"));
         }
         if !(-1.0..=1.0).contains(&self.min_zncc) {
             return bad("min_zncc", "must lie in [-1, 1]".into());
+        }
+        if self.max_motion_px > MAX_MOTION_PX {
+            return bad("max_motion_px", format!("at most {MAX_MOTION_PX} px"));
+        }
+        if self.search_radius_px > MAX_SEARCH_RADIUS_PX {
+            return bad(
+                "search_radius_px",
+                format!("at most {MAX_SEARCH_RADIUS_PX} px"),
+            );
+        }
+        if let Some(roi) = self.roi {
+            if roi.x.checked_add(roi.width).is_none() || roi.y.checked_add(roi.height).is_none() {
+                return bad("roi", "the ROI does not fit in any image".into());
+            }
         }
         Ok(())
     }

@@ -12,6 +12,8 @@ use ffdic_hw::{
     StagePosition,
 };
 use serde::Serialize;
+use std::panic::AssertUnwindSafe;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -20,6 +22,9 @@ use std::time::Duration;
 /// real bench a person mounts the one target by hand, and there is no mount.
 pub trait TargetMount: Send {
     fn mount(&mut self, label: &str, pattern: &SpecklePattern, seed: u64) -> Result<(), HwError>;
+    /// The area a mounted print covers (mm, relative to the optical axis at the reference
+    /// position): what sizes its layout.
+    fn field_mm(&self) -> (f64, f64, f64, f64);
 }
 
 /// What the bench actor owns.
@@ -43,6 +48,10 @@ pub enum BenchError {
     Unresponsive { after_ms: u64 },
     #[error("the bench actor has stopped")]
     Stopped,
+    /// A driver or the mock scene panicked inside a command: the command failed, the actor
+    /// goes on (the stage is stopped first).
+    #[error("the bench failed inside a command: {0}")]
+    Panicked(String),
 }
 
 /// The state of the bench as one snapshot.
@@ -127,6 +136,8 @@ struct Request {
 pub struct BenchHandle {
     tx: mpsc::Sender<Request>,
     holder: Arc<Mutex<Option<String>>>,
+    /// False once the actor thread has ended (for whatever reason): `/health` reports it.
+    alive: Arc<AtomicBool>,
     /// How long a caller waits for the actor before giving up (it may be inside a long capture).
     reply_timeout: Duration,
 }
@@ -152,15 +163,26 @@ impl BenchHandle {
         let (tx, rx) = mpsc::channel::<Request>();
         let holder = Arc::new(Mutex::new(None));
         let actor_holder = holder.clone();
+        let alive = Arc::new(AtomicBool::new(true));
+        let flag = AliveFlag(alive.clone());
         std::thread::Builder::new()
             .name("bench-actor".into())
-            .spawn(move || Actor::new(hardware, actor_holder).serve(rx))
+            .spawn(move || {
+                let _flag = flag;
+                Actor::new(hardware, actor_holder).serve(rx)
+            })
             .expect("spawn the bench actor thread");
         Self {
             tx,
             holder,
+            alive,
             reply_timeout,
         }
+    }
+
+    /// Whether the actor thread still runs.
+    pub fn is_alive(&self) -> bool {
+        self.alive.load(Ordering::SeqCst)
     }
 
     /// Takes the bench for `run_id`; direct control gets `Busy` until the lease is dropped.
@@ -297,6 +319,24 @@ impl BenchHandle {
     }
 }
 
+/// Clears the alive flag when the actor thread ends, by return or by unwinding.
+struct AliveFlag(Arc<AtomicBool>);
+
+impl Drop for AliveFlag {
+    fn drop(&mut self) {
+        self.0.store(false, Ordering::SeqCst);
+    }
+}
+
+/// The text of a panic payload (`panic!` with a literal or a formatted message).
+pub fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
+    panic
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| panic.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "a panic without a message".into())
+}
+
 struct Actor {
     hw: BenchHardware,
     holder: Arc<Mutex<Option<String>>>,
@@ -317,9 +357,21 @@ impl Actor {
     fn serve(mut self, rx: mpsc::Receiver<Request>) {
         // Ends when every handle is gone: the stage is left stopped.
         while let Ok(req) = rx.recv() {
-            let result = self
-                .admit(&req.owner, &req.command)
-                .and_then(|()| self.run(req.command));
+            let result = self.admit(&req.owner, &req.command).and_then(|()| {
+                // A panic in a driver or the mock scene fails this command only; the actor,
+                // and with it the bench, stays up for the next one.
+                let command = req.command;
+                std::panic::catch_unwind(AssertUnwindSafe(|| self.run(command))).unwrap_or_else(
+                    |panic| {
+                        let what = panic_message(&panic);
+                        tracing::error!("bench command panicked: {what}");
+                        if let Some(stage) = self.hw.stage.as_mut() {
+                            let _ = stage.stop();
+                        }
+                        Err(BenchError::Panicked(what))
+                    },
+                )
+            });
             // The caller may have given up waiting; that is its business.
             let _ = req.reply.send(result);
         }

@@ -4,6 +4,7 @@
 
 mod bench;
 mod figures;
+mod limits;
 mod maps;
 mod model_scene;
 mod request;
@@ -17,9 +18,12 @@ pub use bench::{
     StageStatus, TargetMount,
 };
 pub use figures::{figure_svgs, figures_text, rows_json, study_csv};
+pub use limits::{BenchLimits, DOT_DIAMETER_PX, EXPOSURE_US, MIN_DOT_SPACING_PX};
 pub use maps::{field_map_svgs, map_file_name};
 pub use model_scene::ModelScene;
-pub use request::{ExperimentPlan, ExperimentRequest, FieldError, SchemeSpec};
+pub use request::{
+    check_dic, check_schemes, ExperimentPlan, ExperimentRequest, FieldError, SchemeSpec,
+};
 pub use runner::{run_experiment, BenchTimeouts, ExperimentOutcome, RunSink, RunnerError};
 pub use simulate::{
     derive_seed, pattern_dots, render_stage_frame, simulate_dataset, SimulateError,

@@ -2,7 +2,7 @@
 //! mock hardware does) is configured apart from any analysis model, so a comparison can hold a
 //! model against a bench that has effects the model lacks.
 
-use crate::model::{render_frame, Camera, ModelConfig, SpecklePattern, TargetDot};
+use crate::model::{render_frame, Camera, ModelConfig, SpecklePattern, TargetDot, TooManyDots};
 use ffdic_hw::StagePosition;
 use ffdic_mocks::Scene;
 
@@ -21,14 +21,14 @@ impl ModelScene {
         pattern: &SpecklePattern,
         travel_mm: f64,
         seed: u64,
-    ) -> Self {
-        let dots = pattern.dots(camera.field_mm(travel_mm + 2.0), seed);
-        Self {
+    ) -> Result<Self, TooManyDots> {
+        let dots = pattern.dots(camera.field_mm(travel_mm + 2.0), seed)?;
+        Ok(Self {
             camera,
             bench,
             dots,
             seed,
-        }
+        })
     }
 }
 

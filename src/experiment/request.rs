@@ -2,6 +2,7 @@
 //! defaults to the paper's study, so `{}` runs it. Validation names the offending field, so the
 //! API can answer 422 with it.
 
+use super::limits::BenchLimits;
 use super::spec::{ExperimentSpec, MoveSpec, PatternSpec, StepSeries};
 use crate::dic::DicSettings;
 use crate::model::SpecklePattern;
@@ -99,94 +100,16 @@ pub struct ExperimentPlan {
 const MAX_MOVES: usize = 200;
 const MAX_FRAMES_AVERAGED: usize = 64;
 const MAX_REPEATS: usize = 32;
+const MAX_PATTERNS: usize = 16;
+const MAX_SCHEMES: usize = 16;
+const MAX_SETTLE_MS: u64 = 60_000;
 
 impl ExperimentRequest {
-    /// Checks everything that does not need the hardware; `has_target_mount` is whether the
-    /// bench can change targets itself.
-    pub fn plan(&self, has_target_mount: bool) -> Result<ExperimentPlan, FieldError> {
-        if self.name.trim().is_empty() || self.name.len() > 128 {
-            return Err(field_error("name", "must be 1 to 128 characters"));
-        }
-        if self.patterns.is_empty() {
-            return Err(field_error("patterns", "at least one pattern"));
-        }
-        if !has_target_mount && self.patterns.len() != 1 {
-            return Err(field_error(
-                "patterns",
-                "this bench has no target changer: name exactly one pattern, the mounted target",
-            ));
-        }
-        let mut patterns = Vec::new();
-        for (i, p) in self.patterns.iter().enumerate() {
-            patterns.push(match p {
-                PatternSpec::Preset(label) => SpecklePattern::preset(label).ok_or_else(|| {
-                    field_error(
-                        format!("patterns[{i}]"),
-                        format!("unknown preset '{label}' (a, b or c)"),
-                    )
-                })?,
-                PatternSpec::Custom(c) => {
-                    if !(c.dot_diameter_mm > 0.0 && c.dot_spacing_mm > 0.0) {
-                        return Err(field_error(
-                            format!("patterns[{i}]"),
-                            "dot_diameter_mm and dot_spacing_mm must be positive",
-                        ));
-                    }
-                    c.clone()
-                }
-            });
-        }
-        for (i, p) in patterns.iter().enumerate() {
-            if patterns[..i].iter().any(|q| q.label == p.label) {
-                return Err(field_error(
-                    format!("patterns[{i}]"),
-                    format!("label '{}' appears twice", p.label),
-                ));
-            }
-        }
-        let spec_moves = ExperimentSpec {
-            moves: self.moves.clone(),
-            step_series: self.step_series.clone(),
-            ..ExperimentSpec::paper()
-        }
-        .all_moves();
-        if spec_moves.is_empty() {
-            return Err(field_error("moves", "at least one move or step series"));
-        }
-        if spec_moves.len() > MAX_MOVES {
-            return Err(field_error(
-                "moves",
-                format!("at most {MAX_MOVES} moves in all"),
-            ));
-        }
-        for (i, m) in spec_moves.iter().enumerate() {
-            if !(m.dx_mm.is_finite() && m.dy_mm.is_finite()) {
-                return Err(field_error(
-                    format!("moves[{i}]"),
-                    "dx_mm, dy_mm must be finite",
-                ));
-            }
-            if !is_plain_id(&m.id) {
-                return Err(field_error(
-                    format!("moves[{i}].id"),
-                    "letters, digits, '-' and '_' only, at most 64",
-                ));
-            }
-            if spec_moves[..i].iter().any(|o| o.id == m.id) {
-                return Err(field_error(
-                    format!("moves[{i}].id"),
-                    format!("'{}' appears twice", m.id),
-                ));
-            }
-        }
-        for (i, p) in patterns.iter().enumerate() {
-            if !is_plain_id(&p.label) {
-                return Err(field_error(
-                    format!("patterns[{i}].label"),
-                    "letters, digits, '-' and '_' only, at most 64",
-                ));
-            }
-        }
+    /// Checks everything that does not need the hardware, against what the bench can do.
+    pub fn plan(&self, limits: &BenchLimits) -> Result<ExperimentPlan, FieldError> {
+        check_name(&self.name)?;
+        let patterns = self.check_patterns(limits)?;
+        let moves = self.check_moves(limits)?;
         if !(1..=MAX_FRAMES_AVERAGED).contains(&self.frames_averaged) {
             return Err(field_error(
                 "frames_averaged",
@@ -196,45 +119,166 @@ impl ExperimentRequest {
         if self.repeats > MAX_REPEATS {
             return Err(field_error("repeats", format!("at most {MAX_REPEATS}")));
         }
-        if self.settle_ms > 60_000 {
-            return Err(field_error("settle_ms", "at most 60000"));
+        if self.settle_ms > MAX_SETTLE_MS {
+            return Err(field_error("settle_ms", format!("at most {MAX_SETTLE_MS}")));
         }
         if let Some(e) = self.exposure_us {
-            if !(e > 0.0 && e.is_finite()) {
-                return Err(field_error("exposure_us", "must be positive"));
-            }
+            limits
+                .check_exposure(e)
+                .map_err(|r| field_error("exposure_us", r))?;
         }
-        if self.schemes.is_empty() {
-            return Err(field_error("schemes", "at least one scheme"));
-        }
-        let mut schemes = Vec::new();
-        for (i, s) in self.schemes.iter().enumerate() {
-            let scheme = match s {
-                SchemeSpec::Preset(name) => Scheme::preset(name),
-                SchemeSpec::Custom(c) => Scheme::new(&c.name, c.x, c.y),
-            }
-            .map_err(|e| field_error(format!("schemes[{i}]"), e.to_string()))?;
-            schemes.push(scheme);
-        }
-        self.dic.validate().map_err(|e| match e {
-            crate::dic::DicError::Setting { field, reason } => {
-                field_error(format!("dic.{field}"), reason)
-            }
-            other => field_error("dic", other.to_string()),
-        })?;
         Ok(ExperimentPlan {
             name: self.name.clone(),
             patterns,
-            moves: spec_moves,
+            moves,
             repeats: self.repeats,
             frames_averaged: self.frames_averaged,
             settle_ms: self.settle_ms,
             exposure_us: self.exposure_us,
-            schemes,
-            dic: self.dic.clone(),
+            schemes: check_schemes(&self.schemes)?,
+            dic: check_dic(&self.dic)?,
             seed: self.seed,
         })
     }
+
+    fn check_patterns(&self, limits: &BenchLimits) -> Result<Vec<SpecklePattern>, FieldError> {
+        if self.patterns.is_empty() {
+            return Err(field_error("patterns", "at least one pattern"));
+        }
+        if self.patterns.len() > MAX_PATTERNS {
+            return Err(field_error(
+                "patterns",
+                format!("at most {MAX_PATTERNS} patterns"),
+            ));
+        }
+        if !limits.has_target_mount() && self.patterns.len() != 1 {
+            return Err(field_error(
+                "patterns",
+                "this bench has no target changer: name exactly one pattern, the mounted target",
+            ));
+        }
+        let mut patterns: Vec<SpecklePattern> = Vec::new();
+        for (i, p) in self.patterns.iter().enumerate() {
+            let pattern = match p {
+                PatternSpec::Preset(label) => SpecklePattern::preset(label).ok_or_else(|| {
+                    field_error(
+                        format!("patterns[{i}]"),
+                        format!("unknown preset '{label}' (a, b or c)"),
+                    )
+                })?,
+                PatternSpec::Custom(c) => {
+                    limits
+                        .check_pattern(c)
+                        .map_err(|r| field_error(format!("patterns[{i}]"), r))?;
+                    c.clone()
+                }
+            };
+            if !is_plain_id(&pattern.label) {
+                return Err(field_error(
+                    format!("patterns[{i}].label"),
+                    "letters, digits, '-' and '_' only, at most 64",
+                ));
+            }
+            if patterns.iter().any(|q| q.label == pattern.label) {
+                return Err(field_error(
+                    format!("patterns[{i}]"),
+                    format!("label '{}' appears twice", pattern.label),
+                ));
+            }
+            patterns.push(pattern);
+        }
+        Ok(patterns)
+    }
+
+    fn check_moves(&self, limits: &BenchLimits) -> Result<Vec<MoveSpec>, FieldError> {
+        // Counted before the step series are expanded: `count` sizes that expansion.
+        let requested = self
+            .step_series
+            .iter()
+            .try_fold(self.moves.len(), |n, s| n.checked_add(s.count))
+            .unwrap_or(usize::MAX);
+        if requested > MAX_MOVES {
+            return Err(field_error(
+                "moves",
+                format!("at most {MAX_MOVES} moves in all"),
+            ));
+        }
+        let moves = ExperimentSpec {
+            moves: self.moves.clone(),
+            step_series: self.step_series.clone(),
+            ..ExperimentSpec::paper()
+        }
+        .all_moves();
+        if moves.is_empty() {
+            return Err(field_error("moves", "at least one move or step series"));
+        }
+        for (i, m) in moves.iter().enumerate() {
+            limits
+                .check_move(m.dx_mm, m.dy_mm)
+                .map_err(|r| field_error(format!("moves[{i}]"), r))?;
+            if !is_plain_id(&m.id) {
+                return Err(field_error(
+                    format!("moves[{i}].id"),
+                    "letters, digits, '-' and '_' only, at most 64",
+                ));
+            }
+            if moves[..i].iter().any(|o| o.id == m.id) {
+                return Err(field_error(
+                    format!("moves[{i}].id"),
+                    format!("'{}' appears twice", m.id),
+                ));
+            }
+        }
+        Ok(moves)
+    }
+}
+
+/// A run's name: shown in lists and written into manifests; printable, 1 to 128 characters.
+fn check_name(name: &str) -> Result<(), FieldError> {
+    if name.trim().is_empty() || name.chars().count() > 128 || name.chars().any(char::is_control) {
+        return Err(field_error("name", "must be 1 to 128 printable characters"));
+    }
+    Ok(())
+}
+
+/// The reduction schemes of a request (shared by experiments, analyses and comparisons).
+pub fn check_schemes(specs: &[SchemeSpec]) -> Result<Vec<Scheme>, FieldError> {
+    if specs.is_empty() {
+        return Err(field_error("schemes", "at least one scheme"));
+    }
+    if specs.len() > MAX_SCHEMES {
+        return Err(field_error(
+            "schemes",
+            format!("at most {MAX_SCHEMES} schemes"),
+        ));
+    }
+    let mut schemes: Vec<Scheme> = Vec::new();
+    for (i, s) in specs.iter().enumerate() {
+        let scheme = match s {
+            SchemeSpec::Preset(name) => Scheme::preset(name),
+            SchemeSpec::Custom(c) => Scheme::new(&c.name, c.x, c.y),
+        }
+        .map_err(|e| field_error(format!("schemes[{i}]"), e.to_string()))?;
+        if schemes.iter().any(|q| q.name == scheme.name) {
+            return Err(field_error(
+                format!("schemes[{i}]"),
+                format!("'{}' appears twice", scheme.name),
+            ));
+        }
+        schemes.push(scheme);
+    }
+    Ok(schemes)
+}
+
+/// The DIC settings of a request, with the field named as `dic.<field>`.
+pub fn check_dic(dic: &DicSettings) -> Result<DicSettings, FieldError> {
+    dic.validate().map_err(|e| match e {
+        crate::dic::DicError::Setting { field, reason } => {
+            field_error(format!("dic.{field}"), reason)
+        }
+        other => field_error("dic", other.to_string()),
+    })?;
+    Ok(dic.clone())
 }
 
 /// Ids and labels become file names: keep them plain.
@@ -249,10 +293,19 @@ fn is_plain_id(s: &str) -> bool {
 mod tests {
     use super::*;
 
+    fn limits() -> BenchLimits {
+        BenchLimits {
+            target_field_mm: Some((-75.0, -68.0, 75.0, 68.0)),
+            travel_x_mm: Some((-25.0, 25.0)),
+            travel_y_mm: Some((-25.0, 25.0)),
+            ..BenchLimits::analysis_only(26.0)
+        }
+    }
+
     #[test]
     fn empty_request_is_the_paper() {
         let r: ExperimentRequest = serde_json::from_str("{}").unwrap();
-        let p = r.plan(true).unwrap();
+        let p = r.plan(&limits()).unwrap();
         assert_eq!(p.patterns.len(), 3);
         assert_eq!(p.moves.len(), 1);
         assert_eq!(p.moves[0].dx_mm, 5.0);
@@ -264,7 +317,7 @@ mod tests {
         let bad = |json: &str| {
             serde_json::from_str::<ExperimentRequest>(json)
                 .unwrap()
-                .plan(true)
+                .plan(&limits())
                 .unwrap_err()
                 .field
         };
@@ -273,9 +326,34 @@ mod tests {
         assert_eq!(bad(r#"{"schemes":["ff7"]}"#), "schemes[0]");
         assert_eq!(bad(r#"{"dic":{"subset_px":40}}"#), "dic.subset");
         assert_eq!(bad(r#"{"moves":[{"id":"../x","dx_mm":1}]}"#), "moves[0].id");
+        // The issue's reproducers: a layout of 288 GB, a capacity overflow, a move beyond the
+        // travel, an exposure of a day, a scheme name that is a path, a control character.
+        let custom = |d: f64, s: f64| {
+            format!(
+                r#"{{"patterns":[{{"label":"x","dot_diameter_mm":{d},"dot_spacing_mm":{s},"contrast":0.8}}]}}"#
+            )
+        };
+        assert_eq!(bad(&custom(0.0005, 0.001)), "patterns[0]");
+        assert_eq!(bad(&custom(0.0005, 1e-9)), "patterns[0]");
+        assert_eq!(bad(r#"{"moves":[{"id":"far","dx_mm":26}]}"#), "moves[0]");
+        assert_eq!(bad(r#"{"exposure_us":8.64e10}"#), "exposure_us");
+        assert_eq!(
+            bad(
+                r#"{"schemes":[{"name":"a/b","x":{"block":2,"first":0,"active":1},"y":{"block":2,"first":0,"active":1}}]}"#
+            ),
+            "schemes[0]"
+        );
+        assert_eq!(bad(r#"{"name":"a\u0007b"}"#), "name");
+        assert_eq!(
+            bad(r#"{"step_series":[{"id":"s","dx_step_mm":0.001,"count":18446744073709551615}]}"#),
+            "moves"
+        );
+        // Preset names in any case.
+        let upper: ExperimentRequest = serde_json::from_str(r#"{"schemes":["FF50"]}"#).unwrap();
+        assert_eq!(upper.plan(&limits()).unwrap().schemes[0].name, "ff50");
         let one_target = serde_json::from_str::<ExperimentRequest>("{}")
             .unwrap()
-            .plan(false)
+            .plan(&BenchLimits::analysis_only(26.0))
             .unwrap_err();
         assert_eq!(one_target.field, "patterns");
     }

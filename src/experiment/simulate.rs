@@ -5,7 +5,7 @@
 use super::spec::ExperimentSpec;
 use crate::dataset::{CameraInfo, DatasetError, Manifest, PatternInfo, Run, StageMove};
 use crate::image::{write_tiff_u16, Image, ImageError};
-use crate::model::{render_frame, FrameSpec, ModelConfig, SpecklePattern, TargetDot};
+use crate::model::{render_frame, FrameSpec, ModelConfig, SpecklePattern, TargetDot, TooManyDots};
 use std::path::Path;
 
 #[derive(Debug, thiserror::Error)]
@@ -14,6 +14,8 @@ pub enum SimulateError {
     Image(#[from] ImageError),
     #[error(transparent)]
     Dataset(#[from] DatasetError),
+    #[error(transparent)]
+    Target(#[from] TooManyDots),
     #[error("cannot create {path}: {source}")]
     Create {
         path: std::path::PathBuf,
@@ -36,7 +38,7 @@ pub fn pattern_dots(
     pattern: &SpecklePattern,
     index: usize,
     seed: u64,
-) -> Vec<TargetDot> {
+) -> Result<Vec<TargetDot>, TooManyDots> {
     let travel = spec
         .all_moves()
         .iter()
@@ -93,7 +95,7 @@ pub fn simulate_dataset(
         serde_json::json!({"model": model.name, "seed": seed}),
     );
     for (pi, pattern) in patterns.iter().enumerate() {
-        let dots = pattern_dots(spec, pattern, pi, seed);
+        let dots = pattern_dots(spec, pattern, pi, seed)?;
         let mut frame_no = 0u64;
         let mut shoot = |name: &str, stage: (f64, f64)| -> Result<(), SimulateError> {
             let img = render_stage_frame(

@@ -12,6 +12,6 @@ mod speckle;
 
 pub use config::{ModelConfig, ModelError};
 pub use effects::{Effects, EFFECT_IDS};
-pub use pattern::{SpecklePattern, TargetDot};
+pub use pattern::{SpecklePattern, TargetDot, TooManyDots, MAX_TARGET_DOTS};
 pub use render::{project, render_frame, Camera, FrameSpec};
 pub use speckle::{render_dots, GaussianDot, SpeckleLayout};

@@ -24,6 +24,22 @@ pub struct SpecklePattern {
     pub edge_softness_mm: f64,
 }
 
+/// The most dots one target layout may hold (32 bytes each: 128 MiB). Every layout is sized
+/// from input — a request's pattern, a dataset's moves — so the cap is what keeps one request
+/// from allocating the machine away.
+pub const MAX_TARGET_DOTS: usize = 4_000_000;
+
+/// A layout larger than [`MAX_TARGET_DOTS`] (or with a spacing that is not a positive number).
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+#[error(
+    "the target would need {dots:.3e} dots (at most {MAX_TARGET_DOTS}): dot_spacing_mm must be at \
+     least {min_spacing_mm:.4} mm over this field, or the field (image and moves) smaller"
+)]
+pub struct TooManyDots {
+    pub dots: f64,
+    pub min_spacing_mm: f64,
+}
+
 /// One dot on the target plane, mm, relative to the optical axis at the reference position.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TargetDot {
@@ -58,10 +74,34 @@ impl SpecklePattern {
         ((self.dot_diameter_mm / FWHM_PER_SIGMA).powi(2) + self.edge_softness_mm.powi(2)).sqrt()
     }
 
+    /// How many dots cover the rectangle [x0, x1] x [y0, y1] mm: one per lattice cell. Refuses
+    /// (never allocates) a layout above [`MAX_TARGET_DOTS`], a non-finite field or spacing.
+    pub fn dot_count(&self, (x0, y0, x1, y1): (f64, f64, f64, f64)) -> Result<usize, TooManyDots> {
+        let s = self.dot_spacing_mm;
+        let nx = ((x1 - x0) / s).ceil();
+        let ny = ((y1 - y0) / s).ceil();
+        let n = nx * ny;
+        // NaN fails every comparison, so `!(n <= MAX)` also refuses NaN and infinities.
+        if !(s > 0.0 && nx >= 0.0 && ny >= 0.0 && n <= MAX_TARGET_DOTS as f64) {
+            let area_mm2 = (x1 - x0) * (y1 - y0);
+            return Err(TooManyDots {
+                dots: n,
+                min_spacing_mm: (area_mm2 / MAX_TARGET_DOTS as f64).sqrt(),
+            });
+        }
+        Ok(n as usize)
+    }
+
     /// Dots covering the rectangle [x0, x1] x [y0, y1] mm on a jittered lattice (one dot per
     /// cell, uniformly placed within it, depth ±15 %), reproducible from `seed`.
-    pub fn dots(&self, (x0, y0, x1, y1): (f64, f64, f64, f64), seed: u64) -> Vec<TargetDot> {
+    pub fn dots(
+        &self,
+        field: (f64, f64, f64, f64),
+        seed: u64,
+    ) -> Result<Vec<TargetDot>, TooManyDots> {
         use rand::{Rng, SeedableRng};
+        self.dot_count(field)?;
+        let (x0, y0, x1, y1) = field;
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let s = self.dot_spacing_mm;
         let nx = ((x1 - x0) / s).ceil() as usize;
@@ -78,6 +118,6 @@ impl SpecklePattern {
                 });
             }
         }
-        dots
+        Ok(dots)
     }
 }

@@ -30,15 +30,24 @@ impl AxisScheme {
     }
 
     fn validate(&self, axis: &str) -> Result<(), ReduceError> {
-        if self.block == 0 || self.active == 0 || self.first + self.active > self.block {
+        let end = self.first.checked_add(self.active);
+        if self.block == 0
+            || self.block > MAX_BLOCK_PX
+            || self.active == 0
+            || end.is_none_or(|e| e > self.block)
+        {
             return Err(ReduceError::InvalidScheme(format!(
-                "{axis}: need block >= 1, active >= 1 and first + active <= block, got block {} first {} active {}",
+                "{axis}: need 1 <= block <= {MAX_BLOCK_PX}, active >= 1 and first + active <= block, got block {} first {} active {}",
                 self.block, self.first, self.active
             )));
         }
         Ok(())
     }
 }
+
+/// The largest reduction block: a "pixel" of 256 sensor pixels is far beyond any fill-factor
+/// question, and bounds what a request can ask of the reducer.
+pub const MAX_BLOCK_PX: usize = 256;
 
 /// A reduction scheme: a name and one [`AxisScheme`] per axis.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -67,7 +76,15 @@ pub enum ReduceError {
 }
 
 impl Scheme {
+    /// A scheme's name becomes part of file names and table columns: letters, digits, `-`,
+    /// `_`, `.` and `+`, at most 64.
     pub fn new(name: &str, x: AxisScheme, y: AxisScheme) -> Result<Self, ReduceError> {
+        let plain = |c: char| c.is_ascii_alphanumeric() || "-_.+".contains(c);
+        if name.is_empty() || name.len() > 64 || !name.chars().all(plain) || name.starts_with('.') {
+            return Err(ReduceError::InvalidScheme(format!(
+                "name {name:?}: letters, digits, '-', '_', '.' and '+' only, 1 to 64, not starting with '.'"
+            )));
+        }
         x.validate("x")?;
         y.validate("y")?;
         Ok(Self {
@@ -77,8 +94,10 @@ impl Scheme {
         })
     }
 
-    /// The paper's three schemes by name.
+    /// The paper's three schemes by name, in any case (`FF50` is `ff50`).
     pub fn preset(name: &str) -> Result<Self, ReduceError> {
+        let name = name.to_ascii_lowercase();
+        let name = name.as_str();
         let bin = AxisScheme {
             block: 2,
             first: 0,

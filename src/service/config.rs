@@ -31,6 +31,19 @@ pub struct DaemonConfig {
     /// Largest dataset upload, bytes.
     #[serde(default = "default_max_upload_bytes")]
     pub max_upload_bytes: usize,
+    /// Most bytes all stored datasets may take together; an upload that would pass it is
+    /// refused (507) before anything is kept.
+    #[serde(default = "default_datasets_quota_bytes")]
+    pub datasets_quota_bytes: u64,
+    /// Host names (besides loopback names and IP literals) this daemon answers to; any other
+    /// `Host` header is refused, so a DNS-rebinding page cannot reach it.
+    #[serde(default)]
+    pub allowed_hosts: Vec<String>,
+    /// Whether reads (GET) need the token too. Unset: yes when `listen` is not loopback.
+    #[serde(default)]
+    pub read_requires_token: Option<bool>,
+    #[serde(default)]
+    pub http: HttpLimits,
     pub bench: BenchConfig,
     pub camera: CameraConfig,
     pub stage: StageConfig,
@@ -42,6 +55,39 @@ fn default_max_json_bytes() -> usize {
 
 fn default_max_upload_bytes() -> usize {
     2 * 1024 * 1024 * 1024
+}
+
+fn default_datasets_quota_bytes() -> u64 {
+    50 * 1024 * 1024 * 1024
+}
+
+/// Timeouts and limits of the HTTP server, so neither a slow nor a silent client can hold the
+/// daemon: a connection must send its request head within `header_read_timeout_ms` (also the
+/// keep-alive idle time), each piece of a body within `body_read_timeout_ms`, and a request
+/// (other than an SSE stream or an upload) must be answered within `request_timeout_ms`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HttpLimits {
+    pub header_read_timeout_ms: u64,
+    pub body_read_timeout_ms: u64,
+    /// Longer than the slowest bench command (homing, 120 s by default).
+    pub request_timeout_ms: u64,
+    /// Open connections at most; more are closed as soon as they are accepted.
+    pub max_connections: usize,
+    /// On shutdown, how long open requests get to finish before the daemon exits anyway.
+    pub drain_ms: u64,
+}
+
+impl Default for HttpLimits {
+    fn default() -> Self {
+        Self {
+            header_read_timeout_ms: 10_000,
+            body_read_timeout_ms: 30_000,
+            request_timeout_ms: 300_000,
+            max_connections: 4_096,
+            drain_ms: 3_000,
+        }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -156,10 +202,18 @@ impl DaemonConfig {
         if !(config.bench.scale_px_per_mm > 0.0) {
             return Err(parse("bench.scale_px_per_mm must be positive".into()));
         }
+        if !(config.bench.scale_px_per_mm <= 1e4) {
+            return Err(parse("bench.scale_px_per_mm must be at most 10000".into()));
+        }
         if let CameraConfig::Mock { width, height, .. } = config.camera {
-            if width < 64 || height < 64 {
-                return Err(parse("camera: the mock sensor is at least 64x64 px".into()));
+            if !(64..=16_384).contains(&width) || !(64..=16_384).contains(&height) {
+                return Err(parse(
+                    "camera: the mock sensor is 64x64 to 16384x16384 px".into(),
+                ));
             }
+        }
+        if config.http.max_connections == 0 {
+            return Err(parse("http.max_connections must be at least 1".into()));
         }
         Ok(config)
     }
@@ -184,6 +238,13 @@ impl DaemonConfig {
             .ok()
             .filter(|t| !t.is_empty())
             .or_else(|| self.auth_token.clone().filter(|t| !t.is_empty()))
+    }
+
+    /// Whether GET requests need the token (set, or implied by a non-loopback address).
+    pub fn reads_need_token(&self) -> bool {
+        self.read_requires_token
+            .unwrap_or(!self.listen.ip().is_loopback())
+            && self.token().is_some()
     }
 
     /// The mock camera's geometry as the model sees it.

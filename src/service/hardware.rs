@@ -18,6 +18,9 @@ pub enum HardwareError {
     Camera(HwError),
     #[error("stage: {0}")]
     Stage(HwError),
+    /// The mock camera's field of view is too large for a target layout.
+    #[error("mock camera: {0}")]
+    MockTarget(#[from] crate::model::TooManyDots),
     #[error("this ffdic was built without the `{0}` feature (cargo build --features {0})")]
     FeatureMissing(&'static str),
 }
@@ -50,9 +53,21 @@ struct MockTargets {
 impl TargetMount for MockTargets {
     fn mount(&mut self, _label: &str, pattern: &SpecklePattern, seed: u64) -> Result<(), HwError> {
         let mut s = self.scene.0.write().expect("scene lock");
-        s.dots = pattern.dots(s.camera.field_mm(MOCK_TARGET_MARGIN_MM), seed);
+        s.dots = pattern
+            .dots(s.camera.field_mm(MOCK_TARGET_MARGIN_MM), seed)
+            .map_err(|e| HwError::OutOfRange {
+                what: format!("target {} dots", e.dots),
+                value: pattern.dot_spacing_mm,
+                min: e.min_spacing_mm,
+                max: f64::INFINITY,
+            })?;
         s.seed = seed;
         Ok(())
+    }
+
+    fn field_mm(&self) -> (f64, f64, f64, f64) {
+        let s = self.scene.0.read().expect("scene lock");
+        s.camera.field_mm(MOCK_TARGET_MARGIN_MM)
     }
 }
 
@@ -62,21 +77,24 @@ pub fn mock_bench(
     truth: ModelConfig,
     speed_mm_s: f64,
     settle: Duration,
-) -> BenchHardware {
+) -> Result<BenchHardware, HardwareError> {
     let bench = new_bench();
-    let (camera, targets) = mock_camera(geometry, truth, bench.clone());
-    BenchHardware {
+    let (camera, targets) = mock_camera(geometry, truth, bench.clone())?;
+    Ok(BenchHardware {
         camera,
         stage: Some(Box::new(MockStage::new(bench, speed_mm_s, settle))),
         targets: Some(targets),
-    }
+    })
 }
+
+/// The mock camera and the target changer that swaps what it sees.
+type MockCameraAndTargets = (Box<dyn Camera>, Box<dyn TargetMount>);
 
 fn mock_camera(
     geometry: ModelCamera,
     truth: ModelConfig,
     bench: SharedBench,
-) -> (Box<dyn Camera>, Box<dyn TargetMount>) {
+) -> Result<MockCameraAndTargets, HardwareError> {
     let pattern = SpecklePattern::preset("b").expect("preset b exists");
     let scene = SwappableScene(Arc::new(RwLock::new(ModelScene::new(
         geometry,
@@ -84,11 +102,11 @@ fn mock_camera(
         &pattern,
         MOCK_TARGET_MARGIN_MM,
         1,
-    ))));
-    (
+    )?)));
+    Ok((
         Box::new(MockCamera::new(scene.clone(), bench)),
         Box::new(MockTargets { scene }),
-    )
+    ))
 }
 
 /// Opens what `config` names.
@@ -97,7 +115,7 @@ pub fn open_bench(config: &DaemonConfig) -> Result<BenchHardware, HardwareError>
     let (camera, targets): (Box<dyn Camera>, Option<Box<dyn TargetMount>>) = match &config.camera {
         CameraConfig::Mock { bench_model, .. } => {
             let geometry = config.mock_geometry().expect("mock camera has a geometry");
-            let (c, t) = mock_camera(geometry, load_bench_model(bench_model)?, shared.clone());
+            let (c, t) = mock_camera(geometry, load_bench_model(bench_model)?, shared.clone())?;
             (c, Some(t))
         }
         CameraConfig::Aravis { device, buffers } => (open_aravis(device, *buffers)?, None),

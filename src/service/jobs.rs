@@ -93,7 +93,7 @@ pub struct Jobs {
     store: Arc<RunStore>,
     live: Arc<Mutex<HashMap<RunId, Live>>>,
     lanes: Mutex<HashMap<Lane, mpsc::Sender<Queued>>>,
-    workers: Mutex<Vec<std::thread::JoinHandle<()>>>,
+    workers: Mutex<Vec<(Lane, std::thread::JoinHandle<()>)>>,
 }
 
 impl Jobs {
@@ -113,13 +113,29 @@ impl Jobs {
                 .spawn(move || worker(rx, store, live))
                 .expect("spawn a job worker");
             jobs.lanes.lock().expect("lanes").insert(lane, tx);
-            jobs.workers.lock().expect("workers").push(handle);
+            jobs.workers.lock().expect("workers").push((lane, handle));
         }
         jobs
     }
 
     pub fn store(&self) -> &Arc<RunStore> {
         &self.store
+    }
+
+    /// Lanes whose worker has ended although the server still takes work: `/health` reports
+    /// them (a job's panic is caught and fails the job only, so this means a bug).
+    pub fn dead_lanes(&self) -> Vec<Lane> {
+        let taking_work = !self.lanes.lock().expect("lanes").is_empty();
+        if !taking_work {
+            return Vec::new();
+        }
+        self.workers
+            .lock()
+            .expect("workers")
+            .iter()
+            .filter(|(_, h)| h.is_finished())
+            .map(|(lane, _)| *lane)
+            .collect()
     }
 
     /// Queues `work` as a new run, or returns the run an earlier request with the same
@@ -222,7 +238,7 @@ impl Jobs {
         }
         let deadline = std::time::Instant::now() + grace;
         let handles: Vec<_> = self.workers.lock().expect("workers").drain(..).collect();
-        for h in handles {
+        for (_, h) in handles {
             while !h.is_finished() && std::time::Instant::now() < deadline {
                 std::thread::sleep(Duration::from_millis(20));
             }

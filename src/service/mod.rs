@@ -9,8 +9,8 @@ mod models;
 mod work;
 
 pub use config::{
-    load_bench_model, BenchConfig, CameraConfig, ConfigError, DaemonConfig, StageConfig,
-    DEFAULT_CONFIG_TOML, PAPER_BENCH_TOML,
+    load_bench_model, BenchConfig, CameraConfig, ConfigError, DaemonConfig, HttpLimits,
+    StageConfig, DEFAULT_CONFIG_TOML, PAPER_BENCH_TOML,
 };
 pub use hardware::{mock_bench, open_bench, HardwareError, SwappableScene};
 pub use jobs::{JobContext, JobError, JobOutput, Jobs, Lane, Work};
@@ -20,7 +20,9 @@ pub use models::{
 };
 pub use work::{AnalysisRequest, CompareRequest};
 
-use crate::experiment::{BenchHandle, BenchHardware, BenchTimeouts, ExperimentRequest};
+use crate::experiment::{
+    BenchHandle, BenchHardware, BenchLimits, BenchTimeouts, ExperimentRequest, EXPOSURE_US,
+};
 use crate::store::{DatasetId, RecoveryReport, RunRecord, RunStore, StoreError};
 use std::sync::Arc;
 use std::time::Duration;
@@ -40,8 +42,9 @@ pub struct Service {
     pub store: Arc<RunStore>,
     pub jobs: Arc<Jobs>,
     pub bench: BenchHandle,
-    /// Whether the bench can change targets itself (the mock bench); set at start.
-    pub has_target_mount: bool,
+    /// What the bench can do (scale, target, travel, exposure), read at start: every request
+    /// is checked against it at the door.
+    pub limits: Arc<BenchLimits>,
     pub has_stage: bool,
     /// Cancelled when the server shuts down: live streams end with it.
     pub shutdown: tokio_util::sync::CancellationToken,
@@ -56,8 +59,18 @@ impl Service {
     ) -> Result<(Self, RecoveryReport), ServiceError> {
         let (store, recovery) = RunStore::open(&config.data_dir)?;
         let store = Arc::new(store);
-        let has_target_mount = hardware.targets.is_some();
         let has_stage = hardware.stage.is_some();
+        let limits = Arc::new(BenchLimits {
+            scale_px_per_mm: config.bench.scale_px_per_mm,
+            target_field_mm: hardware.targets.as_ref().map(|t| t.field_mm()),
+            travel_x_mm: hardware.stage.as_ref().map(|s| s.info().travel_x_mm),
+            travel_y_mm: hardware.stage.as_ref().map(|s| s.info().travel_y_mm),
+            exposure_us: hardware
+                .camera
+                .info()
+                .exposure_range_us
+                .unwrap_or(EXPOSURE_US),
+        });
         let bench = BenchHandle::spawn(hardware, Duration::from_secs(30));
         let jobs = Jobs::start(store.clone());
         Ok((
@@ -66,7 +79,7 @@ impl Service {
                 store,
                 jobs,
                 bench,
-                has_target_mount,
+                limits,
                 has_stage,
                 shutdown: tokio_util::sync::CancellationToken::new(),
             },
@@ -89,7 +102,7 @@ impl Service {
         request: &ExperimentRequest,
         idempotency_key: Option<&str>,
     ) -> Result<(RunRecord, bool), SubmitError> {
-        let plan = request.plan(self.has_target_mount)?;
+        let plan = request.plan(&self.limits)?;
         if !self.has_stage {
             return Err(SubmitError::NoStage);
         }

@@ -9,8 +9,8 @@ use crate::diagnose::{
 };
 use crate::dic::DicSettings;
 use crate::experiment::{
-    analyze_dataset, figure_svgs, rows_json, run_experiment, study_csv, ExperimentPlan,
-    ExperimentRequest, FieldError, RunSink, RunnerError, SchemeSpec, StudyError,
+    analyze_dataset, check_dic, check_schemes, figure_svgs, rows_json, run_experiment, study_csv,
+    ExperimentPlan, ExperimentRequest, FieldError, RunSink, RunnerError, SchemeSpec, StudyError,
 };
 use crate::model::ModelConfig;
 use crate::reduce::Scheme;
@@ -46,16 +46,9 @@ pub struct AnalysisPlan {
 
 impl AnalysisRequest {
     pub fn plan(&self) -> Result<AnalysisPlan, FieldError> {
-        // The experiment's checks of schemes and DIC settings are the ones that apply.
-        let p = ExperimentRequest {
-            schemes: self.schemes.clone(),
-            dic: self.dic.clone(),
-            ..ExperimentRequest::default()
-        }
-        .plan(true)?;
         Ok(AnalysisPlan {
-            schemes: p.schemes,
-            dic: p.dic,
+            schemes: check_schemes(&self.schemes)?,
+            dic: check_dic(&self.dic)?,
         })
     }
 }
@@ -171,14 +164,9 @@ impl Default for CompareRequest {
 
 impl CompareRequest {
     pub fn options(&self) -> Result<CompareOptions, FieldError> {
-        let plan = AnalysisRequest {
-            schemes: self.schemes.clone(),
-            dic: self.dic.clone(),
-        }
-        .plan()?;
         Ok(CompareOptions {
-            dic: plan.dic,
-            schemes: plan.schemes,
+            dic: check_dic(&self.dic)?,
+            schemes: check_schemes(&self.schemes)?,
             seed: self.seed,
         })
     }

@@ -70,14 +70,17 @@ impl TestServer {
     pub async fn start(config: DaemonConfig) -> Self {
         let geometry = config.mock_geometry().unwrap();
         let truth = ffdic::service::load_bench_model("paper-bench").unwrap();
-        let hardware = mock_bench(geometry, truth, 25.0, Duration::from_millis(10));
+        let hardware = mock_bench(geometry, truth, 25.0, Duration::from_millis(10)).unwrap();
         let (service, _) = Service::start(config, hardware).unwrap();
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let base = format!("http://{}", listener.local_addr().unwrap());
         let app = ffdic::api::app(service.clone(), ffdic::dashboard::router());
         let shutdown = service.shutdown.clone();
+        let limits = service.config.http.clone();
         let task = tokio::spawn(async move {
-            ffdic::api::run(listener, app, shutdown).await.unwrap();
+            ffdic::api::run(listener, app, shutdown, &limits)
+                .await
+                .unwrap();
         });
         Self {
             base,

@@ -111,6 +111,7 @@ impl AravisCamera {
             pixel_formats: features.pixel_formats.clone(),
             hardware_binning: caps.binning_max != (1, 1) && caps.binning_mode.is_some(),
             hardware_decimation: caps.decimation_max != (1, 1),
+            exposure_range_us: camera.float_bounds(features.exposure).ok(),
         };
         let mut cam = Self {
             config,

@@ -78,6 +78,10 @@ pub struct CameraInfo {
     /// Binning and decimation the hardware does itself (offered as hardware fill-factor schemes).
     pub hardware_binning: bool,
     pub hardware_decimation: bool,
+    /// The exposures the camera accepts, µs, when it says (GenICam feature bounds); requests
+    /// are checked against it before anything is captured.
+    #[serde(default)]
+    pub exposure_range_us: Option<(f64, f64)>,
 }
 
 /// Stream health since the camera was opened.

@@ -19,4 +19,8 @@ pub enum HwError {
     Busy(String),
     #[error("not supported by this device: {0}")]
     Unsupported(String),
+    /// The stage has no reference position (power-up, after a fault): a client's fault to fix
+    /// by homing, not a protocol failure.
+    #[error("{0}")]
+    NotReferenced(String),
 }

@@ -115,6 +115,8 @@ impl V4l2Camera {
             pixel_formats,
             hardware_binning: false,
             hardware_decimation: false,
+            // V4L2 reports the control's range per control query; exposure is optional there.
+            exposure_range_us: None,
         };
         let start_format = V4l2Format::from_fourcc(u32::from(current.fourcc))
             .filter(|f| offered.contains(f))

@@ -71,6 +71,22 @@ pub async fn move_stage(
             return Err(ApiError::invalid(field, "must be a finite number"));
         }
     }
+    // An absolute target is checked against the travel here; a relative one depends on where
+    // the stage is, and the driver refuses it (422) before moving.
+    if absolute {
+        let (x, y) = (m.x_mm.unwrap_or(0.0), m.y_mm.unwrap_or(0.0));
+        svc.limits.check_move(x, y).map_err(|reason| {
+            let field = if reason.starts_with("dy") {
+                "y_mm"
+            } else {
+                "x_mm"
+            };
+            ApiError::invalid(
+                field,
+                reason.replace("dx_mm", "x_mm").replace("dy_mm", "y_mm"),
+            )
+        })?;
+    }
     let bench = svc.bench.clone();
     let t = svc.timeouts();
     let settled = blocking(move || {

@@ -5,23 +5,43 @@ use crate::api::problem::{ApiResult, Problem};
 use crate::service::Service;
 use crate::store::{RunKind, RunStatus};
 use axum::extract::State;
+use axum::http::StatusCode;
 use axum::Json;
 use serde::Serialize;
 use serde_json::Value;
 
 #[derive(Serialize, utoipa::ToSchema)]
 pub struct Health {
+    /// `ok`, or `degraded` when a part of the daemon has stopped (then the status is 503).
     pub status: &'static str,
     pub version: &'static str,
+    /// What has stopped: `bench` (the actor owning camera and stage), `lane:bench`,
+    /// `lane:compute` (the job workers). Empty when all is well.
+    pub stopped: Vec<String>,
 }
 
 #[utoipa::path(get, path = "/health", tag = "system",
-    responses((status = 200, description = "The server is up", body = Health)))]
-pub async fn health() -> Json<Health> {
-    Json(Health {
-        status: "ok",
+    responses((status = 200, description = "The server is up", body = Health),
+              (status = 503, description = "A part of the daemon has stopped", body = Health)))]
+pub async fn health(State(svc): State<Service>) -> (StatusCode, Json<Health>) {
+    let mut stopped: Vec<String> = Vec::new();
+    if !svc.bench.is_alive() {
+        stopped.push("bench".into());
+    }
+    for lane in svc.jobs.dead_lanes() {
+        stopped.push(format!("lane:{}", format!("{lane:?}").to_lowercase()));
+    }
+    let status = if stopped.is_empty() {
+        StatusCode::OK
+    } else {
+        StatusCode::SERVICE_UNAVAILABLE
+    };
+    let health = Health {
+        status: if stopped.is_empty() { "ok" } else { "degraded" },
         version: crate::VERSION,
-    })
+        stopped,
+    };
+    (status, Json(health))
 }
 
 #[derive(Serialize, utoipa::ToSchema)]

@@ -263,7 +263,7 @@ impl Stage for AptStage {
         check_target(&self.info, target)?;
         self.refresh_status()?;
         if let Some(a) = self.axes.iter().find(|a| !a.homed) {
-            return Err(HwError::Protocol(format!(
+            return Err(HwError::NotReferenced(format!(
                 "{} axis (APT 0x{:02x}) is not homed: home first",
                 a.axis.name(),
                 a.address

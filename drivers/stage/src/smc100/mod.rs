@@ -207,7 +207,7 @@ impl Smc100Stage {
 }
 
 fn not_referenced(axis: Axis, address: u8) -> HwError {
-    HwError::Protocol(format!(
+    HwError::NotReferenced(format!(
         "{} axis (SMC100 address {address}) is not referenced: home first",
         axis.name()
     ))

@@ -210,7 +210,7 @@ impl ZaberStage {
 }
 
 fn not_homed(a: Address) -> HwError {
-    HwError::Protocol(format!(
+    HwError::NotReferenced(format!(
         "{} axis (Zaber device {} axis {}) has no reference position (WR): home first",
         a.axis.name(),
         a.device,

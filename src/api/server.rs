@@ -1,0 +1,102 @@
+//! The accept loop. `axum::serve` keeps a connection for as long as the client wants and waits
+//! for every open request at shutdown; a daemon left beside a bench for weeks cannot. Here each
+//! connection is HTTP/1 with hyper's header-read timer (it runs from the moment a connection is
+//! idle, so it bounds both a client that never sends a head and an idle keep-alive), the number
+//! of open connections is capped (over the cap a connection is closed as soon as it is
+//! accepted, so the listen backlog never fills with them), and shutdown drains the open
+//! requests for a bounded time, then leaves.
+
+use crate::service::HttpLimits;
+use axum::Router;
+use hyper_util::rt::{TokioIo, TokioTimer};
+use hyper_util::server::graceful::GracefulShutdown;
+use hyper_util::service::TowerToHyperService;
+use std::sync::Arc;
+use std::time::Duration;
+use tokio::net::TcpListener;
+use tokio::sync::Semaphore;
+use tokio_util::sync::CancellationToken;
+
+/// Serves `app` on `listener` until `shutdown` is cancelled, then stops accepting, asks every
+/// connection to close after its current request and waits at most `limits.drain_ms`.
+pub async fn serve(
+    listener: TcpListener,
+    app: Router,
+    shutdown: CancellationToken,
+    limits: &HttpLimits,
+) -> std::io::Result<()> {
+    raise_open_files_limit();
+    let slots = Arc::new(Semaphore::new(limits.max_connections));
+    let graceful = GracefulShutdown::new();
+    let mut http = hyper::server::conn::http1::Builder::new();
+    http.timer(TokioTimer::new())
+        .header_read_timeout(Duration::from_millis(limits.header_read_timeout_ms))
+        .max_buf_size(64 * 1024);
+    loop {
+        let accepted = tokio::select! {
+            _ = shutdown.cancelled() => break,
+            a = listener.accept() => a,
+        };
+        let (stream, _peer) = match accepted {
+            Ok(s) => s,
+            Err(e) => {
+                // Out of file descriptors (or a connection reset before accept): back off a
+                // little rather than spin; the connections we hold will time out.
+                tracing::warn!("accept failed: {e}");
+                tokio::time::sleep(Duration::from_millis(50)).await;
+                continue;
+            }
+        };
+        let Ok(slot) = slots.clone().try_acquire_owned() else {
+            tracing::warn!(
+                "{} connections open: closing a new one",
+                limits.max_connections
+            );
+            drop(stream);
+            continue;
+        };
+        let _ = stream.set_nodelay(true);
+        let service = TowerToHyperService::new(app.clone());
+        let connection = graceful.watch(http.serve_connection(TokioIo::new(stream), service));
+        tokio::spawn(async move {
+            // A timed-out or reset connection is the client's business, not an error of ours.
+            if let Err(e) = connection.await {
+                tracing::debug!("connection ended: {e}");
+            }
+            drop(slot);
+        });
+    }
+    drop(listener);
+    let drain = Duration::from_millis(limits.drain_ms);
+    if tokio::time::timeout(drain, graceful.shutdown())
+        .await
+        .is_err()
+    {
+        tracing::warn!(
+            "open requests did not finish within {} ms: leaving them",
+            limits.drain_ms
+        );
+    }
+    Ok(())
+}
+
+/// Lifts the soft limit on open files to the hard one: each connection is a descriptor, and the
+/// common soft default (1024) is what let 1,100 half-open connections take the daemon offline.
+fn raise_open_files_limit() {
+    // SAFETY: getrlimit/setrlimit only read and write the struct we pass.
+    unsafe {
+        let mut l = libc::rlimit {
+            rlim_cur: 0,
+            rlim_max: 0,
+        };
+        if libc::getrlimit(libc::RLIMIT_NOFILE, &mut l) == 0 && l.rlim_cur < l.rlim_max {
+            let wanted = libc::rlimit {
+                rlim_cur: l.rlim_max,
+                rlim_max: l.rlim_max,
+            };
+            if libc::setrlimit(libc::RLIMIT_NOFILE, &wanted) != 0 {
+                tracing::debug!("cannot raise the open-files limit");
+            }
+        }
+    }
+}
