@@ -339,3 +339,100 @@ async fn a_token_guards_every_mutating_request() {
     assert_eq!(ok.status(), 200);
     server.stop().await;
 }
+
+/// Issue 12's reproducers: each of these killed the daemon or its bench thread, drove the bench
+/// from a body no JSON client sends, or answered 500. Now each is a problem naming its cause,
+/// and the daemon answers afterwards.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn requests_that_killed_the_daemon_are_refused_at_the_door() {
+    let tmp = tempfile::tempdir().unwrap();
+    let server = TestServer::start(small_config(tmp.path())).await;
+    let c = client();
+    let post = |body: String| {
+        c.post(server.url("/experiments"))
+            .header("content-type", "application/json")
+            .body(body)
+            .send()
+    };
+    let custom = |d: f64, s: f64| {
+        format!(
+            r#"{{"patterns":[{{"label":"x","dot_diameter_mm":{d},"dot_spacing_mm":{s},"contrast":0.8}}]}}"#
+        )
+    };
+    // A 288 GB layout (aborted the process) and a capacity overflow (killed the bench thread).
+    for (d, s) in [(0.0005, 0.001), (0.5, 1e-9)] {
+        let p = problem(post(custom(d, s)).await.unwrap(), 422).await;
+        assert_eq!(p["field"], "patterns[0]", "{p}");
+    }
+    let p = problem(
+        post(r#"{"moves":[{"id":"far","dx_mm":1e7}]}"#.into())
+            .await
+            .unwrap(),
+        422,
+    )
+    .await;
+    assert_eq!(p["field"], "moves[0]", "{p}");
+    let p = problem(
+        post(r#"{"dic":{"max_motion_px":100000}}"#.into())
+            .await
+            .unwrap(),
+        422,
+    )
+    .await;
+    assert_eq!(p["field"], "dic.max_motion_px", "{p}");
+    problem(post("[]".into()).await.unwrap(), 422).await;
+    // A body with no content type is what a cross-site no-cors fetch sends.
+    problem(
+        c.post(server.url("/experiments"))
+            .body("{}")
+            .send()
+            .await
+            .unwrap(),
+        415,
+    )
+    .await;
+    // Upload part names that `Path::components` shortened to a plain name: 500 before.
+    for name in ["x/", "x/."] {
+        let form = reqwest::multipart::Form::new().text(name, "1");
+        let resp = c
+            .post(server.url("/datasets"))
+            .multipart(form)
+            .send()
+            .await
+            .unwrap();
+        assert!(
+            resp.status().is_client_error(),
+            "part {name:?}: {}",
+            resp.status()
+        );
+    }
+    // The framework's own rejections are problems too.
+    problem(
+        c.delete(server.url("/experiments")).send().await.unwrap(),
+        405,
+    )
+    .await;
+    let health: Value = c
+        .get(server.url("/health"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(health["status"], "ok", "{health}");
+    let runs: Value = c
+        .get(server.url("/experiments"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(
+        runs.as_array().map(Vec::len),
+        Some(0),
+        "nothing queued: {runs}"
+    );
+    server.stop().await;
+}

@@ -22,8 +22,14 @@ where
             .get(header::CONTENT_TYPE)
             .and_then(|v| v.to_str().ok())
             .map(|v| {
-                let v = v.to_ascii_lowercase();
-                v.starts_with("application/json") || v.contains("+json")
+                let essence = v
+                    .split(';')
+                    .next()
+                    .unwrap_or("")
+                    .trim()
+                    .to_ascii_lowercase();
+                essence == "application/json"
+                    || (essence.starts_with("application/") && essence.ends_with("+json"))
             });
         let bytes = Bytes::from_request(req, state).await.map_err(|e| {
             if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
@@ -36,15 +42,17 @@ where
                 ApiError::bad_request(format!("cannot read the body: {e}"))
             }
         })?;
-        // An empty body with no content type means "all defaults".
+        // An empty body means "all defaults". Anything else must say it is JSON: a body without
+        // a JSON content type is what a cross-site form or `fetch(.., {mode: 'no-cors'})` sends,
+        // and is never read as JSON.
         let bytes = if bytes.is_empty() {
             Bytes::from_static(b"{}")
         } else {
-            if is_json == Some(false) {
+            if is_json != Some(true) {
                 return Err(ApiError::new(
                     StatusCode::UNSUPPORTED_MEDIA_TYPE,
                     "unsupported-media-type",
-                    "send JSON (Content-Type: application/json)",
+                    "send JSON with Content-Type: application/json",
                 ));
             }
             bytes
@@ -53,8 +61,13 @@ where
     }
 }
 
-/// Parses JSON, naming the field at fault.
+/// Parses JSON, naming the field at fault. Every request body is an object: serde's derived
+/// structs would also take an array (`[]` as "all defaults"), which no client means.
 pub fn parse<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
+    let first = bytes.iter().find(|b| !b.is_ascii_whitespace());
+    if first.is_some_and(|&b| b != b'{') {
+        return Err(ApiError::invalid("body", "the body must be a JSON object"));
+    }
     let de = &mut serde_json::Deserializer::from_slice(bytes);
     serde_path_to_error::deserialize(de).map_err(|e| {
         let path = e.path().to_string();
@@ -117,5 +130,7 @@ mod tests {
         assert!(e.detail.contains("zz"), "{}", e.detail);
         let e = parse::<Body>(br#"{"a":1"#).unwrap_err();
         assert_eq!(e.status.as_u16(), 400);
+        let e = parse::<Body>(b" []").unwrap_err();
+        assert_eq!((e.status.as_u16(), e.field.as_deref()), (422, Some("body")));
     }
 }

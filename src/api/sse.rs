@@ -16,6 +16,10 @@ use tokio_stream::wrappers::ReceiverStream;
 pub type SseResponse = axum::response::Response;
 
 const TERMINAL: [&str; 3] = ["succeeded", "failed", "cancelled"];
+/// The last event of a stream the server closes before its run has ended.
+pub const SHUTDOWN_EVENT: &str = "server_shutdown";
+/// How long a stream waits, at shutdown, for its run's terminal event.
+const SHUTDOWN_WAIT: Duration = Duration::from_secs(2);
 
 pub fn last_event_id(headers: &HeaderMap) -> Option<u64> {
     headers
@@ -49,7 +53,37 @@ pub fn stream(svc: Service, id: RunId, after: Option<u64>) -> SseResponse {
                 return;
             };
             tokio::select! {
-                _ = shutdown.cancelled() => return,
+                _ = shutdown.cancelled() => {
+                    // The server cancels running work before it drains: give the run a moment
+                    // to record its end, then close with a terminal event either way.
+                    let grace = tokio::time::sleep(SHUTDOWN_WAIT);
+                    tokio::pin!(grace);
+                    while !ended {
+                        tokio::select! {
+                            _ = &mut grace => break,
+                            got = rx.recv() => match got {
+                                Ok(e) if e.id > last => {
+                                    last = e.id;
+                                    ended = TERMINAL.contains(&e.kind.as_str());
+                                    if tx.send(Ok(to_sse(&e))).await.is_err() {
+                                        return;
+                                    }
+                                }
+                                Ok(_) => {}
+                                Err(_) => break,
+                            }
+                        }
+                    }
+                    // The log may hold the end the live channel missed.
+                    let open = ended || replay(&svc, &id, &mut last, &mut ended, &tx).await;
+                    if open && !ended {
+                        let bye = Event::default().event(SHUTDOWN_EVENT).data(
+                            r#"{"message":"the server is shutting down; the run's record stays in the store"}"#,
+                        );
+                        let _ = tx.send(Ok(bye)).await;
+                    }
+                    return;
+                }
                 _ = tx.closed() => return,
                 got = rx.recv() => match got {
                     Ok(e) if e.id > last => {

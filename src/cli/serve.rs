@@ -8,7 +8,6 @@ use ffdic::service::{open_bench, DaemonConfig, Service};
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::Duration;
-use tokio_util::sync::CancellationToken;
 
 #[derive(Debug, Args)]
 pub struct ServeArgs {
@@ -23,8 +22,9 @@ pub struct ServeArgs {
     pub data: Option<PathBuf>,
 }
 
-/// Time the running job gets to notice its cancellation and write itself as cancelled.
-const SHUTDOWN_GRACE: Duration = Duration::from_secs(8);
+/// Time the running job gets, after the server has drained (`http.drain_ms`, 3 s by default), to
+/// notice its cancellation and write itself as cancelled: the two stay within 10 s.
+const SHUTDOWN_GRACE: Duration = Duration::from_secs(5);
 
 pub fn run(args: &ServeArgs) -> Result<()> {
     super::logging::init();
@@ -58,18 +58,22 @@ pub fn run(args: &ServeArgs) -> Result<()> {
         // The first line on stdout is the address: scripts and tests that asked for port 0 read it.
         println!("listening on http://{bound}");
         let shutdown = service.shutdown.clone();
-        tokio::spawn(wait_for_signal(shutdown.clone()));
+        tokio::spawn(wait_for_signal(service.clone()));
         let app = ffdic::api::app(service.clone(), ffdic::dashboard::router());
         ffdic::api::run(listener, app, shutdown, &service.config.http).await?;
         anyhow::Ok(())
     })?;
-    tracing::info!("stopping: cancelling running work");
+    tracing::info!("stopping: waiting for cancelled runs to record their end");
     service.stop(SHUTDOWN_GRACE);
+    // Blocking tasks still waiting on the bench or the store are left, not waited for.
+    runtime.shutdown_timeout(Duration::from_millis(200));
     tracing::info!("stopped");
     Ok(())
 }
 
-async fn wait_for_signal(shutdown: CancellationToken) {
+/// On SIGINT or SIGTERM: cancel the running work first (so an experiment never goes on, let
+/// alone succeeds, after the signal), then let the server drain its requests for a bounded time.
+async fn wait_for_signal(service: Service) {
     let ctrl_c = tokio::signal::ctrl_c();
     #[cfg(unix)]
     {
@@ -82,6 +86,12 @@ async fn wait_for_signal(shutdown: CancellationToken) {
     }
     #[cfg(not(unix))]
     let _ = ctrl_c.await;
-    tracing::info!("signal received: shutting down");
-    shutdown.cancel();
+    tracing::info!("signal received: cancelling running work, then shutting down");
+    let s = service.clone();
+    if tokio::task::spawn_blocking(move || s.begin_stop())
+        .await
+        .is_err()
+    {
+        service.shutdown.cancel();
+    }
 }

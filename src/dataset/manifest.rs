@@ -147,10 +147,13 @@ impl Manifest {
 
 /// A name that stays inside the dataset folder: one normal path component, no separators.
 pub fn is_plain_file_name(name: &str) -> bool {
+    // `Path::components` drops a trailing `/` or `/.`, so `x/` and `x/.` would pass as `x`:
+    // refuse separators outright, and control characters with them.
     let mut comps = Path::new(name).components();
     matches!(comps.next(), Some(Component::Normal(_)))
         && comps.next().is_none()
-        && !name.contains('\\')
+        && !name.contains(['/', '\\'])
+        && !name.chars().any(char::is_control)
 }
 
 #[cfg(test)]
@@ -186,7 +189,17 @@ mod tests {
     #[test]
     fn file_names_cannot_leave_the_folder() {
         assert!(is_plain_file_name("a.tif"));
-        for bad in ["../a.tif", "/etc/passwd", "x/a.tif", "", "..", "a\\b.tif"] {
+        for bad in [
+            "../a.tif",
+            "/etc/passwd",
+            "x/a.tif",
+            "",
+            "..",
+            "a\\b.tif",
+            "x/",
+            "x/.",
+            "a\u{7}.tif",
+        ] {
             assert!(!is_plain_file_name(bad), "{bad}");
         }
     }

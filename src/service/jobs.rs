@@ -220,6 +220,13 @@ impl Jobs {
 
     /// Stops taking work, cancels every run, and waits up to `grace` for the workers.
     pub fn shutdown(&self, grace: Duration) {
+        self.cancel_all();
+        self.join_workers(grace);
+    }
+
+    /// Stops taking work and cancels every queued and running run (the running ones at their
+    /// next check). Returns at once: what comes first when the daemon is asked to stop.
+    pub fn cancel_all(&self) {
         self.lanes.lock().expect("lanes").clear();
         let ids: Vec<RunId> = self.live.lock().expect("live").keys().cloned().collect();
         for id in ids {
@@ -236,6 +243,10 @@ impl Jobs {
                 l.cancel.cancel();
             }
         }
+    }
+
+    /// Waits up to `grace` for the workers to write their runs' ends.
+    pub fn join_workers(&self, grace: Duration) {
         let deadline = std::time::Instant::now() + grace;
         let handles: Vec<_> = self.workers.lock().expect("workers").drain(..).collect();
         for (_, h) in handles {

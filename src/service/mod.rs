@@ -202,10 +202,19 @@ impl Service {
         )?)
     }
 
-    /// Stops taking work, cancels what runs (cooperatively), stops the stage.
-    pub fn stop(&self, grace: Duration) {
+    /// The first step of stopping: no new work, every run cancelled, the stage stopped, then
+    /// the server told to drain (live streams end with their run's terminal event).
+    pub fn begin_stop(&self) {
+        self.jobs.cancel_all();
+        let _ = self.bench.stop_stage(crate::experiment::Owner::Direct);
         self.shutdown.cancel();
-        self.jobs.shutdown(grace);
+    }
+
+    /// Stops taking work, cancels what runs (cooperatively), waits up to `grace` for the runs to
+    /// write their ends, stops the stage.
+    pub fn stop(&self, grace: Duration) {
+        self.begin_stop();
+        self.jobs.join_workers(grace);
         let _ = self.bench.stop_stage(crate::experiment::Owner::Direct);
     }
 }
