@@ -729,3 +729,50 @@ fn an_experiment_export_is_imported_as_a_dataset() {
     assert!(matches!(missing, Err(StoreError::NotFound(_))));
     assert_eq!(store.list_datasets().unwrap().len(), 1);
 }
+
+/// Issue 12, item 6: a second daemon on the same data folder marked the first one's live run
+/// failed. The folder is now held by the first store; the second open is refused, naming it.
+#[test]
+fn a_second_store_on_the_same_folder_is_refused_and_leaves_live_runs_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = open(dir.path());
+    let run = new_run(&store, RunKind::Experiment);
+    store
+        .set_status(&run.id, RunStatus::Running, "running")
+        .unwrap();
+    match RunStore::open(dir.path()) {
+        Err(StoreError::Locked { holder }) => {
+            assert_eq!(holder, format!("pid {}", std::process::id()))
+        }
+        Err(other) => panic!("expected Locked, got {other}"),
+        Ok(_) => panic!("a second store opened the held folder"),
+    }
+    assert_eq!(store.get(&run.id).unwrap().status, RunStatus::Running);
+    drop(store);
+    // Released with the store: the next open recovers the run as an earlier server's.
+    let (_, report) = RunStore::open(dir.path()).unwrap();
+    assert_eq!(report.failed, vec![run.id]);
+}
+
+/// Issue 12, item 7: a damaged page of the index stopped start-up. The index fails SQLite's
+/// integrity check, is recreated and refilled from the folders (the truth).
+#[test]
+fn a_damaged_index_is_rebuilt_at_open() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = open(dir.path());
+    let ids: Vec<RunId> = (0..40)
+        .map(|_| new_run(&store, RunKind::Analysis).id)
+        .collect();
+    drop(store);
+    let index = dir.path().join("index.sqlite");
+    let mut bytes = std::fs::read(&index).expect("the index is a file after a clean close");
+    assert!(bytes.len() > 4096, "{} bytes", bytes.len());
+    // Page 2 onwards: the header stays readable, the b-tree pages are garbage.
+    for b in &mut bytes[4096 + 8..] {
+        *b = 0xA5;
+    }
+    std::fs::write(&index, &bytes).unwrap();
+    let store = open(dir.path());
+    let listed = store.list(None, None, 1000).unwrap();
+    assert_eq!(listed.len(), ids.len());
+}

@@ -36,6 +36,12 @@ pub enum StoreError {
     /// `set_status` writes (it seals the run).
     #[error("bad event: {0}")]
     BadEvent(String),
+    /// Another process holds the data folder (a second daemon on the same data would mark the
+    /// first one's live runs failed).
+    #[error(
+        "the data folder is in use by another ffdic ({holder}); stop it or use another data folder"
+    )]
+    Locked { holder: String },
     /// A file of the store that does not parse: the folder was edited or damaged by hand.
     #[error("{path} is damaged: {message}")]
     Corrupt { path: PathBuf, message: String },

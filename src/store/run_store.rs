@@ -24,6 +24,8 @@ pub(crate) const RUN_FILE: &str = "run.json";
 pub(crate) const DATASET_RECORD: &str = "record.json";
 /// Prefix of a run folder being created; renamed to the id once complete.
 const NEW_RUN_PREFIX: &str = ".new-";
+/// The data folder's lock file (see `lock_data_dir`).
+const LOCK_FILE: &str = ".lock";
 pub(crate) const STAGING_PREFIX: &str = ".staging-";
 /// Longest idempotency key kept, in bytes.
 pub const MAX_IDEMPOTENCY_KEY_LEN: usize = 256;
@@ -63,6 +65,8 @@ pub struct RunStore {
     root: PathBuf,
     db: Mutex<Connection>,
     slots: Mutex<HashMap<RunId, Arc<Mutex<RunSlot>>>>,
+    /// The exclusive lock on `DATA/.lock`, held as long as the store is open.
+    _lock: std::fs::File,
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -96,6 +100,9 @@ impl RunStore {
         for dir in [root.clone(), root.join(RUNS), root.join(DATASETS)] {
             std::fs::create_dir_all(&dir).map_err(io(&dir))?;
         }
+        // Before anything is recovered: recovery fails the runs it finds unfinished, which are
+        // another live daemon's runs if one holds the folder.
+        let lock = lock_data_dir(&root)?;
         remove_leftovers(&root.join(RUNS), NEW_RUN_PREFIX)?;
         remove_leftovers(&root.join(DATASETS), STAGING_PREFIX)?;
         let mut conn = open_index(&root)?;
@@ -115,6 +122,7 @@ impl RunStore {
             root,
             db: Mutex::new(conn),
             slots: Mutex::new(HashMap::new()),
+            _lock: lock,
         };
         Ok((store, report))
     }
@@ -498,9 +506,55 @@ fn remove_index(root: &Path) -> Result<()> {
 }
 
 /// The index, recreated from nothing when the file is not a usable database: it is a cache.
+/// Takes the data folder for this process: an exclusive lock on `DATA/.lock` (released by the
+/// kernel when the process ends, however it ends), with the holder's pid written in it so the
+/// refusal can name it.
+fn lock_data_dir(root: &Path) -> Result<std::fs::File> {
+    use std::io::{Read, Seek, Write};
+    let path = root.join(LOCK_FILE);
+    let mut file = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(&path)
+        .map_err(io(&path))?;
+    if file.try_lock().is_err() {
+        let mut holder = String::new();
+        let _ = file.read_to_string(&mut holder);
+        let holder = holder.trim();
+        return Err(StoreError::Locked {
+            holder: if holder.is_empty() {
+                "holder unknown".into()
+            } else {
+                holder.to_string()
+            },
+        });
+    }
+    let me = format!("pid {}", std::process::id());
+    file.set_len(0)
+        .and_then(|()| file.rewind())
+        .and_then(|()| file.write_all(me.as_bytes()))
+        .map_err(io(&path))?;
+    Ok(file)
+}
+
+/// Opens the index, or recreates it when SQLite cannot open it or its integrity check fails
+/// (a damaged page): the folders are the truth and the index is rebuilt from them right after.
 fn open_index(root: &Path) -> Result<Connection> {
     let path = root.join(index::FILE);
-    match index::open(&path) {
+    let checked = index::open(&path).and_then(|conn| {
+        let verdict: String = conn.query_row("PRAGMA quick_check", [], |r| r.get(0))?;
+        if verdict == "ok" {
+            Ok(conn)
+        } else {
+            Err(StoreError::Corrupt {
+                path: path.clone(),
+                message: verdict,
+            })
+        }
+    });
+    match checked {
         Ok(conn) => Ok(conn),
         Err(e) => {
             tracing::warn!(index = %path.display(), "unusable index, recreating it: {e}");
