@@ -381,6 +381,17 @@ async fn requests_that_killed_the_daemon_are_refused_at_the_door() {
     .await;
     assert_eq!(p["field"], "dic.max_motion_px", "{p}");
     problem(post("[]".into()).await.unwrap(), 422).await;
+    // A direct absolute move beyond the travel names its axis.
+    let p = problem(
+        c.post(server.url("/stage/moves"))
+            .json(&json!({"x_mm": 0.0, "y_mm": 1e7}))
+            .send()
+            .await
+            .unwrap(),
+        422,
+    )
+    .await;
+    assert_eq!(p["field"], "y_mm", "{p}");
     // A body with no content type is what a cross-site no-cors fetch sends.
     problem(
         c.post(server.url("/experiments"))

@@ -17,7 +17,7 @@ pub type SseResponse = axum::response::Response;
 
 const TERMINAL: [&str; 3] = ["succeeded", "failed", "cancelled"];
 /// The last event of a stream the server closes before its run has ended.
-pub const SHUTDOWN_EVENT: &str = "server_shutdown";
+const SHUTDOWN_EVENT: &str = "server_shutdown";
 /// How long a stream waits, at shutdown, for its run's terminal event.
 const SHUTDOWN_WAIT: Duration = Duration::from_secs(2);
 
@@ -63,9 +63,7 @@ pub fn stream(svc: Service, id: RunId, after: Option<u64>) -> SseResponse {
                             _ = &mut grace => break,
                             got = rx.recv() => match got {
                                 Ok(e) if e.id > last => {
-                                    last = e.id;
-                                    ended = TERMINAL.contains(&e.kind.as_str());
-                                    if tx.send(Ok(to_sse(&e))).await.is_err() {
+                                    if !forward(&e, &mut last, &mut ended, &tx).await {
                                         return;
                                     }
                                 }
@@ -87,9 +85,7 @@ pub fn stream(svc: Service, id: RunId, after: Option<u64>) -> SseResponse {
                 _ = tx.closed() => return,
                 got = rx.recv() => match got {
                     Ok(e) if e.id > last => {
-                        last = e.id;
-                        ended = TERMINAL.contains(&e.kind.as_str());
-                        if tx.send(Ok(to_sse(&e))).await.is_err() {
+                        if !forward(&e, &mut last, &mut ended, &tx).await {
                             return;
                         }
                     }
@@ -131,11 +127,21 @@ async fn replay(
         .and_then(Result::ok)
         .unwrap_or_default();
     for e in events {
-        *last = e.id;
-        *ended = TERMINAL.contains(&e.kind.as_str());
-        if tx.send(Ok(to_sse(&e))).await.is_err() {
+        if !forward(&e, last, ended, tx).await {
             return false;
         }
     }
     true
+}
+
+/// Sends one event and records where the stream stands; false when the client has gone.
+async fn forward(
+    e: &RunEvent,
+    last: &mut u64,
+    ended: &mut bool,
+    tx: &mpsc::Sender<Result<Event, Infallible>>,
+) -> bool {
+    *last = e.id;
+    *ended = TERMINAL.contains(&e.kind.as_str());
+    tx.send(Ok(to_sse(e))).await.is_ok()
 }

@@ -21,6 +21,29 @@ pub struct BenchLimits {
     pub exposure_us: (f64, f64),
 }
 
+/// A stage axis, so a refusal names the request field at fault whatever the request calls it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StageAxis {
+    X,
+    Y,
+}
+
+impl StageAxis {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::X => "x",
+            Self::Y => "y",
+        }
+    }
+}
+
+/// A move the stage cannot make.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OutOfTravel {
+    pub axis: StageAxis,
+    pub reason: String,
+}
+
 /// A dot spacing below one image pixel is not a speckle pattern a camera can resolve (DIC needs
 /// 3–5 px speckles; Sutton, Orteu & Schreier, *Image Correlation for Shape, Motion and
 /// Deformation Measurements*, 2009, §3.3), and it is what sizes the target layout.
@@ -45,6 +68,11 @@ impl BenchLimits {
 
     pub fn has_target_mount(&self) -> bool {
         self.target_field_mm.is_some()
+    }
+
+    /// A bench with a stage knows its travel.
+    pub fn has_stage(&self) -> bool {
+        self.travel_x_mm.is_some()
     }
 
     /// Checks a custom print against what the camera resolves and what a target layout may hold.
@@ -85,20 +113,23 @@ impl BenchLimits {
         Ok(())
     }
 
-    /// Checks a move from the reference position against the stage's travel.
-    pub fn check_move(&self, dx_mm: f64, dy_mm: f64) -> Result<(), String> {
-        if !(dx_mm.is_finite() && dy_mm.is_finite()) {
-            return Err("dx_mm, dy_mm must be finite".into());
-        }
+    /// Checks a position relative to the reference (home) against the stage's travel, naming
+    /// the axis at fault.
+    pub fn check_move(&self, dx_mm: f64, dy_mm: f64) -> Result<(), OutOfTravel> {
         for (axis, d, travel) in [
-            ("dx_mm", dx_mm, self.travel_x_mm),
-            ("dy_mm", dy_mm, self.travel_y_mm),
+            (StageAxis::X, dx_mm, self.travel_x_mm),
+            (StageAxis::Y, dy_mm, self.travel_y_mm),
         ] {
+            let name = axis.name();
+            if !d.is_finite() {
+                let reason = format!("the {name} move must be a finite number of mm");
+                return Err(OutOfTravel { axis, reason });
+            }
             if let Some((lo, hi)) = travel {
                 if !(lo..=hi).contains(&d) {
-                    return Err(format!(
-                        "{axis} = {d} is outside the stage's travel [{lo}, {hi}] mm"
-                    ));
+                    let reason =
+                        format!("{d} mm in {name} is outside the stage's travel [{lo}, {hi}] mm");
+                    return Err(OutOfTravel { axis, reason });
                 }
             }
         }
@@ -159,8 +190,9 @@ mod tests {
     fn moves_stay_within_the_travel() {
         let l = mock();
         assert!(l.check_move(5.0, 0.013).is_ok());
-        assert!(l.check_move(25.5, 0.0).unwrap_err().contains("dx_mm"));
-        assert!(l.check_move(0.0, -1e7).unwrap_err().contains("dy_mm"));
+        assert_eq!(l.check_move(25.5, 0.0).unwrap_err().axis, StageAxis::X);
+        assert_eq!(l.check_move(0.0, -1e7).unwrap_err().axis, StageAxis::Y);
+        assert_eq!(l.check_move(0.0, f64::NAN).unwrap_err().axis, StageAxis::Y);
         assert!(l.check_move(f64::INFINITY, 0.0).is_err());
     }
 }

@@ -18,7 +18,9 @@ pub use bench::{
     StageStatus, TargetMount,
 };
 pub use figures::{figure_svgs, figures_text, rows_json, study_csv};
-pub use limits::{BenchLimits, DOT_DIAMETER_PX, EXPOSURE_US, MIN_DOT_SPACING_PX};
+pub use limits::{
+    BenchLimits, OutOfTravel, StageAxis, DOT_DIAMETER_PX, EXPOSURE_US, MIN_DOT_SPACING_PX,
+};
 pub use maps::{field_map_svgs, map_file_name};
 pub use model_scene::ModelScene;
 pub use request::{

@@ -215,7 +215,7 @@ impl ExperimentRequest {
         for (i, m) in moves.iter().enumerate() {
             limits
                 .check_move(m.dx_mm, m.dy_mm)
-                .map_err(|r| field_error(format!("moves[{i}]"), r))?;
+                .map_err(|e| field_error(format!("moves[{i}]"), e.reason))?;
             if !is_plain_id(&m.id) {
                 return Err(field_error(
                     format!("moves[{i}].id"),

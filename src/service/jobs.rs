@@ -218,12 +218,6 @@ impl Jobs {
         publish_last(&self.store, &self.live, id);
     }
 
-    /// Stops taking work, cancels every run, and waits up to `grace` for the workers.
-    pub fn shutdown(&self, grace: Duration) {
-        self.cancel_all();
-        self.join_workers(grace);
-    }
-
     /// Stops taking work and cancels every queued and running run (the running ones at their
     /// next check). Returns at once: what comes first when the daemon is asked to stop.
     pub fn cancel_all(&self) {

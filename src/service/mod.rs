@@ -45,7 +45,6 @@ pub struct Service {
     /// What the bench can do (scale, target, travel, exposure), read at start: every request
     /// is checked against it at the door.
     pub limits: Arc<BenchLimits>,
-    pub has_stage: bool,
     /// Cancelled when the server shuts down: live streams end with it.
     pub shutdown: tokio_util::sync::CancellationToken,
 }
@@ -59,7 +58,6 @@ impl Service {
     ) -> Result<(Self, RecoveryReport), ServiceError> {
         let (store, recovery) = RunStore::open(&config.data_dir)?;
         let store = Arc::new(store);
-        let has_stage = hardware.stage.is_some();
         let limits = Arc::new(BenchLimits {
             scale_px_per_mm: config.bench.scale_px_per_mm,
             target_field_mm: hardware.targets.as_ref().map(|t| t.field_mm()),
@@ -80,7 +78,6 @@ impl Service {
                 jobs,
                 bench,
                 limits,
-                has_stage,
                 shutdown: tokio_util::sync::CancellationToken::new(),
             },
             recovery,
@@ -103,7 +100,7 @@ impl Service {
         idempotency_key: Option<&str>,
     ) -> Result<(RunRecord, bool), SubmitError> {
         let plan = request.plan(&self.limits)?;
-        if !self.has_stage {
+        if !self.limits.has_stage() {
             return Err(SubmitError::NoStage);
         }
         let work = work::experiment(self.clone(), plan);

@@ -3,7 +3,7 @@
 use super::blocking;
 use crate::api::json::ApiJson;
 use crate::api::problem::{ApiError, ApiResult, Problem};
-use crate::experiment::Owner;
+use crate::experiment::{Owner, StageAxis};
 use crate::service::Service;
 use axum::extract::State;
 use axum::Json;
@@ -75,16 +75,12 @@ pub async fn move_stage(
     // the stage is, and the driver refuses it (422) before moving.
     if absolute {
         let (x, y) = (m.x_mm.unwrap_or(0.0), m.y_mm.unwrap_or(0.0));
-        svc.limits.check_move(x, y).map_err(|reason| {
-            let field = if reason.starts_with("dy") {
-                "y_mm"
-            } else {
-                "x_mm"
+        svc.limits.check_move(x, y).map_err(|e| {
+            let field = match e.axis {
+                StageAxis::X => "x_mm",
+                StageAxis::Y => "y_mm",
             };
-            ApiError::invalid(
-                field,
-                reason.replace("dx_mm", "x_mm").replace("dy_mm", "y_mm"),
-            )
+            ApiError::invalid(field, e.reason)
         })?;
     }
     let bench = svc.bench.clone();
