@@ -11,9 +11,11 @@ cd "$(dirname "$0")/.."
 # - v4l2: libclang-dev (bindgen);
 # - the Zaber simulator is checked with zproto, which pulls serialport's libudev feature.
 # - iproute2: the Aravis tests bring up loopback inside their own network namespace.
+# - python3-venv: the independent dataset generator of the diagnosis tests (tests/independent/,
+#   numpy and tifffile from PyPI into target/independent-venv, made by the tests on first use);
 # - chromium, nodejs, npm: the dashboard's end-to-end test (tests/dashboard_browser.rs) drives
 #   headless Chromium with playwright-core, pinned in tests/browser/package-lock.json.
-APT_PACKAGES=(libaravis-dev libusb-1.0-0-dev aravis-tools-cli aravis-tools libclang-dev libudev-dev pkg-config iproute2 chromium)
+APT_PACKAGES=(libaravis-dev libusb-1.0-0-dev aravis-tools-cli aravis-tools libclang-dev libudev-dev pkg-config iproute2 chromium python3-venv)
 missing=()
 for pkg in "${APT_PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")

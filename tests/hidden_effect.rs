@@ -383,7 +383,20 @@ fn hidden_sensor_noise() {
         spec("a", vec![mv("x3", 3.0, 0.0)], false, 1),
         vec![native()],
     );
-    check(&o, "sensor_noise", 0.5);
+    // Shot noise acts on the photon-transfer curve; the displacement discrepancy sits at its
+    // noise floor before and after (a fall there would be smaller than its standard error), so
+    // the fall asked for is that curve's χ².
+    assert_eq!(o.diagnosis.verdict, "sensor_noise");
+    let (before, after) = (
+        o.diagnosis.before.as_ref().unwrap(),
+        o.diagnosis.after.as_ref().unwrap(),
+    );
+    let (ptc_before, ptc_after) = (before.chi2.image_parts[1].0, after.chi2.image_parts[1].0);
+    println!(
+        "   photon-transfer χ² {ptc_before:.1} -> {ptc_after:.1}; discrepancy {:.5} ± {:.5} -> {:.5} ± {:.5} px",
+        before.discrepancy_px, o.diagnosis.discrepancy_se_px, after.discrepancy_px, after.discrepancy_se_px
+    );
+    assert!(ptc_after * 2.0 <= ptc_before);
     close(&o.diagnosis, "sensor_noise", "gain", 0.5);
     close(&o.diagnosis, "sensor_noise", "read_noise_e", 3.0);
 }

@@ -109,6 +109,7 @@ pub fn comparison_text(cmp: &Comparison) -> String {
                 r.id.clone(),
                 r.scheme.clone(),
                 f(r.discrepancy_px),
+                f(r.rigid_px),
                 f(r.field_px),
                 f(r.std_px),
                 f(r.mean_diff_px[0]),
@@ -125,6 +126,7 @@ pub fn comparison_text(cmp: &Comparison) -> String {
             "run",
             "scheme",
             "D [px]",
+            "rigid",
             "field",
             "std",
             "Δu mean",
@@ -176,17 +178,43 @@ pub fn comparison_text(cmp: &Comparison) -> String {
         &images,
     );
     s += &format!(
-        "\nmodel {} ({}), dataset {}: discrepancy {:.5} px (field {:.5}, std {:.5}); stage misalignment {:.6} rad, travel scale {:.6}\n",
+        "\nmodel {} ({}), dataset {}: discrepancy {:.5} px (rigid {:.5}, field {:.5}, std {:.5}); stage misalignment {:.6} rad, travel scale {:.6}{}\n",
         cmp.model.name,
         cmp.model.version,
         cmp.dataset,
         cmp.discrepancy_px,
+        cmp.parts.rigid_px,
         cmp.parts.field_px,
         cmp.parts.std_px,
         cmp.model.nominal.misalignment_rad,
-        cmp.model.nominal.travel_scale
+        cmp.model.nominal.travel_scale,
+        stage_text(cmp)
     );
     s
+}
+
+/// The stage landing in words: the offsets' RMS against the repeatability that bounded them.
+fn stage_text(cmp: &Comparison) -> String {
+    let stage = &cmp.model.nominal.stage;
+    let k = cmp.model.nominal.scale_px_per_mm;
+    let observed = stage
+        .observed_repeatability_um(k)
+        .map_or(String::new(), |(s, se)| {
+            format!("; stage landings {s:.2} ± {se:.2} µm RMS")
+        });
+    let bound = match stage.repeatability_um {
+        Some(r) => format!(
+            " (repeatability {r:.2} µm from the {:?}, envelope ±3σ)",
+            stage.source
+        )
+        .to_lowercase(),
+        None => " (no repeatability stated: offsets free)".into(),
+    };
+    if observed.is_empty() {
+        observed
+    } else {
+        observed + &bound
+    }
 }
 
 pub fn run(args: &CompareArgs) -> Result<()> {

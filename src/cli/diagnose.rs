@@ -6,7 +6,7 @@ use super::compare::{load_analysis_model, AnalysisArgs};
 use super::ProgressBar;
 use anyhow::{Context, Result};
 use clap::Args;
-use ffdic::diagnose::{diagnose, Diagnosis};
+use ffdic::diagnose::{diagnose_rounds, Candidate, Diagnosis, Rounds, MAX_ROUNDS};
 use std::path::PathBuf;
 
 #[derive(Debug, Args)]
@@ -22,8 +22,39 @@ pub struct DiagnoseArgs {
     /// Write the model with the winner added (TOML).
     #[arg(long)]
     pub write_model: Option<PathBuf>,
+    /// Add the winner and diagnose again, up to this many rounds (stops at `none`).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=MAX_ROUNDS as u64))]
+    pub rounds: u64,
     #[command(flatten)]
     pub analysis: AnalysisArgs,
+}
+
+/// "yes", or "no: " and the criteria the candidate fails.
+fn significance(c: &Candidate) -> String {
+    if c.significant {
+        return "yes".into();
+    }
+    let k = &c.criteria;
+    let mut why = Vec::new();
+    if !k.beyond_null {
+        why.push("within 2 SE of none".to_string());
+    }
+    if k.beyond_null && !k.delta_bic_ok {
+        why.push("ΔBIC ≥ −10".into());
+    }
+    if k.beyond_null && !k.drop_ok {
+        why.push(format!(
+            "drop {:+.5} ± {:.5} px, image χ² drop {:.1} ± {:.1}",
+            k.drop_px, k.drop_se_px, k.image_chi2_drop, k.image_chi2_se
+        ));
+    }
+    if !k.within_range {
+        why.push("at the range's bound".into());
+    }
+    if !k.separable_from_print {
+        why.push("confounded with the print".into());
+    }
+    format!("no: {}", why.join("; "))
 }
 
 pub fn diagnosis_text(d: &Diagnosis) -> String {
@@ -45,7 +76,7 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
                 format!("{:.1}", c.delta_bic),
                 format!("{:.5}", c.discrepancy_px),
                 format!("{:+.5}", c.drop_px),
-                if c.significant { "yes" } else { "no" }.into(),
+                significance(c),
                 params.join(", "),
             ]
         })
@@ -62,9 +93,16 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
         &rows,
     );
     s += &format!(
-        "\nmodel {} ({}): discrepancy {:.5} px; verdict: {}\n",
-        d.model.name, d.model.version, d.discrepancy_px, d.verdict
+        "\nmodel {} ({}): discrepancy {:.5} ± {:.5} px; verdict: {}\n",
+        d.model.name, d.model.version, d.discrepancy_px, d.discrepancy_se_px, d.verdict
     );
+    for c in d
+        .candidates
+        .iter()
+        .filter_map(|c| c.criteria.outside_range.as_ref().map(|o| (c, o)))
+    {
+        s += &format!("{} outside the catalogue's range: {}\n", c.0.effect, c.1);
+    }
     if let Some(a) = &d.after {
         s += &format!("with {} added: {:.5} px\n", d.verdict, a.discrepancy_px);
     }
@@ -83,28 +121,88 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
     s
 }
 
+/// The fall over the rounds, one line each.
+pub fn rounds_text(r: &Rounds) -> String {
+    let mut s = String::from("\nrounds:\n");
+    for (k, round) in r.rounds.iter().enumerate() {
+        let params: Vec<String> = round
+            .params
+            .iter()
+            .map(|(p, v)| match round.stderr.get(p) {
+                Some(se) => format!("{p}={v:.4e} ± {se:.4e}"),
+                None => format!("{p}={v:.4e}"),
+            })
+            .collect();
+        s += &format!(
+            "  {}. {}: {:.5} ± {:.5} px → verdict {}{}{}\n",
+            k + 1,
+            round.model,
+            round.discrepancy_px,
+            round.discrepancy_se_px,
+            round.verdict,
+            if params.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", params.join(", "))
+            },
+            round
+                .after_px
+                .map_or(String::new(), |a| format!(" → {a:.5} px"))
+        );
+    }
+    s += &format!(
+        "found: {}; final discrepancy {:.5} px\n",
+        if r.verdicts.is_empty() {
+            "none".to_string()
+        } else {
+            r.verdicts.join(", ")
+        },
+        r.final_discrepancy_px
+    );
+    s
+}
+
 pub fn run(args: &DiagnoseArgs) -> Result<()> {
     let model = load_analysis_model(&args.model)?;
     let options = args.analysis.options()?;
     let bar = ProgressBar::new(!args.json, "fitting candidates");
-    let d = diagnose(&args.dataset, &model, &options, &|done, total| {
-        bar.update(done, total);
-        true
-    })?;
+    let r = diagnose_rounds(
+        &args.dataset,
+        &model,
+        &options,
+        args.rounds as usize,
+        &|done, total| {
+            bar.update(done, total);
+            true
+        },
+    )?;
     bar.finish();
     if let Some(path) = &args.write_model {
-        match &d.winner_model {
-            Some(m) => std::fs::write(path, m.to_toml())
-                .with_context(|| format!("cannot write {}", path.display()))?,
-            None => eprintln!("verdict none: no model written to {}", path.display()),
+        if r.verdicts.is_empty() {
+            eprintln!("verdict none: no model written to {}", path.display());
+        } else {
+            std::fs::write(path, r.final_model.to_toml())
+                .with_context(|| format!("cannot write {}", path.display()))?;
         }
     }
     if args.json {
-        println!("{}", serde_json::to_string(&d)?);
+        println!("{}", r.to_json());
     } else {
-        print!("{}", diagnosis_text(&d));
-        if let (Some(path), Some(_)) = (&args.write_model, &d.winner_model) {
-            println!("model with {} written to {}", d.verdict, path.display());
+        for (k, d) in r.diagnoses.iter().enumerate() {
+            if r.diagnoses.len() > 1 {
+                println!("== round {}", k + 1);
+            }
+            print!("{}", diagnosis_text(d));
+        }
+        if args.rounds > 1 {
+            print!("{}", rounds_text(&r));
+        }
+        if let (Some(path), false) = (&args.write_model, r.verdicts.is_empty()) {
+            println!(
+                "model with {} written to {}",
+                r.verdicts.join(", "),
+                path.display()
+            );
         }
     }
     Ok(())

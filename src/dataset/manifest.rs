@@ -11,6 +11,10 @@ pub struct Manifest {
     pub scale_px_per_mm: f64,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub camera: Option<CameraInfo>,
+    /// The stage's stated repeatability, 1σ per axis, µm: landings within 3σ of the commanded
+    /// position are the stage behaving as specified (see `model::effects::StageError`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stage_repeatability_um: Option<f64>,
     pub runs: Vec<Run>,
     /// Fields this version does not know, kept so a rewrite loses nothing.
     #[serde(flatten)]
@@ -84,6 +88,7 @@ impl Manifest {
             name: name.into(),
             scale_px_per_mm,
             camera: None,
+            stage_repeatability_um: None,
             runs: Vec::new(),
             extra: Map::new(),
         }
@@ -113,6 +118,13 @@ impl Manifest {
         }
         if !(self.scale_px_per_mm > 0.0) {
             return Err("scale_px_per_mm must be positive".into());
+        }
+        if let Some(r) = self.stage_repeatability_um {
+            if !(r.is_finite() && r > 0.0) {
+                return Err(format!(
+                    "stage_repeatability_um must be a positive number of µm, got {r}"
+                ));
+            }
         }
         if self.runs.is_empty() {
             return Err("runs is empty".into());

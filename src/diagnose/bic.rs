@@ -15,7 +15,7 @@
 //! comparison without the candidate held fixed. A candidate is significant when ΔBIC < −10
 //! (very strong evidence, Kass & Raftery, JASA 90 (1995)).
 
-use super::compare::Comparison;
+use super::compare::{Comparison, RunComparison};
 use super::image_stats::{FrameStats, PtcPoint};
 use crate::dic::DicSettings;
 use serde::{Deserialize, Serialize};
@@ -31,6 +31,12 @@ pub struct Chi2 {
     pub total: f64,
     /// Number of observations (for k·ln n).
     pub observations: usize,
+    /// Of which image statistics.
+    #[serde(default)]
+    pub image_observations: usize,
+    /// The image χ² and observations per kind (spectra, photon transfer, mean map, contrast).
+    #[serde(default)]
+    pub image_parts: [(f64, usize); IMAGE_KINDS],
 }
 
 /// Covariance inflation of neighbouring points whose subsets overlap.
@@ -65,12 +71,26 @@ fn ptc_at(curve: &[PtcPoint], mean: f64) -> Option<(f64, f64)> {
 
 /// χ² and observation count of the image statistics of one frame.
 pub fn image_chi2(m: &FrameStats, o: &FrameStats) -> (f64, usize) {
-    let mut c = 0.0;
-    let mut n = 0;
-    let mut add = |d: f64, se: f64| {
+    let parts = image_chi2_parts(m, o);
+    (
+        parts.iter().map(|p| p.0).sum(),
+        parts.iter().map(|p| p.1).sum(),
+    )
+}
+
+/// The image statistics' kinds: spectra, photon transfer, mean map, contrast.
+pub const IMAGE_KINDS: usize = 4;
+/// The index of the mean-intensity map among [`IMAGE_KINDS`].
+const MEAN_MAP: usize = 2;
+
+/// χ² and observation count of one frame's image statistics, per kind ([`IMAGE_KINDS`]).
+pub fn image_chi2_parts(m: &FrameStats, o: &FrameStats) -> [(f64, usize); IMAGE_KINDS] {
+    let mut parts = [(0.0, 0usize); IMAGE_KINDS];
+    let mut kind = 0;
+    let mut add = |kind: usize, d: f64, se: f64| {
         if d.is_finite() && se > 0.0 && se.is_finite() {
-            c += (d / se).powi(2);
-            n += 1;
+            parts[kind].0 += (d / se).powi(2);
+            parts[kind].1 += 1;
         }
     };
     for (a, b) in m
@@ -81,16 +101,19 @@ pub fn image_chi2(m: &FrameStats, o: &FrameStats) -> (f64, usize) {
     {
         if a.value > 0.0 && b.value > 0.0 {
             add(
+                kind,
                 (a.value / b.value).ln(),
                 ((a.se / a.value).powi(2) + (b.se / b.value).powi(2)).sqrt(),
             );
         }
     }
+    kind += 1;
     for p in &m.ptc {
         if let Some((v, se)) = ptc_at(&o.ptc, p.mean_dn) {
-            add(p.variance_dn2 - v, (p.se * p.se + se * se).sqrt());
+            add(kind, p.variance_dn2 - v, (p.se * p.se + se * se).sqrt());
         }
     }
+    kind += 1;
     for ((a, sa), (b, sb)) in m
         .mean_map
         .values
@@ -98,13 +121,33 @@ pub fn image_chi2(m: &FrameStats, o: &FrameStats) -> (f64, usize) {
         .zip(&m.mean_map.se)
         .zip(o.mean_map.values.iter().zip(&o.mean_map.se))
     {
-        add(a - b, (sa * sa + sb * sb).sqrt());
+        add(kind, a - b, (sa * sa + sb * sb).sqrt());
     }
     add(
+        kind + 1,
         m.contrast - o.contrast,
         (m.contrast_se.powi(2) + o.contrast_se.powi(2)).sqrt(),
     );
-    (c, n)
+    parts
+}
+
+/// N_eff/N of a comparison's analyses. They are not independent: every run of a pattern shares its
+/// reference frame, every scheme of a run its moved frame; half the noise comes from each. For a
+/// disagreement common to all analyses a sum over N analyses counts it N times where the data
+/// hold N_eff = 1/(½Σ_runs(n_r/N)² + ½Σ_patterns(n_p/N)²) independent looks.
+pub fn shared_fraction(runs: &[RunComparison]) -> f64 {
+    let mut per_run: std::collections::BTreeMap<&str, f64> = Default::default();
+    let mut per_pattern: std::collections::BTreeMap<&str, f64> = Default::default();
+    for r in runs {
+        *per_run.entry(r.id.as_str()).or_default() += 1.0;
+        *per_pattern.entry(r.pattern.as_str()).or_default() += 1.0;
+    }
+    let total = runs.len().max(1) as f64;
+    let conc = |m: &std::collections::BTreeMap<&str, f64>| {
+        m.values().map(|k| (k / total).powi(2)).sum::<f64>()
+    };
+    let n_eff = 1.0 / (0.5 * conc(&per_run) + 0.5 * conc(&per_pattern)).max(1.0 / total);
+    n_eff / total
 }
 
 /// χ² of a comparison; `noise_from` holds the noise levels fixed to another comparison's (the one
@@ -112,22 +155,7 @@ pub fn image_chi2(m: &FrameStats, o: &FrameStats) -> (f64, usize) {
 pub fn chi2(cmp: &Comparison, noise_from: Option<&Comparison>, dic: &DicSettings) -> Chi2 {
     let infl = inflation(dic);
     let (mut field, mut std, mut n) = (0.0, 0.0, 0usize);
-    // The analyses are not independent: every run of a pattern shares its reference frame, every
-    // scheme of a run its moved frame; half the noise comes from each. For a disagreement common
-    // to all analyses the χ² summed over N analyses counts it N times where the data hold
-    // N_eff = 1/(½Σ_runs(n_r/N)² + ½Σ_patterns(n_p/N)²) independent looks: scale by N_eff/N.
-    let mut per_run: std::collections::BTreeMap<&str, f64> = Default::default();
-    let mut per_pattern: std::collections::BTreeMap<&str, f64> = Default::default();
-    for r in &cmp.runs {
-        *per_run.entry(r.id.as_str()).or_default() += 1.0;
-        *per_pattern.entry(r.pattern.as_str()).or_default() += 1.0;
-    }
-    let total = cmp.runs.len().max(1) as f64;
-    let conc = |m: &std::collections::BTreeMap<&str, f64>| {
-        m.values().map(|k| (k / total).powi(2)).sum::<f64>()
-    };
-    let n_eff = 1.0 / (0.5 * conc(&per_run) + 0.5 * conc(&per_pattern)).max(1.0 / total);
-    let shared = n_eff / total;
+    let shared = shared_fraction(&cmp.runs);
     for (k, r) in cmp.runs.iter().enumerate() {
         let d = &r.detail;
         let var = noise_from
@@ -156,21 +184,69 @@ pub fn chi2(cmp: &Comparison, noise_from: Option<&Comparison>, dic: &DicSettings
     field *= shared;
     std *= shared;
     let mut image = 0.0;
-    for im in &cmp.images {
-        let (c, k) = image_chi2(&im.measured, &im.model);
-        image += c;
-        n += k;
+    let mut n_image = 0;
+    let mut image_parts = [(0.0, 0usize); IMAGE_KINDS];
+    // The moved frames of a pattern show the same print as its reference, shifted: their
+    // statistics repeat the reference's disagreement with the model's print, so together they
+    // count as one frame (each weighs 1/moved frames of its pattern), and the mean-intensity map
+    // — a property of the illumination and lens, not of the move — is the reference's alone.
+    let mut moved_per_pattern: std::collections::BTreeMap<&str, f64> = Default::default();
+    for im in cmp.images.iter().filter(|i| i.run.is_some()) {
+        *moved_per_pattern.entry(im.pattern.as_str()).or_default() += 1.0;
     }
+    for im in &cmp.images {
+        let weight = match im.run {
+            Some(_) => 1.0 / moved_per_pattern[im.pattern.as_str()],
+            None => 1.0,
+        };
+        for (kind, (acc, (c, k))) in image_parts
+            .iter_mut()
+            .zip(image_chi2_parts(&im.measured, &im.model))
+            .enumerate()
+        {
+            if im.run.is_some() && kind == MEAN_MAP {
+                continue;
+            }
+            let k = (k as f64 * weight).round() as usize;
+            acc.0 += c * weight;
+            acc.1 += k;
+            image += c * weight;
+            n_image += k;
+        }
+    }
+    n += n_image;
     Chi2 {
         field,
         std,
         image,
         total: field + std + image,
         observations: n,
+        image_observations: n_image,
+        image_parts,
     }
 }
 
-/// ΔBIC of adding `k` parameters that moved χ² from `before` to `after`.
+/// The image χ² change from `before` to `after`, each kind divided by its overdispersion
+/// ĉ = max(1, χ²/n) with the candidate (quasi-likelihood: statistics that scatter about the model
+/// more than their standard errors say — a print's texture in the mean map, a print's spectrum
+/// the model cannot draw — count only as much as their scatter allows). Negative is a drop.
+pub fn image_change(before: &Chi2, after: &Chi2) -> f64 {
+    before
+        .image_parts
+        .iter()
+        .zip(&after.image_parts)
+        .map(|(b, a)| {
+            let c_hat = (a.0 / a.1.max(1) as f64).max(1.0);
+            (a.0 - b.0) / c_hat
+        })
+        .sum()
+}
+
+/// ΔBIC of adding `k` parameters that moved χ² from `before` to `after`, the image statistics
+/// scaled for their overdispersion ([`image_change`]).
 pub fn delta_bic(before: &Chi2, after: &Chi2, k: usize) -> f64 {
-    after.total - before.total + k as f64 * (before.observations.max(1) as f64).ln()
+    (after.field - before.field)
+        + (after.std - before.std)
+        + image_change(before, after)
+        + k as f64 * (before.observations.max(1) as f64).ln()
 }

@@ -8,10 +8,13 @@ use super::bic::{chi2, Chi2};
 use super::discrepancy::{run_discrepancy, RunDiscrepancy};
 use super::image_stats::{centre_crop, frame_stats, FrameStats, STATS_CROP_PX};
 use super::nominal::{
-    check_sizes, fit_stage, pattern_for, pattern_indices, pooled_noise_variance, white_level_guess,
-    Nominal, Scene, StageObservation,
+    check_sizes, pattern_for, pattern_indices, pooled_noise_variance, white_level_guess, Nominal,
+    Scene,
 };
+use super::optimise::golden;
+use super::print::{spectral_shape_chi2, PrintCalibration, PrintKnowledge};
 use super::residuals::{residual_map, ResidualMap};
+use super::stage::{fit_stage, StageObservation};
 use super::{CompareOptions, DiagnoseError, Progress};
 use crate::dataset::Manifest;
 use crate::dic::{DicResult, PreparedReference, Summary};
@@ -70,8 +73,14 @@ pub struct RunComparison {
     pub pattern: String,
     pub scheme: String,
     pub discrepancy_px: f64,
+    /// The three parts of the discrepancy (module doc of `diagnose`): rigid, field, std.
+    pub rigid_px: f64,
     pub field_px: f64,
     pub std_px: f64,
+    /// The stage landing offset the model rendered for this run, µm (x, y), and what the data
+    /// said before the stage's envelope clipped it.
+    pub stage_offset_um: [f64; 2],
+    pub stage_landing_um: [f64; 2],
     pub measured: Side,
     pub model: Side,
     /// Mean of measured − model, px (u, v).
@@ -100,20 +109,29 @@ pub struct ImageComparison {
 /// Totals by part, px.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DiscrepancyParts {
+    #[serde(default)]
+    pub rigid_px: f64,
     pub field_px: f64,
     pub std_px: f64,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Comparison {
     pub dataset: String,
     pub model: ModelInfo,
     /// RMS over every run and scheme of the per-run discrepancy, px.
     pub discrepancy_px: f64,
+    /// Its standard error from the noise of both sides' analyses, px ([`discrepancy_se`]).
+    #[serde(default)]
+    pub discrepancy_se_px: f64,
     pub parts: DiscrepancyParts,
     pub runs: Vec<RunComparison>,
     pub images: Vec<ImageComparison>,
     pub chi2: Chi2,
+    /// The model's analyses, per run and scheme (diagnose predicts geometric candidates from
+    /// them without rendering).
+    #[serde(skip)]
+    pub model_dic: Vec<Vec<DicResult>>,
 }
 
 /// A short, stable hash of the model's content (FNV-1a 64 of its canonical TOML).
@@ -268,6 +286,7 @@ pub fn load_measurement(
         noise_floor_dn: noise_var.max(0.0).sqrt(),
         misalignment_rad: 0.0,
         travel_scale: 1.0,
+        stage: Default::default(),
         patterns,
     };
     Ok(Measurement {
@@ -295,6 +314,18 @@ pub fn load_measurement(
 /// The nominal experiment of `model` for this measurement: the stage fitted, the white levels
 /// matched (one centred crop render per pattern).
 pub fn calibrate(meas: &Measurement, model: &ModelConfig) -> Result<Nominal, DiagnoseError> {
+    calibrate_seeded(meas, model, meas.options.seed, None)
+}
+
+/// [`calibrate`] with the model's speckle and noise drawn from `seed`; `scene_from` hands over
+/// the white levels and prints of another comparison of the same image chain (they depend on
+/// the optics and the sensor, not on the geometry or the seed's realisation).
+fn calibrate_seeded(
+    meas: &Measurement,
+    model: &ModelConfig,
+    seed: u64,
+    scene_from: Option<&Nominal>,
+) -> Result<Nominal, DiagnoseError> {
     let mut nominal = meas.nominal.clone();
     let obs: Vec<StageObservation> = meas
         .manifest
@@ -307,24 +338,174 @@ pub fn calibrate(meas: &Measurement, model: &ModelConfig) -> Result<Nominal, Dia
                 .iter()
                 .zip(&meas.dic[ri])
                 .map(move |(s, r)| StageObservation {
-                    pattern: meas.pattern_of_run[ri],
+                    run: ri,
                     commanded: (run.stage.dx_mm, run.stage.dy_mm),
                     scheme: s,
                     result: r,
                 })
         })
         .collect();
-    fit_stage(&mut nominal, &model.effects, &meas.manifest, &obs);
-    let scene = Scene::new(&nominal, &model.effects, &meas.manifest, meas.options.seed)?;
-    for (pi, crop) in meas.reference_crops.iter().enumerate() {
-        let img = scene.render(pi, (0.0, 0.0), false, 0, Some(STATS_CROP_PX));
-        let (m_model, _) = img.mean_std();
-        let (m_meas, _) = crop.mean_std();
-        if m_model > 0.0 && m_meas > 0.0 {
-            nominal.patterns[pi].white_level_dn *= m_meas / m_model;
+    fit_stage(
+        &mut nominal,
+        &model.effects,
+        &obs,
+        meas.manifest.runs.len(),
+        meas.manifest.stage_repeatability_um,
+        super::bic::inflation(&meas.options.dic),
+    );
+    if let Some(other) = scene_from {
+        nominal.patterns.clone_from(&other.patterns);
+        return Ok(nominal);
+    }
+    for pi in 0..nominal.patterns.len() {
+        match_white(meas, &mut nominal, model, pi, seed)?;
+        if nominal.patterns[pi].print == PrintKnowledge::Calibrated {
+            calibrate_print(meas, &mut nominal, model, pi, seed)?;
+            match_white(meas, &mut nominal, model, pi, seed)?;
         }
     }
     Ok(nominal)
+}
+
+/// The model's centred reference crop of pattern `pi`.
+fn reference_crop(
+    meas: &Measurement,
+    nominal: &Nominal,
+    model: &ModelConfig,
+    pi: usize,
+    seed: u64,
+) -> Result<Image, DiagnoseError> {
+    let scene = Scene::new(nominal, &model.effects, &meas.manifest, seed)?;
+    Ok(scene.render(pi, (0.0, 0.0), false, 0, Some(STATS_CROP_PX)))
+}
+
+/// Scales pattern `pi`'s white level so the model's reference crop has the measured mean.
+fn match_white(
+    meas: &Measurement,
+    nominal: &mut Nominal,
+    model: &ModelConfig,
+    pi: usize,
+    seed: u64,
+) -> Result<(), DiagnoseError> {
+    let (m_model, _) = reference_crop(meas, nominal, model, pi, seed)?.mean_std();
+    let (m_meas, _) = meas.reference_crops[pi].mean_std();
+    if m_model > 0.0 && m_meas > 0.0 {
+        nominal.patterns[pi].white_level_dn *= m_meas / m_model;
+    }
+    Ok(())
+}
+
+/// Calibrates pattern `pi`'s print to the measured reference (see [`super::print`]): two rounds of
+/// contrast then dot size.
+fn calibrate_print(
+    meas: &Measurement,
+    nominal: &mut Nominal,
+    model: &ModelConfig,
+    pi: usize,
+    seed: u64,
+) -> Result<(), DiagnoseError> {
+    let measured = &meas.reference_stats[pi];
+    let start = nominal.patterns[pi].pattern.clone();
+    let contrast_of = |img: &Image| {
+        let (m, s) = img.mean_std();
+        s / m.max(1e-12)
+    };
+    for _ in 0..2 {
+        let crop = reference_crop(meas, nominal, model, pi, seed)?;
+        let ratio = measured.contrast / contrast_of(&crop).max(1e-9);
+        if ratio.is_finite() {
+            let p = &mut nominal.patterns[pi].pattern;
+            p.contrast = (p.contrast * ratio).clamp(0.02, 1.0);
+        }
+        let sigma0 = nominal.patterns[pi].pattern.sigma_mm();
+        let trial = |ln_factor: f64| -> f64 {
+            let mut n = nominal.clone();
+            set_sigma(&mut n.patterns[pi].pattern, sigma0 * ln_factor.exp());
+            match reference_crop(meas, &n, model, pi, seed) {
+                Ok(img) => spectral_shape_chi2(measured, &img),
+                Err(_) => f64::INFINITY,
+            }
+        };
+        // Keep the print physical: its mean darkening 2πσ²ρc (Campbell's theorem for a field of
+        // Gaussian dots) below 60 %, beyond which dots pile up into black.
+        let p = &nominal.patterns[pi].pattern;
+        let rho_per_mm2 = 1.0 / p.dot_spacing_mm.powi(2);
+        let sigma_max = (0.6 / (2.0 * std::f64::consts::PI * rho_per_mm2 * p.contrast)).sqrt();
+        let hi = (sigma_max / sigma0).clamp(0.3, 4.0);
+        let best = golden(&trial, (0.25f64).ln(), hi.ln(), 12);
+        set_sigma(&mut nominal.patterns[pi].pattern, sigma0 * best.exp());
+    }
+    let crop = reference_crop(meas, nominal, model, pi, seed)?;
+    let p = &nominal.patterns[pi].pattern;
+    nominal.patterns[pi].calibration = Some(PrintCalibration {
+        start_sigma_mm: start.sigma_mm(),
+        sigma_mm: p.sigma_mm(),
+        start_contrast: start.contrast,
+        contrast: p.contrast,
+        measured_contrast: measured.contrast,
+        model_contrast: contrast_of(&crop),
+    });
+    Ok(())
+}
+
+/// A Gaussian dot of σ `sigma_mm` (the FWHM carries all of it; no separate softness).
+fn set_sigma(p: &mut crate::model::SpecklePattern, sigma_mm: f64) {
+    p.dot_diameter_mm = sigma_mm * 2.354_820_045_030_949;
+    p.edge_softness_mm = 0.0;
+}
+
+/// The landing offsets against the model's own DIC rather than its geometry: the first fit
+/// compares the measured mean displacement with the ideal geometric one, so the model's own
+/// sub-pixel bias would stay in every run as a rigid residual. The remaining mean difference of
+/// each run (over its schemes and valid points, full-resolution px) is added to the run's
+/// offset, within the stage's envelope, and to the model's displacements — a shift of a few
+/// thousandths of a pixel moves a DIC result by the same amount (its bias changes at second
+/// order), so no second rendering is needed.
+fn refine_landings(meas: &Measurement, nominal: &mut Nominal, model_dic: &mut [Vec<DicResult>]) {
+    let envelope = nominal.stage.envelope_px(nominal.scale_px_per_mm);
+    for (ri, model_results) in model_dic.iter_mut().enumerate() {
+        let (mut sum, mut k) = ([0.0, 0.0], 0.0);
+        for (si, scheme) in meas.options.schemes.iter().enumerate() {
+            let (m, o) = (&meas.dic[ri][si], &model_results[si]);
+            let (mut du, mut dv, mut n) = (0.0, 0.0, 0.0);
+            for (a, b) in m.points.iter().zip(&o.points) {
+                if a.status.is_valid() && b.status.is_valid() {
+                    du += a.u - b.u;
+                    dv += a.v - b.v;
+                    n += 1.0;
+                }
+            }
+            if n > 0.0 {
+                sum[0] += du / n * scheme.x.block as f64;
+                sum[1] += dv / n * scheme.y.block as f64;
+                k += 1.0;
+            }
+        }
+        if k == 0.0 {
+            continue;
+        }
+        let old = nominal.stage.applied_offset_px(ri);
+        let mut shift = [0.0; 2];
+        for c in 0..2 {
+            let applied = (old[c] + sum[c] / k).clamp(-envelope, envelope);
+            shift[c] = applied - old[c];
+        }
+        // What the data say: the offset the model was rendered at plus what its own analysis
+        // still leaves over.
+        if let Some(l) = nominal.stage.landing_px.get_mut(ri) {
+            *l = [old[0] + sum[0] / k, old[1] + sum[1] / k];
+        }
+        if let Some(o) = nominal.stage.offsets_px.get_mut(ri) {
+            *o = [old[0] + shift[0], old[1] + shift[1]];
+        }
+        for (si, scheme) in meas.options.schemes.iter().enumerate() {
+            let (bx, by) = (scheme.x.block as f64, scheme.y.block as f64);
+            for p in model_results[si].points.iter_mut() {
+                p.u += shift[0] / bx;
+                p.v += shift[1] / by;
+            }
+        }
+    }
 }
 
 /// Renders and analyses the model's side and compares. `progress` counts run × scheme analyses.
@@ -333,9 +514,33 @@ pub fn compare_prepared(
     model: &ModelConfig,
     progress: Progress,
 ) -> Result<Comparison, DiagnoseError> {
+    compare_seeded(meas, model, meas.options.seed, progress)
+}
+
+/// [`compare_prepared`] with the model's speckle and noise drawn from `seed` (the options' seed
+/// is the comparison's; `diagnose` renders with the next ones for the realisation scatter).
+pub fn compare_seeded(
+    meas: &Measurement,
+    model: &ModelConfig,
+    seed: u64,
+    progress: Progress,
+) -> Result<Comparison, DiagnoseError> {
+    compare_with_scene(meas, model, seed, None, progress)
+}
+
+/// [`compare_seeded`] with the white levels and prints of `scene_from` (a comparison of a model
+/// with the same image chain: the same optics, sensor and radiometry) instead of calibrating them
+/// again.
+pub fn compare_with_scene(
+    meas: &Measurement,
+    model: &ModelConfig,
+    seed: u64,
+    scene_from: Option<&Nominal>,
+    progress: Progress,
+) -> Result<Comparison, DiagnoseError> {
     let opts = &meas.options;
-    let nominal = calibrate(meas, model)?;
-    let scene = Scene::new(&nominal, &model.effects, &meas.manifest, opts.seed)?;
+    let nominal = calibrate_seeded(meas, model, seed, scene_from)?;
+    let scene = Scene::new(&nominal, &model.effects, &meas.manifest, seed)?;
     let runs = &meas.manifest.runs;
     let total = runs.len() * opts.schemes.len();
     let done = AtomicUsize::new(0);
@@ -368,7 +573,7 @@ pub fn compare_prepared(
         {
             let moved = scene.render(
                 pi,
-                (run.stage.dx_mm, run.stage.dy_mm),
+                nominal.landed_command(ri, (run.stage.dx_mm, run.stage.dy_mm)),
                 true,
                 2 + ri as u64,
                 None,
@@ -397,13 +602,31 @@ pub fn compare_prepared(
         }
     }
     images.extend(moved_images.into_iter().flatten());
+    let model_dic: Vec<Vec<DicResult>> = model_dic
+        .into_iter()
+        .map(|r| r.expect("every run rendered"))
+        .collect();
+    Ok(assemble(meas, model, nominal, model_dic, images))
+}
+
+/// The comparison from the model's analyses: the landings refined against them
+/// ([`refine_landings`]), every run's discrepancy, the totals and the χ².
+pub(super) fn assemble(
+    meas: &Measurement,
+    model: &ModelConfig,
+    nominal: Nominal,
+    mut model_dic: Vec<Vec<DicResult>>,
+    images: Vec<ImageComparison>,
+) -> Comparison {
+    let opts = &meas.options;
+    let runs = &meas.manifest.runs;
+    let mut nominal = nominal;
+    refine_landings(meas, &mut nominal, &mut model_dic);
     let mut out_runs = Vec::new();
     for (ri, run) in runs.iter().enumerate() {
-        let model_results = model_dic[ri].as_ref().expect("every run rendered");
-        let (sx, sy) = nominal.scaled_move(run.stage.dx_mm, run.stage.dy_mm);
-        let (s, c) = nominal.misalignment_rad.sin_cos();
-        let k = nominal.scale_px_per_mm;
-        let move_px = [k * (c * sx - s * sy), k * (s * sx + c * sy)];
+        let model_results = &model_dic[ri];
+        let move_px = nominal.actual_move_px(ri, (run.stage.dx_mm, run.stage.dy_mm));
+        let um = |p: [f64; 2]| p.map(|x| x * 1000.0 / nominal.scale_px_per_mm);
         for (si, scheme) in opts.schemes.iter().enumerate() {
             let m = &meas.dic[ri][si];
             let o = &model_results[si];
@@ -414,7 +637,15 @@ pub fn compare_prepared(
                 pattern: meas.labels[meas.pattern_of_run[ri]].clone(),
                 scheme: scheme.name.clone(),
                 discrepancy_px: d.discrepancy_px,
+                rigid_px: d.rigid_px,
                 field_px: d.field_px,
+                stage_offset_um: um(nominal.stage.applied_offset_px(ri)),
+                stage_landing_um: um(nominal
+                    .stage
+                    .landing_px
+                    .get(ri)
+                    .copied()
+                    .unwrap_or_default()),
                 std_px: d.std_px,
                 measured: Side {
                     summary: m.summary,
@@ -445,16 +676,46 @@ pub fn compare_prepared(
             nominal,
         },
         discrepancy_px: rms(|r| r.discrepancy_px),
+        discrepancy_se_px: discrepancy_se(&out_runs),
         parts: DiscrepancyParts {
+            rigid_px: rms(|r| r.rigid_px),
             field_px: rms(|r| r.field_px),
             std_px: rms(|r| r.std_px),
         },
         runs: out_runs,
         images,
         chi2: Chi2::default(),
+        model_dic: Vec::new(),
     };
     cmp.chi2 = chi2(&cmp, None, &opts.dic);
-    Ok(cmp)
+    cmp.model_dic = model_dic;
+    cmp
+}
+
+/// Standard error of the total discrepancy D = √(mean D_r²) from the noise of each analysis,
+/// propagated (var D² = Σ var D_r² / N², scaled by N/N_eff for the frames the analyses share).
+/// It does not hold the model's speckle realisation: `diagnose` adds the scatter over model
+/// seeds.
+pub fn discrepancy_se(runs: &[RunComparison]) -> f64 {
+    let valid: Vec<&RunComparison> = runs
+        .iter()
+        .filter(|r| r.discrepancy_px.is_finite())
+        .collect();
+    let n = valid.len();
+    if n == 0 {
+        return f64::NAN;
+    }
+    let nf = n as f64;
+    let d2 = valid.iter().map(|r| r.discrepancy_px.powi(2)).sum::<f64>() / nf;
+    let shared = super::bic::shared_fraction(runs).max(1e-9);
+    let var_d2 = valid
+        .iter()
+        .map(|r| r.detail.discrepancy_sq_var)
+        .filter(|v| v.is_finite())
+        .sum::<f64>()
+        / (nf * nf)
+        / shared;
+    super::discrepancy::se_of_length(d2.sqrt(), var_d2)
 }
 
 /// Reads the dataset in `dir` and compares it with `model`. `progress` counts every analysis

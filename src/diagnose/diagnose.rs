@@ -14,9 +14,11 @@
 //! false). Effects the dataset cannot reveal are listed with the runs to add, not fitted; pairs
 //! that explain the same residual are named with the run that would separate them.
 
-use super::basis::GeometricParam;
-use super::bic::{chi2, delta_bic, SIGNIFICANT_DELTA_BIC};
-use super::compare::{compare_prepared, load_measurement, Comparison, Measurement, ModelInfo};
+use super::basis::{geometric_basis, GeometricParam};
+use super::bic::{chi2, delta_bic, image_change, SIGNIFICANT_DELTA_BIC};
+use super::compare::{
+    compare_prepared, compare_with_scene, load_measurement, Comparison, Measurement, ModelInfo,
+};
 use super::fit_geometric::{fit_geometric, FieldSample};
 use super::fit_image::{
     fit_fill_factor, fit_illumination_change, fit_motion_blur, fit_psf_blur, fit_sensor_noise,
@@ -24,6 +26,7 @@ use super::fit_image::{
 };
 use super::identifiability::{design_of, separating_run};
 pub use super::identifiability::{Confounded, NotIdentifiable};
+use super::print::PrintKnowledge;
 use super::{CompareOptions, DiagnoseError, Progress};
 use crate::model::effects::{LensDistortion, Rotation, Scale};
 use crate::model::{Effects, ModelConfig, EFFECT_IDS};
@@ -44,14 +47,72 @@ pub struct Candidate {
     pub significant: bool,
     /// Discrepancy of the model − with the candidate, px.
     pub drop_px: f64,
-    /// Whether the discrepancy was recomputed by rendering (see the module doc).
+    /// Whether the discrepancy was recomputed (see the module doc), and how.
     pub recomputed: bool,
+    pub method: Method,
+    /// Each criterion a verdict needs, and whether this candidate meets it.
+    pub criteria: Criteria,
+}
+
+/// What a candidate's effect shows in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Evidence {
+    /// The displacement fields: the discrepancy must drop.
+    Displacement,
+    /// The image statistics (mean map, noise, contrast): their χ² must drop.
+    Image,
+    /// Either: the discrepancy or the image statistics must drop.
+    Either,
+}
+
+impl Evidence {
+    pub fn of(effect: &str) -> Self {
+        match effect {
+            "vignetting" | "illumination_change" | "sensor_noise" | "fixed_pattern" => {
+                Evidence::Image
+            }
+            "psf_blur" | "fill_factor" | "motion_blur" => Evidence::Either,
+            _ => Evidence::Displacement,
+        }
+    }
+}
+
+/// The criteria of a verdict (module doc); `significant` is their conjunction.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Criteria {
+    /// ΔBIC below −10.
+    pub delta_bic_ok: bool,
+    /// A fitted parameter more than two standard errors from "no effect".
+    pub beyond_null: bool,
+    pub evidence: Evidence,
+    /// The drop of the discrepancy and its standard error, px.
+    pub drop_px: f64,
+    pub drop_se_px: f64,
+    /// The drop of the image statistics' χ² and its standard error.
+    pub image_chi2_drop: f64,
+    pub image_chi2_se: f64,
+    /// The drop the evidence needs is larger than two of its standard errors.
+    pub drop_ok: bool,
+    /// No fitted parameter sits at the bound of the catalogue's range; when one does, the value
+    /// is reported as outside the range, not as a verdict.
+    pub within_range: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub outside_range: Option<String>,
+    /// The effect can be told from the print (false for blur and aperture when the print is
+    /// calibrated to the frames: see `Confounded`).
+    pub separable_from_print: bool,
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Diagnosis {
     pub model: ModelInfo,
     pub discrepancy_px: f64,
+    /// Standard error of the discrepancy: the noise of both analyses propagated, or the scatter
+    /// over [`MODEL_SEEDS`] renderings of the model with different seeds, the larger.
+    pub discrepancy_se_px: f64,
+    /// The discrepancy for each model seed.
+    pub discrepancy_by_seed_px: Vec<f64>,
     /// Ranked by ΔBIC, most negative first.
     pub candidates: Vec<Candidate>,
     /// Candidate ids ranked by the drop of the discrepancy, largest first.
@@ -170,8 +231,215 @@ fn fit_candidate(
         "vignetting" => fit_vignetting(meas, before, model),
         "illumination_change" => fit_illumination_change(meas, before, model),
         "motion_blur" => fit_motion_blur(meas, before, model),
+        "stage_error" => super::stage::fit_stage_error(before, model),
         _ => None,
     }
+}
+
+/// Renderings of the model (the comparison's seed and the next ones) whose scatter of the
+/// discrepancy is part of its standard error: a model disagrees with one realisation of its own
+/// speckle and noise by chance, and differently with the next.
+pub const MODEL_SEEDS: u64 = 2;
+
+/// The non-null bound of every bounded parameter of the image-level fits: a fit that ends there
+/// has not found the effect's value, only that the catalogue's range does not hold it.
+fn bound_of(effect: &str, param: &str) -> Option<(f64, f64)> {
+    // (bound, range width)
+    match (effect, param) {
+        ("psf_blur", "sigma_px") => Some((3.0, 3.0)),
+        ("fill_factor", "fx" | "fy") => Some((0.05, 0.95)),
+        ("motion_blur", "length_px") => Some((4.0, 4.0)),
+        _ => None,
+    }
+}
+
+fn outside_range(effect: &str, params: &BTreeMap<String, f64>) -> Option<String> {
+    let at: Vec<String> = params
+        .iter()
+        .filter_map(|(k, v)| {
+            let (bound, width) = bound_of(effect, k)?;
+            ((v - bound).abs() <= 0.01 * width).then(|| format!("{k} = {v:.4} (bound {bound})"))
+        })
+        .collect();
+    (!at.is_empty()).then(|| {
+        format!(
+            "the fit ended at the edge of the catalogue's range: {}; the data want a value beyond it, which this effect does not describe",
+            at.join(", ")
+        )
+    })
+}
+
+/// How a candidate's comparison was made.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// The parameter is within two standard errors of no effect: adding nothing changes nothing.
+    Unchanged,
+    /// A geometric effect: the model's analyses shifted by the fitted field (first order, no
+    /// rendering); the winner is always rendered.
+    Predicted,
+    /// Rendered and analysed.
+    Rendered,
+}
+
+/// Everything the criteria of a candidate are judged against.
+struct Judge<'a> {
+    before: &'a Comparison,
+    se_before: f64,
+    seed_sd: f64,
+    print_calibrated: bool,
+    /// No translation reaches [`VIGNETTING_MOVE_FRACTION`] of the field.
+    small_moves: bool,
+    dic: &'a crate::dic::DicSettings,
+}
+
+/// The smallest translation, as a fraction of the frame width, that tells vignetting (fixed on
+/// the sensor) from a non-uniform print or light (moving with the target): below it, both give
+/// the same mean-intensity map in every frame.
+pub const VIGNETTING_MOVE_FRACTION: f64 = 0.05;
+
+/// What separates vignetting from the print's or the light's own non-uniformity.
+pub const ILLUMINATION_SEPARATION: &str = "a flat-field frame of a uniform white target, or a translation of at least 5 % of the field: a sensor-fixed falloff stays where it is while the print's and the light's non-uniformity move with the target";
+
+impl Judge<'_> {
+    fn candidate(&self, fit: &ImageFit, after: Option<&(Comparison, Method)>) -> Candidate {
+        let before = self.before;
+        let n_obs = before.chi2.observations;
+        let (discrepancy_px, delta, method, image_chi2_drop) = match after {
+            Some((a, m)) => {
+                let c = chi2(a, Some(before), self.dic);
+                (
+                    a.discrepancy_px,
+                    delta_bic(&before.chi2, &c, fit.k),
+                    *m,
+                    -image_change(&before.chi2, &c),
+                )
+            }
+            None => (
+                before.discrepancy_px,
+                fit.k as f64 * (n_obs.max(1) as f64).ln(),
+                Method::Unchanged,
+                0.0,
+            ),
+        };
+        let drop_px = before.discrepancy_px - discrepancy_px;
+        // The after side shares the measured analyses and the seed: its own noise, plus the
+        // same realisation scatter (conservative: the two are treated as independent).
+        let se_after = after.map_or(self.se_before, |(a, _)| {
+            a.discrepancy_se_px.max(self.seed_sd)
+        });
+        let drop_se_px = self.se_before.hypot(se_after);
+        let evidence = Evidence::of(fit.effect);
+        let displacement_ok = drop_px > 2.0 * drop_se_px;
+        // The image drop is scaled for overdispersion; with no effect a k-parameter drop is
+        // χ²_k, whose standard deviation is √(2k).
+        let image_se = (2.0 * fit.k as f64).sqrt();
+        let image_ok = image_chi2_drop > 2.0 * image_se;
+        // Whatever its evidence, an effect may not make the displacements clearly worse.
+        let no_worse = drop_px > -2.0 * drop_se_px;
+        let drop_ok = no_worse
+            && match evidence {
+                Evidence::Displacement => displacement_ok,
+                Evidence::Image => image_ok,
+                Evidence::Either => displacement_ok || image_ok,
+            };
+        let range = outside_range(fit.effect, &fit.params);
+        let separable_from_print = !(self.print_calibrated
+            && matches!(fit.effect, "psf_blur" | "fill_factor")
+            || fit.effect == "vignetting" && self.small_moves);
+        let criteria = Criteria {
+            delta_bic_ok: method != Method::Unchanged && delta < SIGNIFICANT_DELTA_BIC,
+            beyond_null: fit.beyond_null,
+            evidence,
+            drop_px,
+            drop_se_px,
+            image_chi2_drop,
+            image_chi2_se: image_se,
+            drop_ok,
+            within_range: range.is_none(),
+            outside_range: range,
+            separable_from_print,
+        };
+        Candidate {
+            effect: fit.effect.to_string(),
+            params: fit.params.clone(),
+            // A parameter whose error could not be estimated has no entry (JSON has no NaN).
+            stderr: fit
+                .stderr
+                .iter()
+                .filter(|(_, se)| se.is_finite())
+                .map(|(k, se)| (k.clone(), *se))
+                .collect(),
+            discrepancy_px,
+            delta_bic: delta,
+            significant: criteria.delta_bic_ok
+                && criteria.beyond_null
+                && criteria.drop_ok
+                && criteria.within_range
+                && criteria.separable_from_print,
+            drop_px,
+            recomputed: method != Method::Unchanged,
+            method,
+            criteria,
+        }
+    }
+}
+
+/// The comparison with a geometric candidate added, predicted from the model's analyses: each
+/// valid point's displacement moves by the candidate's displacement field (exact to first order:
+/// a DIC result follows a smooth change of the motion), the landings are refined again, the image
+/// statistics stay. `stage_error` widens the envelope the landings are refined in. None for the
+/// other effects, which change the images.
+fn predict(
+    meas: &Measurement,
+    before: &Comparison,
+    with: &ModelConfig,
+    fit: &ImageFit,
+) -> Option<Comparison> {
+    if before.model_dic.is_empty() {
+        return None;
+    }
+    let mut nominal = before.model.nominal.clone();
+    let param = match fit.effect {
+        "rotation" => Some(GeometricParam::Rotation),
+        "scale" => Some(GeometricParam::Scale),
+        "lens_distortion" => Some(GeometricParam::DistortionK1),
+        "stage_error" => None,
+        _ => return None,
+    };
+    let mut dic = before.model_dic.clone();
+    match param {
+        Some(param) => {
+            let value = *fit.params.values().next()?;
+            let camera = nominal.camera(0);
+            let (cx, cy) = camera.centre();
+            let r0 = camera.half_diagonal_px();
+            for (ri, run) in meas.manifest.runs.iter().enumerate() {
+                let t = nominal.actual_move_px(ri, (run.stage.dx_mm, run.stage.dy_mm));
+                for (si, scheme) in meas.options.schemes.iter().enumerate() {
+                    let (bx, by) = (scheme.x.block as f64, scheme.y.block as f64);
+                    for p in dic[ri][si].points.iter_mut() {
+                        let (fx, fy) = scheme.to_full(p.x, p.y);
+                        let (bu, bv) = geometric_basis(param, (fx - cx, fy - cy), (t[0], t[1]), r0);
+                        p.u += value * bu / bx;
+                        p.v += value * bv / by;
+                    }
+                }
+            }
+        }
+        None => {
+            let e = with.effects.stage_error?;
+            nominal.stage.repeatability_um = Some(e.repeatability_um);
+            nominal.stage.source = super::stage::RepeatabilitySource::Model;
+        }
+    }
+    Some(super::compare::assemble(
+        meas,
+        with,
+        nominal,
+        dic,
+        before.images.clone(),
+    ))
 }
 
 /// Diagnoses `model` against an analysed measurement; `before` is the model's comparison when
@@ -202,13 +470,54 @@ pub fn diagnose_prepared(
             None => fit_ids.push(id),
         }
     }
-    let total = fit_ids.len();
+    let total = fit_ids.len() + MODEL_SEEDS as usize - 1;
     let done = AtomicUsize::new(0);
-    let n_obs = before.chi2.observations;
+    let tick = || {
+        let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+        if progress(n, total) {
+            Ok(())
+        } else {
+            Err(DiagnoseError::Cancelled)
+        }
+    };
+    // The discrepancy's standard error: analysis noise, and the scatter over model seeds.
+    let mut by_seed = vec![before.discrepancy_px];
+    for k in 1..MODEL_SEEDS {
+        let c = compare_with_scene(
+            meas,
+            model,
+            meas.options.seed.wrapping_add(k),
+            Some(&before.model.nominal),
+            &|_, _| true,
+        )?;
+        by_seed.push(c.discrepancy_px);
+        tick()?;
+    }
+    let seed_sd = {
+        let n = by_seed.len() as f64;
+        let m = by_seed.iter().sum::<f64>() / n;
+        (by_seed.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+    };
+    let se_before = before.discrepancy_se_px.max(seed_sd);
+    let print_calibrated = before
+        .model
+        .nominal
+        .patterns
+        .iter()
+        .any(|p| p.print == PrintKnowledge::Calibrated);
+    let judge = Judge {
+        before: &before,
+        se_before,
+        seed_sd,
+        print_calibrated,
+        small_moves: design.largest_move_fraction < VIGNETTING_MOVE_FRACTION,
+        dic: &meas.options.dic,
+    };
     let mut candidates = Vec::new();
     let mut models: BTreeMap<String, (ModelConfig, Option<Comparison>)> = BTreeMap::new();
     for id in &fit_ids {
         let Some(fit) = fit_candidate(meas, &before, &model.effects, id) else {
+            tick()?;
             continue;
         };
         let with = ModelConfig {
@@ -219,43 +528,44 @@ pub fn diagnose_prepared(
             ),
             effects: fit.effects.clone(),
         };
-        let (discrepancy_px, delta, recomputed, after) = if fit.beyond_null {
-            let after = compare_prepared(meas, &with, &|_, _| true)?;
-            let c = chi2(&after, Some(&before), &meas.options.dic);
-            (
-                after.discrepancy_px,
-                delta_bic(&before.chi2, &c, fit.k),
-                true,
-                Some(after),
-            )
+        let after = if !fit.beyond_null {
+            None
+        } else if let Some(predicted) = predict(meas, &before, &with, &fit) {
+            Some((predicted, Method::Predicted))
         } else {
-            (
-                before.discrepancy_px,
-                fit.k as f64 * (n_obs.max(1) as f64).ln(),
-                false,
-                None,
-            )
+            let rendered = compare_with_scene(meas, &with, meas.options.seed, None, &|_, _| true)?;
+            Some((rendered, Method::Rendered))
         };
-        candidates.push(Candidate {
-            effect: fit.effect.to_string(),
-            params: fit.params.clone(),
-            // A parameter whose error could not be estimated has no entry (JSON has no NaN).
-            stderr: fit
-                .stderr
-                .iter()
-                .filter(|(_, se)| se.is_finite())
-                .map(|(k, se)| (k.clone(), *se))
-                .collect(),
-            discrepancy_px,
-            delta_bic: delta,
-            significant: recomputed && fit.beyond_null && delta < SIGNIFICANT_DELTA_BIC,
-            drop_px: before.discrepancy_px - discrepancy_px,
-            recomputed,
-        });
-        models.insert(fit.effect.to_string(), (with, after));
-        let n = done.fetch_add(1, Ordering::Relaxed) + 1;
-        if !progress(n, total) {
-            return Err(DiagnoseError::Cancelled);
+        candidates.push(judge.candidate(&fit, after.as_ref()));
+        models.insert(fit.effect.to_string(), (with, after.map(|a| a.0)));
+        tick()?;
+    }
+    candidates.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
+    // The winner is rendered: a predicted comparison is first order in the effect. When the
+    // rendering no longer meets the criteria, the next significant candidate is tried.
+    let mut winner = None;
+    while let Some(pos) = candidates.iter().position(|c| c.significant) {
+        let effect = candidates[pos].effect.clone();
+        if candidates[pos].method == Method::Rendered {
+            winner = Some(effect);
+            break;
+        }
+        let (with, _) = models.get(&effect).expect("fitted").clone();
+        let fit = fit_candidate(meas, &before, &model.effects, &effect).expect("fitted before");
+        let rendered = compare_with_scene(
+            meas,
+            &with,
+            meas.options.seed,
+            Some(&before.model.nominal),
+            &|_, _| true,
+        )?;
+        let judged = judge.candidate(&fit, Some(&(rendered.clone(), Method::Rendered)));
+        let ok = judged.significant;
+        candidates[pos] = judged;
+        models.insert(effect.clone(), (with, Some(rendered)));
+        if ok {
+            winner = Some(effect);
+            break;
         }
     }
     candidates.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
@@ -263,9 +573,26 @@ pub fn diagnose_prepared(
     by_drop.sort_by(|a, b| b.drop_px.total_cmp(&a.drop_px));
     let ranking_by_drop = by_drop.iter().map(|c| c.effect.clone()).collect();
     let significant: Vec<&Candidate> = candidates.iter().filter(|c| c.significant).collect();
-    let winner = significant.first().map(|c| c.effect.clone());
     let fitted: Vec<&str> = candidates.iter().map(|c| c.effect.as_str()).collect();
     let mut confounded = design.confounded(&fitted);
+    if fitted.contains(&"vignetting") && design.largest_move_fraction < VIGNETTING_MOVE_FRACTION {
+        confounded.push(Confounded {
+            effects: ["vignetting".into(), "illumination".into()],
+            separate_with: ILLUMINATION_SEPARATION.into(),
+            evidence: "design".into(),
+        });
+    }
+    if print_calibrated {
+        for effect in ["psf_blur", "fill_factor"] {
+            if fitted.contains(&effect) {
+                confounded.push(Confounded {
+                    effects: [effect.into(), "print".into()],
+                    separate_with: PRINT_SEPARATION.into(),
+                    evidence: "design".into(),
+                });
+            }
+        }
+    }
     // Data: a second significant candidate explaining nearly as much as the winner.
     if let Some(w) = &winner {
         let top = candidates
@@ -295,6 +622,8 @@ pub fn diagnose_prepared(
     Ok(Diagnosis {
         model: before.model.clone(),
         discrepancy_px: before.discrepancy_px,
+        discrepancy_se_px: se_before,
+        discrepancy_by_seed_px: by_seed,
         candidates,
         ranking_by_drop,
         verdict: winner.unwrap_or_else(|| "none".into()),
@@ -305,3 +634,6 @@ pub fn diagnose_prepared(
         after,
     })
 }
+
+/// What separates lens blur and pixel aperture from the print's own profile.
+pub const PRINT_SEPARATION: &str = "a characterised print (dataset.json pattern.profile \"gaussian\" with its contrast and dot_diameter_mm or measured mtf), a second magnification, a through-focus pair, or a slanted-edge frame measured as in ISO 12233: the print's calibration to the frames absorbs whatever blur one magnification cannot attribute";

@@ -133,10 +133,15 @@ pub fn quadratic_fit(xy: &[(f64, f64)], values: &[f64]) -> Option<QuadraticFit> 
 pub struct RunDiscrepancy {
     /// Points valid in both analyses.
     pub points: usize,
-    /// √(field² + std²), px.
+    /// √(rigid² + field² + std²), px.
     pub discrepancy_px: f64,
-    /// Systematic part: RMS of the quadratic surface of the field difference, debiased for the
-    /// noise the surface absorbs, px.
+    /// Sampling variance of discrepancy² from the noise of both analyses, px⁴.
+    pub discrepancy_sq_var: f64,
+    /// Rigid part: the length of the mean of the field difference, debiased for its noise, px —
+    /// a stage landing the fit could not explain, or a sub-pixel bias the model lacks.
+    pub rigid_px: f64,
+    /// Systematic field part: RMS of the quadratic surface of the field difference about its
+    /// mean, debiased for the noise the surface absorbs, px.
     pub field_px: f64,
     /// Random part: √(Δσu² + Δσv²) debiased for the sampling error of the two stds, px.
     pub std_px: f64,
@@ -164,6 +169,13 @@ pub struct CommonPoint {
     pub dv: f64,
     pub fit_du: f64,
     pub fit_dv: f64,
+}
+
+/// Standard error of a length D from the variance of its square: √(D² + SE(D²)) − D, which is
+/// SE(D²)/(2D) for a clear signal and √SE(D²) at zero.
+pub fn se_of_length(d: f64, sq_var: f64) -> f64 {
+    let se_sq = sq_var.max(0.0).sqrt();
+    (d * d + se_sq).sqrt() - d
 }
 
 fn random_error(xy: &[(f64, f64)], v: &[f64]) -> f64 {
@@ -194,6 +206,8 @@ pub fn run_discrepancy(measured: &DicResult, model: &DicResult, inflation: f64) 
         return RunDiscrepancy {
             points: n,
             discrepancy_px: f64::NAN,
+            discrepancy_sq_var: f64::NAN,
+            rigid_px: f64::NAN,
             field_px: f64::NAN,
             std_px: f64::NAN,
             mean_diff_px: nan2,
@@ -206,11 +220,28 @@ pub fn run_discrepancy(measured: &DicResult, model: &DicResult, inflation: f64) 
     let nf = n as f64;
     let p = QUADRATIC_TERMS as f64;
     let infl = inflation.max(1.0);
-    // E[mean fitted²] of correlated noise is p·σ²·inflation/n per component: remove it.
-    let ms = |f: &QuadraticFit| {
-        f.fitted.iter().map(|x| x * x).sum::<f64>() / nf - p * f.residual_var * infl / nf
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / nf;
+    let (mean_du, mean_dv) = (mean(&du), mean(&dv));
+    // The surface's mean is the mean of the difference (it has a constant term): the rigid part.
+    // E[mean²] of correlated noise is σ²·inflation/n per component, E[mean fitted²] is p times
+    // that: remove both.
+    let noise = |f: &QuadraticFit| f.residual_var * infl / nf;
+    let rigid_sq = mean_du * mean_du + mean_dv * mean_dv - noise(&fu) - noise(&fv);
+    let shape = |f: &QuadraticFit, m: f64| {
+        f.fitted.iter().map(|x| (x - m).powi(2)).sum::<f64>() / nf - (p - 1.0) * noise(f)
     };
-    let field_px = (ms(&fu) + ms(&fv)).max(0.0).sqrt();
+    let field_sq = shape(&fu, mean_du) + shape(&fv, mean_dv);
+    let rigid_px = rigid_sq.max(0.0).sqrt();
+    let field_px = field_sq.max(0.0).sqrt();
+    // Sampling variance of the squares (a noncentral χ²: var = 4·signal·s² + 2·k·s⁴ per
+    // component, s² the noise variance of one coefficient, k the coefficients).
+    let square_var = |signal: f64, s2: f64, k: f64| 4.0 * signal.max(0.0) * s2 + 2.0 * k * s2 * s2;
+    let shape_u = shape(&fu, mean_du).max(0.0);
+    let shape_v = shape(&fv, mean_dv).max(0.0);
+    let mut var_sq = square_var(mean_du * mean_du, noise(&fu), 1.0)
+        + square_var(mean_dv * mean_dv, noise(&fv), 1.0)
+        + square_var(shape_u, noise(&fu), p - 1.0)
+        + square_var(shape_v, noise(&fv), p - 1.0);
     let measured_random_px = (random_error(&xy, &mu), random_error(&xy, &mv));
     let model_random_px = (random_error(&xy, &ou), random_error(&xy, &ov));
     // A sample std over n_eff independent points has variance σ²/(2 n_eff): remove the
@@ -221,12 +252,23 @@ pub fn run_discrepancy(measured: &DicResult, model: &DicResult, inflation: f64) 
         + sq(measured_random_px.1, model_random_px.1))
     .max(0.0)
     .sqrt();
+    for (a, b) in [
+        (measured_random_px.0, model_random_px.0),
+        (measured_random_px.1, model_random_px.1),
+    ] {
+        let se2 = (a * a + b * b) / (2.0 * n_eff);
+        if se2.is_finite() {
+            var_sq += square_var((a - b).powi(2), se2, 1.0);
+        }
+    }
     RunDiscrepancy {
         points: n,
-        discrepancy_px: (field_px * field_px + std_px * std_px).sqrt(),
+        discrepancy_px: (rigid_px * rigid_px + field_px * field_px + std_px * std_px).sqrt(),
+        discrepancy_sq_var: var_sq,
+        rigid_px,
         field_px,
         std_px,
-        mean_diff_px: (du.iter().sum::<f64>() / nf, dv.iter().sum::<f64>() / nf),
+        mean_diff_px: (mean_du, mean_dv),
         measured_random_px,
         model_random_px,
         residual_var_px2: (fu.residual_var, fv.residual_var),

@@ -4,8 +4,10 @@
 //! the χ² of the statistics the effect acts on. Standard errors from the curvature of χ² at the
 //! minimum (σ² = 2/∂²χ²).
 //!
-//! - `psf_blur` σ: power spectra along x and y of the references (a Gaussian PSF multiplies both
-//!   by exp(−4π²σ²f²)); coarse grid, then golden section.
+//! - `psf_blur` σ: the shape of the power spectra along x and y of the references above each
+//!   print's dot-spacing frequency (a Gaussian PSF multiplies both by exp(−4π²σ²f²); below the
+//!   spacing frequency the spectrum is the dots' placement, a printer's property no model
+//!   knows); coarse grid, then golden section.
 //! - `fill_factor` fx, fy: the same spectra (the aperture multiplies the x spectrum by
 //!   sinc²(fx·f), the y spectrum by sinc²(fy·f)); coarse grid, then Nelder–Mead.
 //! - `sensor_noise`: photon transfer, var = mean/gain + (read/gain)² (EMVA 1288): weighted linear
@@ -22,8 +24,9 @@
 
 use super::bic::image_chi2;
 use super::compare::{Comparison, Measurement};
-use super::image_stats::{psd, ptc, FrameStats, STATS_CROP_PX};
+use super::image_stats::{psd, ptc, FrameStats, PsdBin, STATS_CROP_PX};
 use super::nominal::Scene;
+use super::optimise::{curvature_stderr, minimise_1d, nelder_mead};
 use crate::model::effects::{
     FillFactor, IlluminationChange, MotionBlur, PsfBlur, SensorNoise, Vignetting,
 };
@@ -71,160 +74,24 @@ fn spectra_chi2(measured: &[&FrameStats], crops: &[crate::image::Image]) -> f64 
     c
 }
 
-/// Golden-section minimum of `f` on [a, b] after a coarse grid of `n` points.
-fn minimise_1d(f: &dyn Fn(f64) -> f64, a: f64, b: f64, n: usize) -> f64 {
-    let grid: Vec<(f64, f64)> = (0..n)
-        .map(|i| a + (b - a) * i as f64 / (n - 1) as f64)
-        .map(|x| (x, f(x)))
-        .collect();
-    let best = grid
+/// χ² of ln(moved/reference) measured against the same ratio of the model, per spectrum bin.
+fn ratio_chi2(m_moved: &[PsdBin], m_ref: &[PsdBin], o_moved: &[PsdBin], o_ref: &[PsdBin]) -> f64 {
+    let rel = |b: &PsdBin| (b.se / b.value).powi(2);
+    m_moved
         .iter()
-        .enumerate()
-        .min_by(|x, y| x.1 .1.total_cmp(&y.1 .1))
-        .map(|(i, _)| i)
-        .unwrap_or(0);
-    let h = (b - a) / (n - 1) as f64;
-    let (mut lo, mut hi) = ((grid[best].0 - h).max(a), (grid[best].0 + h).min(b));
-    let g = 0.618_033_988_749_895;
-    let (mut x1, mut x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
-    let (mut f1, mut f2) = (f(x1), f(x2));
-    for _ in 0..14 {
-        if f1 < f2 {
-            hi = x2;
-            (x2, f2) = (x1, f1);
-            x1 = hi - g * (hi - lo);
-            f1 = f(x1);
-        } else {
-            lo = x1;
-            (x1, f1) = (x2, f2);
-            x2 = lo + g * (hi - lo);
-            f2 = f(x2);
-        }
-    }
-    let x = if f1 < f2 { x1 } else { x2 };
-    if grid[best].1 < f(x) {
-        grid[best].0
-    } else {
-        x
-    }
-}
-
-/// Nelder–Mead in a box (points clamped), from `start` with initial steps `step`.
-fn nelder_mead(
-    f: &dyn Fn(&[f64]) -> f64,
-    start: &[f64],
-    step: &[f64],
-    lo: &[f64],
-    hi: &[f64],
-    iters: usize,
-) -> Vec<f64> {
-    let n = start.len();
-    let clamp = |x: Vec<f64>| -> Vec<f64> {
-        x.iter()
-            .enumerate()
-            .map(|(i, v)| v.clamp(lo[i], hi[i]))
-            .collect()
-    };
-    let mut simplex: Vec<(Vec<f64>, f64)> = Vec::new();
-    let s0 = clamp(start.to_vec());
-    simplex.push((s0.clone(), f(&s0)));
-    for i in 0..n {
-        let mut p = s0.clone();
-        p[i] += step[i];
-        if p[i] > hi[i] {
-            p[i] = s0[i] - step[i];
-        }
-        let p = clamp(p);
-        let v = f(&p);
-        simplex.push((p, v));
-    }
-    for _ in 0..iters {
-        simplex.sort_by(|a, b| a.1.total_cmp(&b.1));
-        let centroid: Vec<f64> = (0..n)
-            .map(|j| simplex[..n].iter().map(|p| p.0[j]).sum::<f64>() / n as f64)
-            .collect();
-        let worst = simplex[n].clone();
-        let along = |t: f64| {
-            clamp(
-                (0..n)
-                    .map(|j| centroid[j] + t * (worst.0[j] - centroid[j]))
-                    .collect(),
-            )
-        };
-        let r = along(-1.0);
-        let fr = f(&r);
-        if fr < simplex[0].1 {
-            let e = along(-2.0);
-            let fe = f(&e);
-            simplex[n] = if fe < fr { (e, fe) } else { (r, fr) };
-        } else if fr < simplex[n - 1].1 {
-            simplex[n] = (r, fr);
-        } else {
-            let c = along(0.5);
-            let fc = f(&c);
-            if fc < worst.1 {
-                simplex[n] = (c, fc);
+        .zip(m_ref)
+        .zip(o_moved.iter().zip(o_ref))
+        .filter(|((a, b), (c, d))| a.value > 0.0 && b.value > 0.0 && c.value > 0.0 && d.value > 0.0)
+        .map(|((a, b), (c, d))| {
+            let r = (a.value / b.value).ln() - (c.value / d.value).ln();
+            let var = rel(a) + rel(b) + rel(c) + rel(d);
+            if var > 0.0 {
+                r * r / var
             } else {
-                let best = simplex[0].0.clone();
-                for p in simplex.iter_mut().skip(1) {
-                    p.0 = clamp(
-                        p.0.iter()
-                            .zip(&best)
-                            .map(|(a, b)| b + 0.5 * (a - b))
-                            .collect(),
-                    );
-                    p.1 = f(&p.0);
-                }
-            }
-        }
-        let spread = simplex
-            .iter()
-            .map(|p| (p.1 - simplex[0].1).abs())
-            .fold(0.0, f64::max);
-        if spread < 1e-3 {
-            break;
-        }
-    }
-    simplex.sort_by(|a, b| a.1.total_cmp(&b.1));
-    simplex[0].0.clone()
-}
-
-/// Standard errors from the diagonal curvature of χ² (σ² = 2/∂²χ²), steps `h`, kept in bounds.
-fn curvature_stderr(
-    f: &dyn Fn(&[f64]) -> f64,
-    x: &[f64],
-    h: &[f64],
-    lo: &[f64],
-    hi: &[f64],
-) -> Vec<f64> {
-    let f0 = f(x);
-    (0..x.len())
-        .map(|i| {
-            let mut a = x.to_vec();
-            let mut b = x.to_vec();
-            // A one-sided stencil at a bound.
-            let (da, db) = if x[i] - h[i] < lo[i] {
-                (h[i], 2.0 * h[i])
-            } else if x[i] + h[i] > hi[i] {
-                (-h[i], -2.0 * h[i])
-            } else {
-                (-h[i], h[i])
-            };
-            a[i] += da;
-            b[i] += db;
-            let (fa, fb) = (f(&a), f(&b));
-            let curv = if da < 0.0 && db > 0.0 {
-                (fa - 2.0 * f0 + fb) / (h[i] * h[i])
-            } else {
-                (fb - 2.0 * fa + f0) / (h[i] * h[i])
-            };
-            if curv > 0.0 {
-                (2.0 / curv).sqrt()
-            } else {
-                f64::INFINITY
+                0.0
             }
         })
-        .collect()
+        .sum()
 }
 
 /// The comparison before a fit built a scene from the same nominal model and manifest, and the
@@ -261,7 +128,25 @@ pub fn fit_psf_blur(meas: &Measurement, before: &Comparison, model: &Effects) ->
         }),
         ..model.clone()
     };
-    let obj = |x: &[f64]| spectra_chi2(&measured, &reference_crops(meas, before, &with(x[0])));
+    // The spectra's shape, not their level: the level is the print's contrast and density
+    // (calibrated or stated), the shape is where a blur acts.
+    // Above each print's dot-spacing frequency only: below it the spectrum is the dots'
+    // placement statistics (a printer's, which no model knows), above it their profile and
+    // whatever blurs it.
+    let nominal = &before.model.nominal;
+    let f_min: Vec<f64> = nominal
+        .patterns
+        .iter()
+        .map(|p| 1.0 / (p.pattern.dot_spacing_mm * nominal.scale_px_per_mm))
+        .collect();
+    let obj = |x: &[f64]| {
+        measured
+            .iter()
+            .zip(reference_crops(meas, before, &with(x[0])))
+            .zip(&f_min)
+            .map(|((m, crop), f)| super::print::spectral_shape_chi2_above(m, &crop, *f))
+            .sum::<f64>()
+    };
     let sigma = minimise_1d(&|s| obj(&[s]), 0.0, 3.0, 9);
     let se = curvature_stderr(&obj, &[sigma], &[0.05], &[0.0], &[3.0])[0];
     ImageFit {
@@ -567,7 +452,29 @@ pub fn fit_motion_blur(
         }),
         ..model.clone()
     };
-    let mrefs: Vec<&FrameStats> = order.iter().map(|&i| &meas.moved_stats[i]).collect();
+    // Motion blur acts on the moved frame only: fit the moved frame's spectra *relative to its
+    // reference*, measured against model, so a blur common to both (lens, print) cannot pass for
+    // motion.
+    let ref_scene = Scene::new(
+        &before.model.nominal,
+        model,
+        &meas.manifest,
+        meas.options.seed,
+    )
+    .expect(TARGET_BUILT);
+    let pairs: Vec<(&FrameStats, &FrameStats, Vec<PsdBin>, Vec<PsdBin>)> = order
+        .iter()
+        .map(|&i| {
+            let pi = meas.pattern_of_run[i];
+            let r = ref_scene.render(pi, (0.0, 0.0), false, 0, Some(STATS_CROP_PX));
+            (
+                &meas.moved_stats[i],
+                &meas.reference_stats[pi],
+                psd(&r, true),
+                psd(&r, false),
+            )
+        })
+        .collect();
     let obj = |x: &[f64]| {
         let scene = Scene::new(
             &before.model.nominal,
@@ -582,14 +489,22 @@ pub fn fit_motion_blur(
                 let r = &runs[i];
                 scene.render(
                     meas.pattern_of_run[i],
-                    (r.stage.dx_mm, r.stage.dy_mm),
+                    before
+                        .model
+                        .nominal
+                        .landed_command(i, (r.stage.dx_mm, r.stage.dy_mm)),
                     true,
                     2 + i as u64,
                     Some(STATS_CROP_PX),
                 )
             })
             .collect();
-        spectra_chi2(&mrefs, &crops)
+        let mut c = 0.0;
+        for ((moved, reference, rx, ry), crop) in pairs.iter().zip(&crops) {
+            c += ratio_chi2(&moved.psd_x, &reference.psd_x, &psd(crop, true), rx);
+            c += ratio_chi2(&moved.psd_y, &reference.psd_y, &psd(crop, false), ry);
+        }
+        c
     };
     let l = minimise_1d(&|l| obj(&[l]), 0.0, 4.0, 9);
     let se = curvature_stderr(&obj, &[l], &[0.2], &[0.0], &[4.0])[0];

@@ -30,6 +30,8 @@ pub struct DatasetDesign {
     pub subpixel_steps_x: usize,
     pub subpixel_steps_y: usize,
     pub has_repeats: bool,
+    /// The dataset states its stage's repeatability (`stage_repeatability_um`).
+    pub repeatability_stated: bool,
     pub dot_size_known: bool,
 }
 
@@ -98,6 +100,7 @@ pub fn design_of(manifest: &Manifest, width: usize) -> DatasetDesign {
         subpixel_steps_x: steps(true),
         subpixel_steps_y: steps(false),
         has_repeats: manifest.runs.iter().any(|r| !r.repeat.is_empty()),
+        repeatability_stated: manifest.stage_repeatability_um.is_some(),
         dot_size_known: manifest.runs.iter().all(|r| {
             r.pattern
                 .as_ref()
@@ -137,6 +140,10 @@ impl DatasetDesign {
             "sensor_noise" if !self.has_repeats => no(
                 "no static repeat frames: noise against mean from one speckle frame is entangled with the speckle",
                 "static repeat frames of the reference position (run.repeat), one or more per pattern",
+            ),
+            "stage_error" if !self.repeatability_stated => no(
+                "the stage's repeatability is not stated: every run's landing offset is fitted freely, so there is nothing to hold them against",
+                "the stage's stated repeatability (dataset.json stage_repeatability_um, 1σ per axis in µm)",
             ),
             "fixed_pattern" => no(
                 "PRNU/DSNU need uniform illumination; speckle frames cannot tell a pixel's gain from the pattern",

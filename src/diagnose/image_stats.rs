@@ -186,13 +186,20 @@ pub fn psd(img: &Image, along_x: bool) -> Vec<PsdBin> {
     let fft = FftPlanner::<f64>::new().plan_fft_forward(len);
     let nbins = 12usize;
     let (fmin, fmax) = (2.0 / len as f64, 0.5);
-    let edge = |k: usize| fmin * (fmax / fmin).powf(k as f64 / nbins as f64);
-    let bin_of = |f: f64| -> Option<usize> {
-        if f < fmin || f > fmax {
-            return None;
-        }
-        (0..nbins).find(|&k| f >= edge(k) && f <= edge(k + 1))
-    };
+    let edges: Vec<f64> = (0..=nbins)
+        .map(|k| fmin * (fmax / fmin).powf(k as f64 / nbins as f64))
+        .collect();
+    let edge = |k: usize| edges[k];
+    // The bin of every FFT frequency, once (the same for every line).
+    let bins: Vec<Option<usize>> = (0..=len / 2)
+        .map(|k| {
+            let f = k as f64 / len as f64;
+            if k == 0 || f < fmin || f > fmax {
+                return None;
+            }
+            (0..nbins).find(|&b| f >= edge(b) && f <= edge(b + 1))
+        })
+        .collect();
     let groups = 8usize;
     // sums[group][bin], counts[bin]
     let mut sums = vec![vec![0.0f64; nbins]; groups];
@@ -216,8 +223,7 @@ pub fn psd(img: &Image, along_x: bool) -> Vec<PsdBin> {
         }
         fft.process(&mut buf);
         for (k, b) in buf.iter().enumerate().take(len / 2 + 1).skip(1) {
-            let f = k as f64 / len as f64;
-            if let Some(bin) = bin_of(f) {
+            if let Some(bin) = bins[k] {
                 sums[g][bin] += b.norm_sqr() / wsum2 / mean2;
                 counts[g][bin] += 1;
             }

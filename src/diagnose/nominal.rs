@@ -9,27 +9,29 @@
 //! `psf_blur` needs a manifest dot size to be identifiable. The white level is then matched so the
 //! model's mean equals the measured mean.
 //!
-//! Stage: the commanded move, turned by the misalignment angle and scaled by the travel scale that
-//! make the model's mean displacement — computed from the model's own projection, so rotation,
-//! scale and distortion in the model are accounted for — match the measured mean displacement in
-//! least squares over every run and scheme (Gauss–Newton, three steps).
+//! Stage: the commanded move, turned by the misalignment angle, scaled by the travel scale and
+//! shifted by the run's landing offset, all fitted to the measured mean displacements
+//! ([`super::stage`]).
 
 use super::image_stats::{noise_variance, percentile};
+use super::print::{characterised, PrintCalibration, PrintKnowledge};
+use super::stage::StageLanding;
 use super::DiagnoseError;
 use crate::dataset::{Manifest, Run};
-use crate::dic::DicResult;
 use crate::experiment::derive_seed;
 use crate::image::Image;
 use crate::model::effects::{Quantization, StageMisalignment};
 use crate::model::{
     project, render_frame, Camera, Effects, FrameSpec, SpecklePattern, TargetDot, TooManyDots,
 };
-use crate::reduce::Scheme;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+
+/// FWHM = 2·sqrt(2 ln 2)·σ.
+const FWHM_PER_SIGMA: f64 = 2.354_820_045_030_949;
 
 /// `config/models/baseline.toml`: what the paper assumes.
 pub const BASELINE_TOML: &str = include_str!("../../config/models/baseline.toml");
@@ -40,8 +42,15 @@ pub struct PatternEstimate {
     pub pattern: SpecklePattern,
     /// White (background) level of this pattern's frames in DN, matched to the measured mean.
     pub white_level_dn: f64,
-    /// "manifest", "estimated" or "manifest+estimated".
+    /// "manifest", "estimated" or "manifest+estimated": where the starting print came from.
     pub source: String,
+    /// Whether the print is rendered as the manifest characterises it or calibrated to the
+    /// measured reference ([`super::print`]).
+    #[serde(default)]
+    pub print: PrintKnowledge,
+    /// The calibration, when there was one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<PrintCalibration>,
 }
 
 /// Everything the model needs beyond its effects to render the dataset's experiment.
@@ -56,6 +65,9 @@ pub struct Nominal {
     /// Fitted stage misalignment (rad) and travel scale (actual / commanded).
     pub misalignment_rad: f64,
     pub travel_scale: f64,
+    /// Where each run's stage landed, fitted (see [`super::stage`]).
+    #[serde(default)]
+    pub stage: StageLanding,
     /// One per distinct pattern label, in order of first appearance.
     pub patterns: Vec<PatternEstimate>,
 }
@@ -99,6 +111,31 @@ impl Nominal {
     /// The actual stage move for a commanded one, mm, before the misalignment turns it.
     pub fn scaled_move(&self, dx_mm: f64, dy_mm: f64) -> (f64, f64) {
         (dx_mm * self.travel_scale, dy_mm * self.travel_scale)
+    }
+
+    /// The command that, through the travel scale and the misalignment, lands run `run` where the
+    /// fit says it landed: the commanded move plus the run's rigid offset turned back into stage
+    /// axes.
+    pub fn landed_command(&self, run: usize, (dx_mm, dy_mm): (f64, f64)) -> (f64, f64) {
+        let [ox, oy] = self.stage.applied_offset_px(run);
+        if ox == 0.0 && oy == 0.0 {
+            return (dx_mm, dy_mm);
+        }
+        let (s, c) = self.misalignment_rad.sin_cos();
+        let k = self.scale_px_per_mm * self.travel_scale;
+        (
+            dx_mm + (c * ox + s * oy) / k,
+            dy_mm + (-s * ox + c * oy) / k,
+        )
+    }
+
+    /// The actual move of run `run` in full-resolution px (travel, misalignment and offset).
+    pub fn actual_move_px(&self, run: usize, (dx_mm, dy_mm): (f64, f64)) -> [f64; 2] {
+        let (sx, sy) = self.scaled_move(dx_mm, dy_mm);
+        let (s, c) = self.misalignment_rad.sin_cos();
+        let k = self.scale_px_per_mm;
+        let [ox, oy] = self.stage.applied_offset_px(run);
+        [k * (c * sx - s * sy) + ox, k * (s * sx + c * sy) + oy]
     }
 }
 
@@ -158,6 +195,16 @@ impl Scene {
             dots,
             seed,
         })
+    }
+
+    /// A scene for geometry only (no dots: [`Scene::geometric_displacement`], not rendering).
+    pub fn geometry_only(nominal: &Nominal, model: &Effects) -> Self {
+        Self {
+            nominal: nominal.clone(),
+            effects: nominal.render_effects(model),
+            dots: Vec::new(),
+            seed: 0,
+        }
     }
 
     /// Renders pattern `pattern` at a commanded stage position; `frame` numbers the exposure (its
@@ -275,98 +322,6 @@ impl Scene {
     }
 }
 
-/// One DIC analysis of the measurement to fit the stage against.
-pub struct StageObservation<'a> {
-    pub pattern: usize,
-    pub commanded: (f64, f64),
-    pub scheme: &'a Scheme,
-    pub result: &'a DicResult,
-}
-
-/// Fits the misalignment angle and travel scale (see the module doc). Leaves them unchanged when
-/// no run moves.
-pub fn fit_stage(
-    nominal: &mut Nominal,
-    model: &Effects,
-    manifest: &Manifest,
-    obs: &[StageObservation],
-) {
-    // Mean measured displacement (full px) and the valid positions of each analysis.
-    /// (commanded move, measured mean displacement, valid positions), full-resolution px.
-    type Observed = ((f64, f64), (f64, f64), Vec<(f64, f64)>);
-    let data: Vec<Observed> = obs
-        .iter()
-        .filter_map(|o| {
-            let bx = o.scheme.x.block as f64;
-            let by = o.scheme.y.block as f64;
-            let valid: Vec<_> = o
-                .result
-                .points
-                .iter()
-                .filter(|p| p.status.is_valid())
-                .collect();
-            if valid.is_empty() {
-                return None;
-            }
-            let n = valid.len() as f64;
-            let mu = valid.iter().map(|p| p.u).sum::<f64>() / n * bx;
-            let mv = valid.iter().map(|p| p.v).sum::<f64>() / n * by;
-            // Every valid position: a subsample would weigh a quadratic field differently from
-            // the measured mean.
-            let pos = valid.iter().map(|p| o.scheme.to_full(p.x, p.y)).collect();
-            Some((o.commanded, (mu, mv), pos))
-        })
-        .collect();
-    let moves: f64 = data.iter().map(|d| d.0 .0.powi(2) + d.0 .1.powi(2)).sum();
-    if data.is_empty() || moves < 1e-18 {
-        return;
-    }
-    for _ in 0..3 {
-        let scene = Scene {
-            nominal: nominal.clone(),
-            effects: nominal.render_effects(model),
-            dots: Vec::new(),
-            seed: 0,
-        };
-        // Normal equations for (δ ln travel_scale, δθ).
-        let (mut a11, mut a12, mut a22, mut b1, mut b2) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        for (cmd, meas, pos) in &data {
-            let n = pos.len() as f64;
-            let (mut mx, mut my) = (0.0, 0.0);
-            for &p in pos {
-                let (u, v) = scene.geometric_displacement(*cmd, p);
-                mx += u / n;
-                my += v / n;
-            }
-            // The actual move in px: derivative of the mean with respect to ln(scale) and angle.
-            let (sx, sy) = nominal.scaled_move(cmd.0, cmd.1);
-            let (s, c) = nominal.misalignment_rad.sin_cos();
-            let k = nominal.scale_px_per_mm;
-            let t = (k * (c * sx - s * sy), k * (s * sx + c * sy));
-            let j1 = t;
-            let j2 = (-t.1, t.0);
-            let e = (meas.0 - mx, meas.1 - my);
-            a11 += j1.0 * j1.0 + j1.1 * j1.1;
-            a12 += j1.0 * j2.0 + j1.1 * j2.1;
-            a22 += j2.0 * j2.0 + j2.1 * j2.1;
-            b1 += j1.0 * e.0 + j1.1 * e.1;
-            b2 += j2.0 * e.0 + j2.1 * e.1;
-        }
-        let det = a11 * a22 - a12 * a12;
-        if !(det.abs() > 1e-12 * (a11 * a22).max(1e-300)) {
-            break;
-        }
-        let dk = (a22 * b1 - a12 * b2) / det;
-        let dth = (a11 * b2 - a12 * b1) / det;
-        nominal.travel_scale *= dk.exp();
-        nominal.misalignment_rad += dth;
-        if dk.abs() < 1e-10 && dth.abs() < 1e-10 {
-            break;
-        }
-    }
-    let _ = manifest;
-}
-
 /// The speckle of a run's pattern from its manifest fields, with whatever is missing estimated
 /// from the measured reference `crop` (white level `white_dn`, pooled noise variance `noise_var`).
 pub fn pattern_for(
@@ -383,6 +338,23 @@ pub fn pattern_for(
     let spacing = info.and_then(|p| p.dot_spacing_mm);
     let contrast = extra("contrast");
     let softness = extra("edge_softness_mm").unwrap_or(0.0);
+    if let (Some((sigma_mm, c, Some(s))), _) | (Some((sigma_mm, c, None)), Some(s)) =
+        (characterised(run), spacing)
+    {
+        return PatternEstimate {
+            pattern: SpecklePattern {
+                label,
+                dot_diameter_mm: sigma_mm * FWHM_PER_SIGMA,
+                dot_spacing_mm: s,
+                contrast: c,
+                edge_softness_mm: 0.0,
+            },
+            source: "manifest".into(),
+            white_level_dn: white_dn,
+            print: PrintKnowledge::Characterised,
+            calibration: None,
+        };
+    }
     if let (Some(d), Some(s), Some(c)) = (diameter, spacing, contrast) {
         return PatternEstimate {
             pattern: SpecklePattern {
@@ -394,10 +366,12 @@ pub fn pattern_for(
             },
             source: "manifest".into(),
             white_level_dn: white_dn,
+            print: PrintKnowledge::Calibrated,
+            calibration: None,
         };
     }
     let est = estimate_speckle(crop, white_dn, noise_var);
-    let fwhm = 2.354_820_045_030_949;
+    let fwhm = FWHM_PER_SIGMA;
     // Imaged σ (px) → mm; with a manifest diameter, keep it.
     let sigma_mm = match diameter {
         Some(d) => ((d / fwhm).powi(2) + softness.powi(2)).sqrt(),
@@ -442,6 +416,8 @@ pub fn pattern_for(
         }
         .into(),
         white_level_dn: white_dn,
+        print: PrintKnowledge::Calibrated,
+        calibration: None,
     }
 }
 

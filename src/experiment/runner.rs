@@ -218,7 +218,7 @@ fn capture_and_analyse(
             shoot(deformed.clone(), at, &mut write)?;
             manifest.runs.push(Run {
                 id: format!("{label}-{}", m.id),
-                pattern: Some(super::simulate::pattern_info(label, pattern)),
+                pattern: Some(super::simulate::pattern_info(label, pattern, false)),
                 reference: reference.clone(),
                 deformed,
                 stage: StageMove {

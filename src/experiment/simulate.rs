@@ -125,7 +125,7 @@ pub fn simulate_dataset(
             shoot(&deformed, (m.dx_mm, m.dy_mm))?;
             manifest.runs.push(Run {
                 id: format!("{label}-{}", m.id),
-                pattern: Some(pattern_info(label, pattern)),
+                pattern: Some(pattern_info(label, pattern, true)),
                 reference: reference.clone(),
                 deformed,
                 stage: StageMove {
@@ -142,9 +142,16 @@ pub fn simulate_dataset(
     Ok(manifest)
 }
 
-/// What a dataset records of the speckle in front of the camera: every parameter of the pattern,
-/// so a comparison renders the same print (`compare` falls back to estimating what is missing).
-pub(crate) fn pattern_info(label: &str, pattern: &crate::model::SpecklePattern) -> PatternInfo {
+/// What a dataset records of the speckle in front of the camera: every parameter of the pattern.
+/// `characterised` says the print is known exactly (a simulation renders the very print it names:
+/// `"profile": "gaussian"`, see `diagnose::print`); a print on a real bench is only nominal, and a
+/// comparison calibrates it to the frames.
+pub(crate) fn pattern_info(
+    label: &str,
+    pattern: &crate::model::SpecklePattern,
+    characterised: bool,
+) -> PatternInfo {
+    let profile = characterised.then(|| ("profile".to_string(), serde_json::json!("gaussian")));
     PatternInfo {
         label: label.to_string(),
         dot_diameter_mm: Some(pattern.dot_diameter_mm),
@@ -157,6 +164,7 @@ pub(crate) fn pattern_info(label: &str, pattern: &crate::model::SpecklePattern) 
             ),
         ]
         .into_iter()
+        .chain(profile)
         .collect(),
     }
 }

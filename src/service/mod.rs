@@ -183,9 +183,13 @@ impl Service {
         })?;
         self.store.get_dataset(dataset)?;
         let work = match kind {
-            crate::store::RunKind::Diagnosis => {
-                work::diagnosis(self.clone(), dataset.clone(), model, options)
-            }
+            crate::store::RunKind::Diagnosis => work::diagnosis(
+                self.clone(),
+                dataset.clone(),
+                model,
+                options,
+                request.rounds,
+            ),
             _ => work::comparison(self.clone(), dataset.clone(), model, options),
         };
         let body = serde_json::to_value(request).expect("a request serialises");

@@ -4,8 +4,8 @@ use super::jobs::{JobContext, JobError, JobOutput, Work};
 use super::Service;
 use crate::dataset::Manifest;
 use crate::diagnose::{
-    append_history, compare, comparison_svgs, diagnose, CompareOptions, Comparison, DiagnoseError,
-    HistoryEntry,
+    append_history, compare, comparison_svgs, diagnose_rounds, CompareOptions, Comparison,
+    DiagnoseError, HistoryEntry, MAX_ROUNDS,
 };
 use crate::dic::DicSettings;
 use crate::experiment::{
@@ -148,6 +148,10 @@ pub struct CompareRequest {
     pub dic: DicSettings,
     /// Seed of the model's speckle layouts and noise (fixed: a comparison is reproducible).
     pub seed: u64,
+    /// Diagnoses only: add the winner and diagnose again, up to this many rounds (1–8; stops at
+    /// verdict `none`). Each round's comparison joins the dataset's history.
+    #[schema(minimum = 1, maximum = 8)]
+    pub rounds: usize,
 }
 
 impl Default for CompareRequest {
@@ -158,12 +162,19 @@ impl Default for CompareRequest {
             schemes: a.schemes,
             dic: a.dic,
             seed: CompareOptions::default().seed,
+            rounds: 1,
         }
     }
 }
 
 impl CompareRequest {
     pub fn options(&self) -> Result<CompareOptions, FieldError> {
+        if !(1..=MAX_ROUNDS).contains(&self.rounds) {
+            return Err(FieldError {
+                field: "rounds".into(),
+                reason: format!("must lie in [1, {MAX_ROUNDS}], got {}", self.rounds),
+            });
+        }
         Ok(CompareOptions {
             dic: check_dic(&self.dic)?,
             schemes: check_schemes(&self.schemes)?,
@@ -242,33 +253,58 @@ pub fn diagnosis(
     dataset: DatasetId,
     model: ModelConfig,
     options: CompareOptions,
+    rounds: usize,
 ) -> Work {
     Box::new(move |ctx: &JobContext| {
         let dir = service.store.dataset_dir(&dataset);
         let report = progress_reporter(ctx, "candidate fits");
-        let d = diagnose(&dir, &model, &options, &report).map_err(diagnose_failure)?;
-        let text = serde_json::to_vec_pretty(&d).map_err(fail)?;
+        let r =
+            diagnose_rounds(&dir, &model, &options, rounds, &report).map_err(diagnose_failure)?;
+        let text = serde_json::to_vec_pretty(&r.to_json()).map_err(fail)?;
         ctx.write("results/diagnosis.json", &text).map_err(fail)?;
-        if let Some(winner) = &d.winner_model {
-            ctx.write("results/winner-model.toml", winner.to_toml().as_bytes())
-                .map_err(fail)?;
+        if !r.verdicts.is_empty() {
+            ctx.write(
+                "results/winner-model.toml",
+                r.final_model.to_toml().as_bytes(),
+            )
+            .map_err(fail)?;
         }
-        if let Some(before) = &d.before {
+        let first = r.diagnoses.first().ok_or_else(|| fail("no round ran"))?;
+        if let Some(before) = &first.before {
             for (name, svg) in comparison_svgs(before) {
                 ctx.write(&format!("plots/{name}"), svg.as_bytes())
                     .map_err(fail)?;
             }
         }
+        // Several rounds: every step of the fall joins the history.
+        if rounds > 1 {
+            let steps = r
+                .diagnoses
+                .iter()
+                .filter_map(|d| d.before.as_ref())
+                .chain(r.diagnoses.last().and_then(|d| d.after.as_ref()));
+            for cmp in steps {
+                append_history(&dir, &HistoryEntry::of(cmp)).map_err(fail)?;
+            }
+        }
+        let fall: Vec<String> = r
+            .rounds
+            .iter()
+            .map(|x| format!("{:.5}", x.discrepancy_px))
+            .chain(std::iter::once(format!("{:.5}", r.final_discrepancy_px)))
+            .collect();
         Ok(JobOutput {
-            message: match &d.after {
-                Some(after) => format!(
-                    "verdict {}: discrepancy {:.5} px → {:.5} px with it added",
-                    d.verdict, d.discrepancy_px, after.discrepancy_px
-                ),
-                None => format!(
-                    "verdict {}: no candidate explains the discrepancy of {:.5} px",
-                    d.verdict, d.discrepancy_px
-                ),
+            message: if r.verdicts.is_empty() {
+                format!(
+                    "verdict none: no candidate explains the discrepancy of {:.5} ± {:.5} px",
+                    first.discrepancy_px, first.discrepancy_se_px
+                )
+            } else {
+                format!(
+                    "verdict {}: discrepancy {} px",
+                    r.verdicts.join(", "),
+                    fall.join(" → ")
+                )
             },
         })
     })

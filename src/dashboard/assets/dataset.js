@@ -101,16 +101,18 @@ async function showComparison(job) {
   $("#comparison-model").textContent = `${cmp.model.name} (version ${cmp.model.version})`;
   clear($("#comparison-summary"), [
     ["discrepancy", el("strong", { id: "comparison-discrepancy", "data-discrepancy": cmp.discrepancy_px }, `${num(cmp.discrepancy_px)} px`)],
+    ["rigid (stage landing, bias)", `${num(cmp.parts && cmp.parts.rigid_px)} px`],
     ["systematic (field)", `${num(cmp.parts && cmp.parts.field_px)} px`],
     ["random (std)", `${num(cmp.parts && cmp.parts.std_px)} px`],
     ["model effects", (cmp.model.effects && (Array.isArray(cmp.model.effects) ? cmp.model.effects : Object.keys(cmp.model.effects)).join(", ")) || "—"],
   ].flatMap(([k, v]) => [el("dt", {}, k), el("dd", {}, v)]));
   const runs = [...(cmp.runs || [])].sort((a, b) => b.discrepancy_px - a.discrepancy_px);
   clear($("#comparison-runs"), el("table", {},
-    el("thead", {}, el("tr", {}, ["run", "scheme", "discrepancy [px]", "field [px]", "std [px]", "mean Δu [px]", "mean Δv [px]"].map((h, i) => el("th", { class: i > 1 ? "num" : "" }, h)))),
+    el("thead", {}, el("tr", {}, ["run", "scheme", "discrepancy [px]", "rigid [px]", "field [px]", "std [px]", "mean Δu [px]", "mean Δv [px]"].map((h, i) => el("th", { class: i > 1 ? "num" : "" }, h)))),
     el("tbody", {}, runs.map((r) => el("tr", {},
       el("td", {}, r.id), el("td", {}, r.scheme),
-      el("td", { class: "num" }, num(r.discrepancy_px)), el("td", { class: "num" }, num(r.field_px)),
+      el("td", { class: "num" }, num(r.discrepancy_px)), el("td", { class: "num" }, num(r.rigid_px)),
+      el("td", { class: "num" }, num(r.field_px)),
       el("td", { class: "num" }, num(r.std_px)),
       el("td", { class: "num" }, num(r.mean_diff_px && r.mean_diff_px[0])),
       el("td", { class: "num" }, num(r.mean_diff_px && r.mean_diff_px[1])))))));
@@ -147,6 +149,13 @@ async function showDiagnosis(job, body) {
   v.textContent = d.verdict !== "none"
     ? `Verdict: ${d.verdict} — the model lacks it`
     : "Verdict: none — no candidate explains the discrepancy beyond its noise";
+  const rounds = (d.rounds || []).length > 1 ? d.rounds : [];
+  clear($("#diagnosis-rounds"), rounds.map((r) => el("li", { "data-verdict": r.verdict },
+    `${r.model}: ${num(r.discrepancy_px)} ± ${num(r.discrepancy_se_px)} px → ${r.verdict}` +
+    (r.after_px != null ? ` → ${num(r.after_px)} px` : ""))));
+  if ((d.verdicts || []).length > 1) {
+    v.textContent = `Found, in order: ${d.verdicts.join(", ")} — discrepancy ${num(d.discrepancy_px)} → ${num(d.final_discrepancy_px)} px`;
+  }
   clear($("#candidates"), el("table", { id: "candidate-table" },
     el("thead", {}, el("tr", {}, ["#", "effect", "fitted parameters ± standard error", "discrepancy with it [px]", "drop [px]", "ΔBIC", "significant"].map((h, i) => el("th", { class: i >= 3 && i <= 5 ? "num" : "" }, h)))),
     el("tbody", {}, d.candidates.map((c, i) => el("tr", { class: c.effect === d.verdict ? "winner" : "", "data-effect": c.effect },
@@ -165,27 +174,36 @@ async function showDiagnosis(job, body) {
   const hasWinner = d.verdict !== "none" && (job.result_files || []).includes("results/winner-model.toml");
   add.classList.toggle("hidden", !hasWinner);
   add.disabled = false;
-  add.textContent = `Add ${d.verdict} as a new model version`;
+  add.textContent = (d.verdicts || []).length > 1
+    ? `Add ${d.verdicts.join(" + ")} as a new model version`
+    : `Add ${d.verdict} as a new model version`;
   $("#add-notice").textContent = "";
 }
 
 async function guard(fn) {
   if (busy) return;
   busy = true;
-  for (const b of ["#compare-btn", "#diagnose-btn", "#add-winner"]) $(b).disabled = true;
+  for (const b of ["#compare-btn", "#diagnose-btn", "#find-all-btn", "#add-winner"]) $(b).disabled = true;
   try {
     await fn();
   } catch (e) {
     showError($("#job-error"), e);
   } finally {
     busy = false;
-    for (const b of ["#compare-btn", "#diagnose-btn", "#add-winner"]) $(b).disabled = false;
+    for (const b of ["#compare-btn", "#diagnose-btn", "#find-all-btn", "#add-winner"]) $(b).disabled = false;
   }
 }
 
 $("#compare-btn").addEventListener("click", () => guard(async () => {
   const job = await runJob("comparisons", settings($("#model").value));
   await showComparison(job);
+  await loadHistory();
+}));
+
+$("#find-all-btn").addEventListener("click", () => guard(async () => {
+  const body = { ...settings($("#model").value), rounds: 4 };
+  const job = await runJob("diagnoses", body);
+  await showDiagnosis(job, body);
   await loadHistory();
 }));
 

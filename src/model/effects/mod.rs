@@ -12,6 +12,7 @@ mod quantization;
 mod rotation;
 mod scale;
 mod sensor_noise;
+mod stage_error;
 mod stage_misalignment;
 mod vignetting;
 
@@ -25,6 +26,7 @@ pub use quantization::Quantization;
 pub use rotation::Rotation;
 pub use scale::Scale;
 pub use sensor_noise::SensorNoise;
+pub use stage_error::StageError;
 pub use stage_misalignment::StageMisalignment;
 pub use vignetting::Vignetting;
 
@@ -41,8 +43,9 @@ pub enum Stage {
 }
 
 /// Every effect id, in the order of DESIGN.md's table.
-pub const EFFECT_IDS: [&str; 12] = [
+pub const EFFECT_IDS: [&str; 13] = [
     "stage_misalignment",
+    "stage_error",
     "rotation",
     "scale",
     "lens_distortion",
@@ -59,7 +62,9 @@ pub const EFFECT_IDS: [&str; 12] = [
 /// The chain position of an effect id.
 pub fn stage_of(id: &str) -> Option<Stage> {
     Some(match id {
-        "stage_misalignment" | "rotation" | "scale" | "lens_distortion" => Stage::Geometry,
+        "stage_misalignment" | "stage_error" | "rotation" | "scale" | "lens_distortion" => {
+            Stage::Geometry
+        }
         "psf_blur" | "motion_blur" => Stage::Optics,
         "fill_factor" | "sensor_noise" | "fixed_pattern" | "quantization" => Stage::Sensor,
         "vignetting" | "illumination_change" => Stage::Radiometry,
@@ -73,6 +78,8 @@ pub fn stage_of(id: &str) -> Option<Stage> {
 pub struct Effects {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub stage_misalignment: Option<StageMisalignment>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stage_error: Option<StageError>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rotation: Option<Rotation>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -102,6 +109,7 @@ impl Effects {
     pub fn enabled(&self) -> Vec<&'static str> {
         let on = [
             self.stage_misalignment.is_some(),
+            self.stage_error.is_some(),
             self.rotation.is_some(),
             self.scale.is_some(),
             self.lens_distortion.is_some(),

@@ -1,0 +1,168 @@
+//! The optimisers of the fits: golden section (after a coarse grid), Nelder–Mead in a box, and
+//! standard errors from the curvature of χ² at the minimum (σ² = 2/∂²χ²).
+
+/// Golden-section minimum of `f` on [a, b] (`iters` steps).
+pub fn golden(f: &dyn Fn(f64) -> f64, a: f64, b: f64, iters: usize) -> f64 {
+    let g = 0.618_033_988_749_895;
+    let (mut lo, mut hi) = (a, b);
+    let (mut x1, mut x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
+    let (mut f1, mut f2) = (f(x1), f(x2));
+    for _ in 0..iters {
+        if f1 < f2 {
+            hi = x2;
+            (x2, f2) = (x1, f1);
+            x1 = hi - g * (hi - lo);
+            f1 = f(x1);
+        } else {
+            lo = x1;
+            (x1, f1) = (x2, f2);
+            x2 = lo + g * (hi - lo);
+            f2 = f(x2);
+        }
+    }
+    if f1 < f2 {
+        x1
+    } else {
+        x2
+    }
+}
+
+/// Golden-section minimum of `f` on [a, b] after a coarse grid of `n` points.
+pub fn minimise_1d(f: &dyn Fn(f64) -> f64, a: f64, b: f64, n: usize) -> f64 {
+    let grid: Vec<(f64, f64)> = (0..n)
+        .map(|i| a + (b - a) * i as f64 / (n - 1) as f64)
+        .map(|x| (x, f(x)))
+        .collect();
+    let best = grid
+        .iter()
+        .enumerate()
+        .min_by(|x, y| x.1 .1.total_cmp(&y.1 .1))
+        .map(|(i, _)| i)
+        .unwrap_or(0);
+    let h = (b - a) / (n - 1) as f64;
+    let (lo, hi) = ((grid[best].0 - h).max(a), (grid[best].0 + h).min(b));
+    let x = golden(f, lo, hi, 14);
+    if grid[best].1 < f(x) {
+        grid[best].0
+    } else {
+        x
+    }
+}
+
+/// Nelder–Mead in a box (points clamped), from `start` with initial steps `step`.
+pub fn nelder_mead(
+    f: &dyn Fn(&[f64]) -> f64,
+    start: &[f64],
+    step: &[f64],
+    lo: &[f64],
+    hi: &[f64],
+    iters: usize,
+) -> Vec<f64> {
+    let n = start.len();
+    let clamp = |x: Vec<f64>| -> Vec<f64> {
+        x.iter()
+            .enumerate()
+            .map(|(i, v)| v.clamp(lo[i], hi[i]))
+            .collect()
+    };
+    let mut simplex: Vec<(Vec<f64>, f64)> = Vec::new();
+    let s0 = clamp(start.to_vec());
+    simplex.push((s0.clone(), f(&s0)));
+    for i in 0..n {
+        let mut p = s0.clone();
+        p[i] += step[i];
+        if p[i] > hi[i] {
+            p[i] = s0[i] - step[i];
+        }
+        let p = clamp(p);
+        let v = f(&p);
+        simplex.push((p, v));
+    }
+    for _ in 0..iters {
+        simplex.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let centroid: Vec<f64> = (0..n)
+            .map(|j| simplex[..n].iter().map(|p| p.0[j]).sum::<f64>() / n as f64)
+            .collect();
+        let worst = simplex[n].clone();
+        let along = |t: f64| {
+            clamp(
+                (0..n)
+                    .map(|j| centroid[j] + t * (worst.0[j] - centroid[j]))
+                    .collect(),
+            )
+        };
+        let r = along(-1.0);
+        let fr = f(&r);
+        if fr < simplex[0].1 {
+            let e = along(-2.0);
+            let fe = f(&e);
+            simplex[n] = if fe < fr { (e, fe) } else { (r, fr) };
+        } else if fr < simplex[n - 1].1 {
+            simplex[n] = (r, fr);
+        } else {
+            let c = along(0.5);
+            let fc = f(&c);
+            if fc < worst.1 {
+                simplex[n] = (c, fc);
+            } else {
+                let best = simplex[0].0.clone();
+                for p in simplex.iter_mut().skip(1) {
+                    p.0 = clamp(
+                        p.0.iter()
+                            .zip(&best)
+                            .map(|(a, b)| b + 0.5 * (a - b))
+                            .collect(),
+                    );
+                    p.1 = f(&p.0);
+                }
+            }
+        }
+        let spread = simplex
+            .iter()
+            .map(|p| (p.1 - simplex[0].1).abs())
+            .fold(0.0, f64::max);
+        if spread < 1e-3 {
+            break;
+        }
+    }
+    simplex.sort_by(|a, b| a.1.total_cmp(&b.1));
+    simplex[0].0.clone()
+}
+
+/// Standard errors from the diagonal curvature of χ² (σ² = 2/∂²χ²), steps `h`, kept in bounds.
+pub fn curvature_stderr(
+    f: &dyn Fn(&[f64]) -> f64,
+    x: &[f64],
+    h: &[f64],
+    lo: &[f64],
+    hi: &[f64],
+) -> Vec<f64> {
+    let f0 = f(x);
+    (0..x.len())
+        .map(|i| {
+            let mut a = x.to_vec();
+            let mut b = x.to_vec();
+            // A one-sided stencil at a bound.
+            let (da, db) = if x[i] - h[i] < lo[i] {
+                (h[i], 2.0 * h[i])
+            } else if x[i] + h[i] > hi[i] {
+                (-h[i], -2.0 * h[i])
+            } else {
+                (-h[i], h[i])
+            };
+            a[i] += da;
+            b[i] += db;
+            let (fa, fb) = (f(&a), f(&b));
+            let curv = if da < 0.0 && db > 0.0 {
+                (fa - 2.0 * f0 + fb) / (h[i] * h[i])
+            } else {
+                (fb - 2.0 * fa + f0) / (h[i] * h[i])
+            };
+            if curv > 0.0 {
+                (2.0 / curv).sqrt()
+            } else {
+                f64::INFINITY
+            }
+        })
+        .collect()
+}

@@ -1,0 +1,145 @@
+//! The print the model renders, taken from the measurement unless the dataset characterises it.
+//!
+//! A nominal print (the dot size and spacing the lab asked the printer for) is never the print
+//! the camera sees: toner spreads, dots vary, edges are soft. A model that renders the nominal
+//! print reads every difference between it and the real one as lens blur or pixel aperture. So
+//! unless a pattern is *characterised* in the manifest, the comparison calibrates it, the same way
+//! it matches the white level and the noise:
+//!
+//! - the dot's contrast, so the model's reference crop has the measured contrast (std/mean; both
+//!   sides carry the same noise, so the raw ratio is compared), and
+//! - the dot's imaged size, so the *shape* of the model's power spectra along x and y matches the
+//!   measured one (χ² of ln(measured/model) per bin about its weighted mean: the level is the
+//!   contrast's business), by golden section on σ.
+//!
+//! Both go through the model's own optics and sensor, so the print absorbs exactly what the model
+//! does not explain of the spectrum — which is why `psf_blur` (and the spectral side of
+//! `fill_factor`) cannot be told from the print on such a dataset: `diagnose` reports them as
+//! confounded with the print, naming what would separate them, instead of giving a verdict.
+//!
+//! A pattern is characterised when its manifest entry says `"profile": "gaussian"` and gives the
+//! dot's `contrast` and its size, as `dot_diameter_mm` (FWHM) or as a measured `mtf` — pairs
+//! `[cycles_per_mm, modulation]` of the print alone, fitted to exp(−2π²σ²f²) (a Gaussian dot's
+//! transfer function). `edge_softness_mm` adds in quadrature. The model renders it as stated.
+
+use super::image_stats::{psd, FrameStats, PsdBin};
+use crate::dataset::Run;
+use crate::image::Image;
+use serde::{Deserialize, Serialize};
+
+/// FWHM = 2·sqrt(2 ln 2)·σ.
+const FWHM_PER_SIGMA: f64 = 2.354_820_045_030_949;
+
+/// What the comparison knows of a pattern's print.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PrintKnowledge {
+    /// Stated by the manifest (profile, size or MTF, contrast): rendered as stated.
+    Characterised,
+    /// Calibrated to the measured reference frame (module doc).
+    #[default]
+    Calibrated,
+}
+
+/// The calibration of one pattern: the starting print and the one the model renders.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PrintCalibration {
+    /// σ of a dot before and after, mm.
+    pub start_sigma_mm: f64,
+    pub sigma_mm: f64,
+    pub start_contrast: f64,
+    pub contrast: f64,
+    /// The reference crops' contrast (std/mean): measured, and the model's once calibrated.
+    pub measured_contrast: f64,
+    pub model_contrast: f64,
+}
+
+/// The print of `run`'s pattern as the manifest characterises it: (dot σ in mm, contrast,
+/// spacing in mm), or None when it is not characterised (module doc).
+pub fn characterised(run: &Run) -> Option<(f64, f64, Option<f64>)> {
+    let p = run.pattern.as_ref()?;
+    let get = |k: &str| p.extra.get(k);
+    if get("profile").and_then(|v| v.as_str()) != Some("gaussian") {
+        return None;
+    }
+    let contrast = get("contrast").and_then(|v| v.as_f64())?;
+    let softness = get("edge_softness_mm")
+        .and_then(|v| v.as_f64())
+        .unwrap_or(0.0);
+    let from_mtf = get("mtf").and_then(|v| {
+        let pairs: Vec<(f64, f64)> = v
+            .as_array()?
+            .iter()
+            .filter_map(|p| Some((p.get(0)?.as_f64()?, p.get(1)?.as_f64()?)))
+            .collect();
+        sigma_from_mtf(&pairs)
+    });
+    let sigma = from_mtf.or(p.dot_diameter_mm.map(|d| d / FWHM_PER_SIGMA))?;
+    Some((sigma.hypot(softness), contrast, p.dot_spacing_mm))
+}
+
+/// σ (mm) of the Gaussian whose transfer function exp(−2π²σ²f²) fits the MTF pairs
+/// (cycles/mm, modulation) best in ln M against f², through the origin; points with M outside
+/// (0.02, 0.995) carry no usable information and are skipped.
+pub fn sigma_from_mtf(pairs: &[(f64, f64)]) -> Option<f64> {
+    let (mut sxy, mut sxx) = (0.0, 0.0);
+    for &(f, m) in pairs {
+        if f > 0.0 && m > 0.02 && m < 0.995 {
+            let x = f * f;
+            sxy += x * m.ln();
+            sxx += x * x;
+        }
+    }
+    if !(sxx > 0.0) {
+        return None;
+    }
+    let slope = sxy / sxx;
+    (slope < 0.0).then(|| (-slope / (2.0 * std::f64::consts::PI.powi(2))).sqrt())
+}
+
+/// χ² of the spectral shape: ln(measured/model) per bin about its weighted mean.
+pub fn spectral_shape_chi2(measured: &FrameStats, model: &Image) -> f64 {
+    spectral_shape_chi2_above(measured, model, 0.0)
+}
+
+/// [`spectral_shape_chi2`] over the bins at or above `f_min` cycles/px.
+pub fn spectral_shape_chi2_above(measured: &FrameStats, model: &Image, f_min: f64) -> f64 {
+    let pairs = |m: &[PsdBin], o: Vec<PsdBin>| -> Vec<(f64, f64)> {
+        m.iter()
+            .zip(o)
+            .filter(|(a, b)| a.value > 0.0 && b.value > 0.0 && a.f >= f_min)
+            .map(|(a, b)| {
+                let se = ((a.se / a.value).powi(2) + (b.se / b.value).powi(2)).sqrt();
+                ((a.value / b.value).ln(), se)
+            })
+            .filter(|(r, se)| r.is_finite() && *se > 0.0)
+            .collect()
+    };
+    let mut all = pairs(&measured.psd_x, psd(model, true));
+    all.extend(pairs(&measured.psd_y, psd(model, false)));
+    let w: f64 = all.iter().map(|(_, se)| 1.0 / (se * se)).sum();
+    if !(w > 0.0) {
+        return 0.0;
+    }
+    let mean = all.iter().map(|(r, se)| r / (se * se)).sum::<f64>() / w;
+    all.iter().map(|(r, se)| ((r - mean) / se).powi(2)).sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_gaussian_mtf_gives_back_its_sigma() {
+        let sigma = 0.08;
+        let pairs: Vec<(f64, f64)> = (0..15)
+            .map(|k| {
+                let f = k as f64 * 0.5;
+                (f, (-2.0 * (std::f64::consts::PI * sigma * f).powi(2)).exp())
+            })
+            .collect();
+        let s = sigma_from_mtf(&pairs).unwrap();
+        assert!((s / sigma - 1.0).abs() < 1e-9, "{s}");
+        assert_eq!(sigma_from_mtf(&[(1.0, 1.0)]), None);
+    }
+}

@@ -1,0 +1,125 @@
+//! Several effects at once: diagnose, add the winner, diagnose again, until the verdict is `none`
+//! or the rounds run out. Each round starts from the comparison the previous one made with its
+//! winner added, so the fall of the discrepancy is a chain of comparisons on the same
+//! measurement.
+
+use super::compare::{compare_prepared, load_measurement, Measurement};
+use super::diagnose::{diagnose_prepared, Diagnosis};
+use super::{CompareOptions, DiagnoseError, Progress};
+use crate::model::ModelConfig;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// The most rounds one diagnosis may run (each is a full diagnosis).
+pub const MAX_ROUNDS: usize = 8;
+
+/// One round: the verdict, its fitted parameters, and the discrepancy of the model entering the
+/// round (with its standard error) and with the verdict added.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Round {
+    pub verdict: String,
+    pub params: BTreeMap<String, f64>,
+    pub stderr: BTreeMap<String, f64>,
+    /// The model this round diagnosed.
+    pub model: String,
+    pub discrepancy_px: f64,
+    pub discrepancy_se_px: f64,
+    /// With the verdict added (none when the verdict is `none`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub after_px: Option<f64>,
+}
+
+/// Every round; `diagnoses[k]` is round k's full diagnosis.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Rounds {
+    pub rounds: Vec<Round>,
+    /// The verdicts other than `none`, in the order found.
+    pub verdicts: Vec<String>,
+    /// The discrepancy of the final model (every verdict added), px.
+    pub final_discrepancy_px: f64,
+    /// The model with every verdict added.
+    #[serde(skip)]
+    pub final_model: ModelConfig,
+    #[serde(skip)]
+    pub diagnoses: Vec<Diagnosis>,
+}
+
+impl Rounds {
+    /// The first round's diagnosis as JSON (the fields a one-round diagnosis has always had) with
+    /// `rounds`, `verdicts` and `final_discrepancy_px` beside them.
+    pub fn to_json(&self) -> serde_json::Value {
+        let mut v = self.diagnoses.first().map_or(serde_json::Value::Null, |d| {
+            serde_json::to_value(d).unwrap_or_default()
+        });
+        if let (Some(obj), Ok(serde_json::Value::Object(extra))) =
+            (v.as_object_mut(), serde_json::to_value(self))
+        {
+            obj.extend(extra);
+        }
+        v
+    }
+}
+
+/// Reads the dataset in `dir` and runs up to `rounds` rounds on it.
+pub fn diagnose_rounds(
+    dir: &Path,
+    model: &ModelConfig,
+    options: &CompareOptions,
+    rounds: usize,
+    progress: Progress,
+) -> Result<Rounds, DiagnoseError> {
+    let meas = load_measurement(dir, options, &|_, _| progress(0, 1))?;
+    diagnose_rounds_prepared(&meas, model, rounds, progress)
+}
+
+/// Up to `rounds` (1..=[`MAX_ROUNDS`]) rounds on an analysed measurement. `progress` counts the
+/// candidate fits of the current round.
+pub fn diagnose_rounds_prepared(
+    meas: &Measurement,
+    model: &ModelConfig,
+    rounds: usize,
+    progress: Progress,
+) -> Result<Rounds, DiagnoseError> {
+    let rounds = rounds.clamp(1, MAX_ROUNDS);
+    let mut current = model.clone();
+    let mut before = Some(compare_prepared(meas, &current, &|_, _| true)?);
+    let mut out = Vec::new();
+    let mut verdicts = Vec::new();
+    let mut diagnoses: Vec<Diagnosis> = Vec::new();
+    for _ in 0..rounds {
+        let d = diagnose_prepared(meas, &current, before.take(), progress)?;
+        let winner = d.candidates.iter().find(|c| c.effect == d.verdict);
+        out.push(Round {
+            verdict: d.verdict.clone(),
+            params: winner.map(|c| c.params.clone()).unwrap_or_default(),
+            stderr: winner.map(|c| c.stderr.clone()).unwrap_or_default(),
+            model: current.name.clone(),
+            discrepancy_px: d.discrepancy_px,
+            discrepancy_se_px: d.discrepancy_se_px,
+            after_px: d.after.as_ref().map(|a| a.discrepancy_px),
+        });
+        let next = d.winner_model.clone();
+        before = d.after.clone();
+        diagnoses.push(d);
+        match next {
+            Some(m) => {
+                verdicts.push(out.last().expect("pushed").verdict.clone());
+                current = m;
+            }
+            None => break,
+        }
+    }
+    let last = diagnoses.last().expect("at least one round");
+    let final_discrepancy_px = out
+        .last()
+        .and_then(|r| r.after_px)
+        .unwrap_or(last.discrepancy_px);
+    Ok(Rounds {
+        rounds: out,
+        verdicts,
+        final_discrepancy_px,
+        final_model: current,
+        diagnoses,
+    })
+}

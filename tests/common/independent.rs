@@ -1,0 +1,158 @@
+//! Datasets from the independent generator (`tests/independent/generate.py`, Python with numpy,
+//! sharing no code with `src/model/`): the truth the diagnosis tests hold ffdic against.
+//!
+//! The generator runs in a virtual environment under `target/independent-venv`, made on first use
+//! from `tests/independent/requirements.txt` (numpy and tifffile from PyPI).
+
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::OnceLock;
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The venv's python, made (once per test binary) when missing.
+pub fn python() -> PathBuf {
+    static PYTHON: OnceLock<PathBuf> = OnceLock::new();
+    PYTHON
+        .get_or_init(|| {
+            let target = std::env::var_os("CARGO_TARGET_DIR")
+                .map(PathBuf::from)
+                .unwrap_or_else(|| repo().join("target"));
+            let venv = target.join("independent-venv");
+            let py = venv.join("bin/python");
+            let marker = venv.join(".requirements-installed");
+            let requirements = repo().join("tests/independent/requirements.txt");
+            let wanted = std::fs::read_to_string(&requirements).expect("requirements.txt");
+            if std::fs::read_to_string(&marker).ok().as_deref() != Some(wanted.as_str()) {
+                let ok = Command::new("python3")
+                    .args(["-m", "venv"])
+                    .arg(&venv)
+                    .status()
+                    .expect("python3 runs")
+                    .success();
+                assert!(ok, "python3 -m venv {} failed", venv.display());
+                let ok = Command::new(&py)
+                    .args(["-m", "pip", "install", "--quiet", "-r"])
+                    .arg(&requirements)
+                    .status()
+                    .expect("pip runs")
+                    .success();
+                assert!(ok, "pip install -r {} failed", requirements.display());
+                std::fs::write(&marker, wanted).expect("marker written");
+            }
+            py
+        })
+        .clone()
+}
+
+/// Generates the dataset of `spec` into `dir` (which must not exist or be empty) and returns its
+/// truth (`truth.json`).
+pub fn generate(spec: &Value, dir: &Path) -> Value {
+    let spec_path = dir.with_extension("spec.json");
+    std::fs::write(&spec_path, serde_json::to_vec_pretty(spec).unwrap()).unwrap();
+    let out = Command::new(python())
+        .arg(repo().join("tests/independent/generate.py"))
+        .arg(&spec_path)
+        .arg(dir)
+        .arg("--quiet")
+        .output()
+        .expect("generate.py runs");
+    assert!(
+        out.status.success(),
+        "generate.py failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&std::fs::read(dir.join("truth.json")).unwrap()).unwrap()
+}
+
+/// The DIC Challenge Sample 3 images (../shared/data) as a dataset at `scale` px/mm.
+pub fn sample3(dir: &Path, scale: f64) {
+    let out = Command::new(python())
+        .arg(repo().join("tests/independent/sample3_dataset.py"))
+        .arg(dir)
+        .args(["--scale", &scale.to_string()])
+        .output()
+        .expect("sample3_dataset.py runs");
+    assert!(
+        out.status.success(),
+        "sample3_dataset.py failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// A reproducible draw for the hidden values of one test: `FFDIC_INDEPENDENT_SEED` (default 2026)
+/// mixed with the test's own number, so another seed redraws every dataset.
+pub struct Draw(u64);
+
+impl Draw {
+    pub fn new(test: u64) -> Self {
+        let base: u64 = std::env::var("FFDIC_INDEPENDENT_SEED")
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(2026);
+        Self(base.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ test.wrapping_mul(0xD1B5_4A32_D192_ED03))
+    }
+
+    /// Uniform in [0, 1) (splitmix64).
+    pub fn unit(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.unit()
+    }
+
+    pub fn seed(&mut self) -> u64 {
+        (self.unit() * 1e9) as u64 + 1
+    }
+}
+
+/// A speckle print drawn for a test: Gaussian dots or hard disks, 0.25–0.35 mm at 1.6–1.8 times
+/// that spacing, contrast 0.5–0.8.
+pub fn print(draw: &mut Draw, label: &str, sharp: bool) -> Value {
+    let d = draw.range(0.25, 0.35);
+    let spacing = d * draw.range(1.6, 1.8);
+    let contrast = draw.range(0.5, 0.8);
+    if sharp {
+        json!({"label": label, "profile": "disk", "dot_diameter_mm": d, "dot_spacing_mm": spacing,
+               "contrast": contrast, "placement": "dart"})
+    } else {
+        json!({"label": label, "profile": "gaussian", "dot_diameter_mm": d,
+               "dot_spacing_mm": spacing, "contrast": contrast})
+    }
+}
+
+/// The bench of the tests: 640x540 at 13 px/mm (a quarter of the paper's 2560x2160 at 26 px/mm
+/// per axis, the same field in mm at half the magnification), 16-bit, a signal-independent read
+/// noise of 20 DN (the sensor the baseline assumes), translations of 5, 2.5 and 5 mm (x, x, y),
+/// sub-pixel step series of 0.1 px in x and in y, one static repeat, and a stage that lands within
+/// a stated 20 µm repeatability with a drawn constant offset up to 0.5 px per axis plus 5 µm of
+/// random scatter.
+pub fn bench(name: &str, draw: &mut Draw, sharp: bool) -> Value {
+    json!({
+        "name": name,
+        "seed": draw.seed(),
+        "width": 640, "height": 540, "scale_px_per_mm": 13.0, "bit_depth": 16,
+        "white_level_dn": draw.range(25000.0, 35000.0),
+        "gain_e_per_dn": null, "read_noise_dn": 20.0,
+        "patterns": [print(draw, "a", sharp)],
+        "state_print": "nominal",
+        "moves": [{"id": "x5mm", "dx_mm": 5.0, "dy_mm": 0.0},
+                  {"id": "x2mm", "dx_mm": 2.5, "dy_mm": 0.0},
+                  {"id": "y5mm", "dx_mm": 0.0, "dy_mm": 5.0}],
+        "step_series": [{"id": "xs", "dx_step_mm": 0.0077, "dy_step_mm": 0.0, "count": 3},
+                        {"id": "ys", "dx_step_mm": 0.0, "dy_step_mm": 0.0077, "count": 3}],
+        "repeats": 1,
+        "stage": {"constant_offset_px": [draw.range(-0.5, 0.5), draw.range(-0.5, 0.5)],
+                  "repeatability_um": 5.0},
+        "stated_repeatability_um": 20.0,
+        "effects": {}
+    })
+}

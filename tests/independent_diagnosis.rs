@@ -1,0 +1,434 @@
+//! The diagnosis held against datasets ffdic did not render (issue 18): every dataset here comes
+//! from the independent generator (`tests/independent/`, Python with numpy, its own speckle,
+//! geometry, optics, sensor and stage; see its README), with hidden values, seeds and prints drawn
+//! per test (`FFDIC_INDEPENDENT_SEED` redraws them all), or from the DIC Challenge's Sample 3
+//! images. The baseline model is diagnosed against each; the tests assert the verdicts, the
+//! fitted parameters against the generator's `truth.json`, and the fall of the discrepancy.
+//!
+//! The analysis is the default DIC (subset 41, step 20) on the native frames (one scheme, to keep
+//! the suite's time), `diagnose --rounds` as the library runs it.
+
+#[path = "common/independent.rs"]
+mod independent;
+
+use ffdic::diagnose::{
+    diagnose_rounds_prepared, load_measurement, CompareOptions, Diagnosis, Rounds, BASELINE_TOML,
+};
+use ffdic::dic::DicSettings;
+use ffdic::model::ModelConfig;
+use ffdic::reduce::{AxisScheme, Scheme};
+use independent::{bench, generate, Draw};
+use serde_json::{json, Value};
+use std::path::Path;
+
+fn baseline() -> ModelConfig {
+    ModelConfig::from_toml(BASELINE_TOML, Path::new("config/models/baseline.toml")).unwrap()
+}
+
+fn options() -> CompareOptions {
+    let one = AxisScheme {
+        block: 1,
+        first: 0,
+        active: 1,
+    };
+    CompareOptions {
+        dic: DicSettings::default(),
+        schemes: vec![Scheme::new("native", one, one).unwrap()],
+        seed: 0x5EED,
+    }
+}
+
+/// Generates `spec`, diagnoses the baseline against it for up to `rounds` rounds; returns the
+/// rounds and the truth.
+fn diagnose(spec: &Value, rounds: usize) -> (Rounds, Value) {
+    let root = tempfile::tempdir().unwrap();
+    let dir = root.path().join("dataset");
+    let truth = generate(spec, &dir);
+    let meas = load_measurement(&dir, &options(), &|_, _| true).unwrap();
+    let r = diagnose_rounds_prepared(&meas, &baseline(), rounds, &|_, _| true).unwrap();
+    report(spec["name"].as_str().unwrap_or("?"), &r);
+    (r, truth)
+}
+
+fn report(name: &str, r: &Rounds) {
+    println!("== {name}: verdicts {:?}", r.verdicts);
+    for round in &r.rounds {
+        println!(
+            "   {} ± {} px -> {} {:?} ± {:?} -> {:?}",
+            round.discrepancy_px,
+            round.discrepancy_se_px,
+            round.verdict,
+            round.params,
+            round.stderr,
+            round.after_px
+        );
+    }
+    let d = &r.diagnoses[0];
+    for c in d.candidates.iter().filter(|c| c.delta_bic < -10.0) {
+        println!(
+            "   {:<20} dBIC {:>12.1} drop {:+.5} ± {:.5} img {:.1} ± {:.1} sig {} {:?}",
+            c.effect,
+            c.delta_bic,
+            c.criteria.drop_px,
+            c.criteria.drop_se_px,
+            c.criteria.image_chi2_drop,
+            c.criteria.image_chi2_se,
+            c.significant,
+            c.params
+        );
+    }
+}
+
+/// `value` is within 5 % of `truth` or within two of its standard errors.
+fn close(effect: &str, value: f64, se: f64, truth: f64) {
+    let ok = (value - truth).abs() <= 0.05 * truth.abs() || (value - truth).abs() <= 2.0 * se;
+    assert!(
+        ok,
+        "{effect}: fitted {value} ± {se}, truth {truth} ({:+.1} %)",
+        100.0 * (value / truth - 1.0)
+    );
+}
+
+fn param(d: &Diagnosis, effect: &str, name: &str) -> (f64, f64) {
+    let c = d
+        .candidates
+        .iter()
+        .find(|c| c.effect == effect)
+        .unwrap_or_else(|| panic!("{effect} was not fitted"));
+    (c.params[name], c.stderr.get(name).copied().unwrap_or(0.0))
+}
+
+/// One hidden effect: named in the first round, its parameter against the truth, and the
+/// discrepancy at least 3x lower with it added.
+fn single(spec: Value, effect: &str, name: &str, truth: f64) {
+    let (r, _) = diagnose(&spec, 1);
+    let d = &r.diagnoses[0];
+    assert_eq!(d.verdict, effect, "verdict");
+    let (v, se) = param(d, effect, name);
+    close(effect, v, se, truth);
+    let after = d.after.as_ref().expect("the winner's comparison");
+    assert!(
+        after.discrepancy_px * 3.0 <= d.discrepancy_px,
+        "{effect}: discrepancy {} -> {} px, less than a 3x fall",
+        d.discrepancy_px,
+        after.discrepancy_px
+    );
+}
+
+#[test]
+fn the_generator_passes_its_own_checks() {
+    // Shifts measured by its own FFT phase correlation, mean, contrast, noise and vignetting
+    // against their predictions, disk areas against Monte Carlo (tests/independent/selfcheck.py).
+    let out = std::process::Command::new(independent::python())
+        .arg(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/independent/selfcheck.py"
+        ))
+        .output()
+        .expect("selfcheck.py runs");
+    println!("{}", String::from_utf8_lossy(&out.stdout));
+    assert!(
+        out.status.success(),
+        "selfcheck failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn controls_with_nothing_hidden_give_at_most_one_verdict() {
+    // Ten datasets: different seeds, smooth and sharp prints, stage offsets up to 0.5 px.
+    let mut verdicts = Vec::new();
+    for k in 0..10u64 {
+        let mut draw = Draw::new(100 + k);
+        let spec = bench(&format!("control-{k}"), &mut draw, k % 2 == 1);
+        let (r, _) = diagnose(&spec, 1);
+        verdicts.push(r.diagnoses[0].verdict.clone());
+    }
+    println!("control verdicts: {verdicts:?}");
+    let found = verdicts.iter().filter(|v| *v != "none").count();
+    assert!(
+        found <= 1,
+        "{found} of 10 controls got a verdict: {verdicts:?}"
+    );
+}
+
+#[test]
+fn hidden_lens_distortion() {
+    let mut draw = Draw::new(1);
+    let mut spec = bench("distortion", &mut draw, false);
+    // −2e-10 to −6e-10 px⁻² at the paper's 2560x2160 is −1.2e-3 to −3.7e-3 in ffdic's normalised
+    // k1 (r0 the half diagonal): the same range here, where r0 is 4x smaller.
+    let k1_norm = -draw.range(2.0e-3, 5.0e-3);
+    spec["effects"] = json!({"k1_norm": k1_norm});
+    single(spec, "lens_distortion", "k1", k1_norm);
+}
+
+#[test]
+fn hidden_rotation() {
+    let mut draw = Draw::new(2);
+    let mut spec = bench("rotation", &mut draw, false);
+    let angle = draw.range(1.0e-4, 3.0e-4) * if draw.unit() < 0.5 { -1.0 } else { 1.0 };
+    spec["effects"] = json!({"rotation_rad": angle});
+    single(spec, "rotation", "angle_rad", angle);
+}
+
+#[test]
+fn hidden_scale() {
+    let mut draw = Draw::new(3);
+    let mut spec = bench("scale", &mut draw, true);
+    let ds = draw.range(1.0e-4, 3.0e-4) * if draw.unit() < 0.5 { -1.0 } else { 1.0 };
+    spec["effects"] = json!({"scale_ds": ds});
+    single(spec, "scale", "ds", ds);
+}
+
+#[test]
+fn hidden_stage_error() {
+    // The stage states 1 µm but lands with 10–20 µm of scatter.
+    let mut draw = Draw::new(4);
+    let mut spec = bench("stage", &mut draw, false);
+    let sigma_um = draw.range(10.0, 20.0);
+    spec["stated_repeatability_um"] = json!(1.0);
+    spec["stage"] = json!({"constant_offset_px": [0.0, 0.0], "repeatability_um": sigma_um});
+    let (r, truth) = diagnose(&spec, 1);
+    let d = &r.diagnoses[0];
+    assert_eq!(d.verdict, "stage_error");
+    // The truth: the RMS per axis of the offsets the generator drew.
+    let offsets: Vec<f64> = truth["runs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|run| {
+            let o = &run["offset_px"]["total"];
+            [o[0].as_f64().unwrap(), o[1].as_f64().unwrap()]
+        })
+        .collect();
+    let rms_px = (offsets.iter().map(|x| x * x).sum::<f64>() / offsets.len() as f64).sqrt();
+    let (v, se) = param(d, "stage_error", "repeatability_um");
+    close("stage_error", v, se, rms_px * 1000.0 / 13.0);
+    let after = d.after.as_ref().unwrap();
+    assert!(after.discrepancy_px * 3.0 <= d.discrepancy_px);
+}
+
+#[test]
+fn hidden_vignetting() {
+    // DIC's zero-normalised criterion barely sees vignetting: its evidence is the mean-intensity
+    // map, so the fall asked of it is that map's χ² (the test prints the displacement
+    // discrepancy beside it).
+    let mut draw = Draw::new(5);
+    let mut spec = bench("vignetting", &mut draw, false);
+    let v = draw.range(0.2, 0.4);
+    spec["effects"] = json!({"vignetting_v": v});
+    let (r, _) = diagnose(&spec, 1);
+    let d = &r.diagnoses[0];
+    assert_eq!(d.verdict, "vignetting");
+    let (fit, se) = param(d, "vignetting", "v");
+    close("vignetting", fit, se, v);
+    let before = d.before.as_ref().unwrap();
+    let after = d.after.as_ref().unwrap();
+    // The mean-intensity map's χ² (the statistic vignetting acts on).
+    let (map_before, map_after) = (before.chi2.image_parts[2].0, after.chi2.image_parts[2].0);
+    println!(
+        "vignetting: mean-map χ² {map_before} -> {map_after}, image χ² {} -> {}, discrepancy {} -> {} px",
+        before.chi2.image, after.chi2.image, before.discrepancy_px, after.discrepancy_px
+    );
+    assert!(map_after * 3.0 <= map_before);
+}
+
+/// The psf_blur dataset of the tests: Gaussian dots, a lens blur drawn in 0.8–1.4 px.
+fn psf_spec(state_print: &str) -> (Value, f64) {
+    let mut draw = Draw::new(6);
+    let sigma = draw.range(0.8, 1.4);
+    let mut spec = bench(&format!("psf-{state_print}"), &mut draw, false);
+    spec["effects"] = json!({"psf_sigma_px": sigma});
+    spec["state_print"] = json!(state_print);
+    (spec, sigma)
+}
+
+#[test]
+fn hidden_psf_blur_with_a_nominal_print_is_confounded_with_it() {
+    let (spec, _) = psf_spec("nominal");
+    let (r, _) = diagnose(&spec, 1);
+    let d = &r.diagnoses[0];
+    // Never another effect; with a print known only nominally, the blur is the print's or the
+    // lens's, and the diagnosis says so with the run that separates them.
+    assert!(
+        d.verdict == "psf_blur" || d.verdict == "none",
+        "verdict {}",
+        d.verdict
+    );
+    if d.verdict == "none" {
+        assert!(d
+            .confounded
+            .iter()
+            .any(|c| c.effects.contains(&"psf_blur".to_string())
+                && c.effects.contains(&"print".to_string())
+                && !c.separate_with.is_empty()));
+    }
+}
+
+#[test]
+fn hidden_psf_blur_with_a_characterised_print_is_named() {
+    let (spec, sigma) = psf_spec("characterised");
+    let (r, _) = diagnose(&spec, 1);
+    let d = &r.diagnoses[0];
+    assert_eq!(d.verdict, "psf_blur");
+    let (fit, se) = param(d, "psf_blur", "sigma_px");
+    println!("psf_blur σ {fit} ± {se} px, truth {sigma} px");
+}
+
+/// The issue asks for σ within 20 % with a characterised print. Not met yet: the model's print
+/// (dots on a jittered lattice, depths ±15 %) and the generator's (Poisson placement, equal
+/// depths) differ in spectral shape beyond what the stated profile covers, and the σ fitted on
+/// the spectra's shape moves with the frequency window (0.9–1.66 px for a truth of 1.27 px).
+#[test]
+#[ignore = "not met: psf_blur σ is 28 % low on this draw (see the doc comment and the README)"]
+fn hidden_psf_blur_with_a_characterised_print_within_20_percent() {
+    let (spec, sigma) = psf_spec("characterised");
+    let (r, _) = diagnose(&spec, 1);
+    let (fit, _) = param(&r.diagnoses[0], "psf_blur", "sigma_px");
+    assert!(
+        (fit / sigma - 1.0).abs() <= 0.2,
+        "psf_blur σ {fit} px, truth {sigma} px"
+    );
+}
+
+#[test]
+fn hidden_fill_factor_is_never_a_fit_at_its_bound() {
+    let mut draw = Draw::new(7);
+    let mut spec = bench("fill-factor", &mut draw, true);
+    spec["effects"] = json!({"fill_factor": [0.5, 1.0]});
+    let (r, _) = diagnose(&spec, 1);
+    let d = &r.diagnoses[0];
+    assert!(
+        d.verdict == "fill_factor" || d.verdict == "none",
+        "verdict {}",
+        d.verdict
+    );
+    if d.verdict == "none" {
+        assert!(d
+            .confounded
+            .iter()
+            .any(|c| c.effects.contains(&"fill_factor".to_string())));
+    }
+    for c in d.candidates.iter().filter(|c| c.significant) {
+        assert!(
+            c.criteria.within_range,
+            "{} significant at a bound",
+            c.effect
+        );
+    }
+}
+
+/// Several hidden at once: every one found by the rounds, each within 10 %, the discrepancy
+/// falling at every round.
+fn several(spec: Value, expected: &[(&str, &str, f64)]) {
+    let (r, _) = diagnose(&spec, expected.len() + 1);
+    for (effect, name, truth) in expected {
+        assert!(
+            r.verdicts.iter().any(|v| v == effect),
+            "{effect} not found: {:?}",
+            r.verdicts
+        );
+        let k = r.verdicts.iter().position(|v| v == effect).unwrap();
+        let value = r.rounds[k].params[*name];
+        assert!(
+            (value / truth - 1.0).abs() <= 0.10,
+            "{effect}: {value} against {truth}"
+        );
+    }
+    for round in r.rounds.iter().filter(|x| x.verdict != "none") {
+        let after = round.after_px.unwrap();
+        assert!(
+            after < round.discrepancy_px,
+            "round {}: {} -> {after}",
+            round.verdict,
+            round.discrepancy_px
+        );
+    }
+}
+
+#[test]
+fn distortion_rotation_and_stage_offsets_at_once() {
+    let mut draw = Draw::new(8);
+    let mut spec = bench("distortion+rotation", &mut draw, false);
+    let k1 = -draw.range(2.0e-3, 5.0e-3);
+    let angle = draw.range(1.0e-4, 3.0e-4);
+    spec["effects"] = json!({"k1_norm": k1, "rotation_rad": angle});
+    several(
+        spec,
+        &[
+            ("lens_distortion", "k1", k1),
+            ("rotation", "angle_rad", angle),
+        ],
+    );
+}
+
+#[test]
+fn vignetting_and_scale_at_once() {
+    let mut draw = Draw::new(9);
+    let mut spec = bench("vignetting+scale", &mut draw, false);
+    let v = draw.range(0.2, 0.4);
+    let ds = draw.range(1.0e-4, 3.0e-4);
+    spec["effects"] = json!({"vignetting_v": v, "scale_ds": ds});
+    let (r, _) = diagnose(&spec, 3);
+    for (effect, name, truth) in [("vignetting", "v", v), ("scale", "ds", ds)] {
+        let k = r
+            .verdicts
+            .iter()
+            .position(|x| x == effect)
+            .unwrap_or_else(|| panic!("{effect} not found: {:?}", r.verdicts));
+        let value = r.rounds[k].params[name];
+        assert!(
+            (value / truth - 1.0).abs() <= 0.10,
+            "{effect}: {value} against {truth}"
+        );
+    }
+    // Vignetting falls in the image statistics, scale in the displacements: every round lowers
+    // the total χ² (the displacement discrepancy cannot fall with vignetting, see above).
+    for (k, round) in r
+        .rounds
+        .iter()
+        .enumerate()
+        .filter(|(_, x)| x.verdict != "none")
+    {
+        let d = &r.diagnoses[k];
+        let before = d.before.as_ref().unwrap().chi2.total;
+        let after = d.after.as_ref().unwrap();
+        let after_chi2 = after.chi2.total;
+        assert!(
+            after_chi2 < before,
+            "round {}: χ² {before} -> {after_chi2}",
+            round.verdict
+        );
+    }
+}
+
+#[test]
+fn sample3_has_nothing_to_find() {
+    // Fourier-shifted frames of one real speckle image: no lens, print or sensor effect between
+    // reference and shifts.
+    let root = tempfile::tempdir().unwrap();
+    let dir = root.path().join("sample3");
+    independent::sample3(&dir, 10.0);
+    let meas = load_measurement(&dir, &options(), &|_, _| true).unwrap();
+    let r = diagnose_rounds_prepared(&meas, &baseline(), 1, &|_, _| true).unwrap();
+    report("sample3", &r);
+    assert_eq!(r.diagnoses[0].verdict, "none");
+}
+
+/// The false-alarm rate over 30 control seeds (slow: run with `--ignored`; the figure is in the
+/// README).
+#[test]
+#[ignore = "slow: 30 diagnoses; the measured rate is in the README"]
+fn false_alarm_rate_over_30_controls() {
+    let mut verdicts = Vec::new();
+    for k in 0..30u64 {
+        let mut draw = Draw::new(1000 + k);
+        let spec = bench(&format!("control-{k}"), &mut draw, k % 2 == 1);
+        let (r, _) = diagnose(&spec, 1);
+        verdicts.push(r.diagnoses[0].verdict.clone());
+    }
+    let found = verdicts.iter().filter(|v| *v != "none").count();
+    println!("false alarms: {found} of 30: {verdicts:?}");
+    assert!(found <= 3, "{found} of 30 controls got a verdict");
+}
