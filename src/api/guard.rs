@@ -6,8 +6,9 @@
 //! - A request that changes something and comes from another site is refused (403): browsers
 //!   send `Origin` (and `Sec-Fetch-Site`) with every cross-site POST, including the "simple"
 //!   ones that need no CORS preflight (`mode: 'no-cors'`, forms, `sendBeacon`).
-//! - A body whose `Content-Length` is over the route's limit is refused (413) before a byte of
-//!   it is read.
+//! - A body whose `Content-Length` is over the route's limit is refused (413) before a handler
+//!   sees it; up to 1 MiB of it is read and dropped first, so the client reads the answer instead
+//!   of a connection reset.
 //! - A request other than an SSE stream or an upload is answered within the request timeout.
 //! - Every error leaves as `application/problem+json`, the framework's own (404, 405, 413,
 //!   415, a bad path or query) included.
@@ -64,6 +65,13 @@ pub async fn guard(State(config): State<Arc<GuardConfig>>, req: Request, next: N
     };
     if let Some(len) = content_length(req.headers()) {
         if len > limit as u64 {
+            if len <= DRAIN_BEFORE_REFUSING_BYTES {
+                // Closing with the client's bytes still unread makes the kernel reset the
+                // connection, and the client may lose the answer before reading it: read and drop
+                // a modest body first, so it sees the 413 (a larger one gets the reset).
+                let _ = axum::body::to_bytes(req.into_body(), DRAIN_BEFORE_REFUSING_BYTES as usize)
+                    .await;
+            }
             return ApiError::new(
                 StatusCode::PAYLOAD_TOO_LARGE,
                 "too-large",
@@ -90,6 +98,9 @@ pub async fn guard(State(config): State<Arc<GuardConfig>>, req: Request, next: N
     };
     as_problem(response).await
 }
+
+/// An over-limit body up to this size is read and dropped before the 413 (see [`guard`]).
+const DRAIN_BEFORE_REFUSING_BYTES: u64 = 1 << 20;
 
 fn content_length(headers: &HeaderMap) -> Option<u64> {
     headers
