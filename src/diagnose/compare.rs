@@ -514,23 +514,13 @@ pub fn compare_prepared(
     model: &ModelConfig,
     progress: Progress,
 ) -> Result<Comparison, DiagnoseError> {
-    compare_seeded(meas, model, meas.options.seed, progress)
+    compare_with_scene(meas, model, meas.options.seed, None, progress)
 }
 
-/// [`compare_prepared`] with the model's speckle and noise drawn from `seed` (the options' seed
-/// is the comparison's; `diagnose` renders with the next ones for the realisation scatter).
-pub fn compare_seeded(
-    meas: &Measurement,
-    model: &ModelConfig,
-    seed: u64,
-    progress: Progress,
-) -> Result<Comparison, DiagnoseError> {
-    compare_with_scene(meas, model, seed, None, progress)
-}
-
-/// [`compare_seeded`] with the white levels and prints of `scene_from` (a comparison of a model
-/// with the same image chain: the same optics, sensor and radiometry) instead of calibrating them
-/// again.
+/// [`compare_prepared`] with the model's speckle and noise drawn from `seed` (`diagnose` renders
+/// with the next seeds for the realisation scatter), and with the white levels and prints of
+/// `scene_from` (a comparison of a model with the same image chain: the same optics, sensor and
+/// radiometry) instead of calibrating them again.
 pub fn compare_with_scene(
     meas: &Measurement,
     model: &ModelConfig,

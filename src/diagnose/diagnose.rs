@@ -514,7 +514,8 @@ pub fn diagnose_prepared(
         dic: &meas.options.dic,
     };
     let mut candidates = Vec::new();
-    let mut models: BTreeMap<String, (ModelConfig, Option<Comparison>)> = BTreeMap::new();
+    // Per candidate: its fit, the model with it, and that model's comparison.
+    let mut models: BTreeMap<String, (ImageFit, ModelConfig, Option<Comparison>)> = BTreeMap::new();
     for id in &fit_ids {
         let Some(fit) = fit_candidate(meas, &before, &model.effects, id) else {
             tick()?;
@@ -537,7 +538,7 @@ pub fn diagnose_prepared(
             Some((rendered, Method::Rendered))
         };
         candidates.push(judge.candidate(&fit, after.as_ref()));
-        models.insert(fit.effect.to_string(), (with, after.map(|a| a.0)));
+        models.insert(fit.effect.to_string(), (fit, with, after.map(|a| a.0)));
         tick()?;
     }
     candidates.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
@@ -550,19 +551,21 @@ pub fn diagnose_prepared(
             winner = Some(effect);
             break;
         }
-        let (with, _) = models.get(&effect).expect("fitted").clone();
-        let fit = fit_candidate(meas, &before, &model.effects, &effect).expect("fitted before");
-        let rendered = compare_with_scene(
-            meas,
-            &with,
-            meas.options.seed,
-            Some(&before.model.nominal),
-            &|_, _| true,
-        )?;
-        let judged = judge.candidate(&fit, Some(&(rendered.clone(), Method::Rendered)));
+        let (fit, with, after) = models.get_mut(&effect).expect("fitted");
+        let rendered = (
+            compare_with_scene(
+                meas,
+                with,
+                meas.options.seed,
+                Some(&before.model.nominal),
+                &|_, _| true,
+            )?,
+            Method::Rendered,
+        );
+        let judged = judge.candidate(fit, Some(&rendered));
         let ok = judged.significant;
         candidates[pos] = judged;
-        models.insert(effect.clone(), (with, Some(rendered)));
+        *after = Some(rendered.0);
         if ok {
             winner = Some(effect);
             break;
@@ -614,7 +617,7 @@ pub fn diagnose_prepared(
     }
     let (winner_model, after) = match &winner {
         Some(w) => {
-            let (m, a) = models.remove(w).expect("fitted");
+            let (_, m, a) = models.remove(w).expect("fitted");
             (Some(m), a)
         }
         None => (None, None),
