@@ -108,7 +108,14 @@ async fn bad_requests_are_problems_and_write_nothing() {
                   "stage": {"dx_mm": 0.5, "dy_mm": 0.0}}]})
     .to_string();
     let good_tiff = {
-        let img = ffdic::image::Image::from_fn(96, 80, |c, r| ((c * 37 + r * 11) % 200) as f32);
+        // A 2-D random texture (a hash of the pixel position): a sawtooth in one direction
+        // would leave any motion along its ridges undetermined.
+        let img = ffdic::image::Image::from_fn(96, 80, |c, r| {
+            let mut s = (c as u64).wrapping_mul(73_856_093) ^ (r as u64).wrapping_mul(19_349_663);
+            s ^= s >> 13;
+            s = s.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+            (s >> 56) as f32
+        });
         let data: Vec<u16> = img.data().iter().map(|&v| v as u16).collect();
         ffdic::image::tiff_u16_bytes(96, 80, &data).unwrap()
     };

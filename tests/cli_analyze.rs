@@ -92,7 +92,7 @@ fn out_folder_gets_points_and_settings() {
     let mut lines = csv.lines();
     assert_eq!(
         lines.next().unwrap(),
-        "x,y,u,v,exx,eyy,exy,zncc,iterations,status"
+        "x,y,u,v,exx,eyy,exy,zncc,u_std_px,v_std_px,iterations,status"
     );
     let rows: Vec<&str> = lines.collect();
     assert_eq!(rows.len(), 17 * 16);
@@ -167,4 +167,98 @@ fn flat_region_is_a_point_status_not_an_error() {
     assert_eq!(doc["valid"], 0);
     let csv = std::fs::read_to_string(dir.path().join("r/points.csv")).unwrap();
     assert!(csv.lines().skip(1).all(|l| l.ends_with(",no_contrast")));
+}
+
+#[test]
+fn a_sequence_accumulates_frame_by_frame() {
+    // Sample 3's frames shifted by 0.1 px steps in x and y, given as a list and as a folder.
+    let dir = tempfile::tempdir().unwrap();
+    let frames = dir.path().join("frames");
+    std::fs::create_dir(&frames).unwrap();
+    for k in 1..=3 {
+        let name = format!("shift_0{k}.tif");
+        std::fs::copy(sample3(&name), frames.join(&name)).unwrap();
+    }
+    let out_dir = dir.path().join("res");
+    for deformed in [
+        vec![
+            frames.join("shift_01.tif"),
+            frames.join("shift_02.tif"),
+            frames.join("shift_03.tif"),
+        ],
+        vec![frames.clone()],
+    ] {
+        let mut args = vec!["analyze".to_string(), sample3("reference.tif")];
+        args.extend(deformed.iter().map(|p| p.to_string_lossy().into_owned()));
+        args.extend(["--json", "--out"].map(String::from));
+        args.push(out_dir.to_string_lossy().into_owned());
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        let out = ffdic(&refs);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let frames_doc = doc["frames"].as_array().unwrap();
+        assert_eq!(frames_doc.len(), 3);
+        for (k, f) in frames_doc.iter().enumerate() {
+            let shift = 0.1 * (k + 1) as f64;
+            assert_eq!(f["index"], k + 1);
+            assert_eq!(f["valid"], f["points"], "{f}");
+            assert!(
+                (f["u"]["mean"].as_f64().unwrap() - shift).abs() < 0.003,
+                "{f}"
+            );
+            assert!(
+                (f["v"]["mean"].as_f64().unwrap() - shift).abs() < 0.003,
+                "{f}"
+            );
+        }
+        for k in 1..=3 {
+            assert!(out_dir.join(format!("points_{k:04}.csv")).is_file());
+        }
+    }
+}
+
+#[test]
+fn thresholds_and_polygon_masks_are_settable() {
+    let dir = tempfile::tempdir().unwrap();
+    let polygons = dir.path().join("mask.json");
+    // Sample 3 is 512x512 with points 25..=485 at the defaults: exclude the left half.
+    std::fs::write(
+        &polygons,
+        r#"{"exclude": [[[0, 0], [255, 0], [255, 511], [0, 511]]]}"#,
+    )
+    .unwrap();
+    let out = ffdic(&[
+        "analyze",
+        &sample3("reference.tif"),
+        &sample3("shift_05.tif"),
+        "--mask-polygons",
+        polygons.to_str().unwrap(),
+        "--min-zncc",
+        "0.99999",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let masked = doc["statuses"]["masked"].as_u64().unwrap();
+    assert_eq!(masked, 24 * 12, "{doc}");
+    // Noisy images never correlate to 0.99999: every analysed point is refused.
+    assert_eq!(doc["valid"], 0, "{doc}");
+    assert_eq!(doc["settings"]["dic"]["min_zncc"], 0.99999);
+    let out = ffdic(&[
+        "analyze",
+        &sample3("reference.tif"),
+        &sample3("shift_05.tif"),
+        "--min-zncc",
+        "2",
+    ]);
+    assert!(!out.status.success());
+    assert!(stderr_line(&out).contains("min_zncc"));
 }

@@ -81,7 +81,15 @@ fn reproduce_json_has_a_row_per_run_and_scheme_and_recovers_the_motion() {
         for f in ["u", "v", "exx", "eyy", "exy"] {
             assert!(r[f]["std"].is_f64() && r[f]["mean"].is_f64(), "{r}");
         }
-        assert_eq!(r["valid"], r["points"]);
+        // The grid is centred in the span where whole subsets fit in the reference; a move
+        // along x carries the subsets of the last column out of the moved frame (left_image),
+        // the sub-pixel y steps keep every point.
+        let (valid, points) = (r["valid"].as_u64().unwrap(), r["points"].as_u64().unwrap());
+        if r["run"].as_str().unwrap().contains("-ys") {
+            assert_eq!(valid, points, "{r}");
+        } else {
+            assert!(valid >= points * 19 / 20, "{r}");
+        }
     }
     // The bench's stage is misaligned by 6.15 mrad: a 1 mm move at 13 px/mm is 6.5 px in the
     // reduced images, with 0.040 px of y.

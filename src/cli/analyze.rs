@@ -1,21 +1,30 @@
-//! `ffdic analyze REF DEF`: DIC of one image pair, summary on stdout, points and settings on disk.
+//! `ffdic analyze REF DEF [DEF…]`: DIC of one image pair, or of a sequence (several deformed
+//! images, or one folder of them) analysed incrementally; summary on stdout, points and
+//! settings on disk.
 
 use super::ProgressBar;
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::Args;
-use ffdic::dic::{DicResult, DicSettings, Interpolation, PreparedReference};
-use ffdic::image::{read_tiff, Roi};
+use ffdic::dic::{
+    analyze_sequence, DicResult, DicSettings, Interpolation, PolygonMask, PreparedReference,
+    RasterMask, SequenceFrame, Summary,
+};
+use ffdic::image::{read_tiff, Image, Roi};
 use serde_json::json;
+use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 #[derive(Debug, Args)]
 pub struct AnalyzeArgs {
-    /// Reference image (8- or 16-bit grayscale TIFF).
+    /// Reference image (8- or 16-bit integer or 32-bit float grey, palette or grey+alpha TIFF).
     pub reference: PathBuf,
-    /// Deformed image, same size as the reference.
-    pub deformed: PathBuf,
+    /// Deformed image(s), same size as the reference. Several images, or one folder of TIFFs
+    /// (taken in name order), are analysed as a sequence: incrementally, the reference moving
+    /// to the previous frame when correlation drops, displacements accumulated.
+    #[arg(required = true)]
+    pub deformed: Vec<PathBuf>,
     /// Subset side in px (odd).
     #[arg(long, default_value_t = 41)]
     pub subset: usize,
@@ -34,10 +43,32 @@ pub struct AnalyzeArgs {
     /// Gaussian pre-filter σ in px applied to both images (0: off).
     #[arg(long, default_value_t = 0.7)]
     pub prefilter_sigma: f64,
+    /// Points whose ZNCC is below this are not valid (low_correlation).
+    #[arg(long, default_value_t = DicSettings::default().min_zncc)]
+    pub min_zncc: f64,
+    /// Largest rigid motion the global search looks for, px.
+    #[arg(long, default_value_t = DicSettings::default().max_motion_px)]
+    pub max_motion: usize,
+    /// Points whose predicted displacement standard deviation exceeds this are not valid
+    /// (no_texture), px.
+    #[arg(long, default_value_t = DicSettings::default().max_displacement_std_px)]
+    pub max_displacement_std: f64,
+    /// Normalised median test threshold (Westerweel & Scarano 2005: 2).
+    #[arg(long, default_value_t = 2.0, conflicts_with = "no_outlier_test")]
+    pub outlier_threshold: f64,
+    /// Turn the neighbour (median) test off.
+    #[arg(long)]
+    pub no_outlier_test: bool,
+    /// Mask image, same size as the reference: points on its zero pixels are not analysed.
+    #[arg(long)]
+    pub mask: Option<PathBuf>,
+    /// Polygon mask, JSON: {"include": [[[x,y],…],…], "exclude": [[[x,y],…],…]} in px.
+    #[arg(long)]
+    pub mask_polygons: Option<PathBuf>,
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Write points.csv and settings.json into this folder.
+    /// Write points.csv (points_NNNN.csv for a sequence) and settings.json into this folder.
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Print one JSON document on stdout and nothing else.
@@ -47,47 +78,110 @@ pub struct AnalyzeArgs {
 
 pub fn run(args: &AnalyzeArgs) -> Result<()> {
     let (reference, _) = read_tiff(&args.reference)?;
-    let (deformed, _) = read_tiff(&args.deformed)?;
-    let settings = DicSettings {
+    let frames = deformed_paths(&args.deformed)?;
+    let settings = settings(args)?;
+    let mask = match &args.mask {
+        Some(path) => Some(RasterMask::from_image(&read_tiff(path)?.0)),
+        None => None,
+    };
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.threads.unwrap_or(0))
+        .build()
+        .context("cannot start worker threads")?;
+    if frames.len() == 1 {
+        let (deformed, _) = read_tiff(&frames[0])?;
+        return run_pair(args, &settings, mask.as_ref(), &reference, &deformed, &pool);
+    }
+    if mask.is_some() {
+        bail!("--mask applies to one image pair; for a sequence use --mask-polygons");
+    }
+    run_sequence(args, &settings, &reference, &frames, &pool)
+}
+
+fn settings(args: &AnalyzeArgs) -> Result<DicSettings> {
+    let mask = match &args.mask_polygons {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("cannot read {}", path.display()))?;
+            let polygons: PolygonMask = serde_json::from_str(&text)
+                .with_context(|| format!("{} is not a polygon mask", path.display()))?;
+            Some(polygons)
+        }
+        None => None,
+    };
+    Ok(DicSettings {
         subset_px: args.subset,
         step_px: args.step,
         roi: args.roi,
         strain_window: args.strain_window,
         interpolation: args.interp,
         prefilter_sigma_px: args.prefilter_sigma,
+        min_zncc: args.min_zncc,
+        max_motion_px: args.max_motion,
+        max_displacement_std_px: args.max_displacement_std,
+        outlier_threshold: (!args.no_outlier_test).then_some(args.outlier_threshold),
+        mask,
         ..DicSettings::default()
-    };
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.threads.unwrap_or(0))
-        .build()
-        .context("cannot start worker threads")?;
+    })
+}
+
+/// The deformed images: the paths given, or the TIFFs of one folder in name order.
+fn deformed_paths(given: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    if let [dir] = given {
+        if dir.is_dir() {
+            let mut tiffs: Vec<PathBuf> = std::fs::read_dir(dir)
+                .with_context(|| format!("cannot list {}", dir.display()))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| {
+                    p.extension()
+                        .and_then(|e| e.to_str())
+                        .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "tif" | "tiff"))
+                })
+                .collect();
+            tiffs.sort();
+            if tiffs.is_empty() {
+                bail!("{} holds no .tif or .tiff image", dir.display());
+            }
+            return Ok(tiffs);
+        }
+    }
+    Ok(given.to_vec())
+}
+
+fn run_pair(
+    args: &AnalyzeArgs,
+    settings: &DicSettings,
+    mask: Option<&RasterMask>,
+    reference: &Image,
+    deformed: &Image,
+    pool: &rayon::ThreadPool,
+) -> Result<()> {
     let bar = ProgressBar::new(!args.json, "correlating");
     let started = Instant::now();
     let result = pool.install(|| -> Result<DicResult> {
-        let prepared = PreparedReference::new(&reference, &settings)?;
-        Ok(prepared.correlate(&deformed, Some(&|d, t| bar.update(d, t)))?)
+        let prepared = PreparedReference::with_mask(reference, settings, mask)?;
+        Ok(prepared.correlate(deformed, Some(&|d, t| bar.update(d, t)))?)
     })?;
     let elapsed_s = started.elapsed().as_secs_f64();
     bar.finish();
 
     if let Some(dir) = &args.out {
-        write_outputs(dir, &result, args)?;
+        create_dir(dir)?;
+        write_atomic(&dir.join("points.csv"), points_csv(&result).as_bytes())?;
+        let doc = settings_json(&result, args, &args.deformed[0]);
+        write_atomic(
+            &dir.join("settings.json"),
+            serde_json::to_string_pretty(&doc)?.as_bytes(),
+        )?;
     }
-    let summary = result.summary;
-    let doc = json!({
-        "points": summary.points,
-        "valid": summary.valid,
-        "u": summary.u, "v": summary.v,
-        "exx": summary.exx, "eyy": summary.eyy, "exy": summary.exy,
-        "global_offset_px": result.global_offset_px,
-        "elapsed_s": elapsed_s,
-        "settings": settings_json(&result, args),
-    });
+    let mut doc = summary_json(&result);
+    doc["elapsed_s"] = json!(elapsed_s);
+    doc["settings"] = settings_json(&result, args, &args.deformed[0]);
     let mut out = std::io::stdout().lock();
     if args.json {
         writeln!(out, "{doc}")?;
     } else {
-        let s = &summary;
+        let s = &result.summary;
         writeln!(
             out,
             "{} points, {} valid, {:.3} s ({:.0} POI/s)",
@@ -96,30 +190,160 @@ pub fn run(args: &AnalyzeArgs) -> Result<()> {
             elapsed_s,
             s.points as f64 / elapsed_s
         )?;
-        for (name, st, scale, unit) in [
-            ("u", s.u, 1.0, "px"),
-            ("v", s.v, 1.0, "px"),
-            ("exx", s.exx, 1e6, "µε"),
-            ("eyy", s.eyy, 1e6, "µε"),
-            ("exy", s.exy, 1e6, "µε"),
-        ] {
-            writeln!(
-                out,
-                "{name:>4}: mean {:>12.5} std {:>10.5} min {:>12.5} max {:>12.5} {unit}",
-                st.mean * scale,
-                st.std * scale,
-                st.min * scale,
-                st.max * scale
-            )?;
-        }
+        write_statuses(&mut out, &result)?;
+        write_summary(&mut out, s)?;
     }
     Ok(())
 }
 
-fn settings_json(result: &DicResult, args: &AnalyzeArgs) -> serde_json::Value {
+fn run_sequence(
+    args: &AnalyzeArgs,
+    settings: &DicSettings,
+    reference: &Image,
+    frames: &[PathBuf],
+    pool: &rayon::ThreadPool,
+) -> Result<()> {
+    // Frames are read one at a time as the analysis reaches them; a read error stops it.
+    let mut read_error: Option<anyhow::Error> = None;
+    let images = frames.iter().map_while(|path| match read_tiff(path) {
+        Ok((image, _)) => Some(image),
+        Err(e) => {
+            read_error = Some(e.into());
+            None
+        }
+    });
+    let bar = ProgressBar::new(!args.json, "frames");
+    let started = Instant::now();
+    let mut written: Result<()> = Ok(());
+    let results = pool.install(|| {
+        analyze_sequence(reference, images, settings, |frame: &SequenceFrame| {
+            bar.update(frame.index, frames.len());
+            if let (Some(dir), Ok(())) = (&args.out, &written) {
+                written = create_dir(dir).and_then(|_| {
+                    write_atomic(
+                        &dir.join(format!("points_{:04}.csv", frame.index)),
+                        points_csv(&frame.result).as_bytes(),
+                    )
+                });
+            }
+        })
+    })?;
+    bar.finish();
+    if let Some(e) = read_error {
+        return Err(e);
+    }
+    written?;
+    let elapsed_s = started.elapsed().as_secs_f64();
+    let frame_docs: Vec<serde_json::Value> = results
+        .iter()
+        .map(|f| {
+            let mut doc = summary_json(&f.result);
+            doc["index"] = json!(f.index);
+            doc["file"] = json!(frames[f.index - 1]);
+            doc["reference_index"] = json!(f.reference_index);
+            doc
+        })
+        .collect();
+    let settings_doc = results
+        .first()
+        .map(|f| settings_json(&f.result, args, &frames[0]))
+        .unwrap_or(serde_json::Value::Null);
+    if let Some(dir) = &args.out {
+        let doc = json!({ "settings": settings_doc, "frames": frame_docs });
+        write_atomic(
+            &dir.join("settings.json"),
+            serde_json::to_string_pretty(&doc)?.as_bytes(),
+        )?;
+    }
+    let mut out = std::io::stdout().lock();
+    if args.json {
+        let doc = json!({ "frames": frame_docs, "elapsed_s": elapsed_s, "settings": settings_doc });
+        writeln!(out, "{doc}")?;
+        return Ok(());
+    }
+    writeln!(
+        out,
+        "{} frames in {elapsed_s:.3} s; displacements accumulated from {}",
+        results.len(),
+        args.reference.display()
+    )?;
+    writeln!(
+        out,
+        "{:>5} {:>4} {:>7} {:>12} {:>12} {:>10} {:>10}  file",
+        "frame", "ref", "valid", "u mean px", "v mean px", "exx µε", "eyy µε"
+    )?;
+    for f in &results {
+        let s = &f.result.summary;
+        writeln!(
+            out,
+            "{:>5} {:>4} {:>7} {:>12.5} {:>12.5} {:>10.0} {:>10.0}  {}",
+            f.index,
+            f.reference_index,
+            s.valid,
+            s.u.mean,
+            s.v.mean,
+            s.exx.mean * 1e6,
+            s.eyy.mean * 1e6,
+            frames[f.index - 1].display()
+        )?;
+    }
+    Ok(())
+}
+
+fn status_counts(result: &DicResult) -> BTreeMap<&'static str, usize> {
+    let mut counts = BTreeMap::new();
+    for p in &result.points {
+        *counts.entry(p.status.as_str()).or_insert(0) += 1;
+    }
+    counts
+}
+
+fn summary_json(result: &DicResult) -> serde_json::Value {
+    let s = result.summary;
+    json!({
+        "points": s.points,
+        "valid": s.valid,
+        "statuses": status_counts(result),
+        "u": s.u, "v": s.v,
+        "exx": s.exx, "eyy": s.eyy, "exy": s.exy,
+        "global_offset_px": result.global_offset_px,
+    })
+}
+
+fn write_statuses(out: &mut impl Write, result: &DicResult) -> Result<()> {
+    let counts = status_counts(result);
+    if counts.len() > 1 {
+        let parts: Vec<String> = counts.iter().map(|(k, n)| format!("{k} {n}")).collect();
+        writeln!(out, "statuses: {}", parts.join(", "))?;
+    }
+    Ok(())
+}
+
+fn write_summary(out: &mut impl Write, s: &Summary) -> Result<()> {
+    for (name, st, scale, unit) in [
+        ("u", s.u, 1.0, "px"),
+        ("v", s.v, 1.0, "px"),
+        ("exx", s.exx, 1e6, "µε"),
+        ("eyy", s.eyy, 1e6, "µε"),
+        ("exy", s.exy, 1e6, "µε"),
+    ] {
+        writeln!(
+            out,
+            "{name:>4}: mean {:>12.5} std {:>10.5} min {:>12.5} max {:>12.5} {unit}",
+            st.mean * scale,
+            st.std * scale,
+            st.min * scale,
+            st.max * scale
+        )?;
+    }
+    Ok(())
+}
+
+fn settings_json(result: &DicResult, args: &AnalyzeArgs, deformed: &Path) -> serde_json::Value {
     json!({
         "reference": args.reference,
-        "deformed": args.deformed,
+        "deformed": deformed,
+        "mask": args.mask,
         "dic": result.settings,
         "roi": result.grid.roi,
         "grid": { "nx": result.grid.nx(), "ny": result.grid.ny() },
@@ -131,12 +355,11 @@ fn settings_json(result: &DicResult, args: &AnalyzeArgs) -> serde_json::Value {
     })
 }
 
-fn write_outputs(dir: &Path, result: &DicResult, args: &AnalyzeArgs) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    let mut csv = String::from("x,y,u,v,exx,eyy,exy,zncc,iterations,status\n");
+fn points_csv(result: &DicResult) -> String {
+    let mut csv = String::from("x,y,u,v,exx,eyy,exy,zncc,u_std_px,v_std_px,iterations,status\n");
     for p in &result.points {
         csv.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{}\n",
             p.x,
             p.y,
             p.u,
@@ -145,13 +368,17 @@ fn write_outputs(dir: &Path, result: &DicResult, args: &AnalyzeArgs) -> Result<(
             p.eyy,
             p.exy,
             p.zncc,
+            p.u_std_px,
+            p.v_std_px,
             p.iterations,
             p.status.as_str()
         ));
     }
-    write_atomic(&dir.join("points.csv"), csv.as_bytes())?;
-    let settings = serde_json::to_string_pretty(&settings_json(result, args))?;
-    write_atomic(&dir.join("settings.json"), settings.as_bytes())
+    csv
+}
+
+fn create_dir(dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))
 }
 
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {

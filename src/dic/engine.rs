@@ -1,31 +1,51 @@
-//! One analysis: prepare the reference once (interpolation coefficients, gradients, grid), then
-//! correlate any number of deformed images against it, in parallel over grid rows.
+//! One analysis: prepare the reference once (interpolation coefficients, gradients, grid, mask),
+//! then correlate any number of deformed images against it.
 //!
-//! Initial guesses: a global phase correlation gives the integer rigid offset. The first point of
-//! each grid row refines its own integer displacement by a ZNCC search around that offset; every
-//! further point starts IC-GN from the prediction of its converged left neighbour (the affine
-//! field moved by one step), in the spirit of reliability-guided propagation (Pan,
-//! "Reliability-guided digital image correlation for image deformation measurement", Appl. Opt.
-//! 48 (2009)). When that start does not converge to a good correlation — a discontinuity, a
-//! neighbour gone wrong — the point falls back to its own integer search, so no point inherits
-//! an error it cannot check.
-//!
-//! Rows are independent tasks processed left to right, so the result does not depend on the
-//! number of threads.
+//! A correlation runs in four stages, each parallel over points and each independent of the
+//! number of threads:
+//! 1. **Seeds** on a coarse lattice: an integer ZNCC search around the global rigid offset
+//!    (phase correlation), then IC-GN. When fewer than half the seeds hold, the motion is not
+//!    a translation: a Fourier-Mellin similarity (rotation, scale, translation) predicts each
+//!    failed seed's full first-order shape and IC-GN starts from it.
+//! 2. **Propagation** from the seeds ([`super::propagate`]): each point starts from its best
+//!    valid neighbour's shape.
+//! 3. **Search** where propagation could not reach or failed: an integer search around the
+//!    prediction of the nearest valid point, then another round of propagation.
+//! 4. **Validation**: every point is judged on its own evidence ([`super::validate`]) as it is
+//!    solved, then against the field: its texture against the image noise, its ZNSSD against the field's median (a partial match
+//!    at a discontinuity), and the normalised median test; a point that fails is solved
+//!    once more from the neighbour that agrees best with the median, and keeps the `outlier`
+//!    status if it still fails.
 
 use super::bspline::BSplineImage;
 use super::fft_guess::global_offset;
 use super::icgn::{Scratch, SubsetReference};
 use super::integer_search::integer_search;
+use super::mask::{analysed_points, RasterMask};
 use super::prefilter::gaussian_blur;
+use super::propagate::{seed_indices, warp_of, Field};
+use super::similarity::{estimate_similarity, Similarity};
 use super::strain::compute_strains;
+use super::validate::{
+    median_test_failures, noise_std, own_status, relative_correlation_failures,
+    MIN_TEXTURE_TO_NOISE,
+};
 use super::{DicError, DicResult, DicSettings, PoiGrid, PoiResult, PoiStatus, Summary, Warp};
 use crate::image::Image;
 use rayon::prelude::*;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
-/// Progress callback: (points done, points in all). Called from worker threads.
+/// Progress callback: (points done, points in all). Called from the calling thread.
 pub type Progress<'a> = &'a (dyn Fn(usize, usize) + Sync);
+
+/// Seed lattice spacing, in grid points: ≈100 seeds on the paper's dense 161x161 grid, a few
+/// on a small one.
+const SEED_SPACING_POINTS: usize = 16;
+/// A seed guides propagation only if its ZNCC is within this of the best seed's: a seed that
+/// IC-GN pulled onto a wrong match correlates far worse than the true ones, and would otherwise
+/// lead a whole region astray before any neighbour could object.
+const SEED_ZNCC_MARGIN: f64 = 0.15;
+/// Rounds of search-then-propagate for the points propagation leaves.
+const SEARCH_ROUNDS: usize = 3;
 
 /// The reference image with everything the correlation needs from it.
 pub struct PreparedReference {
@@ -35,20 +55,64 @@ pub struct PreparedReference {
     grid: PoiGrid,
     grad_x: Vec<f32>,
     grad_y: Vec<f32>,
+    /// Per grid point (row-major): inside the mask.
+    analysed: Vec<bool>,
+    /// Per grid point: grey-level standard deviation of its pre-filtered reference subset.
+    subset_std: Vec<f64>,
+}
+
+/// How a seed's first guess is made.
+#[derive(Clone, Copy, Debug)]
+enum Guess {
+    Translation((i64, i64)),
+    Similarity(Similarity),
+}
+
+impl Guess {
+    fn warp_at(&self, x: f64, y: f64) -> Warp {
+        match self {
+            Guess::Translation((u, v)) => Warp::translation(*u as f64, *v as f64),
+            Guess::Similarity(s) => s.warp_at(x, y),
+        }
+    }
 }
 
 impl PreparedReference {
     pub fn new(image: &Image, settings: &DicSettings) -> Result<Self, DicError> {
+        Self::with_mask(image, settings, None)
+    }
+
+    /// As [`PreparedReference::new`], with a raster mask (non-zero pixels analysed) on top of
+    /// the settings' polygons.
+    pub fn with_mask(
+        image: &Image,
+        settings: &DicSettings,
+        mask: Option<&RasterMask>,
+    ) -> Result<Self, DicError> {
         settings.validate()?;
+        if let Some(m) = mask {
+            if m.size() != (image.width(), image.height()) {
+                return Err(DicError::MaskSize {
+                    mask_w: m.size().0,
+                    mask_h: m.size().1,
+                    width: image.width(),
+                    height: image.height(),
+                });
+            }
+        }
         let grid = PoiGrid::new(settings, image.width(), image.height())?;
+        let analysed = analysed_points(&grid, settings.mask.as_ref(), mask);
         let image = gaussian_blur(image, settings.prefilter_sigma_px);
         let (grad_x, grad_y) = BSplineImage::new(&image, settings.interpolation).gradient_images();
+        let subset_std = subset_stds(&image, &grid, settings.half_subset());
         Ok(Self {
+            subset_std,
             image,
             settings: settings.clone(),
             grid,
             grad_x,
             grad_y,
+            analysed,
         })
     }
 
@@ -78,26 +142,161 @@ impl PreparedReference {
         let s = &self.settings;
         let deformed = &gaussian_blur(deformed, s.prefilter_sigma_px);
         let offset = global_offset(&self.image, deformed, self.grid.roi, s.max_motion_px);
-        let def_spline = BSplineImage::new(deformed, s.interpolation);
+        let pair = Pair {
+            reference: self,
+            deformed,
+            spline: BSplineImage::new(deformed, s.interpolation),
+        };
         let (nx, ny) = (self.grid.nx(), self.grid.ny());
         let total = nx * ny;
-        let done = AtomicUsize::new(0);
-        let half = s.half_subset();
-        let rows: Vec<Vec<PoiResult>> = (0..ny)
-            .into_par_iter()
-            .map_init(
-                || Scratch::new(half),
-                |scratch, j| {
-                    let row = self.correlate_row(j, deformed, &def_spline, offset, scratch);
-                    let n = done.fetch_add(nx, Ordering::Relaxed) + nx;
-                    if let Some(report) = progress {
-                        report(n, total);
-                    }
-                    row
-                },
-            )
+        let report = |field: &Field| {
+            if let Some(report) = progress {
+                let done = (0..total)
+                    .filter(|&k| field.is_valid(k) || field.is_masked(k))
+                    .count();
+                report(done, total);
+            }
+        };
+        let mut field = Field::new(nx, ny, &self.analysed);
+
+        // 1. Seeds.
+        let seeds: Vec<usize> = seed_indices(nx, ny, SEED_SPACING_POINTS)
+            .into_iter()
+            .filter(|&k| !field.is_masked(k))
             .collect();
-        let mut points: Vec<PoiResult> = rows.into_iter().flatten().collect();
+        let guess = Guess::Translation(offset);
+        let mut seed_results =
+            pair.solve_all(&seeds, |k, scratch| pair.solve_seed(k, &guess, scratch));
+        let held = |results: &[PoiResult]| results.iter().filter(|r| r.status.is_valid()).count();
+        if 2 * held(&seed_results) < seeds.len() {
+            if let Some(sim) = estimate_similarity(
+                &self.image,
+                deformed,
+                self.grid.roi,
+                offset,
+                s.max_motion_px,
+            ) {
+                let guess = Guess::Similarity(sim);
+                let again: Vec<usize> = (0..seeds.len())
+                    .filter(|&i| !seed_results[i].status.is_valid())
+                    .collect();
+                let ks: Vec<usize> = again.iter().map(|&i| seeds[i]).collect();
+                let retried = pair.solve_all(&ks, |k, scratch| pair.solve_seed(k, &guess, scratch));
+                for (i, r) in again.into_iter().zip(retried) {
+                    seed_results[i] = r;
+                }
+            }
+        }
+        let best_seed = seed_results
+            .iter()
+            .filter(|r| r.status.is_valid())
+            .map(|r| r.zncc)
+            .fold(f64::NEG_INFINITY, f64::max);
+        for (&k, r) in seeds.iter().zip(seed_results) {
+            let guides = r.status.is_valid() && r.zncc >= best_seed - SEED_ZNCC_MARGIN;
+            field.record(k, r, guides);
+        }
+        report(&field);
+
+        // 2 and 3. Propagation, then a search where it did not reach.
+        for _ in 0..SEARCH_ROUNDS {
+            loop {
+                let tasks = field.frontier(&self.grid.xs, &self.grid.ys);
+                if tasks.is_empty() {
+                    break;
+                }
+                let results = pair.solve_tasks(&tasks, |t, scratch| {
+                    pair.solve_from(t.index, t.start, scratch)
+                });
+                for (t, r) in tasks.iter().zip(results) {
+                    let valid = r.status.is_valid();
+                    field.record_task(t, r, valid);
+                }
+                report(&field);
+            }
+            let unresolved = field.unresolved();
+            if unresolved.is_empty() {
+                break;
+            }
+            let nearest = field.nearest_valid();
+            let predictions: Vec<Warp> = unresolved
+                .iter()
+                .map(|&k| match nearest[k] {
+                    Some(n) => {
+                        let from = field.result(n).expect("a valid point has a result");
+                        let (x, y) = self.position(k);
+                        warp_of(from).moved_by(x - from.x, y - from.y)
+                    }
+                    None => {
+                        let (x, y) = self.position(k);
+                        guess.warp_at(x, y)
+                    }
+                })
+                .collect();
+            let jobs: Vec<(usize, Warp)> = unresolved.into_iter().zip(predictions).collect();
+            let results = pair.solve_tasks(&jobs, |&(k, p), scratch| {
+                pair.solve_searching(k, p, scratch)
+            });
+            let mut gained = 0;
+            for (&(k, _), r) in jobs.iter().zip(results) {
+                let valid = r.status.is_valid();
+                gained += valid as usize;
+                field.record(k, r, valid);
+            }
+            report(&field);
+            if gained == 0 {
+                break;
+            }
+        }
+
+        // 4. The field's verdict.
+        let mut points = field.into_points(&self.grid.xs, &self.grid.ys);
+        let side = s.subset_px;
+        if let Some(noise) = noise_std(&points, &self.subset_std, side * side) {
+            for (p, &sd) in points.iter_mut().zip(&self.subset_std) {
+                let judged = !matches!(
+                    p.status,
+                    PoiStatus::Masked | PoiStatus::LeftImage | PoiStatus::NoContrast
+                );
+                if judged && sd < MIN_TEXTURE_TO_NOISE * noise {
+                    *p = PoiResult {
+                        u_std_px: p.u_std_px,
+                        v_std_px: p.v_std_px,
+                        ..PoiResult::invalid(p.x, p.y, PoiStatus::NoTexture, p.zncc, p.iterations)
+                    };
+                }
+            }
+        }
+        if let Some(ratio) = s.max_znssd_ratio {
+            for k in relative_correlation_failures(&points, ratio) {
+                let p = points[k];
+                points[k] = PoiResult {
+                    u_std_px: p.u_std_px,
+                    v_std_px: p.v_std_px,
+                    ..PoiResult::invalid(p.x, p.y, PoiStatus::LowCorrelation, p.zncc, p.iterations)
+                };
+            }
+        }
+        if let Some(threshold) = s.outlier_threshold {
+            let failures = median_test_failures(&points, nx, ny, threshold);
+            let starts: Vec<(usize, Warp)> = failures
+                .iter()
+                .filter_map(|&k| self.agreeing_neighbour_start(&points, k).map(|w| (k, w)))
+                .collect();
+            let retried =
+                pair.solve_tasks(&starts, |&(k, w), scratch| pair.solve_from(k, w, scratch));
+            for (&(k, _), r) in starts.iter().zip(retried) {
+                points[k] = r;
+            }
+            for k in median_test_failures(&points, nx, ny, threshold) {
+                let p = points[k];
+                points[k] = PoiResult {
+                    u_std_px: p.u_std_px,
+                    v_std_px: p.v_std_px,
+                    ..PoiResult::invalid(p.x, p.y, PoiStatus::Outlier, p.zncc, p.iterations)
+                };
+            }
+        }
         compute_strains(&self.grid, &mut points, s.strain_window);
         let summary = Summary::of(&points);
         Ok(DicResult {
@@ -110,101 +309,118 @@ impl PreparedReference {
         })
     }
 
-    fn correlate_row(
-        &self,
-        j: usize,
-        deformed: &Image,
-        def_spline: &BSplineImage,
-        offset: (i64, i64),
-        scratch: &mut Scratch,
-    ) -> Vec<PoiResult> {
-        let s = &self.settings;
-        let y0 = self.grid.ys[j];
-        let mut previous: Option<Warp> = None;
-        let mut out = Vec::with_capacity(self.grid.nx());
-        for &x0 in &self.grid.xs {
-            let (x, y) = (x0 as f64, y0 as f64);
-            let predicted = previous.map(|w| w.moved_by(s.step_px as f64, 0.0));
-            let result =
-                self.correlate_point((x0, y0), deformed, def_spline, offset, predicted, scratch);
-            previous = match result.status {
-                PoiStatus::Converged => Some(Warp {
-                    u: result.u,
-                    ux: result.du_dx,
-                    uy: result.du_dy,
-                    v: result.v,
-                    vx: result.dv_dx,
-                    vy: result.dv_dy,
-                }),
-                _ => None,
-            };
-            debug_assert!(result.x == x && result.y == y);
-            out.push(result);
-        }
-        out
+    fn position(&self, k: usize) -> (f64, f64) {
+        let nx = self.grid.nx();
+        (self.grid.xs[k % nx] as f64, self.grid.ys[k / nx] as f64)
     }
 
-    fn correlate_point(
+    /// The start of the valid 3x3 neighbour whose prediction of point k lies nearest the
+    /// neighbours' median prediction.
+    fn agreeing_neighbour_start(&self, points: &[PoiResult], k: usize) -> Option<Warp> {
+        let (nx, ny) = (self.grid.nx(), self.grid.ny());
+        let (i, j) = (k % nx, k / nx);
+        let (x, y) = self.position(k);
+        let mut predictions: Vec<Warp> = Vec::with_capacity(8);
+        for jj in j.saturating_sub(1)..=(j + 1).min(ny - 1) {
+            for ii in i.saturating_sub(1)..=(i + 1).min(nx - 1) {
+                let n = &points[jj * nx + ii];
+                if (ii, jj) != (i, j) && n.status.is_valid() {
+                    predictions.push(warp_of(n).moved_by(x - n.x, y - n.y));
+                }
+            }
+        }
+        if predictions.is_empty() {
+            return None;
+        }
+        let median = |f: fn(&Warp) -> f64| {
+            let mut v: Vec<f64> = predictions.iter().map(f).collect();
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        let (mu, mv) = (median(|w| w.u), median(|w| w.v));
+        predictions.into_iter().min_by(|a, b| {
+            let da = (a.u - mu).hypot(a.v - mv);
+            let db = (b.u - mu).hypot(b.v - mv);
+            da.total_cmp(&db)
+        })
+    }
+}
+
+/// The reference and one pre-filtered deformed image.
+struct Pair<'a> {
+    reference: &'a PreparedReference,
+    deformed: &'a Image,
+    spline: BSplineImage,
+}
+
+impl Pair<'_> {
+    /// Solves every item in parallel, in order, with one scratch buffer per worker.
+    fn solve_tasks<T: Sync>(
         &self,
-        (x0, y0): (usize, usize),
-        deformed: &Image,
-        def_spline: &BSplineImage,
-        offset: (i64, i64),
-        predicted: Option<Warp>,
+        items: &[T],
+        solve: impl Fn(&T, &mut Scratch) -> PoiResult + Sync,
+    ) -> Vec<PoiResult> {
+        let half = self.reference.settings.half_subset();
+        items
+            .par_iter()
+            .map_init(|| Scratch::new(half), |scratch, item| solve(item, scratch))
+            .collect()
+    }
+
+    fn solve_all(
+        &self,
+        points: &[usize],
+        solve: impl Fn(usize, &mut Scratch) -> PoiResult + Sync,
+    ) -> Vec<PoiResult> {
+        self.solve_tasks(points, |&k, scratch| solve(k, scratch))
+    }
+
+    /// Loads the reference subset of point k; Err with the finished result when it has none.
+    fn subset(&self, k: usize, scratch: &mut Scratch) -> Result<SubsetReference, PoiResult> {
+        let r = self.reference;
+        let (x, y) = r.position(k);
+        SubsetReference::prepare(
+            &r.image,
+            &r.grad_x,
+            &r.grad_y,
+            (x as usize, y as usize),
+            r.settings.half_subset(),
+            scratch,
+        )
+        .ok_or_else(|| PoiResult::invalid(x, y, PoiStatus::NoContrast, f64::NAN, 0))
+    }
+
+    /// IC-GN from `start`, judged on the point's own evidence.
+    fn solve_from(&self, k: usize, start: Warp, scratch: &mut Scratch) -> PoiResult {
+        match self.subset(k, scratch) {
+            Ok(sref) => self.icgn(k, &sref, start, scratch),
+            Err(done) => done,
+        }
+    }
+
+    fn icgn(
+        &self,
+        k: usize,
+        sref: &SubsetReference,
+        start: Warp,
         scratch: &mut Scratch,
     ) -> PoiResult {
-        let s = &self.settings;
-        let half = s.half_subset();
-        let (x, y) = (x0 as f64, y0 as f64);
-        let Some(sref) = SubsetReference::prepare(
-            &self.image,
-            &self.grad_x,
-            &self.grad_y,
-            (x0, y0),
-            half,
+        let s = &self.reference.settings;
+        let (x, y) = self.reference.position(k);
+        let o = sref.solve(
+            &self.spline,
+            start,
+            s.convergence_px,
+            s.max_iterations,
             scratch,
-        ) else {
-            return PoiResult::invalid(x, y, PoiStatus::NoContrast, f64::NAN, 0);
+        );
+        let (u_std_px, v_std_px) = if o.residual_ss.is_finite() {
+            sref.displacement_std(o.residual_ss)
+        } else {
+            (f64::NAN, f64::NAN)
         };
-        // A converged neighbour's prediction is usually within a few thousandths of a pixel:
-        // IC-GN starts from it directly. Points without one, and points whose propagated start
-        // does not converge to a good correlation, get the integer ZNCC search.
-        let propagated = predicted
-            .map(|p| sref.solve(def_spline, p, s.convergence_px, s.max_iterations, scratch));
-        let outcome = match propagated {
-            Some(o) if o.status == PoiStatus::Converged && o.zncc >= s.min_zncc => o,
-            _ => {
-                let centre = predicted.map_or(offset, |p| (p.u.round() as i64, p.v.round() as i64));
-                let Some(best) = integer_search(
-                    &scratch.f0,
-                    sref.df,
-                    deformed,
-                    (x0, y0),
-                    half,
-                    centre,
-                    s.search_radius_px as i64,
-                ) else {
-                    return PoiResult::invalid(x, y, PoiStatus::LeftImage, f64::NAN, 0);
-                };
-                let start = Warp::translation(best.u as f64, best.v as f64);
-                sref.solve(
-                    def_spline,
-                    start,
-                    s.convergence_px,
-                    s.max_iterations,
-                    scratch,
-                )
-            }
-        };
-        let status = match outcome.status {
-            PoiStatus::Converged if !(outcome.zncc >= s.min_zncc) => PoiStatus::LowCorrelation,
-            other => other,
-        };
-        if status != PoiStatus::Converged {
-            return PoiResult::invalid(x, y, status, outcome.zncc, outcome.iterations);
-        }
-        let w = outcome.warp;
-        PoiResult {
+        let w = o.warp;
+        let mut p = PoiResult {
             x,
             y,
             u: w.u,
@@ -216,11 +432,97 @@ impl PreparedReference {
             exx: f64::NAN,
             eyy: f64::NAN,
             exy: f64::NAN,
-            zncc: outcome.zncc,
-            iterations: outcome.iterations,
-            status,
+            zncc: o.zncc,
+            u_std_px,
+            v_std_px,
+            iterations: o.iterations,
+            status: o.status,
+        };
+        p.status = own_status(&p, s);
+        if !p.status.is_valid() {
+            p = PoiResult {
+                zncc: p.zncc,
+                u_std_px,
+                v_std_px,
+                ..PoiResult::invalid(x, y, p.status, p.zncc, p.iterations)
+            };
+        }
+        p
+    }
+
+    /// An integer ZNCC search around `predicted`, then IC-GN with the predicted gradients.
+    fn solve_searching(&self, k: usize, predicted: Warp, scratch: &mut Scratch) -> PoiResult {
+        let s = &self.reference.settings;
+        let sref = match self.subset(k, scratch) {
+            Ok(sref) => sref,
+            Err(done) => return done,
+        };
+        let centre = (predicted.u.round() as i64, predicted.v.round() as i64);
+        let Some(best) = integer_search(
+            &scratch.f0,
+            sref.df,
+            self.deformed,
+            (sref.x0, sref.y0),
+            sref.half,
+            centre,
+            s.search_radius_px as i64,
+        ) else {
+            let (x, y) = self.reference.position(k);
+            return PoiResult::invalid(x, y, PoiStatus::LeftImage, f64::NAN, 0);
+        };
+        let start = Warp {
+            u: best.u as f64,
+            v: best.v as f64,
+            ..predicted
+        };
+        self.icgn(k, &sref, start, scratch)
+    }
+
+    /// A seed: from the guess directly when it carries a shape, else (or when that fails) from
+    /// an integer search around it.
+    fn solve_seed(&self, k: usize, guess: &Guess, scratch: &mut Scratch) -> PoiResult {
+        let (x, y) = self.reference.position(k);
+        let predicted = guess.warp_at(x, y);
+        if let Guess::Similarity(_) = guess {
+            let direct = self.solve_from(k, predicted, scratch);
+            if direct.status.is_valid() || direct.status == PoiStatus::NoContrast {
+                return direct;
+            }
+        }
+        self.solve_searching(k, predicted, scratch)
+    }
+}
+
+/// Grey-level standard deviation of every grid point's subset, from summed-area tables.
+fn subset_stds(image: &Image, grid: &PoiGrid, half: usize) -> Vec<f64> {
+    let (w, h) = (image.width(), image.height());
+    let mut s1 = vec![0.0f64; (w + 1) * (h + 1)];
+    let mut s2 = vec![0.0f64; (w + 1) * (h + 1)];
+    for r in 0..h {
+        let (mut a, mut b) = (0.0f64, 0.0f64);
+        for (c, &v) in image.row(r).iter().enumerate() {
+            let v = v as f64;
+            a += v;
+            b += v * v;
+            s1[(r + 1) * (w + 1) + c + 1] = s1[r * (w + 1) + c + 1] + a;
+            s2[(r + 1) * (w + 1) + c + 1] = s2[r * (w + 1) + c + 1] + b;
         }
     }
+    let side = 2 * half + 1;
+    let n = (side * side) as f64;
+    let mut out = Vec::with_capacity(grid.len());
+    for &y in &grid.ys {
+        for &x in &grid.xs {
+            let (x0, y0, x1, y1) = (x - half, y - half, x + half + 1, y + half + 1);
+            let rect = |t: &[f64]| {
+                t[y1 * (w + 1) + x1] - t[y0 * (w + 1) + x1] - t[y1 * (w + 1) + x0]
+                    + t[y0 * (w + 1) + x0]
+            };
+            let mean = rect(&s1) / n;
+            out.push((rect(&s2) / n - mean * mean).max(0.0).sqrt());
+        }
+    }
+    out
 }
 
 /// Prepares the reference and correlates one deformed image: the whole analysis of one pair.

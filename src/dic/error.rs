@@ -29,4 +29,11 @@ pub enum DicError {
         width: usize,
         height: usize,
     },
+    #[error("the mask is {mask_w}x{mask_h} but the images are {width}x{height}")]
+    MaskSize {
+        mask_w: usize,
+        mask_h: usize,
+        width: usize,
+        height: usize,
+    },
 }

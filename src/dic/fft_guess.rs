@@ -31,19 +31,34 @@ pub fn global_offset(
     let ky = h.min(MAX_WINDOW_PX);
     let rx = cx.saturating_sub(kx / 2).min(w - kx);
     let ry = cy.saturating_sub(ky / 2).min(h - ky);
-    // A motion larger than the image leaves no overlap to find: clamping keeps the L x L frame
-    // (L ≈ window + 2m) from growing with a careless setting.
-    let m = max_motion_px.min(w.max(h));
-    let l = fast_fft_len(kx.max(ky) + 2 * m);
 
     let (ref_mean, ref_std) = reference.crop(Roi::new(rx, ry, kx, ky)).mean_std();
     if ref_std <= 0.0 {
         return (0, 0);
     }
+    let window: Vec<f32> = (0..kx * ky)
+        .map(|k| (reference.get(rx + k % kx, ry + k / kx) as f64 - ref_mean) as f32)
+        .collect();
+    offset_of_window(&window, (kx, ky), (rx, ry), deformed, max_motion_px)
+}
+
+/// Integer (dx, dy), each within ±`max_motion_px`, at which the zero-mean `window` (kx x ky,
+/// row-major, taken at (rx, ry) of some reference) best matches `deformed`.
+pub(super) fn offset_of_window(
+    window: &[f32],
+    (kx, ky): (usize, usize),
+    (rx, ry): (usize, usize),
+    deformed: &Image,
+    max_motion_px: usize,
+) -> (i64, i64) {
+    // A motion larger than the image leaves no overlap to find: clamping keeps the L x L frame
+    // (L ≈ window + 2m) from growing with a careless setting.
+    let m = max_motion_px.min(deformed.width().max(deformed.height()));
+    let l = fast_fft_len(kx.max(ky) + 2 * m);
     let mut a = vec![Complex::new(0.0f32, 0.0); l * l];
     for r in 0..ky {
         for c in 0..kx {
-            a[r * l + c].re = (reference.get(rx + c, ry + r) as f64 - ref_mean) as f32;
+            a[r * l + c].re = window[r * kx + c];
         }
     }
     // The deformed window; samples outside the image are filled with its mean (zero after
@@ -89,20 +104,29 @@ pub fn global_offset(
     }
     fft2d(&mut planner, &mut a, l, true);
 
-    let (mut best, mut best_idx) = (f32::NEG_INFINITY, 0usize);
-    for (idx, v) in a.iter().enumerate() {
-        if v.re > best {
-            best = v.re;
-            best_idx = idx;
+    // Only shifts within ±m: the frame is larger than window + 2m (a 5-smooth length), and a
+    // peak in the excess would be a motion the user ruled out.
+    let reach = (2 * m + 1).min(l);
+    let (mut best, mut best_at) = (f32::NEG_INFINITY, (0usize, 0usize));
+    for sy in 0..reach {
+        for (sx, v) in a[sy * l..sy * l + reach].iter().enumerate() {
+            if v.re > best {
+                best = v.re;
+                best_at = (sx, sy);
+            }
         }
     }
-    let (sy, sx) = ((best_idx / l) as i64, (best_idx % l) as i64);
-    (sx - m as i64, sy - m as i64)
+    (best_at.0 as i64 - m as i64, best_at.1 as i64 - m as i64)
 }
 
 /// In-place 2D FFT of an n x n row-major array (rows in parallel, then columns through a
 /// transpose).
-fn fft2d(planner: &mut FftPlanner<f32>, data: &mut [Complex<f32>], n: usize, inverse: bool) {
+pub(super) fn fft2d(
+    planner: &mut FftPlanner<f32>,
+    data: &mut [Complex<f32>],
+    n: usize,
+    inverse: bool,
+) {
     let fft = if inverse {
         planner.plan_fft_inverse(n)
     } else {
@@ -127,7 +151,7 @@ fn transpose(data: &mut [Complex<f32>], n: usize) {
 }
 
 /// Smallest length >= n whose only prime factors are 2, 3 and 5.
-fn fast_fft_len(n: usize) -> usize {
+pub(super) fn fast_fft_len(n: usize) -> usize {
     (n..)
         .find(|&m| {
             let mut k = m;
@@ -139,6 +163,14 @@ fn fast_fft_len(n: usize) -> usize {
             k == 1
         })
         .expect("a 5-smooth number always exists")
+}
+
+/// Largest length <= n whose only prime factors are 2, 3 and 5 (n >= 1).
+pub(super) fn fast_fft_len_at_most(n: usize) -> usize {
+    (1..=n.max(1))
+        .rev()
+        .find(|&m| fast_fft_len(m) == m)
+        .unwrap_or(1)
 }
 
 #[cfg(test)]
@@ -171,6 +203,16 @@ mod tests {
             let roi = Roi::centred(900, 800, 400, 400);
             assert_eq!(global_offset(&reference, &deformed, roi, 160), (dx, dy));
         }
+    }
+
+    #[test]
+    fn motion_beyond_max_motion_is_not_reported() {
+        let reference = texture(600, 600, 0, 0);
+        let deformed = texture(600, 600, 40, -30);
+        let roi = Roi::centred(600, 600, 300, 300);
+        assert_eq!(global_offset(&reference, &deformed, roi, 64), (40, -30));
+        let (dx, dy) = global_offset(&reference, &deformed, roi, 20);
+        assert!(dx.abs() <= 20 && dy.abs() <= 20, "{dx}, {dy}");
     }
 
     #[test]

@@ -1,9 +1,10 @@
 //! The grid of points of interest (subset centres).
 //!
-//! The ROI holds the POI centres: along x they sit at `roi.x, roi.x + step, ...` up to and
-//! including `roi.x + roi.width` — the ROI is the span of centres, as in MatchID and the paper,
-//! so an 800 px ROI at step 5 has 161 points per axis. Points whose subset would not lie wholly
-//! inside the image are dropped, so the default ROI clipped to a small image still works.
+//! The ROI holds the POI centres — the ROI is the span of centres, as in MatchID and the paper,
+//! so an 800 px ROI at step 5 has 161 points per axis, from `roi.x` to `roi.x + roi.width`.
+//! Only centres whose subset lies wholly inside the image are used: the span is first narrowed
+//! to those, and the points are centred in what remains, so a default ROI clipped to a small
+//! image gives a grid with equal margins rather than one pushed against a border.
 
 use super::{DicError, DicSettings};
 use crate::image::Roi;
@@ -30,9 +31,16 @@ impl PoiGrid {
         }
         let half = settings.half_subset();
         let axis = |start: usize, span: usize, size: usize| -> Vec<usize> {
-            (0..=span / settings.step_px)
-                .map(|k| start + k * settings.step_px)
-                .filter(|&c| c >= half && c + half < size)
+            let first = start.max(half);
+            let last = (start + span).min(size.saturating_sub(half + 1));
+            if size < 2 * half + 1 || first > last {
+                return Vec::new();
+            }
+            let usable = last - first;
+            let count = usable / settings.step_px + 1;
+            let margin = (usable - (count - 1) * settings.step_px) / 2;
+            (0..count)
+                .map(|k| first + margin + k * settings.step_px)
                 .collect()
         };
         let xs = axis(roi.x, roi.width, width);
@@ -90,8 +98,10 @@ mod tests {
     #[test]
     fn default_roi_on_a_small_image_keeps_subsets_inside() {
         let g = PoiGrid::new(&DicSettings::default(), 512, 512).unwrap();
-        assert_eq!(g.xs.first(), Some(&20));
-        assert_eq!(g.xs.last(), Some(&480));
+        // Centres 20..=491 fit; 24 points at step 20 span 460 px, centred: 25..=485.
+        assert_eq!(g.xs.first(), Some(&25));
+        assert_eq!(g.xs.last(), Some(&485));
+        assert_eq!(g.xs.len(), 24);
     }
 
     #[test]

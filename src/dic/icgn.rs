@@ -12,6 +12,12 @@ use super::bspline::{cubic_weights, quintic_weights, BSplineImage};
 use super::{Interpolation, PoiStatus, Warp};
 use crate::image::Image;
 
+/// Smallest ratio of the weaker to the stronger principal gradient energy of a subset: below
+/// it the subset is textured in one direction only (the `no_contrast` status). A speckle
+/// subset has a ratio of 0.3 to 1; 10⁻³ means a position 30 times less certain across the
+/// texture than along it.
+pub const MIN_GRADIENT_ISOTROPY: f64 = 1e-3;
+
 /// Per-thread buffers for one subset, reused from point to point.
 pub struct Scratch {
     pub f0: Vec<f32>,
@@ -51,6 +57,9 @@ pub struct SubsetReference {
 pub struct IcgnOutcome {
     pub warp: Warp,
     pub zncc: f64,
+    /// Σ r² of the last iteration's ZNSSD residual, on the reference's grey scale (NaN when
+    /// never evaluated).
+    pub residual_ss: f64,
     pub iterations: u32,
     pub status: PoiStatus,
 }
@@ -130,6 +139,15 @@ impl SubsetReference {
                 *hij = mom[prod][MONO[i % 3][j % 3]];
             }
         }
+        // Gradients in essentially one direction (a 1-D texture, an edge, fringes) leave the
+        // position along the other undetermined whatever the noise: the weaker eigenvalue of
+        // the translation block [Σgx², Σgxgy; Σgxgy, Σgy²] must hold a share of the stronger.
+        let (a, b, c) = (mom[0][0], mom[1][0], mom[2][0]);
+        let mean = 0.5 * (a + c);
+        let spread = (0.25 * (a - c) * (a - c) + b * b).sqrt();
+        if !(mean - spread >= MIN_GRADIENT_ISOTROPY * (mean + spread)) {
+            return None;
+        }
         let chol = cholesky(&hess)?;
         Some(Self {
             x0,
@@ -138,6 +156,23 @@ impl SubsetReference {
             df,
             chol,
         })
+    }
+
+    /// Standard deviations of u and v, px, that a fit residual Σ r² implies: the Gauss-Newton
+    /// covariance σ̂²·H⁻¹ with σ̂² = Σ r² / (n − 6) (the residual holds the noise of both images,
+    /// and any misfit). Pan et al., "Study on subset size selection in digital image
+    /// correlation for speckle patterns", Opt. Express 16 (2008), derive the same scaling
+    /// (σ_u ∝ σ/√SSSIG) for the translation alone.
+    pub fn displacement_std(&self, residual_ss: f64) -> (f64, f64) {
+        let side = 2 * self.half + 1;
+        let dof = (side * side).saturating_sub(6).max(1) as f64;
+        let sigma2 = residual_ss / dof;
+        let diag = |k: usize| {
+            let mut e = [0.0f64; 6];
+            e[k] = 1.0;
+            cholesky_solve(&self.chol, &e)[k]
+        };
+        ((sigma2 * diag(0)).sqrt(), (sigma2 * diag(3)).sqrt())
     }
 
     /// Runs IC-GN from `start` until the update is below `convergence_px` or `max_iterations`.
@@ -154,6 +189,7 @@ impl SubsetReference {
         let half_f = self.half as f64;
         let mut warp = start;
         let mut zncc = f64::NAN;
+        let mut residual_ss = f64::NAN;
         for iteration in 1..=max_iterations {
             let inside = match deformed.kind() {
                 Interpolation::Bspline3 => warp_subset::<4>(deformed, self, &warp, &mut scratch.g),
@@ -163,6 +199,7 @@ impl SubsetReference {
                 return IcgnOutcome {
                     warp,
                     zncc,
+                    residual_ss,
                     iterations: iteration,
                     status: PoiStatus::LeftImage,
                 };
@@ -181,6 +218,7 @@ impl SubsetReference {
                 return IcgnOutcome {
                     warp,
                     zncc,
+                    residual_ss,
                     iterations: iteration,
                     status: PoiStatus::LowCorrelation,
                 };
@@ -217,6 +255,7 @@ impl SubsetReference {
                 rr += s as f64;
             }
             zncc = 1.0 - 0.5 * rr / (self.df * self.df);
+            residual_ss = rr;
             let x = cholesky_solve(&self.chol, &b);
             let dp = Warp::from_array([-x[0], -x[1], -x[2], -x[3], -x[4], -x[5]]);
             match warp.compose_inverse(&dp) {
@@ -225,6 +264,7 @@ impl SubsetReference {
                     return IcgnOutcome {
                         warp,
                         zncc,
+                        residual_ss,
                         iterations: iteration,
                         status: PoiStatus::NotConverged,
                     }
@@ -234,6 +274,7 @@ impl SubsetReference {
                 return IcgnOutcome {
                     warp,
                     zncc,
+                    residual_ss,
                     iterations: iteration,
                     status: PoiStatus::Converged,
                 };
@@ -242,6 +283,7 @@ impl SubsetReference {
         IcgnOutcome {
             warp,
             zncc,
+            residual_ss,
             iterations: max_iterations,
             status: PoiStatus::NotConverged,
         }

@@ -1,6 +1,8 @@
-//! 2D subset digital image correlation: B-spline interpolation, a global FFT initial guess with
-//! per-point integer refinement, IC-GN with the first-order shape function and the ZNSSD
-//! criterion, strain by pointwise least squares, and summary statistics.
+//! 2D subset digital image correlation: B-spline interpolation, initial guesses from a global
+//! FFT offset (translation) or a Fourier-Mellin similarity (rotation and scale) at seed points,
+//! reliability-guided propagation over the grid, IC-GN with the first-order shape function and
+//! the ZNSSD criterion, validation (ZNCC, shape, texture, normalised median test, masks),
+//! strain by pointwise least squares, and summary statistics.
 //!
 //! Nothing here knows about files, cameras or HTTP: images in, [`DicResult`] out.
 
@@ -11,11 +13,16 @@ mod fft_guess;
 mod grid;
 mod icgn;
 mod integer_search;
+mod mask;
 mod prefilter;
+mod propagate;
 mod result;
+mod sequence;
 mod settings;
+mod similarity;
 mod stats;
 mod strain;
+mod validate;
 mod warp;
 
 pub use bspline::{BSplineImage, Interpolation};
@@ -23,8 +30,12 @@ pub use engine::{analyze, PreparedReference, Progress};
 pub use error::DicError;
 pub use fft_guess::global_offset;
 pub use grid::PoiGrid;
+pub use mask::{Polygon, PolygonMask, RasterMask, MAX_MASK_VERTICES};
 pub use prefilter::gaussian_blur;
 pub use result::{DicResult, PoiResult, PoiStatus};
+pub use sequence::{analyze_sequence, SequenceFrame, REFERENCE_UPDATE_FRACTION};
 pub use settings::{DicSettings, DEFAULT_ROI_SIDE_PX};
+pub use similarity::{estimate_similarity, Similarity};
 pub use stats::{Stats, Summary};
+pub use validate::{MAX_PLAUSIBLE_GRADIENT, RELATIVE_ZNCC_FLOOR};
 pub use warp::Warp;

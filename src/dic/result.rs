@@ -3,7 +3,9 @@
 use super::{DicSettings, PoiGrid, Summary};
 use serde::{Deserialize, Serialize};
 
-/// The outcome of one point of interest. Only `Converged` points carry displacements.
+/// The outcome of one point of interest. Only `Converged` points are valid and carry
+/// displacements: converged, correlated above `min_zncc`, a plausible shape, a texture that
+/// determines the position, and in agreement with the neighbours.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum PoiStatus {
@@ -17,6 +19,18 @@ pub enum PoiStatus {
     /// The reference subset has no usable intensity variation (flat, or gradients in one
     /// direction only, which makes the Gauss-Newton Hessian singular).
     NoContrast,
+    /// The subset's gradients do not pin its position down against the fit residual: the
+    /// predicted standard deviation of u or v exceeds `max_displacement_std_px` (a blank or
+    /// nearly blank region whose noise or shading the correlation can lock onto anywhere).
+    NoTexture,
+    /// Converged to a shape no real deformation of a subset has (a displacement gradient
+    /// beyond [`MAX_PLAUSIBLE_GRADIENT`](crate::dic::MAX_PLAUSIBLE_GRADIENT)).
+    Implausible,
+    /// Disagrees with its neighbours by the normalised median test (Westerweel & Scarano,
+    /// "Universal outlier detection for PIV data", Exp. Fluids 39 (2005)).
+    Outlier,
+    /// The subset centre lies outside the analysis mask.
+    Masked,
 }
 
 impl PoiStatus {
@@ -27,6 +41,10 @@ impl PoiStatus {
             PoiStatus::LowCorrelation => "low_correlation",
             PoiStatus::LeftImage => "left_image",
             PoiStatus::NoContrast => "no_contrast",
+            PoiStatus::NoTexture => "no_texture",
+            PoiStatus::Implausible => "implausible",
+            PoiStatus::Outlier => "outlier",
+            PoiStatus::Masked => "masked",
         }
     }
 
@@ -55,6 +73,12 @@ pub struct PoiResult {
     pub exy: f64,
     /// Zero-normalised cross-correlation at the solution (NaN when never evaluated).
     pub zncc: f64,
+    /// Standard deviation of u and v predicted from the fit residual and the subset's own
+    /// gradients (the Gauss-Newton covariance σ̂²·H⁻¹), px; NaN when never evaluated.
+    #[serde(default = "nan")]
+    pub u_std_px: f64,
+    #[serde(default = "nan")]
+    pub v_std_px: f64,
     pub iterations: u32,
     pub status: PoiStatus,
 }
@@ -74,10 +98,16 @@ impl PoiResult {
             eyy: f64::NAN,
             exy: f64::NAN,
             zncc,
+            u_std_px: f64::NAN,
+            v_std_px: f64::NAN,
             iterations,
             status,
         }
     }
+}
+
+fn nan() -> f64 {
+    f64::NAN
 }
 
 /// Everything one analysis produced, with every setting that produced it.

@@ -1,7 +1,7 @@
 //! Every setting of one DIC analysis. Defaults follow the paper's study (Hijazi, Rawashdeh &
 //! Kähler): subset 41x41, step 20, ROI 800x800 centred, strain window 7x7 points.
 
-use super::{DicError, Interpolation};
+use super::{DicError, Interpolation, PolygonMask};
 use crate::image::Roi;
 use serde::{Deserialize, Serialize};
 
@@ -24,6 +24,20 @@ pub struct DicSettings {
     pub max_iterations: u32,
     /// Points whose final ZNCC is below this get the `low_correlation` status.
     pub min_zncc: f64,
+    /// Points whose ZNSSD (= 2·(1 − ZNCC)) exceeds this many times the median ZNSSD of the
+    /// field's valid points get the `low_correlation` status, unless their ZNCC is at least
+    /// [`RELATIVE_ZNCC_FLOOR`](crate::dic::RELATIVE_ZNCC_FLOOR): a subset that straddles a
+    /// discontinuity or a region the deformed image does not show matches only in part;
+    /// `None` turns the test off.
+    pub max_znssd_ratio: Option<f64>,
+    /// Points whose predicted displacement standard deviation (fit residual against the
+    /// subset's own gradients) exceeds this get the `no_texture` status, px.
+    pub max_displacement_std_px: f64,
+    /// Threshold of the normalised median test against the 3x3 neighbours (Westerweel &
+    /// Scarano 2005 recommend 2); `None` turns the test off.
+    pub outlier_threshold: Option<f64>,
+    /// Polygons bounding the analysed region; points outside get the `masked` status.
+    pub mask: Option<PolygonMask>,
     /// Largest rigid motion the global FFT cross-correlation looks for, in px.
     pub max_motion_px: usize,
     /// Integer search radius around the global offset where no converged neighbour helps, in px.
@@ -55,6 +69,10 @@ impl Default for DicSettings {
             convergence_px: 1e-3,
             max_iterations: 50,
             min_zncc: 0.6,
+            max_znssd_ratio: Some(10.0),
+            max_displacement_std_px: 0.1,
+            outlier_threshold: Some(2.0),
+            mask: None,
             max_motion_px: 160,
             search_radius_px: 3,
         }
@@ -101,6 +119,22 @@ impl DicSettings {
         }
         if !(-1.0..=1.0).contains(&self.min_zncc) {
             return bad("min_zncc", "must lie in [-1, 1]".into());
+        }
+        if !(self.max_displacement_std_px > 0.0 && self.max_displacement_std_px <= 100.0) {
+            return bad("max_displacement_std_px", "must lie in (0, 100] px".into());
+        }
+        if let Some(r) = self.max_znssd_ratio {
+            if !(1.0..=1e6).contains(&r) {
+                return bad("max_znssd_ratio", "must lie in [1, 1e6]".into());
+            }
+        }
+        if let Some(t) = self.outlier_threshold {
+            if !(t > 0.0 && t <= 100.0) {
+                return bad("outlier_threshold", "must lie in (0, 100]".into());
+            }
+        }
+        if let Some(mask) = &self.mask {
+            mask.validate()?;
         }
         if self.max_motion_px > MAX_MOTION_PX {
             return bad("max_motion_px", format!("at most {MAX_MOTION_PX} px"));

@@ -7,6 +7,7 @@ mod error;
 mod gray;
 mod roi;
 mod tiff_io;
+mod tiff_layout;
 
 pub use error::ImageError;
 pub use gray::Image;

@@ -1,13 +1,15 @@
 //! Grayscale TIFF in and out (the `tiff` crate). 8- and 16-bit integer and 32-bit float grey
-//! images are read; 8- and 16-bit are written. Writes go to a temporary file that is renamed into
+//! images are read, and palette and grey+alpha ones through [`super::tiff_layout`]; 8- and
+//! 16-bit are written. Writes go to a temporary file that is renamed into
 //! place, so a crash never leaves a half-written frame under the final name.
 
+use super::tiff_layout::{rewrite_as_grey, Rewritten};
 use super::{Image, ImageError};
-use std::fs::File;
-use std::io::{BufReader, Cursor};
+use std::io::Cursor;
 use std::path::Path;
 use tiff::decoder::{Decoder, DecodingResult};
 use tiff::encoder::{colortype, TiffEncoder};
+use tiff::tags::Tag;
 use tiff::ColorType;
 
 /// What a TIFF file held before conversion to f32.
@@ -18,9 +20,11 @@ pub struct TiffInfo {
     pub bit_depth: u8,
 }
 
-/// Reads the first page of a grayscale TIFF as f32 grey values on the file's own scale.
+/// Reads the first page of a grayscale TIFF as f32 grey values on the file's own scale. Palette
+/// images are read through their colour map (grey palettes exactly, colour ones as Rec. 601
+/// luma) on the scale of their index depth; grey+alpha images drop the alpha.
 pub fn read_tiff(path: &Path) -> Result<(Image, TiffInfo), ImageError> {
-    let file = File::open(path).map_err(|source| ImageError::Open {
+    let bytes = std::fs::read(path).map_err(|source| ImageError::Open {
         path: path.to_owned(),
         source,
     })?;
@@ -28,11 +32,58 @@ pub fn read_tiff(path: &Path) -> Result<(Image, TiffInfo), ImageError> {
         path: path.to_owned(),
         reason: e.to_string(),
     };
-    let mut decoder = Decoder::new(BufReader::new(file)).map_err(decode_err)?;
+    let unsupported = |kind: String| ImageError::Unsupported {
+        path: path.to_owned(),
+        kind,
+    };
+    let colortype = Decoder::new(Cursor::new(&bytes)).and_then(|mut d| d.colortype());
+    match colortype {
+        Ok(ColorType::Gray(8 | 16 | 32)) => {
+            let mut decoder = Decoder::new(Cursor::new(&bytes)).map_err(decode_err)?;
+            decode_grey(&mut decoder, path)
+        }
+        other => match rewrite_as_grey(&bytes) {
+            Some(Rewritten::Palette(copy)) => {
+                let mut decoder = Decoder::new(Cursor::new(&copy)).map_err(decode_err)?;
+                let (indices, info) = decode_grey(&mut decoder, path)?;
+                let map = decoder.get_tag_u16_vec(Tag::ColorMap).map_err(decode_err)?;
+                palette_to_grey(&indices, info, &map).ok_or_else(|| ImageError::Decode {
+                    path: path.to_owned(),
+                    reason: "the colour map does not cover the palette indices".into(),
+                })
+            }
+            Some(Rewritten::GreyAlpha(copy)) => {
+                let mut decoder = Decoder::new(Cursor::new(&copy)).map_err(decode_err)?;
+                let (both, info) = decode_grey(&mut decoder, path)?;
+                let width = info.width / 2;
+                let grey: Vec<f32> = both.data().iter().step_by(2).copied().collect();
+                let image =
+                    Image::from_vec(width, info.height, grey).map_err(|_| ImageError::Decode {
+                        path: path.to_owned(),
+                        reason: "pixel data shorter than the image dimensions".into(),
+                    })?;
+                Ok((image, TiffInfo { width, ..info }))
+            }
+            None => match other {
+                Ok(color) => Err(unsupported(format!("{color:?}"))),
+                Err(e) => Err(decode_err(e)),
+            },
+        },
+    }
+}
+
+/// Decodes a grey first page (8/16-bit integer or 32-bit float).
+fn decode_grey(
+    decoder: &mut Decoder<Cursor<&Vec<u8>>>,
+    path: &Path,
+) -> Result<(Image, TiffInfo), ImageError> {
+    let decode_err = |e: tiff::TiffError| ImageError::Decode {
+        path: path.to_owned(),
+        reason: e.to_string(),
+    };
     let (w, h) = decoder.dimensions().map_err(decode_err)?;
     let (width, height) = (w as usize, h as usize);
-    let color = decoder.colortype().map_err(decode_err)?;
-    let bit_depth = match color {
+    let bit_depth = match decoder.colortype().map_err(decode_err)? {
         ColorType::Gray(bits @ (8 | 16 | 32)) => bits,
         other => {
             return Err(ImageError::Unsupported {
@@ -46,10 +97,16 @@ pub fn read_tiff(path: &Path) -> Result<(Image, TiffInfo), ImageError> {
         DecodingResult::U16(v) => v.into_iter().map(f32::from).collect(),
         DecodingResult::F32(v) => v,
         other => {
+            let kind = match other {
+                DecodingResult::U32(_) => "32-bit integer samples",
+                DecodingResult::U64(_) => "64-bit integer samples",
+                DecodingResult::F64(_) => "64-bit float samples",
+                _ => "signed integer samples",
+            };
             return Err(ImageError::Unsupported {
                 path: path.to_owned(),
-                kind: format!("{:?} samples", std::mem::discriminant(&other)),
-            })
+                kind: kind.into(),
+            });
         }
     };
     let image = Image::from_vec(width, height, data).map_err(|_| ImageError::Decode {
@@ -64,6 +121,37 @@ pub fn read_tiff(path: &Path) -> Result<(Image, TiffInfo), ImageError> {
             bit_depth: bit_depth as u8,
         },
     ))
+}
+
+/// Grey values of palette indices: the colour map holds 2^bits red, then green, then blue
+/// entries on a 16-bit scale; the grey is scaled back to the index depth (a grey palette of an
+/// 8-bit image gives its 0..255 values exactly).
+fn palette_to_grey(indices: &Image, info: TiffInfo, map: &[u16]) -> Option<(Image, TiffInfo)> {
+    let entries = 1usize << info.bit_depth.min(16);
+    if map.len() < 3 * entries {
+        return None;
+    }
+    let (r, g, b) = (
+        &map[..entries],
+        &map[entries..2 * entries],
+        &map[2 * entries..3 * entries],
+    );
+    let scale = ((1u32 << info.bit_depth.min(16)) - 1) as f64 / 65535.0;
+    let grey: Vec<f32> = indices
+        .data()
+        .iter()
+        .map(|&i| {
+            let i = (i as usize).min(entries - 1);
+            let y = if r[i] == g[i] && g[i] == b[i] {
+                r[i] as f64
+            } else {
+                0.299 * r[i] as f64 + 0.587 * g[i] as f64 + 0.114 * b[i] as f64
+            };
+            (y * scale) as f32
+        })
+        .collect();
+    let image = Image::from_vec(info.width, info.height, grey).ok()?;
+    Some((image, info))
 }
 
 /// Writes 16-bit grey values, rounding and clamping to 0..=65535.
@@ -148,6 +236,42 @@ mod tests {
         let (back, info) = read_tiff(&path).unwrap();
         assert_eq!(info.bit_depth, 8);
         assert_eq!(back, img);
+    }
+
+    fn fixture(name: &str) -> std::path::PathBuf {
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/fixtures/tiff")
+            .join(name)
+    }
+
+    /// The fixtures were written by tifffile (Python), not by this crate: a 64x48 ramp
+    /// (i·7 mod 251, 8-bit) and (i·97 mod 65521, 16-bit).
+    fn ramp8(c: usize, r: usize) -> f32 {
+        ((r * 64 + c) * 7 % 251) as f32
+    }
+
+    #[test]
+    fn palette_and_grey_alpha_files_are_read() {
+        let (img, info) = read_tiff(&fixture("palette8.tif")).unwrap();
+        assert_eq!((info.width, info.height, info.bit_depth), (64, 48, 8));
+        assert_eq!(img, Image::from_fn(64, 48, ramp8));
+        let (img, _) = read_tiff(&fixture("greyalpha8.tif")).unwrap();
+        assert_eq!(img, Image::from_fn(64, 48, ramp8));
+        let (img, info) = read_tiff(&fixture("greyalpha16.tif")).unwrap();
+        assert_eq!(info.bit_depth, 16);
+        assert_eq!(
+            img,
+            Image::from_fn(64, 48, |c, r| ((r * 64 + c) * 97 % 65521) as f32)
+        );
+        // A colour palette k -> (k, 255 - k, k / 2) becomes its Rec. 601 luma.
+        let (img, _) = read_tiff(&fixture("palette8_colour.tif")).unwrap();
+        let k = ramp8(5, 3) as f64;
+        let luma = 0.299 * k + 0.587 * (255.0 - k) + 0.114 * (k / 2.0).floor();
+        assert!(
+            (img.get(5, 3) as f64 - luma).abs() < 1e-3,
+            "{} vs {luma}",
+            img.get(5, 3)
+        );
     }
 
     #[test]
