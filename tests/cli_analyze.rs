@@ -262,3 +262,36 @@ fn thresholds_and_polygon_masks_are_settable() {
     assert!(!out.status.success());
     assert!(stderr_line(&out).contains("min_zncc"));
 }
+
+#[test]
+fn the_second_order_shape_function_is_selectable() {
+    let out = ffdic(&[
+        "analyze",
+        &sample3("reference.tif"),
+        &sample3("shift_05.tif"),
+        "--shape",
+        "quadratic",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(doc["settings"]["shape_function"], "quadratic");
+    assert_eq!(doc["valid"], doc["points"], "{doc}");
+    assert!(
+        (doc["u"]["mean"].as_f64().unwrap() - 0.5).abs() < 0.003,
+        "{doc}"
+    );
+    let out = ffdic(&[
+        "analyze",
+        &sample3("reference.tif"),
+        &sample3("shift_05.tif"),
+        "--shape",
+        "cubic",
+    ]);
+    assert!(!out.status.success());
+    assert!(stderr_line(&out).contains("cubic"));
+}

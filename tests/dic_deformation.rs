@@ -11,7 +11,7 @@
 
 mod common;
 
-use ffdic::dic::{analyze, DicResult, DicSettings, PoiStatus};
+use ffdic::dic::{analyze, DicResult, DicSettings, PoiStatus, ShapeFunction};
 use ffdic::image::{Image, Roi};
 use ffdic::model::{render_dots, SpeckleLayout};
 use rand::SeedableRng;
@@ -361,4 +361,53 @@ fn a_rotation_sequence_beyond_one_subset_is_followed_by_moving_the_reference() {
         results.last().unwrap().reference_index > 0,
         "the reference never moved"
     );
+}
+
+#[test]
+fn a_quadratic_field_needs_the_second_order_shape_function() {
+    // u = a(X − c)², v = a(Y − c)²: the gradient changes across every subset. Each dot moves
+    // with the field and is stretched by the local (diagonal) Jacobian; the field's curvature
+    // within one dot (a·σ² ≈ 2e-4 px) is below anything measured here.
+    const A: f64 = 1e-4;
+    let layout = speckle(41);
+    let moved = SpeckleLayout {
+        dots: layout
+            .dots
+            .iter()
+            .map(|d| ffdic::model::GaussianDot {
+                x_px: d.x_px + A * (d.x_px - CENTRE).powi(2),
+                y_px: d.y_px + A * (d.y_px - CENTRE).powi(2),
+                sigma_x_px: d.sigma_x_px * (1.0 + 2.0 * A * (d.x_px - CENTRE)),
+                sigma_y_px: d.sigma_y_px * (1.0 + 2.0 * A * (d.y_px - CENTRE)),
+                depth: d.depth,
+            })
+            .collect(),
+    };
+    let reference = noisy(render(&layout), 20);
+    let deformed = noisy(render(&moved), 21);
+    let truth = |x: f64, y: f64| (A * (x - CENTRE).powi(2), A * (y - CENTRE).powi(2));
+    let mut worst = Vec::new();
+    for shape in [ShapeFunction::Affine, ShapeFunction::Quadratic] {
+        let s = DicSettings {
+            shape,
+            step_px: 20,
+            ..settings()
+        };
+        let result = analyze(&reference, &deformed, &s, None).unwrap();
+        let e = errors(&result, truth);
+        println!(
+            "{shape:?}: {}/{} valid, worst {:.4} px, bias u {:+.5} v {:+.5} px",
+            e.valid, e.points, e.worst_px, e.bias_u_px, e.bias_v_px
+        );
+        assert!(e.valid as f64 >= 0.99 * e.points as f64, "{shape:?}");
+        worst.push((e.worst_px, e.bias_u_px.abs().max(e.bias_v_px.abs())));
+    }
+    // First order: the subset's mean of a·Δx² (a·(41² − 1)/12 = 0.014 px) appears as a bias.
+    let (affine, quadratic) = (worst[0], worst[1]);
+    assert!(
+        affine.1 > 0.005,
+        "the first-order bias should show: {affine:?}"
+    );
+    assert!(quadratic.1 <= 0.002, "second order bias {quadratic:?}");
+    assert!(quadratic.0 <= 0.02, "second order worst {quadratic:?}");
 }

@@ -7,7 +7,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use ffdic::dic::{
     analyze_sequence, DicResult, DicSettings, Interpolation, PolygonMask, PreparedReference,
-    RasterMask, SequenceFrame, Summary,
+    RasterMask, SequenceFrame, ShapeFunction, Summary,
 };
 use ffdic::image::{read_tiff, Image, Roi};
 use serde_json::json;
@@ -40,6 +40,9 @@ pub struct AnalyzeArgs {
     /// Interpolation: bspline3 or bspline5.
     #[arg(long, default_value = "bspline3")]
     pub interp: Interpolation,
+    /// Subset shape function: affine (first order) or quadratic (second order, slower).
+    #[arg(long, default_value = "affine")]
+    pub shape: ShapeFunction,
     /// Gaussian pre-filter σ in px applied to both images (0: off).
     #[arg(long, default_value_t = 0.7)]
     pub prefilter_sigma: f64,
@@ -115,6 +118,7 @@ fn settings(args: &AnalyzeArgs) -> Result<DicSettings> {
         roi: args.roi,
         strain_window: args.strain_window,
         interpolation: args.interp,
+        shape: args.shape,
         prefilter_sigma_px: args.prefilter_sigma,
         min_zncc: args.min_zncc,
         max_motion_px: args.max_motion,
@@ -349,7 +353,7 @@ fn settings_json(result: &DicResult, args: &AnalyzeArgs, deformed: &Path) -> ser
         "grid": { "nx": result.grid.nx(), "ny": result.grid.ny() },
         "strain_gauge_px": result.strain_gauge_px,
         "criterion": "znssd",
-        "shape_function": "first_order",
+        "shape_function": result.settings.shape.as_str(),
         "algorithm": "icgn",
         "ffdic_version": ffdic::VERSION,
     })

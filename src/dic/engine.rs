@@ -24,13 +24,16 @@ use super::integer_search::integer_search;
 use super::mask::{analysed_points, RasterMask};
 use super::prefilter::gaussian_blur;
 use super::propagate::{seed_indices, warp_of, Field};
+use super::quadratic::{QuadraticSolve, QuadraticWarp};
 use super::similarity::{estimate_similarity, Similarity};
 use super::strain::compute_strains;
 use super::validate::{
     median_test_failures, noise_std, own_status, relative_correlation_failures,
     MIN_TEXTURE_TO_NOISE,
 };
-use super::{DicError, DicResult, DicSettings, PoiGrid, PoiResult, PoiStatus, Summary, Warp};
+use super::{
+    DicError, DicResult, DicSettings, PoiGrid, PoiResult, PoiStatus, ShapeFunction, Summary, Warp,
+};
 use crate::image::Image;
 use rayon::prelude::*;
 
@@ -149,10 +152,11 @@ impl PreparedReference {
         };
         let (nx, ny) = (self.grid.nx(), self.grid.ny());
         let total = nx * ny;
+        // Progress counts points decided so far: solved at least once (valid or not) or masked.
         let report = |field: &Field| {
             if let Some(report) = progress {
                 let done = (0..total)
-                    .filter(|&k| field.is_valid(k) || field.is_masked(k))
+                    .filter(|&k| field.result(k).is_some() || field.is_masked(k))
                     .count();
                 report(done, total);
             }
@@ -164,7 +168,9 @@ impl PreparedReference {
             .into_iter()
             .filter(|&k| !field.is_masked(k))
             .collect();
-        let guess = Guess::Translation(offset);
+        // The global guess: the rigid offset, or the similarity once it has been estimated (it
+        // also serves the search for points with no valid point anywhere).
+        let mut guess = Guess::Translation(offset);
         let mut seed_results =
             pair.solve_all(&seeds, |k, scratch| pair.solve_seed(k, &guess, scratch));
         let held = |results: &[PoiResult]| results.iter().filter(|r| r.status.is_valid()).count();
@@ -176,7 +182,7 @@ impl PreparedReference {
                 offset,
                 s.max_motion_px,
             ) {
-                let guess = Guess::Similarity(sim);
+                guess = Guess::Similarity(sim);
                 let again: Vec<usize> = (0..seeds.len())
                     .filter(|&i| !seed_results[i].status.is_valid())
                     .collect();
@@ -407,19 +413,38 @@ impl Pair<'_> {
     ) -> PoiResult {
         let s = &self.reference.settings;
         let (x, y) = self.reference.position(k);
-        let o = sref.solve(
-            &self.spline,
-            start,
-            s.convergence_px,
-            s.max_iterations,
-            scratch,
-        );
-        let (u_std_px, v_std_px) = if o.residual_ss.is_finite() {
-            sref.displacement_std(o.residual_ss)
-        } else {
-            (f64::NAN, f64::NAN)
+        let (w, zncc, iterations, status, (u_std_px, v_std_px)) = match s.shape {
+            ShapeFunction::Affine => {
+                let o = sref.solve(
+                    &self.spline,
+                    start,
+                    s.convergence_px,
+                    s.max_iterations,
+                    scratch,
+                );
+                let std = if o.residual_ss.is_finite() {
+                    sref.displacement_std(o.residual_ss)
+                } else {
+                    (f64::NAN, f64::NAN)
+                };
+                (o.warp, o.zncc, o.iterations, o.status, std)
+            }
+            ShapeFunction::Quadratic => {
+                let solve = QuadraticSolve {
+                    deformed: &self.spline,
+                    centre: (sref.x0, sref.y0),
+                    half: sref.half,
+                    df: sref.df,
+                };
+                let o = solve.run(
+                    QuadraticWarp::from_affine(&start),
+                    s.convergence_px,
+                    s.max_iterations,
+                    scratch,
+                );
+                (o.warp.affine(), o.zncc, o.iterations, o.status, o.std_px)
+            }
         };
-        let w = o.warp;
         let mut p = PoiResult {
             x,
             y,
@@ -432,11 +457,11 @@ impl Pair<'_> {
             exx: f64::NAN,
             eyy: f64::NAN,
             exy: f64::NAN,
-            zncc: o.zncc,
+            zncc,
             u_std_px,
             v_std_px,
-            iterations: o.iterations,
-            status: o.status,
+            iterations,
+            status,
         };
         p.status = own_status(&p, s);
         if !p.status.is_valid() {

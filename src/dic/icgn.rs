@@ -21,9 +21,9 @@ pub const MIN_GRADIENT_ISOTROPY: f64 = 1e-3;
 /// Per-thread buffers for one subset, reused from point to point.
 pub struct Scratch {
     pub f0: Vec<f32>,
-    gx: Vec<f32>,
-    gy: Vec<f32>,
-    g: Vec<f32>,
+    pub(super) gx: Vec<f32>,
+    pub(super) gy: Vec<f32>,
+    pub(super) g: Vec<f32>,
     dxs: Vec<f32>,
 }
 
@@ -384,9 +384,9 @@ fn taps6(c: &[f32], base: usize, stride: usize, wx: &[f32; 6], wy: &[f32; 6]) ->
 
 /// Cholesky factor L (lower) of a symmetric positive-definite 6x6 matrix; None if not SPD.
 #[allow(clippy::needless_range_loop)] // index form mirrors the textbook recurrences
-fn cholesky(a: &[[f64; 6]; 6]) -> Option<[[f64; 6]; 6]> {
-    let mut l = [[0.0f64; 6]; 6];
-    for i in 0..6 {
+pub(super) fn cholesky<const N: usize>(a: &[[f64; N]; N]) -> Option<[[f64; N]; N]> {
+    let mut l = [[0.0f64; N]; N];
+    for i in 0..N {
         for j in 0..=i {
             let mut s = a[i][j];
             for k in 0..j {
@@ -407,19 +407,19 @@ fn cholesky(a: &[[f64; 6]; 6]) -> Option<[[f64; 6]; 6]> {
 }
 
 #[allow(clippy::needless_range_loop)]
-fn cholesky_solve(l: &[[f64; 6]; 6], b: &[f64; 6]) -> [f64; 6] {
-    let mut y = [0.0f64; 6];
-    for i in 0..6 {
+pub(super) fn cholesky_solve<const N: usize>(l: &[[f64; N]; N], b: &[f64; N]) -> [f64; N] {
+    let mut y = [0.0f64; N];
+    for i in 0..N {
         let mut s = b[i];
         for k in 0..i {
             s -= l[i][k] * y[k];
         }
         y[i] = s / l[i][i];
     }
-    let mut x = [0.0f64; 6];
-    for i in (0..6).rev() {
+    let mut x = [0.0f64; N];
+    for i in (0..N).rev() {
         let mut s = y[i];
-        for k in i + 1..6 {
+        for k in i + 1..N {
             s -= l[k][i] * x[k];
         }
         x[i] = s / l[i][i];

@@ -64,10 +64,6 @@ impl Field {
         }
     }
 
-    pub fn is_valid(&self, k: usize) -> bool {
-        self.valid[k]
-    }
-
     pub fn is_masked(&self, k: usize) -> bool {
         self.masked[k]
     }

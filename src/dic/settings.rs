@@ -17,6 +17,8 @@ pub struct DicSettings {
     /// Strain window side in POIs; odd.
     pub strain_window: usize,
     pub interpolation: Interpolation,
+    /// Subset shape function: first-order (affine, the default) or second-order.
+    pub shape: ShapeFunction,
     /// Gaussian pre-filter applied to both images, σ in px (0 turns it off).
     pub prefilter_sigma_px: f64,
     /// IC-GN stops when the largest displacement the update causes in the subset is below this.
@@ -44,6 +46,41 @@ pub struct DicSettings {
     pub search_radius_px: usize,
 }
 
+/// The subset shape function of IC-GN.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum ShapeFunction {
+    /// First order: displacement and its four gradients (6 parameters).
+    #[default]
+    Affine,
+    /// Second order: also the six second derivatives (12 parameters; Lu & Cary 2000), for
+    /// displacement gradients that change across a subset. Slower; the first-order part is
+    /// reported.
+    Quadratic,
+}
+
+impl ShapeFunction {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ShapeFunction::Affine => "affine",
+            ShapeFunction::Quadratic => "quadratic",
+        }
+    }
+}
+
+impl std::str::FromStr for ShapeFunction {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "affine" => Ok(Self::Affine),
+            "quadratic" => Ok(Self::Quadratic),
+            other => Err(format!(
+                "unknown shape function '{other}' (expected affine or quadratic)"
+            )),
+        }
+    }
+}
+
 /// Side of the default ROI (the paper's 800x800 centred region).
 pub const DEFAULT_ROI_SIDE_PX: usize = 800;
 
@@ -65,6 +102,7 @@ impl Default for DicSettings {
             roi: None,
             strain_window: 7,
             interpolation: Interpolation::Bspline3,
+            shape: ShapeFunction::Affine,
             prefilter_sigma_px: 0.7,
             convergence_px: 1e-3,
             max_iterations: 50,
