@@ -265,22 +265,13 @@ impl PreparedReference {
                     PoiStatus::Masked | PoiStatus::LeftImage | PoiStatus::NoContrast
                 );
                 if judged && sd < MIN_TEXTURE_TO_NOISE * noise {
-                    *p = PoiResult {
-                        u_std_px: p.u_std_px,
-                        v_std_px: p.v_std_px,
-                        ..PoiResult::invalid(p.x, p.y, PoiStatus::NoTexture, p.zncc, p.iterations)
-                    };
+                    *p = p.rejected(PoiStatus::NoTexture);
                 }
             }
         }
         if let Some(ratio) = s.max_znssd_ratio {
             for k in relative_correlation_failures(&points, ratio) {
-                let p = points[k];
-                points[k] = PoiResult {
-                    u_std_px: p.u_std_px,
-                    v_std_px: p.v_std_px,
-                    ..PoiResult::invalid(p.x, p.y, PoiStatus::LowCorrelation, p.zncc, p.iterations)
-                };
+                points[k] = points[k].rejected(PoiStatus::LowCorrelation);
             }
         }
         if let Some(threshold) = s.outlier_threshold {
@@ -295,12 +286,7 @@ impl PreparedReference {
                 points[k] = r;
             }
             for k in median_test_failures(&points, nx, ny, threshold) {
-                let p = points[k];
-                points[k] = PoiResult {
-                    u_std_px: p.u_std_px,
-                    v_std_px: p.v_std_px,
-                    ..PoiResult::invalid(p.x, p.y, PoiStatus::Outlier, p.zncc, p.iterations)
-                };
+                points[k] = points[k].rejected(PoiStatus::Outlier);
             }
         }
         compute_strains(&self.grid, &mut points, s.strain_window);
@@ -464,15 +450,11 @@ impl Pair<'_> {
             status,
         };
         p.status = own_status(&p, s);
-        if !p.status.is_valid() {
-            p = PoiResult {
-                zncc: p.zncc,
-                u_std_px,
-                v_std_px,
-                ..PoiResult::invalid(x, y, p.status, p.zncc, p.iterations)
-            };
+        if p.status.is_valid() {
+            p
+        } else {
+            p.rejected(p.status)
         }
-        p
     }
 
     /// An integer ZNCC search around `predicted`, then IC-GN with the predicted gradients.

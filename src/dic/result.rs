@@ -106,6 +106,18 @@ impl PoiResult {
     }
 }
 
+impl PoiResult {
+    /// This point refused with `status`: displacements and strains cleared to NaN, its
+    /// correlation evidence (ZNCC, predicted std, iterations) kept to show why.
+    pub fn rejected(self, status: PoiStatus) -> Self {
+        Self {
+            u_std_px: self.u_std_px,
+            v_std_px: self.v_std_px,
+            ..Self::invalid(self.x, self.y, status, self.zncc, self.iterations)
+        }
+    }
+}
+
 fn nan() -> f64 {
     f64::NAN
 }
