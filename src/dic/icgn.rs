@@ -5,11 +5,13 @@
 //!
 //! Everything that depends only on the reference — the zero-mean subset, its norm, the steepest-
 //! descent images and the Gauss-Newton Hessian with its Cholesky factor — is computed once per
-//! subset ([`SubsetReference::prepare`]); an iteration only interpolates the deformed subset and
-//! accumulates one 6-vector.
+//! subset ([`SubsetReference::prepare`]); an iteration is one pass over the warped deformed
+//! subset that interpolates and accumulates at once (`icgn_sums`).
 
-use super::bspline::{cubic_weights, quintic_weights, BSplineImage};
-use super::{Interpolation, PoiStatus, Warp};
+use super::bspline::BSplineImage;
+use super::icgn_sums::{warped_sums, SubsetArrays};
+use super::reference_sums::{reference_sums, ReferenceSums};
+use super::{PoiStatus, Warp};
 use crate::image::Image;
 
 /// Smallest ratio of the weaker to the stronger principal gradient energy of a subset: below
@@ -48,6 +50,12 @@ pub struct SubsetReference {
     pub half: usize,
     /// sqrt(Σ (f - f_mean)²).
     pub df: f64,
+    /// The reference subset's mean grey value.
+    mean: f32,
+    /// Σ J·f over the subset (f zero-mean), J the steepest-descent images.
+    jf: [f64; 6],
+    /// Σ J over the subset.
+    jsum: [f64; 6],
     /// Lower Cholesky factor of the Gauss-Newton Hessian Σ JᵀJ.
     chol: [[f64; 6]; 6],
 }
@@ -77,54 +85,28 @@ impl SubsetReference {
     ) -> Option<Self> {
         let side = 2 * half + 1;
         let w = reference.width();
-        let mut sum = 0.0f64;
         for r in 0..side {
             let start = (y0 - half + r) * w + x0 - half;
             let dst = r * side..(r + 1) * side;
             scratch.f0[dst.clone()].copy_from_slice(&reference.data()[start..start + side]);
             scratch.gx[dst.clone()].copy_from_slice(&grad_x[start..start + side]);
-            scratch.gy[dst.clone()].copy_from_slice(&grad_y[start..start + side]);
-            sum += scratch.f0[dst].iter().map(|&v| v as f64).sum::<f64>();
+            scratch.gy[dst].copy_from_slice(&grad_y[start..start + side]);
         }
         let n = (side * side) as f64;
-        let mean = (sum / n) as f32;
-        let mut ss = 0.0f64;
-        for v in scratch.f0.iter_mut() {
-            *v -= mean;
-            ss += (*v as f64) * (*v as f64);
-        }
+        // Hessian of the steepest-descent images J = [gx, gx·dx, gx·dy, gy, gy·dx, gy·dy],
+        // accumulated as moments {1, dx, dy, dx², dx·dy, dy²} of gx², gx·gy, gy².
+        let ReferenceSums {
+            mean,
+            ss,
+            moments: mom,
+            jf,
+            jsum,
+        } = reference_sums(&mut scratch.f0, &scratch.gx, &scratch.gy, &scratch.dxs);
         let df = ss.sqrt();
         // A subset whose grey levels vary by less than 1e-5 of their mean (or not at all) holds
         // no information; ZNCC would divide by ~0.
         if !(df > 1e-5 * (mean.abs() as f64).max(1e-3) * n.sqrt()) {
             return None;
-        }
-
-        // Hessian of the steepest-descent images J = [gx, gx·dx, gx·dy, gy, gy·dx, gy·dy],
-        // accumulated as moments {1, dx, dy, dx², dx·dy, dy²} of gx², gx·gy, gy² (row by row).
-        let mut mom = [[0.0f64; 6]; 3];
-        for r in 0..side {
-            let dy = r as f64 - half as f64;
-            let gxr = &scratch.gx[r * side..(r + 1) * side];
-            let gyr = &scratch.gy[r * side..(r + 1) * side];
-            let mut s = [[0.0f32; 3]; 3];
-            for ((&a, &b), &dx) in gxr.iter().zip(gyr).zip(&scratch.dxs) {
-                let prods = [a * a, a * b, b * b];
-                for (sp, p) in s.iter_mut().zip(prods) {
-                    sp[0] += p;
-                    sp[1] += p * dx;
-                    sp[2] += p * dx * dx;
-                }
-            }
-            for (m, sp) in mom.iter_mut().zip(&s) {
-                let (s0, s1, s2) = (sp[0] as f64, sp[1] as f64, sp[2] as f64);
-                m[0] += s0;
-                m[1] += s1;
-                m[2] += dy * s0;
-                m[3] += s2;
-                m[4] += dy * s1;
-                m[5] += dy * dy * s0;
-            }
         }
         // Monomial index of m_i·m_j for multipliers {1, dx, dy}.
         const MONO: [[usize; 3]; 3] = [[0, 1, 2], [1, 3, 4], [2, 4, 5]];
@@ -143,9 +125,9 @@ impl SubsetReference {
         // position along the other undetermined whatever the noise: the weaker eigenvalue of
         // the translation block [Σgx², Σgxgy; Σgxgy, Σgy²] must hold a share of the stronger.
         let (a, b, c) = (mom[0][0], mom[1][0], mom[2][0]);
-        let mean = 0.5 * (a + c);
+        let centre = 0.5 * (a + c);
         let spread = (0.25 * (a - c) * (a - c) + b * b).sqrt();
-        if !(mean - spread >= MIN_GRADIENT_ISOTROPY * (mean + spread)) {
+        if !(centre - spread >= MIN_GRADIENT_ISOTROPY * (centre + spread)) {
             return None;
         }
         let chol = cholesky(&hess)?;
@@ -154,6 +136,9 @@ impl SubsetReference {
             y0,
             half,
             df,
+            mean,
+            jf,
+            jsum,
             chol,
         })
     }
@@ -191,11 +176,15 @@ impl SubsetReference {
         let mut zncc = f64::NAN;
         let mut residual_ss = f64::NAN;
         for iteration in 1..=max_iterations {
-            let inside = match deformed.kind() {
-                Interpolation::Bspline3 => warp_subset::<4>(deformed, self, &warp, &mut scratch.g),
-                Interpolation::Bspline5 => warp_subset::<6>(deformed, self, &warp, &mut scratch.g),
+            let arrays = SubsetArrays {
+                f0: &scratch.f0,
+                gx: &scratch.gx,
+                gy: &scratch.gy,
+                half: self.half,
+                centre: (self.x0, self.y0),
+                shift: self.mean,
             };
-            if !inside {
+            let Some(sums) = warped_sums(deformed, &arrays, &warp) else {
                 return IcgnOutcome {
                     warp,
                     zncc,
@@ -203,18 +192,11 @@ impl SubsetReference {
                     iterations: iteration,
                     status: PoiStatus::LeftImage,
                 };
-            }
-            let gm = (scratch.g.iter().map(|&v| v as f64).sum::<f64>() / n) as f32;
-            let dg = scratch
-                .g
-                .iter()
-                .map(|&v| {
-                    let d = (v - gm) as f64;
-                    d * d
-                })
-                .sum::<f64>()
-                .sqrt();
-            if !(dg > 0.0) {
+            };
+            // h = g − mean_f: Δg² = Σh² − (Σh)²/n.
+            let h_mean = sums.h / n;
+            let dg = (sums.hh - sums.h * h_mean).max(0.0).sqrt();
+            if !(dg > 1e-6 * sums.hh.sqrt()) {
                 return IcgnOutcome {
                     warp,
                     zncc,
@@ -223,37 +205,14 @@ impl SubsetReference {
                     status: PoiStatus::LowCorrelation,
                 };
             }
-            // r = (f - fm) - (Δf/Δg)(g - gm); b = Σ Jᵀr; ZNSSD = Σ r² / Δf².
-            let k = (self.df / dg) as f32;
-            let offset = k * gm;
+            // r = f − k(g − ḡ), k = Δf/Δg: b = Σ Jᵀr = Σ Jf − k(Σ Jh − h̄ Σ J),
+            // Σ r² = 2Δf² − 2k Σ f·h (f zero-mean); ZNSSD = Σ r² / Δf².
+            let k = self.df / dg;
             let mut b = [0.0f64; 6];
-            let mut rr = 0.0f64;
-            for r in 0..side {
-                let dy = r as f64 - half_f;
-                let range = r * side..(r + 1) * side;
-                let (f0, g) = (&scratch.f0[range.clone()], &scratch.g[range.clone()]);
-                let (gx, gy) = (&scratch.gx[range.clone()], &scratch.gy[range]);
-                let (mut a0, mut a1, mut b0, mut b1, mut s) =
-                    (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
-                for i in 0..side {
-                    let res = f0[i] - k * g[i] + offset;
-                    let dx = scratch.dxs[i];
-                    let ax = gx[i] * res;
-                    let ay = gy[i] * res;
-                    a0 += ax;
-                    a1 += ax * dx;
-                    b0 += ay;
-                    b1 += ay * dx;
-                    s += res * res;
-                }
-                b[0] += a0 as f64;
-                b[1] += a1 as f64;
-                b[2] += dy * a0 as f64;
-                b[3] += b0 as f64;
-                b[4] += b1 as f64;
-                b[5] += dy * b0 as f64;
-                rr += s as f64;
+            for (i, bi) in b.iter_mut().enumerate() {
+                *bi = self.jf[i] - k * (sums.jh[i] - h_mean * self.jsum[i]);
             }
+            let rr = (2.0 * self.df * self.df - 2.0 * k * sums.fh).max(0.0);
             zncc = 1.0 - 0.5 * rr / (self.df * self.df);
             residual_ss = rr;
             let x = cholesky_solve(&self.chol, &b);
@@ -288,98 +247,6 @@ impl SubsetReference {
             status: PoiStatus::NotConverged,
         }
     }
-}
-
-/// Interpolates the deformed subset under `warp` into `out`; false when any corner of the warped
-/// subset falls outside the image (an affine map of a square is a parallelogram, so the corners
-/// bound it).
-#[inline(always)]
-fn warp_subset<const N: usize>(
-    def: &BSplineImage,
-    sref: &SubsetReference,
-    warp: &Warp,
-    out: &mut [f32],
-) -> bool {
-    let h = sref.half as f64;
-    // Pixel (c, r) covers [c-0.5, c+0.5]: the image spans [-0.5, w-0.5], where the mirror-
-    // boundary interpolant is still defined by the edge pixels themselves.
-    let (w_max, h_max) = (def.width() as f64 - 0.5, def.height() as f64 - 0.5);
-    for (dx, dy) in [(-h, -h), (h, -h), (-h, h), (h, h)] {
-        let (lx, ly) = warp.apply(dx, dy);
-        let (x, y) = (sref.x0 as f64 + lx, sref.y0 as f64 + ly);
-        if !(x >= -0.5 && y >= -0.5 && x <= w_max && y <= h_max) {
-            return false;
-        }
-    }
-    let side = 2 * sref.half + 1;
-    let coeffs = def.coeffs();
-    let stride = def.stride();
-    let kind = def.kind();
-    let (sx, sy) = ((1.0 + warp.ux) as f32, warp.vx as f32);
-    for r in 0..side {
-        let dy = r as f64 - h;
-        // Positions relative to the subset centre keep f32 precision (~1e-5 px) on any image.
-        let (lx0, ly0) = warp.apply(-h, dy);
-        let (lx0, ly0) = (lx0 as f32, ly0 as f32);
-        let out_row = &mut out[r * side..(r + 1) * side];
-        for (c, o) in out_row.iter_mut().enumerate() {
-            let lx = lx0 + c as f32 * sx;
-            let ly = ly0 + c as f32 * sy;
-            let (fx, fy) = (floor_i32(lx), floor_i32(ly));
-            let (tx, ty) = (lx - fx as f32, ly - fy as f32);
-            let ix = sref.x0 as isize + fx as isize;
-            let iy = sref.y0 as isize + fy as isize;
-            let base = def.tap_base(ix, iy, kind);
-            *o = if N == 4 {
-                taps4(coeffs, base, stride, &cubic_weights(tx), &cubic_weights(ty))
-            } else {
-                taps6(
-                    coeffs,
-                    base,
-                    stride,
-                    &quintic_weights(tx),
-                    &quintic_weights(ty),
-                )
-            };
-        }
-    }
-    true
-}
-
-/// floor() as an integer without a libm call (x86-64's baseline has no rounding instruction).
-#[inline(always)]
-fn floor_i32(x: f32) -> i32 {
-    let t = x as i32;
-    t - ((x < t as f32) as i32)
-}
-
-/// Σ_j wy_j Σ_i wx_i c[j][i] over a 4x4 tap block. Each tap row is 4 contiguous floats, summed
-/// column-wise first so the compiler keeps the four rows in one vector register.
-#[inline(always)]
-fn taps4(c: &[f32], base: usize, stride: usize, wx: &[f32; 4], wy: &[f32; 4]) -> f32 {
-    let row = |k: usize| -> [f32; 4] {
-        c[base + k * stride..base + k * stride + 4]
-            .try_into()
-            .expect("4 taps")
-    };
-    let (r0, r1, r2, r3) = (row(0), row(1), row(2), row(3));
-    let mut col = [0.0f32; 4];
-    for i in 0..4 {
-        col[i] = wy[0] * r0[i] + wy[1] * r1[i] + wy[2] * r2[i] + wy[3] * r3[i];
-    }
-    (col[0] * wx[0] + col[1] * wx[1]) + (col[2] * wx[2] + col[3] * wx[3])
-}
-
-#[inline(always)]
-fn taps6(c: &[f32], base: usize, stride: usize, wx: &[f32; 6], wy: &[f32; 6]) -> f32 {
-    let mut col = [0.0f32; 6];
-    for (j, &wyj) in wy.iter().enumerate() {
-        let row = &c[base + j * stride..base + j * stride + 6];
-        for i in 0..6 {
-            col[i] += wyj * row[i];
-        }
-    }
-    col.iter().zip(wx).map(|(a, b)| a * b).sum()
 }
 
 /// Cholesky factor L (lower) of a symmetric positive-definite 6x6 matrix; None if not SPD.
@@ -447,13 +314,6 @@ mod tests {
         for i in 0..6 {
             let ax: f64 = (0..6).map(|j| a[i][j] * x[j]).sum();
             assert!((ax - b[i]).abs() < 1e-12);
-        }
-    }
-
-    #[test]
-    fn floor_matches_std() {
-        for x in [-2.5f32, -1.0, -0.3, 0.0, 0.7, 3.0, 12.9999] {
-            assert_eq!(floor_i32(x), x.floor() as i32, "{x}");
         }
     }
 }
