@@ -190,42 +190,54 @@ impl BSplineImage {
     pub fn gradient_images(&self) -> (Vec<f32>, Vec<f32>) {
         let (val, der) = self.integer_kernels();
         let (w, h, stride) = (self.width, self.height, self.stride);
-        let padded_h = h + 2 * PAD;
-        // Along x: d[r][col] = Σ_s der(s) c[r][col - s], v[r][col] = Σ_s val(s) c[r][col - s].
-        let mut dx_rows = vec![0.0f64; padded_h * w];
-        let mut vx_rows = vec![0.0f64; padded_h * w];
-        dx_rows
-            .par_chunks_mut(w)
-            .zip(vx_rows.par_chunks_mut(w))
-            .enumerate()
-            .for_each(|(r, (drow, vrow))| {
-                let crow = &self.coeffs[r * stride..(r + 1) * stride];
-                for col in 0..w {
-                    let (mut d, mut v) = (0.0, 0.0);
-                    for (k, (&vk, &dk)) in val.iter().zip(&der).enumerate() {
-                        let c = crow[col + PAD + 2 - k] as f64;
-                        d += dk * c;
-                        v += vk * c;
-                    }
-                    drow[col] = d;
-                    vrow[col] = v;
-                }
-            });
+        // Output rows in parallel, each from the five coefficient rows around it filtered
+        // along x into a per-worker buffer: no image-sized intermediate (whose first touch
+        // cost more than the arithmetic).
         let mut gx = vec![0.0f32; w * h];
         let mut gy = vec![0.0f32; w * h];
         gx.par_chunks_mut(w)
             .zip(gy.par_chunks_mut(w))
             .enumerate()
-            .for_each(|(row, (gxr, gyr))| {
-                for (k, (&vk, &dk)) in val.iter().zip(&der).enumerate() {
-                    let r = row + PAD + 2 - k;
-                    let (drow, vrow) = (&dx_rows[r * w..(r + 1) * w], &vx_rows[r * w..(r + 1) * w]);
-                    for col in 0..w {
-                        gxr[col] += (vk * drow[col]) as f32;
-                        gyr[col] += (dk * vrow[col]) as f32;
+            .for_each_init(
+                || {
+                    (
+                        vec![0.0f64; w],
+                        vec![0.0f64; w],
+                        vec![0.0f64; w],
+                        vec![0.0f64; w],
+                    )
+                },
+                |(dx_row, vx_row, gx_acc, gy_acc), (row, (gxr, gyr))| {
+                    gx_acc.fill(0.0);
+                    gy_acc.fill(0.0);
+                    for (k, (&vk, &dk)) in val.iter().zip(&der).enumerate() {
+                        if vk == 0.0 && dk == 0.0 {
+                            continue;
+                        }
+                        // Along x: d[col] = Σ_s der(s) c[col − s], v[col] = Σ_s val(s) c[col − s].
+                        let r = row + PAD + 2 - k;
+                        let crow = &self.coeffs[r * stride..(r + 1) * stride];
+                        for col in 0..w {
+                            let (mut d, mut v) = (0.0, 0.0);
+                            for (s, (&vs, &ds)) in val.iter().zip(&der).enumerate() {
+                                let c = crow[col + PAD + 2 - s] as f64;
+                                d += ds * c;
+                                v += vs * c;
+                            }
+                            dx_row[col] = d;
+                            vx_row[col] = v;
+                        }
+                        for col in 0..w {
+                            gx_acc[col] += vk * dx_row[col];
+                            gy_acc[col] += dk * vx_row[col];
+                        }
                     }
-                }
-            });
+                    for col in 0..w {
+                        gxr[col] = gx_acc[col] as f32;
+                        gyr[col] = gy_acc[col] as f32;
+                    }
+                },
+            );
         (gx, gy)
     }
 

@@ -502,34 +502,43 @@ impl Pair<'_> {
 
 /// Grey-level standard deviation of every grid point's subset, from summed-area tables.
 fn subset_stds(image: &Image, grid: &PoiGrid, half: usize) -> Vec<f64> {
-    let (w, h) = (image.width(), image.height());
-    let mut s1 = vec![0.0f64; (w + 1) * (h + 1)];
-    let mut s2 = vec![0.0f64; (w + 1) * (h + 1)];
-    for r in 0..h {
-        let (mut a, mut b) = (0.0f64, 0.0f64);
-        for (c, &v) in image.row(r).iter().enumerate() {
-            let v = v as f64;
-            a += v;
-            b += v * v;
-            s1[(r + 1) * (w + 1) + c + 1] = s1[r * (w + 1) + c + 1] + a;
-            s2[(r + 1) * (w + 1) + c + 1] = s2[r * (w + 1) + c + 1] + b;
-        }
-    }
     let side = 2 * half + 1;
     let n = (side * side) as f64;
-    let mut out = Vec::with_capacity(grid.len());
-    for &y in &grid.ys {
-        for &x in &grid.xs {
-            let (x0, y0, x1, y1) = (x - half, y - half, x + half + 1, y + half + 1);
-            let rect = |t: &[f64]| {
-                t[y1 * (w + 1) + x1] - t[y0 * (w + 1) + x1] - t[y1 * (w + 1) + x0]
-                    + t[y0 * (w + 1) + x0]
-            };
-            let mean = rect(&s1) / n;
-            out.push((rect(&s2) / n - mean * mean).max(0.0).sqrt());
-        }
-    }
-    out
+    // Only the columns some subset covers.
+    let (Some(&x_first), Some(&x_last)) = (grid.xs.first(), grid.xs.last()) else {
+        return Vec::new();
+    };
+    let (c0, c1) = (x_first - half, x_last + half + 1);
+    // Per grid row: column sums of v and v² over the subset's rows, then their running sums
+    // along x, differenced at each point (f64 throughout; grid rows in parallel).
+    grid.ys
+        .par_iter()
+        .flat_map_iter(|&y| {
+            let mut col = vec![[0.0f64; 2]; c1 - c0];
+            for r in y - half..=y + half {
+                for (acc, &v) in col.iter_mut().zip(&image.row(r)[c0..c1]) {
+                    let v = v as f64;
+                    acc[0] += v;
+                    acc[1] += v * v;
+                }
+            }
+            let mut running = Vec::with_capacity(col.len() + 1);
+            running.push([0.0f64; 2]);
+            let mut total = [0.0f64; 2];
+            for c in &col {
+                total = [total[0] + c[0], total[1] + c[1]];
+                running.push(total);
+            }
+            grid.xs
+                .iter()
+                .map(|&x| {
+                    let (a, b) = (running[x - half - c0], running[x + half + 1 - c0]);
+                    let mean = (b[0] - a[0]) / n;
+                    ((b[1] - a[1]) / n - mean * mean).max(0.0).sqrt()
+                })
+                .collect::<Vec<_>>()
+        })
+        .collect()
 }
 
 /// Prepares the reference and correlates one deformed image: the whole analysis of one pair.
