@@ -290,7 +290,12 @@ impl PreparedReference {
             }
         }
         compute_strains(&self.grid, &mut points, s.strain_window);
-        let summary = Summary::of(&points);
+        let summary = Summary::with_intervals(
+            &points,
+            self.grid.nx(),
+            self.grid.ny(),
+            super::CorrelationLengths::of(s.subset_px, s.strain_gauge_px(), s.step_px),
+        );
         Ok(DicResult {
             settings: s.clone(),
             grid: self.grid.clone(),

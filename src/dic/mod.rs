@@ -6,6 +6,7 @@
 //!
 //! Nothing here knows about files, cameras or HTTP: images in, [`DicResult`] out.
 
+mod bootstrap;
 mod bspline;
 mod engine;
 mod error;
@@ -28,6 +29,9 @@ mod strain;
 mod validate;
 mod warp;
 
+pub use bootstrap::{
+    sample_std, BlockBootstrap, BLOCK_PER_CORRELATION_LENGTH, BOOTSTRAP_REPLICATES, MIN_BLOCKS,
+};
 pub use bspline::{BSplineImage, Interpolation};
 pub use engine::{analyze, PreparedReference, Progress};
 pub use error::DicError;
@@ -39,6 +43,6 @@ pub use result::{DicResult, PoiResult, PoiStatus};
 pub use sequence::{analyze_sequence, SequenceFrame, REFERENCE_UPDATE_FRACTION};
 pub use settings::{DicSettings, ShapeFunction, DEFAULT_ROI_SIDE_PX};
 pub use similarity::{estimate_similarity, Similarity};
-pub use stats::{Stats, Summary};
+pub use stats::{f64_or_nan, interval_or_nan, valid_fields, CorrelationLengths, Stats, Summary};
 pub use validate::{MAX_PLAUSIBLE_GRADIENT, RELATIVE_ZNCC_FLOOR};
 pub use warp::Warp;

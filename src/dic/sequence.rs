@@ -98,7 +98,16 @@ pub fn analyze_sequence(
             }
         }
         compute_strains(&grid0, &mut points, settings.strain_window);
-        let summary = Summary::of(&points);
+        let summary = Summary::with_intervals(
+            &points,
+            grid0.nx(),
+            grid0.ny(),
+            super::CorrelationLengths::of(
+                settings.subset_px,
+                settings.strain_gauge_px(),
+                settings.step_px,
+            ),
+        );
         let result = DicResult {
             settings: settings.clone(),
             grid: grid0.clone(),

@@ -4,7 +4,11 @@
 //! the paper's Figures 5 (x: u, exx) and 6 (y: v, eyy).
 
 use crate::dataset::{DatasetError, Manifest, Run};
-use crate::dic::{DicError, DicResult, DicSettings, PreparedReference, Stats, Summary};
+use crate::dic::{f64_or_nan, interval_or_nan};
+use crate::dic::{
+    BlockBootstrap, CorrelationLengths, DicError, DicResult, DicSettings, PreparedReference, Stats,
+    Summary, BLOCK_PER_CORRELATION_LENGTH,
+};
 use crate::image::{read_tiff, Image, ImageError};
 use crate::reduce::{reduce, Scheme};
 use serde::{Deserialize, Serialize};
@@ -37,11 +41,32 @@ pub enum StudyError {
 /// Percent increase of each standard deviation over the same run's first (100 %) scheme.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Increase {
+    #[serde(deserialize_with = "f64_or_nan")]
     pub u: f64,
+    #[serde(deserialize_with = "f64_or_nan")]
     pub v: f64,
+    #[serde(deserialize_with = "f64_or_nan")]
     pub exx: f64,
+    #[serde(deserialize_with = "f64_or_nan")]
     pub eyy: f64,
+    #[serde(deserialize_with = "f64_or_nan")]
     pub exy: f64,
+}
+
+/// 95 % intervals of the [`Increase`] percentages: a block bootstrap resampling the same
+/// grid blocks in the baseline and this scheme (`dic::bootstrap`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct IncreaseInterval {
+    #[serde(deserialize_with = "interval_or_nan")]
+    pub u: [f64; 2],
+    #[serde(deserialize_with = "interval_or_nan")]
+    pub v: [f64; 2],
+    #[serde(deserialize_with = "interval_or_nan")]
+    pub exx: [f64; 2],
+    #[serde(deserialize_with = "interval_or_nan")]
+    pub eyy: [f64; 2],
+    #[serde(deserialize_with = "interval_or_nan")]
+    pub exy: [f64; 2],
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -54,6 +79,9 @@ pub struct StudyRow {
     pub summary: Summary,
     /// None for the baseline scheme itself.
     pub increase_pct: Option<Increase>,
+    /// None for the baseline, and where the two grids differ in shape or hold too few blocks.
+    #[serde(default)]
+    pub increase_ci95: Option<IncreaseInterval>,
 }
 
 /// Runs the study over every run of a dataset in `dir`. `progress(done, total)` after each pair;
@@ -109,6 +137,7 @@ pub fn analyze_dataset_with(
             .as_ref()
             .map_or_else(|| run.id.clone(), |p| p.label.clone());
         let first_row = rows.len();
+        let mut baseline: Option<DicResult> = None;
         for scheme in schemes {
             let result =
                 study_pair_result(&reference, &deformed, scheme, dic).map_err(|source| {
@@ -124,6 +153,12 @@ pub fn analyze_dataset_with(
                 let base: &StudyRow = &rows[first_row];
                 increase(&base.summary, &summary)
             });
+            let increase_ci95 = baseline
+                .as_ref()
+                .and_then(|base| increase_interval(base, &result));
+            if baseline.is_none() {
+                baseline = Some(result);
+            }
             rows.push(StudyRow {
                 run: run.id.clone(),
                 pattern: pattern.clone(),
@@ -131,6 +166,7 @@ pub fn analyze_dataset_with(
                 fill_factor: scheme.linear_fill_factor(),
                 summary,
                 increase_pct,
+                increase_ci95,
             });
             if !progress(rows.len(), total) {
                 return Err(StudyError::Cancelled);
@@ -177,4 +213,36 @@ fn increase(base: &Summary, s: &Summary) -> Increase {
         eyy: pct(&base.eyy, &s.eyy),
         exy: pct(&base.exy, &s.exy),
     }
+}
+
+/// The paired bootstrap interval of every % increase of `result` over `base`: the same blocks
+/// of the same grid drawn in both (their errors are correlated: one pair of frames, reduced
+/// twice). None when the grids differ in shape or hold too few blocks.
+fn increase_interval(base: &DicResult, result: &DicResult) -> Option<IncreaseInterval> {
+    let (nx, ny) = (result.grid.nx(), result.grid.ny());
+    if (base.grid.nx(), base.grid.ny()) != (nx, ny) || base.points.len() != result.points.len() {
+        return None;
+    }
+    let s = &result.settings;
+    let lengths = CorrelationLengths::of(s.subset_px, result.strain_gauge_px, s.step_px);
+    let (b, f) = (
+        crate::dic::valid_fields(&base.points),
+        crate::dic::valid_fields(&result.points),
+    );
+    let disp = BlockBootstrap::new(
+        nx,
+        ny,
+        BLOCK_PER_CORRELATION_LENGTH * lengths.displacement_points,
+    )?
+    .increase_intervals(&[&b[0], &b[1]], &[&f[0], &f[1]]);
+    let strain = BlockBootstrap::new(nx, ny, BLOCK_PER_CORRELATION_LENGTH * lengths.strain_points)
+        .map(|plan| plan.increase_intervals(&[&b[2], &b[3], &b[4]], &[&f[2], &f[3], &f[4]]))
+        .unwrap_or_else(|| vec![[f64::NAN; 2]; 3]);
+    Some(IncreaseInterval {
+        u: disp[0],
+        v: disp[1],
+        exx: strain[0],
+        eyy: strain[1],
+        exy: strain[2],
+    })
 }

@@ -11,6 +11,19 @@ pub struct Series {
     pub values: Vec<f64>,
     /// Text over each bar (e.g. "+13.2 %"), one per group.
     pub labels: Vec<Option<String>>,
+    /// A 95 % interval drawn as an error bar on each bar, one per group (empty: none).
+    pub errors: Vec<Option<[f64; 2]>>,
+}
+
+impl Series {
+    /// The finite ends of the error bar of group `gi`.
+    fn error(&self, gi: usize) -> Option<[f64; 2]> {
+        self.errors
+            .get(gi)
+            .copied()
+            .flatten()
+            .filter(|[lo, hi]| lo.is_finite() && hi.is_finite())
+    }
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -33,7 +46,10 @@ impl BarChart {
         let max = self
             .series
             .iter()
-            .flat_map(|s| s.values.iter().copied())
+            .flat_map(|s| {
+                let tops = (0..s.values.len()).filter_map(|gi| s.error(gi).map(|e| e[1]));
+                s.values.iter().copied().chain(tops)
+            })
             .filter(|v| v.is_finite())
             .fold(0.0f64, f64::max);
         let min = self
@@ -110,6 +126,21 @@ impl BarChart {
                     escape(&series.name),
                     format_tick(v)
                 );
+                let mut label_y = ya - 4.0;
+                if let Some([lo, hi]) = series.error(gi) {
+                    let (yl, yh) = (y_of(lo), y_of(hi));
+                    let xc = x + bar_w * 0.46;
+                    let cap = (bar_w * 0.2).min(6.0);
+                    let _ = write!(
+                        s,
+                        r##"<path class="error-bar" data-lo="{lo}" data-hi="{hi}" d="M{xc:.2},{yl:.2}V{yh:.2}M{:.2},{yl:.2}H{:.2}M{:.2},{yh:.2}H{:.2}" stroke="#222" fill="none"/>"##,
+                        xc - cap,
+                        xc + cap,
+                        xc - cap,
+                        xc + cap
+                    );
+                    label_y = label_y.min(yh - 4.0);
+                }
                 if let Some(Some(label)) = series.labels.get(gi) {
                     let fs = if text_width(label, 11.0) > bar_w {
                         9
@@ -120,7 +151,7 @@ impl BarChart {
                         s,
                         r#"<text class="bar-label" x="{:.1}" y="{:.1}" text-anchor="middle" font-size="{fs}">{}</text>"#,
                         x + bar_w * 0.46,
-                        ya - 4.0,
+                        label_y,
                         escape(label)
                     );
                 }
@@ -168,6 +199,7 @@ mod tests {
                         if k == 2 { f64::NAN } else { 0.005 },
                     ],
                     labels: vec![None, Some("+13.2 %".into()), None],
+                    errors: vec![None, Some([0.015, 0.03]), Some([f64::NAN, 0.01])],
                 })
                 .collect(),
         }
@@ -192,5 +224,25 @@ mod tests {
         assert!((heights[1] / heights[0] - 2.0).abs() < 1e-3, "{heights:?}");
         assert!((heights[2] / heights[0] - 3.0).abs() < 1e-3);
         assert_eq!(svg.matches("<svg").count(), svg.matches("</svg>").count());
+    }
+
+    #[test]
+    fn error_bars_span_their_interval_and_stay_in_the_plot() {
+        let svg = chart().to_svg(720, 420);
+        // Group b of every series has [0.015, 0.03]; group c's interval has a NaN end: none.
+        assert_eq!(svg.matches(r#"class="error-bar""#).count(), 3);
+        let y_of = |part: &str, key: &str| -> f64 {
+            let v = part.split(key).nth(1).unwrap();
+            v[..v.find(|c: char| c != '.' && !c.is_ascii_digit()).unwrap()]
+                .parse()
+                .unwrap()
+        };
+        for part in svg.split(r#"class="error-bar""#).skip(1) {
+            let d = part.split("d=\"M").nth(1).unwrap();
+            let (y_lo, y_hi) = (y_of(d, ","), y_of(d, "V"));
+            // SVG y grows downwards: the upper end (0.03) is above the lower (0.015), and the
+            // 0.03 top fits in the plot (the axis grew to hold it).
+            assert!(y_hi < y_lo && y_hi > 40.0, "{y_lo} {y_hi}");
+        }
     }
 }

@@ -49,8 +49,19 @@ async function showResults(r) {
   // The study as a table.
   try {
     const study = await api(`${base}/results`);
-    const head = ["pattern", "scheme", "valid points", "std u [px]", "std v [px]", "std εxx [µε]", "std εyy [µε]", "Δ std u", "Δ std εxx"];
-    const inc = (row, k) => (row.increase_pct ? `${row.increase_pct[k] >= 0 ? "+" : ""}${row.increase_pct[k].toFixed(1)} %` : "—");
+    const head = ["pattern", "scheme", "valid points", "std u [px]", "std v [px]", "std εxx [µε]", "std εyy [µε]", "Δ std u [95 %]", "Δ std v [95 %]", "Δ std εxx"];
+    const signed = (x) => `${x >= 0 ? "+" : ""}${x.toFixed(1)}`;
+    // The increase, its paired-bootstrap interval when there is one, "n.s." when it holds 0.
+    const inc = (row, k) => {
+      if (!row.increase_pct) return "—";
+      let text = `${signed(row.increase_pct[k])} %`;
+      const ci = row.increase_ci95 && row.increase_ci95[k];
+      if (ci && ci[0] !== null && ci[1] !== null) {
+        text += ` [${signed(ci[0])}, ${signed(ci[1])}]`;
+        if (ci[0] <= 0 && ci[1] >= 0) text += " n.s.";
+      }
+      return text;
+    };
     clear($("#study-table"), el("table", {},
       el("thead", {}, el("tr", {}, head.map((h, i) => el("th", { class: i > 1 ? "num" : "" }, h)))),
       el("tbody", {}, study.rows.map((row) => el("tr", {},
@@ -58,7 +69,8 @@ async function showResults(r) {
         el("td", { class: "num" }, `${row.valid} / ${row.points}`),
         el("td", { class: "num" }, num(row.u.std)), el("td", { class: "num" }, num(row.v.std)),
         el("td", { class: "num" }, num(row.exx.std * 1e6)), el("td", { class: "num" }, num(row.eyy.std * 1e6)),
-        el("td", { class: "num" }, inc(row, "u")), el("td", { class: "num" }, inc(row, "exx")))))));
+        el("td", { class: "num" }, inc(row, "u")), el("td", { class: "num" }, inc(row, "v")),
+        el("td", { class: "num" }, inc(row, "exx")))))));
   } catch (e) {
     clear($("#study-table"), el("p", { class: "error" }, e.message));
   }
