@@ -66,8 +66,8 @@ fn main() {
         Command::History(args) => cli::history::run(args),
     };
     if let Err(err) = outcome {
-        // One line naming the problem: the whole cause chain, joined.
-        eprintln!("error: {err:#}");
+        // One line naming the problem: the whole cause chain, each cause once.
+        eprintln!("error: {}", cli::error_line(&err));
         std::process::exit(1);
     }
 }

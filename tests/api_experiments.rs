@@ -286,3 +286,51 @@ async fn cancel_queue_idempotency_and_a_held_bench() {
     assert_eq!(snap.headers()["content-type"], "image/tiff");
     server.stop().await;
 }
+
+/// The mock bench is deterministic for a request: the same experiment twice, with snapshots
+/// before and between, gives the same numbers to the last digit; another seed does not (so the
+/// comparison can fail).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_same_request_gives_the_same_results_whatever_was_captured_before() {
+    let tmp = tempfile::tempdir().unwrap();
+    let server = TestServer::start(small_config(tmp.path())).await;
+    let c = client();
+    let snapshot = || async {
+        let r = c.post(server.url("/camera/snapshot")).send().await.unwrap();
+        assert_eq!(r.status(), 200);
+    };
+    let run = |seed: u64| {
+        let c = c.clone();
+        let url = server.url("/experiments");
+        async move {
+            let mut request = small_request(1);
+            request["seed"] = json!(seed);
+            let r = c.post(&url).json(&request).send().await.unwrap();
+            assert_eq!(r.status(), 202);
+            let id = r.json::<Value>().await.unwrap()["id"]
+                .as_str()
+                .unwrap()
+                .to_string();
+            let record = wait_terminal(&format!("{url}/{id}")).await;
+            assert_eq!(record["status"], "succeeded", "{record}");
+            let results: Value = c
+                .get(format!("{url}/{id}/results"))
+                .send()
+                .await
+                .unwrap()
+                .json()
+                .await
+                .unwrap();
+            results["rows"].clone()
+        }
+    };
+    snapshot().await;
+    let first = run(7).await;
+    snapshot().await;
+    snapshot().await;
+    let second = run(7).await;
+    assert_eq!(first, second, "same request, same seed, different numbers");
+    let other = run(8).await;
+    assert_ne!(first, other, "another seed gave the same numbers");
+    assert_eq!(first.as_array().unwrap().len(), 3);
+}

@@ -127,3 +127,53 @@ fn a_non_loopback_address_without_a_token_is_refused() {
     assert!(err.contains("token"), "{err}");
     assert!(out.stdout.is_empty(), "nothing was served");
 }
+
+/// At the default level a log file gets one line per request (method, path, status, latency)
+/// and no terminal colour codes.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn requests_are_logged_one_line_each_without_colour_in_a_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let config = config_file(tmp.path());
+    let log = tmp.path().join("serve.log");
+    let mut server = ServeProcess::spawn_logging_to(&["--config", &config], &log);
+    let base = server.base.clone();
+    for _ in 0..3 {
+        let r = client()
+            .get(format!("{base}/api/v1/health"))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 200);
+    }
+    let r = client()
+        .get(format!("{base}/api/v1/experiments/nope"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 404);
+    // The log is written as responses finish; give the last line a moment.
+    let t0 = Instant::now();
+    let text = loop {
+        let text = std::fs::read_to_string(&log).unwrap();
+        if text.contains("404") || t0.elapsed() > Duration::from_secs(5) {
+            break text;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    server.child.kill().unwrap();
+    server.child.wait().unwrap();
+    assert!(
+        !text.contains('\u{1b}'),
+        "colour codes in a log file:\n{text}"
+    );
+    let health: Vec<&str> = text
+        .lines()
+        .filter(|l| l.contains("/api/v1/health") && l.contains("200"))
+        .collect();
+    assert_eq!(health.len(), 3, "one line per request:\n{text}");
+    assert!(
+        text.lines()
+            .any(|l| l.contains("/api/v1/experiments/nope") && l.contains("404")),
+        "{text}"
+    );
+}

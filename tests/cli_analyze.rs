@@ -148,8 +148,10 @@ fn bad_inputs_give_one_line_errors_and_a_failure_exit() {
     }
 }
 
+/// A flat region is a point status, not an error; but a run that keeps no point at all exits
+/// non-zero with one line naming the likely cause — after writing everything it computed.
 #[test]
-fn flat_region_is_a_point_status_not_an_error() {
+fn no_valid_point_exits_non_zero_naming_the_cause_with_everything_written() {
     let dir = tempfile::tempdir().unwrap();
     let img = Image::filled(200, 160, 1000.0);
     let p = dir.path().join("flat.tif");
@@ -162,11 +164,37 @@ fn flat_region_is_a_point_status_not_an_error() {
         "--out",
         dir.path().join("r").to_str().unwrap(),
     ]);
-    assert!(out.status.success());
+    assert!(!out.status.success());
+    let line = stderr_line(&out);
+    assert!(
+        line.contains("no valid point") && line.contains("no_contrast") && line.contains("texture"),
+        "{line}"
+    );
     let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(doc["valid"], 0);
     let csv = std::fs::read_to_string(dir.path().join("r/points.csv")).unwrap();
     assert!(csv.lines().skip(1).all(|l| l.ends_with(",no_contrast")));
+
+    // Two unrelated speckle images: nothing correlates.
+    let a = write_image(dir.path(), "a.tif", 200, 160);
+    let other = dir.path().join("other.tif");
+    write_tiff_u16(
+        &other,
+        &common::render(&common::layout(200, 160, 99), 200, 160),
+    )
+    .unwrap();
+    let out = ffdic(&[
+        "analyze",
+        a.to_str().unwrap(),
+        other.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(!out.status.success());
+    let line = stderr_line(&out);
+    assert!(
+        line.contains("no valid point") && line.contains("same speckle"),
+        "{line}"
+    );
 }
 
 #[test]
@@ -241,10 +269,13 @@ fn thresholds_and_polygon_masks_are_settable() {
         "0.99999",
         "--json",
     ]);
+    // No point survives: the run fails, names why, and still prints its document.
+    assert!(!out.status.success());
+    let line = stderr_line(&out);
     assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+        line.contains("288 of 288 analysed points low_correlation; 288 masked")
+            && line.contains("--min-zncc 0.99999"),
+        "{line}"
     );
     let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let masked = doc["statuses"]["masked"].as_u64().unwrap();

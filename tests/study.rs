@@ -58,6 +58,35 @@ fn simulate_is_deterministic_for_a_seed_and_writes_a_dataset() {
     assert_eq!(manifest.runs[0].stage.dx_mm, 1.0);
     assert_eq!(manifest.runs[0].repeat.len(), 1);
     assert_eq!(manifest.camera.as_ref().unwrap().width, 640);
+
+    // A folder that holds files is refused (nothing written), unless --force.
+    let before = frames(&a);
+    let experiment = fixture();
+    let again = |force: bool| {
+        let mut args = vec![
+            "simulate",
+            "--experiment",
+            experiment.to_str().unwrap(),
+            "--out",
+            a.to_str().unwrap(),
+            "--seed",
+            "2",
+        ];
+        if force {
+            args.push("--force");
+        }
+        ffdic(&args)
+    };
+    let refused = again(false);
+    assert!(!refused.status.success());
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        err.contains("is not empty") && err.contains("--force"),
+        "{err}"
+    );
+    assert_eq!(frames(&a), before, "a refused simulate wrote nothing");
+    assert!(again(true).status.success());
+    assert_eq!(frames(&a), fc, "--force wrote the seed-2 dataset over it");
 }
 
 #[test]

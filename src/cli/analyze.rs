@@ -197,7 +197,52 @@ fn run_pair(
         write_statuses(&mut out, &result)?;
         write_summary(&mut out, s)?;
     }
+    if result.summary.valid == 0 && result.summary.points > 0 {
+        // Everything is written above (nothing lost); the exit status says it failed.
+        bail!("{}", no_valid_point(&result, settings));
+    }
     Ok(())
+}
+
+/// Why an analysis kept no point, from the most common status of the points it analysed.
+fn no_valid_point(result: &DicResult, settings: &DicSettings) -> String {
+    let counts = status_counts(result);
+    let masked = counts.get("masked").copied().unwrap_or(0);
+    let analysed = result.summary.points - masked;
+    let Some((status, n)) = counts
+        .iter()
+        .filter(|(k, _)| **k != "masked")
+        .max_by_key(|(_, n)| **n)
+        .map(|(k, n)| (*k, *n))
+    else {
+        return format!(
+            "no valid point: the mask excludes all {} points",
+            result.summary.points
+        );
+    };
+    let cause = match status {
+        "left_image" => "the motion carries the subsets out of the image: a smaller ROI \
+                         (--roi) or subset (--subset), or check the pairing of the images"
+            .to_string(),
+        "no_contrast" | "no_texture" => "the reference has no usable speckle texture in the ROI \
+                                         (flat or blank there; --roi elsewhere, or a larger --subset)"
+            .to_string(),
+        "low_correlation" if settings.min_zncc > 0.95 => format!(
+            "--min-zncc {} is stricter than noisy images reach",
+            settings.min_zncc
+        ),
+        _ => format!(
+            "the images may not show the same speckle, or the motion exceeds --max-motion ({} px) \
+             or is more than a translation with moderate rotation and strain",
+            settings.max_motion_px
+        ),
+    };
+    let masked_note = if masked > 0 {
+        format!("; {masked} masked")
+    } else {
+        String::new()
+    };
+    format!("no valid point ({n} of {analysed} analysed points {status}{masked_note}): {cause}")
 }
 
 fn run_sequence(

@@ -5,7 +5,7 @@
 
 use super::simulate::load_model;
 use super::ProgressBar;
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::Args;
 use ffdic::diagnose::{
     append_history, compare, comparison_svgs, CompareOptions, Comparison, HistoryEntry,
@@ -34,6 +34,9 @@ pub struct AnalysisArgs {
     /// Seed of the model's speckle layouts and noise.
     #[arg(long, default_value_t = 0x0FFD_1C5E)]
     pub seed: u64,
+    /// Data folder of the daemon, whose models/ holds the model versions `--model NAME` finds.
+    #[arg(long, default_value = "data")]
+    pub data: PathBuf,
 }
 
 impl AnalysisArgs {
@@ -62,9 +65,10 @@ impl AnalysisArgs {
 pub struct CompareArgs {
     /// Dataset folder (format ffdic-dataset/1).
     pub dataset: PathBuf,
-    /// Analysis model (default: config/models/baseline.toml, embedded).
-    #[arg(long)]
-    pub model: Option<PathBuf>,
+    /// Analysis model: a TOML file, or a model name — embedded (baseline, paper-bench,
+    /// paper-bench-distortion) or stored by the daemon in DATA/models (default: baseline).
+    #[arg(long, value_name = "FILE|NAME")]
+    pub model: Option<String>,
     /// Print one JSON document and nothing else.
     #[arg(long)]
     pub json: bool,
@@ -78,8 +82,46 @@ pub struct CompareArgs {
     pub analysis: AnalysisArgs,
 }
 
-pub fn load_analysis_model(path: &Option<PathBuf>) -> Result<ModelConfig> {
-    load_model(path, BASELINE_TOML, "config/models/baseline.toml")
+/// The analysis model `--model` names: a file if one exists at that path, else an embedded
+/// model, else one the daemon stored in `data/models`; the baseline when not given.
+pub fn load_analysis_model(given: &Option<String>, data: &std::path::Path) -> Result<ModelConfig> {
+    let Some(given) = given else {
+        return load_model(&None, BASELINE_TOML, "config/models/baseline.toml");
+    };
+    let as_path = PathBuf::from(given);
+    if as_path.is_file() {
+        return load_model(&Some(as_path), BASELINE_TOML, "config/models/baseline.toml");
+    }
+    if let Some(model) = ffdic::service::embedded_model(given) {
+        return Ok(model);
+    }
+    let stored = data.join("models").join(format!("{given}.toml"));
+    if ffdic::store::is_model_name(given) && stored.is_file() {
+        return Ok(ModelConfig::load(&stored)?);
+    }
+    let embedded: Vec<&str> = ffdic::service::EMBEDDED_MODELS
+        .iter()
+        .map(|m| m.0)
+        .collect();
+    let mut names: Vec<String> = std::fs::read_dir(data.join("models"))
+        .into_iter()
+        .flatten()
+        .filter_map(|e| {
+            let name = e.ok()?.file_name().into_string().ok()?;
+            name.strip_suffix(".toml").map(str::to_string)
+        })
+        .collect();
+    names.sort();
+    bail!(
+        "--model {given}: no such file, and no model of that name (embedded: {}; stored in {}: {})",
+        embedded.join(", "),
+        data.join("models").display(),
+        if names.is_empty() {
+            "none".to_string()
+        } else {
+            names.join(", ")
+        }
+    )
 }
 
 /// Appends the comparison to the dataset's history.
@@ -218,7 +260,7 @@ fn stage_text(cmp: &Comparison) -> String {
 }
 
 pub fn run(args: &CompareArgs) -> Result<()> {
-    let model = load_analysis_model(&args.model)?;
+    let model = load_analysis_model(&args.model, &args.analysis.data)?;
     let options = args.analysis.options()?;
     let bar = ProgressBar::new(!args.json, "comparing");
     let cmp = compare(&args.dataset, &model, &options, &|d, t| {

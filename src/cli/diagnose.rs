@@ -13,9 +13,10 @@ use std::path::PathBuf;
 pub struct DiagnoseArgs {
     /// Dataset folder (format ffdic-dataset/1).
     pub dataset: PathBuf,
-    /// Analysis model (default: config/models/baseline.toml, embedded).
-    #[arg(long)]
-    pub model: Option<PathBuf>,
+    /// Analysis model: a TOML file, or a model name — embedded (baseline, paper-bench,
+    /// paper-bench-distortion) or stored by the daemon in DATA/models (default: baseline).
+    #[arg(long, value_name = "FILE|NAME")]
+    pub model: Option<String>,
     /// Print one JSON document and nothing else.
     #[arg(long)]
     pub json: bool,
@@ -163,7 +164,7 @@ pub fn rounds_text(r: &Rounds) -> String {
 }
 
 pub fn run(args: &DiagnoseArgs) -> Result<()> {
-    let model = load_analysis_model(&args.model)?;
+    let model = load_analysis_model(&args.model, &args.analysis.data)?;
     let options = args.analysis.options()?;
     let bar = ProgressBar::new(!args.json, "fitting candidates");
     let r = diagnose_rounds(

@@ -3,6 +3,7 @@
 pub mod analyze;
 pub mod compare;
 pub mod diagnose;
+mod error_line;
 pub mod history;
 mod logging;
 mod progress;
@@ -12,4 +13,5 @@ pub mod serve;
 pub mod simulate;
 pub mod store;
 
+pub use error_line::error_line;
 pub use progress::ProgressBar;

@@ -1,7 +1,7 @@
 //! `ffdic simulate`: the frames a camera on the bench would deliver, as a dataset.
 
 use super::ProgressBar;
-use anyhow::Result;
+use anyhow::{bail, Context, Result};
 use clap::Args;
 use ffdic::experiment::{simulate_dataset, ExperimentSpec};
 use ffdic::model::ModelConfig;
@@ -21,6 +21,9 @@ pub struct SimulateArgs {
     /// Noise and pattern seed (default: the experiment's).
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Write into `--out` even if it already holds files (they may be overwritten).
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// The paper's bench, embedded so the default needs no file.
@@ -45,6 +48,17 @@ pub fn load_model(
 }
 
 pub fn run(args: &SimulateArgs) -> Result<()> {
+    if !args.force && args.out.is_dir() {
+        let mut entries = std::fs::read_dir(&args.out)
+            .with_context(|| format!("reading {}", args.out.display()))?;
+        if entries.next().is_some() {
+            bail!(
+                "{} is not empty: simulate writes a whole dataset there (dataset.json and frames); \
+                 choose an empty or new folder, or pass --force to write over it",
+                args.out.display()
+            );
+        }
+    }
     let spec = load_experiment(&args.experiment)?;
     let model = load_model(
         &args.model,

@@ -5,12 +5,18 @@
 use crate::model::{render_frame, Camera, ModelConfig, SpecklePattern, TargetDot, TooManyDots};
 use ffdic_hw::StagePosition;
 use ffdic_mocks::Scene;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 pub struct ModelScene {
     pub camera: Camera,
     pub bench: ModelConfig,
     pub dots: Vec<TargetDot>,
     pub seed: u64,
+    /// Exposures since this target was mounted: the noise of exposure k is seeded by (seed, k),
+    /// not by the camera's lifetime frame count, so an experiment (which mounts its targets and
+    /// holds the bench while it captures) gets the same frames whatever was captured before —
+    /// dashboard snapshots, earlier runs.
+    captures_since_mount: AtomicU64,
 }
 
 impl ModelScene {
@@ -28,7 +34,15 @@ impl ModelScene {
             bench,
             dots,
             seed,
+            captures_since_mount: AtomicU64::new(0),
         })
+    }
+
+    /// Puts a new target in front of the camera: its dots and seed; the noise stream restarts.
+    pub fn mount(&mut self, dots: Vec<TargetDot>, seed: u64) {
+        self.dots = dots;
+        self.seed = seed;
+        *self.captures_since_mount.get_mut() = 0;
     }
 }
 
@@ -42,13 +56,14 @@ impl Scene for ModelScene {
         p: StagePosition,
         _exposure_us: f64,
         bit_depth: u8,
-        frame_index: u64,
+        _frame_index: u64,
     ) -> Vec<u16> {
+        let exposure = self.captures_since_mount.fetch_add(1, Ordering::Relaxed);
         let frame = crate::model::FrameSpec {
             stage_dx_mm: p.x_mm,
             stage_dy_mm: p.y_mm,
             moved: p.x_mm != 0.0 || p.y_mm != 0.0,
-            seed: super::derive_seed(self.seed, 0xCA3E, frame_index),
+            seed: super::derive_seed(self.seed, 0xCA3E, exposure),
         };
         let img = render_frame(&self.camera, &self.bench.effects, &self.dots, &frame);
         // The model renders on a 16-bit scale; narrower formats keep the top bits.

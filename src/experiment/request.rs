@@ -43,7 +43,8 @@ pub struct ExperimentRequest {
     pub schemes: Vec<SchemeSpec>,
     #[schema(value_type = Object)]
     pub dic: DicSettings,
-    /// Seed of the mock bench's speckle layouts.
+    /// Seed of the mock bench's speckle layouts and of its noise (per target and exposure):
+    /// the same request and seed give the same frames.
     pub seed: u64,
 }
 

@@ -10,7 +10,7 @@ pub enum ImageError {
     },
     #[error("{path} is not a readable TIFF: {reason}")]
     Decode { path: PathBuf, reason: String },
-    #[error("{path}: unsupported TIFF pixel type {kind} (expected 8- or 16-bit grayscale)")]
+    #[error("{path}: unsupported TIFF pixel type {kind} (read: 8- or 16-bit integer or 32-bit float grey, palette, grey+alpha)")]
     Unsupported { path: PathBuf, kind: String },
     #[error("cannot write {path}: {reason}")]
     Encode { path: PathBuf, reason: String },

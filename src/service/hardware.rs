@@ -53,7 +53,7 @@ struct MockTargets {
 impl TargetMount for MockTargets {
     fn mount(&mut self, _label: &str, pattern: &SpecklePattern, seed: u64) -> Result<(), HwError> {
         let mut s = self.scene.0.write().expect("scene lock");
-        s.dots = pattern
+        let dots = pattern
             .dots(s.camera.field_mm(MOCK_TARGET_MARGIN_MM), seed)
             .map_err(|e| HwError::OutOfRange {
                 what: format!("target {} dots", e.dots),
@@ -61,7 +61,7 @@ impl TargetMount for MockTargets {
                 min: e.min_spacing_mm,
                 max: f64::INFINITY,
             })?;
-        s.seed = seed;
+        s.mount(dots, seed);
         Ok(())
     }
 

@@ -214,13 +214,28 @@ pub struct ServeProcess {
 
 impl ServeProcess {
     pub fn spawn(args: &[&str]) -> Self {
+        let mut command = std::process::Command::new(env!("CARGO_BIN_EXE_ffdic"));
+        command
+            .env("RUST_LOG", "warn")
+            .stderr(std::process::Stdio::inherit());
+        Self::start(command, args)
+    }
+
+    /// [`ServeProcess::spawn`] at the default log level, stderr into the file `log`.
+    pub fn spawn_logging_to(args: &[&str], log: &std::path::Path) -> Self {
+        let mut command = std::process::Command::new(env!("CARGO_BIN_EXE_ffdic"));
+        command
+            .env_remove("RUST_LOG")
+            .stderr(std::fs::File::create(log).unwrap());
+        Self::start(command, args)
+    }
+
+    fn start(mut command: std::process::Command, args: &[&str]) -> Self {
         use std::io::BufRead;
-        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_ffdic"))
+        let mut child = command
             .arg("serve")
             .args(args)
-            .env("RUST_LOG", "warn")
             .stdout(std::process::Stdio::piped())
-            .stderr(std::process::Stdio::inherit())
             .spawn()
             .unwrap();
         let mut line = String::new();
