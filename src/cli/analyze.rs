@@ -6,8 +6,8 @@ use super::ProgressBar;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use ffdic::dic::{
-    analyze_sequence, DicResult, DicSettings, Interpolation, PolygonMask, PreparedReference,
-    RasterMask, SequenceFrame, ShapeFunction, Summary,
+    analyze_sequence, DicResult, DicSettings, Interpolation, PoiStatus, PolygonMask,
+    PreparedReference, RasterMask, SequenceFrame, ShapeFunction, Summary,
 };
 use ffdic::image::{read_tiff, Image, Roi};
 use serde_json::json;
@@ -206,14 +206,17 @@ fn run_pair(
 
 /// Why an analysis kept no point, from the most common status of the points it analysed.
 fn no_valid_point(result: &DicResult, settings: &DicSettings) -> String {
+    // In name order, so that a tie goes to the same status every time.
     let counts = status_counts(result);
-    let masked = counts.get("masked").copied().unwrap_or(0);
-    let analysed = result.summary.points - masked;
-    let Some((status, n)) = counts
+    let masked = counts
         .iter()
-        .filter(|(k, _)| **k != "masked")
-        .max_by_key(|(_, n)| **n)
-        .map(|(k, n)| (*k, *n))
+        .find(|(s, _)| *s == PoiStatus::Masked)
+        .map_or(0, |(_, n)| *n);
+    let analysed = result.summary.points - masked;
+    let Some(&(status, n)) = counts
+        .iter()
+        .filter(|(s, _)| *s != PoiStatus::Masked)
+        .max_by_key(|(_, n)| *n)
     else {
         return format!(
             "no valid point: the mask excludes all {} points",
@@ -221,13 +224,15 @@ fn no_valid_point(result: &DicResult, settings: &DicSettings) -> String {
         );
     };
     let cause = match status {
-        "left_image" => "the motion carries the subsets out of the image: a smaller ROI \
-                         (--roi) or subset (--subset), or check the pairing of the images"
+        PoiStatus::LeftImage => "the motion carries the subsets out of the image: a smaller ROI \
+                                 (--roi) or subset (--subset), or check the pairing of the images"
             .to_string(),
-        "no_contrast" | "no_texture" => "the reference has no usable speckle texture in the ROI \
-                                         (flat or blank there; --roi elsewhere, or a larger --subset)"
-            .to_string(),
-        "low_correlation" if settings.min_zncc > 0.95 => format!(
+        PoiStatus::NoContrast | PoiStatus::NoTexture => {
+            "the reference has no usable speckle texture in the ROI \
+             (flat or blank there; --roi elsewhere, or a larger --subset)"
+                .to_string()
+        }
+        PoiStatus::LowCorrelation if settings.min_zncc > 0.95 => format!(
             "--min-zncc {} is stricter than noisy images reach",
             settings.min_zncc
         ),
@@ -242,7 +247,10 @@ fn no_valid_point(result: &DicResult, settings: &DicSettings) -> String {
     } else {
         String::new()
     };
-    format!("no valid point ({n} of {analysed} analysed points {status}{masked_note}): {cause}")
+    format!(
+        "no valid point ({n} of {analysed} analysed points {}{masked_note}): {cause}",
+        status.as_str()
+    )
 }
 
 fn run_sequence(
@@ -339,11 +347,16 @@ fn run_sequence(
     Ok(())
 }
 
-fn status_counts(result: &DicResult) -> BTreeMap<&'static str, usize> {
-    let mut counts = BTreeMap::new();
+/// How many points got each status, in the order of the statuses' names.
+fn status_counts(result: &DicResult) -> Vec<(PoiStatus, usize)> {
+    let mut counts: Vec<(PoiStatus, usize)> = Vec::new();
     for p in &result.points {
-        *counts.entry(p.status.as_str()).or_insert(0) += 1;
+        match counts.iter_mut().find(|(s, _)| *s == p.status) {
+            Some((_, n)) => *n += 1,
+            None => counts.push((p.status, 1)),
+        }
     }
+    counts.sort_by_key(|(s, _)| s.as_str());
     counts
 }
 
@@ -352,7 +365,10 @@ fn summary_json(result: &DicResult) -> serde_json::Value {
     json!({
         "points": s.points,
         "valid": s.valid,
-        "statuses": status_counts(result),
+        "statuses": status_counts(result)
+            .into_iter()
+            .map(|(status, n)| (status.as_str(), n))
+            .collect::<BTreeMap<_, _>>(),
         "u": s.u, "v": s.v,
         "exx": s.exx, "eyy": s.eyy, "exy": s.exy,
         "global_offset_px": result.global_offset_px,
@@ -362,7 +378,10 @@ fn summary_json(result: &DicResult) -> serde_json::Value {
 fn write_statuses(out: &mut impl Write, result: &DicResult) -> Result<()> {
     let counts = status_counts(result);
     if counts.len() > 1 {
-        let parts: Vec<String> = counts.iter().map(|(k, n)| format!("{k} {n}")).collect();
+        let parts: Vec<String> = counts
+            .iter()
+            .map(|(status, n)| format!("{} {n}", status.as_str()))
+            .collect();
         writeln!(out, "statuses: {}", parts.join(", "))?;
     }
     Ok(())

@@ -14,6 +14,7 @@ use ffdic::diagnose::{
 use ffdic::dic::DicSettings;
 use ffdic::model::ModelConfig;
 use ffdic::reduce::Scheme;
+use ffdic::store::ModelFolder;
 use std::path::PathBuf;
 
 /// How the comparison analyses both sides (shared by compare and diagnose).
@@ -95,27 +96,21 @@ pub fn load_analysis_model(given: &Option<String>, data: &std::path::Path) -> Re
     if let Some(model) = ffdic::service::embedded_model(given) {
         return Ok(model);
     }
-    let stored = data.join("models").join(format!("{given}.toml"));
-    if ffdic::store::is_model_name(given) && stored.is_file() {
-        return Ok(ModelConfig::load(&stored)?);
+    let stored = ModelFolder::in_data_dir(data);
+    if let Ok(path) = stored.path(given) {
+        if path.is_file() {
+            return Ok(ModelConfig::load(&path)?);
+        }
     }
     let embedded: Vec<&str> = ffdic::service::EMBEDDED_MODELS
         .iter()
         .map(|m| m.0)
         .collect();
-    let mut names: Vec<String> = std::fs::read_dir(data.join("models"))
-        .into_iter()
-        .flatten()
-        .filter_map(|e| {
-            let name = e.ok()?.file_name().into_string().ok()?;
-            name.strip_suffix(".toml").map(str::to_string)
-        })
-        .collect();
-    names.sort();
+    let names = stored.list()?;
     bail!(
         "--model {given}: no such file, and no model of that name (embedded: {}; stored in {}: {})",
         embedded.join(", "),
-        data.join("models").display(),
+        stored.dir().display(),
         if names.is_empty() {
             "none".to_string()
         } else {

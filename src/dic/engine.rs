@@ -294,7 +294,7 @@ impl PreparedReference {
             &points,
             self.grid.nx(),
             self.grid.ny(),
-            super::CorrelationLengths::of(s.subset_px, s.strain_gauge_px(), s.step_px),
+            super::CorrelationLengths::of(s),
         );
         Ok(DicResult {
             settings: s.clone(),
@@ -505,7 +505,7 @@ impl Pair<'_> {
     }
 }
 
-/// Grey-level standard deviation of every grid point's subset, from summed-area tables.
+/// Grey-level standard deviation of every grid point's subset, from column sums per grid row.
 fn subset_stds(image: &Image, grid: &PoiGrid, half: usize) -> Vec<f64> {
     let side = 2 * half + 1;
     let n = (side * side) as f64;

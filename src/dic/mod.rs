@@ -30,7 +30,7 @@ mod validate;
 mod warp;
 
 pub use bootstrap::{
-    sample_std, BlockBootstrap, BLOCK_PER_CORRELATION_LENGTH, BOOTSTRAP_REPLICATES, MIN_BLOCKS,
+    BlockBootstrap, BLOCK_PER_CORRELATION_LENGTH, BOOTSTRAP_REPLICATES, MIN_BLOCKS,
 };
 pub use bspline::{BSplineImage, Interpolation};
 pub use engine::{analyze, PreparedReference, Progress};

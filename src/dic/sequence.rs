@@ -102,11 +102,7 @@ pub fn analyze_sequence(
             &points,
             grid0.nx(),
             grid0.ny(),
-            super::CorrelationLengths::of(
-                settings.subset_px,
-                settings.strain_gauge_px(),
-                settings.step_px,
-            ),
+            super::CorrelationLengths::of(settings),
         );
         let result = DicResult {
             settings: settings.clone(),

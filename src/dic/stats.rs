@@ -3,7 +3,7 @@
 //! paper's error measure, after Hijazi et al. [12]).
 
 use super::bootstrap::{BlockBootstrap, BLOCK_PER_CORRELATION_LENGTH};
-use super::PoiResult;
+use super::{DicSettings, PoiResult};
 use serde::{Deserialize, Serialize};
 
 /// Mean, sample standard deviation (n-1), min and max of the finite values of one field.
@@ -49,11 +49,11 @@ pub struct CorrelationLengths {
 
 impl CorrelationLengths {
     /// Subset side / step and virtual strain gauge / step, rounded up.
-    pub fn of(subset_px: usize, strain_gauge_px: usize, step_px: usize) -> Self {
-        let step = step_px.max(1);
+    pub fn of(settings: &DicSettings) -> Self {
+        let step = settings.step_px.max(1);
         Self {
-            displacement_points: subset_px.div_ceil(step),
-            strain_points: strain_gauge_px.div_ceil(step),
+            displacement_points: settings.subset_px.div_ceil(step),
+            strain_points: settings.strain_gauge_px().div_ceil(step),
         }
     }
 
@@ -138,11 +138,11 @@ impl Summary {
         ny: usize,
         lengths: CorrelationLengths,
     ) -> Self {
-        let mut summary = Self::of(points);
+        let fields = valid_fields(points);
+        let mut summary = Self::from_fields(points, &fields);
         if nx * ny != points.len() {
             return summary;
         }
-        let fields = valid_fields(points);
         let (disp, strain) = lengths.plans(nx, ny);
         if let Some(plan) = disp {
             let ci = plan.std_intervals(&[&fields[0], &fields[1]]);
@@ -159,16 +159,21 @@ impl Summary {
     }
 
     pub fn of(points: &[PoiResult]) -> Self {
-        let valid: Vec<&PoiResult> = points.iter().filter(|p| p.status.is_valid()).collect();
-        let field = |f: fn(&PoiResult) -> f64| Stats::of(valid.iter().map(|p| f(p)));
+        Self::from_fields(points, &valid_fields(points))
+    }
+
+    /// The statistics of `points`' [`valid_fields`] (NaN marks a point that is not valid;
+    /// `Stats::of` skips it).
+    fn from_fields(points: &[PoiResult], fields: &[Vec<f64>; 5]) -> Self {
+        let [u, v, exx, eyy, exy] = fields.each_ref().map(|f| Stats::of(f.iter().copied()));
         Self {
             points: points.len(),
-            valid: valid.len(),
-            u: field(|p| p.u),
-            v: field(|p| p.v),
-            exx: field(|p| p.exx),
-            eyy: field(|p| p.eyy),
-            exy: field(|p| p.exy),
+            valid: points.iter().filter(|p| p.status.is_valid()).count(),
+            u,
+            v,
+            exx,
+            eyy,
+            exy,
         }
     }
 }

@@ -2,6 +2,7 @@
 //! Shared by `ffdic reproduce`, the experiment runner and the API, so all show the same numbers.
 
 use super::study::{Increase, IncreaseInterval, StudyRow};
+use crate::dic::{BLOCK_PER_CORRELATION_LENGTH, MIN_BLOCKS};
 use crate::report::{csv, text_table, BarChart, Series};
 use serde_json::json;
 
@@ -36,17 +37,19 @@ struct Metric {
 }
 
 impl Metric {
+    /// The 95 % interval of the increase of row `r`, when it has a finite one.
+    fn increase_interval(&self, r: &StudyRow) -> Option<[f64; 2]> {
+        r.increase_ci95
+            .map(|c| (self.increase_ci)(&c))
+            .filter(|[lo, hi]| lo.is_finite() && hi.is_finite())
+    }
+
     /// "+16.9 % [+8.1, +25.3]", with "n.s." when the interval holds 0 (no significant change).
     fn increase_text(&self, r: &StudyRow) -> Option<String> {
         let i = r.increase_pct?;
         let mut text = format!("{:+.1} %", (self.increase)(&i));
-        if let Some([lo, hi]) = r.increase_ci95.map(|c| (self.increase_ci)(&c)) {
-            if lo.is_finite() && hi.is_finite() {
-                text += &format!(" [{lo:+.1}, {hi:+.1}]");
-                if lo <= 0.0 && hi >= 0.0 {
-                    text += " n.s.";
-                }
-            }
+        if let Some([lo, hi]) = self.increase_interval(r) {
+            text += &format!(" [{lo:+.1}, {hi:+.1}]{}", not_significant_mark([lo, hi]));
         }
         Some(text)
     }
@@ -54,15 +57,17 @@ impl Metric {
     /// The bar label: the increase, and "n.s." when its interval holds 0.
     fn bar_label(&self, r: &StudyRow) -> Option<String> {
         let i = r.increase_pct?;
-        let ns = r
-            .increase_ci95
-            .map(|c| (self.increase_ci)(&c))
-            .is_some_and(|[lo, hi]| lo <= 0.0 && hi >= 0.0);
-        Some(format!(
-            "{:+.1} %{}",
-            (self.increase)(&i),
-            if ns { " n.s." } else { "" }
-        ))
+        let mark = self.increase_interval(r).map_or("", not_significant_mark);
+        Some(format!("{:+.1} %{mark}", (self.increase)(&i)))
+    }
+}
+
+/// " n.s." when an interval of an increase holds 0: no significant change.
+fn not_significant_mark([lo, hi]: [f64; 2]) -> &'static str {
+    if lo <= 0.0 && hi >= 0.0 {
+        " n.s."
+    } else {
+        ""
     }
 }
 
@@ -139,10 +144,12 @@ pub fn figures_text(rows: &[StudyRow]) -> String {
         + &table("Figure 6 — error of the small y component (std over the ROI)", &[&STD_V, &STD_EYY])
         + &table("Shear", &[&STD_EXY])
         + &format!("\nmean motion over all rows: u = {mean_u:.4} px, v = {mean_v:.4} px (reduced images)\n")
-        + "[…]: 95 % interval of the increase, a paired block bootstrap over the grid (one frame pair;\n\
-           it runs ≈ 25 % narrow, README); n.s.: the interval holds 0, no significant change. No\n\
-           interval: the grid holds fewer than 9 blocks of twice the field's correlation length\n\
-           (strains: the virtual strain gauge).\n"
+        + &format!(
+            "[…]: 95 % interval of the increase, a paired block bootstrap over the grid (one frame pair;\n\
+             it runs ≈ 25 % narrow, README); n.s.: the interval holds 0, no significant change. No\n\
+             interval: the grid holds fewer than {MIN_BLOCKS} blocks of {BLOCK_PER_CORRELATION_LENGTH}x the field's correlation\n\
+             length (strains: the virtual strain gauge).\n"
+        )
 }
 
 /// The study as CSV, one row per run and scheme.

@@ -6,8 +6,7 @@
 use crate::dataset::{DatasetError, Manifest, Run};
 use crate::dic::{f64_or_nan, interval_or_nan};
 use crate::dic::{
-    BlockBootstrap, CorrelationLengths, DicError, DicResult, DicSettings, PreparedReference, Stats,
-    Summary, BLOCK_PER_CORRELATION_LENGTH,
+    CorrelationLengths, DicError, DicResult, DicSettings, PreparedReference, Stats, Summary,
 };
 use crate::image::{read_tiff, Image, ImageError};
 use crate::reduce::{reduce, Scheme};
@@ -223,19 +222,13 @@ fn increase_interval(base: &DicResult, result: &DicResult) -> Option<IncreaseInt
     if (base.grid.nx(), base.grid.ny()) != (nx, ny) || base.points.len() != result.points.len() {
         return None;
     }
-    let s = &result.settings;
-    let lengths = CorrelationLengths::of(s.subset_px, result.strain_gauge_px, s.step_px);
     let (b, f) = (
         crate::dic::valid_fields(&base.points),
         crate::dic::valid_fields(&result.points),
     );
-    let disp = BlockBootstrap::new(
-        nx,
-        ny,
-        BLOCK_PER_CORRELATION_LENGTH * lengths.displacement_points,
-    )?
-    .increase_intervals(&[&b[0], &b[1]], &[&f[0], &f[1]]);
-    let strain = BlockBootstrap::new(nx, ny, BLOCK_PER_CORRELATION_LENGTH * lengths.strain_points)
+    let (disp, strain) = CorrelationLengths::of(&result.settings).plans(nx, ny);
+    let disp = disp?.increase_intervals(&[&b[0], &b[1]], &[&f[0], &f[1]]);
+    let strain = strain
         .map(|plan| plan.increase_intervals(&[&b[2], &b[3], &b[4]], &[&f[2], &f[3], &f[4]]))
         .unwrap_or_else(|| vec![[f64::NAN; 2]; 3]);
     Some(IncreaseInterval {

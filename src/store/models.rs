@@ -5,7 +5,7 @@
 use super::atomic::write_atomically;
 use super::error::{Result, StoreError};
 use super::run_store::RunStore;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Longest model name, bytes.
 pub const MAX_MODEL_NAME_LEN: usize = 96;
@@ -29,25 +29,39 @@ pub enum ModelSaved {
     AlreadyThere,
 }
 
-impl RunStore {
-    fn models_dir(&self) -> PathBuf {
-        self.data_dir().join("models")
+/// The models folder of a data folder (`DATA/models`), usable without opening the run store —
+/// a command line reads models there while a daemon holds the store.
+pub struct ModelFolder {
+    dir: PathBuf,
+}
+
+impl ModelFolder {
+    pub fn in_data_dir(data_dir: &Path) -> Self {
+        Self {
+            dir: data_dir.join("models"),
+        }
     }
 
-    fn model_path(&self, name: &str) -> Result<PathBuf> {
+    /// The folder itself.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// Where model `name` is (or would be) stored; an error for a name that is not one.
+    pub fn path(&self, name: &str) -> Result<PathBuf> {
         if !is_model_name(name) {
             return Err(StoreError::BadPath(format!(
                 "'{}' is not a model name (A-Z a-z 0-9 _ - + ., at most {MAX_MODEL_NAME_LEN})",
                 name.chars().take(80).collect::<String>()
             )));
         }
-        Ok(self.models_dir().join(format!("{name}.toml")))
+        Ok(self.dir.join(format!("{name}.toml")))
     }
 
     /// Stores the TOML text of model `name`. The same text again is `AlreadyThere`; another text
     /// under a stored name is a `Conflict` (names are versions: choose a new one).
-    pub fn save_model(&self, name: &str, toml_text: &str) -> Result<ModelSaved> {
-        let path = self.model_path(name)?;
+    pub fn save(&self, name: &str, toml_text: &str) -> Result<ModelSaved> {
+        let path = self.path(name)?;
         if let Ok(existing) = std::fs::read_to_string(&path) {
             return if existing == toml_text {
                 Ok(ModelSaved::AlreadyThere)
@@ -62,14 +76,14 @@ impl RunStore {
             path: path.clone(),
             source,
         };
-        std::fs::create_dir_all(self.models_dir()).map_err(io)?;
+        std::fs::create_dir_all(&self.dir).map_err(io)?;
         write_atomically(&path, toml_text.as_bytes()).map_err(io)?;
         Ok(ModelSaved::Created)
     }
 
     /// The TOML text of stored model `name`.
-    pub fn read_model(&self, name: &str) -> Result<String> {
-        let path = self.model_path(name)?;
+    pub fn read(&self, name: &str) -> Result<String> {
+        let path = self.path(name)?;
         std::fs::read_to_string(&path).map_err(|e| match e.kind() {
             std::io::ErrorKind::NotFound => StoreError::NotFound(format!("model '{name}'")),
             _ => StoreError::Io { path, source: e },
@@ -77,12 +91,16 @@ impl RunStore {
     }
 
     /// Names of the stored models, sorted.
-    pub fn list_models(&self) -> Result<Vec<String>> {
-        let dir = self.models_dir();
-        let entries = match std::fs::read_dir(&dir) {
+    pub fn list(&self) -> Result<Vec<String>> {
+        let entries = match std::fs::read_dir(&self.dir) {
             Ok(e) => e,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
-            Err(source) => return Err(StoreError::Io { path: dir, source }),
+            Err(source) => {
+                return Err(StoreError::Io {
+                    path: self.dir.clone(),
+                    source,
+                })
+            }
         };
         let mut names: Vec<String> = entries
             .filter_map(|e| e.ok())
@@ -94,6 +112,27 @@ impl RunStore {
             .collect();
         names.sort();
         Ok(names)
+    }
+}
+
+impl RunStore {
+    fn models(&self) -> ModelFolder {
+        ModelFolder::in_data_dir(self.data_dir())
+    }
+
+    /// [`ModelFolder::save`] in this store's data folder.
+    pub fn save_model(&self, name: &str, toml_text: &str) -> Result<ModelSaved> {
+        self.models().save(name, toml_text)
+    }
+
+    /// [`ModelFolder::read`] in this store's data folder.
+    pub fn read_model(&self, name: &str) -> Result<String> {
+        self.models().read(name)
+    }
+
+    /// [`ModelFolder::list`] in this store's data folder.
+    pub fn list_models(&self) -> Result<Vec<String>> {
+        self.models().list()
     }
 }
 
