@@ -300,29 +300,10 @@ async fn the_same_request_gives_the_same_results_whatever_was_captured_before() 
         assert_eq!(r.status(), 200);
     };
     let run = |seed: u64| {
-        let c = c.clone();
-        let url = server.url("/experiments");
-        async move {
-            let mut request = small_request(1);
-            request["seed"] = json!(seed);
-            let r = c.post(&url).json(&request).send().await.unwrap();
-            assert_eq!(r.status(), 202);
-            let id = r.json::<Value>().await.unwrap()["id"]
-                .as_str()
-                .unwrap()
-                .to_string();
-            let record = wait_terminal(&format!("{url}/{id}")).await;
-            assert_eq!(record["status"], "succeeded", "{record}");
-            let results: Value = c
-                .get(format!("{url}/{id}/results"))
-                .send()
-                .await
-                .unwrap()
-                .json()
-                .await
-                .unwrap();
-            results["rows"].clone()
-        }
+        let mut request = small_request(1);
+        request["seed"] = json!(seed);
+        let server = &server;
+        async move { run_to_results(server, &request).await.1["rows"].clone() }
     };
     snapshot().await;
     let first = run(7).await;
@@ -333,4 +314,113 @@ async fn the_same_request_gives_the_same_results_whatever_was_captured_before() 
     let other = run(8).await;
     assert_ne!(first, other, "another seed gave the same numbers");
     assert_eq!(first.as_array().unwrap().len(), 3);
+}
+
+/// Issue 13: `repeats` captures every pair anew (new noise each) and the study pools them — the
+/// mean over captures with a Student-t interval — while every capture's rows stay in
+/// `captures`. Checked against the captures themselves: the pooled std is their mean, its
+/// interval holds it, and with `new_layout_per_repeat` the references show different prints.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn repeats_pool_independent_captures_with_intervals_over_them() {
+    let tmp = tempfile::tempdir().unwrap();
+    let server = TestServer::start(small_config(tmp.path())).await;
+    let run = |repeats: usize, new_layouts: bool| {
+        let mut request = small_request(1);
+        request["repeats"] = json!(repeats);
+        request["new_layout_per_repeat"] = json!(new_layouts);
+        let server = &server;
+        async move { run_to_results(server, &request).await }
+    };
+    let (id, results) = run(4, false).await;
+    let rows = results["rows"].as_array().unwrap();
+    let captures = results["captures"].as_array().unwrap();
+    assert_eq!((rows.len(), captures.len()), (3, 12), "{results}");
+    for row in rows {
+        assert_eq!(row["repeats"], 4);
+        assert_eq!(row["run"], "a-x1");
+        let own: Vec<&Value> = captures
+            .iter()
+            .filter(|c| c["scheme"] == row["scheme"])
+            .collect();
+        assert_eq!(own.len(), 4);
+        let stds: Vec<f64> = own
+            .iter()
+            .map(|c| c["u"]["std"].as_f64().unwrap())
+            .collect();
+        assert!(
+            stds.windows(2).any(|w| w[0] != w[1]),
+            "four captures, one noise: {stds:?}"
+        );
+        let mean = stds.iter().sum::<f64>() / 4.0;
+        let std = row["u"]["std"].as_f64().unwrap();
+        assert!((std - mean).abs() < 1e-12 * mean, "{std} vs {mean}");
+        let ci = &row["u"]["ci95"];
+        let (lo, hi) = (ci[0].as_f64().unwrap(), ci[1].as_f64().unwrap());
+        assert!(lo < std && std < hi, "{row}");
+        // The t interval of four values reaches past their range only by the t factor.
+        let spread = stds.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
+            - stds.iter().cloned().fold(f64::INFINITY, f64::min);
+        assert!(hi - lo < 4.0 * spread, "{lo}..{hi} for {stds:?}");
+        if row["scheme"] != "ff100" {
+            let inc = &row["increase_ci95"]["u"];
+            assert!(inc[0].as_f64().unwrap() < inc[1].as_f64().unwrap(), "{row}");
+        }
+    }
+    let dir = server.service.store.run_dir(&id.parse().unwrap());
+    let manifest: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("frames/dataset.json")).unwrap()).unwrap();
+    let runs = manifest["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 4);
+    assert_eq!(runs[2]["id"], "a-x1-rep3");
+    assert_eq!(runs[2]["repeat_of"], "a-x1");
+    assert_eq!(runs[2]["reference"], "a_rep3_ref.tif");
+
+    // The same print in every capture unless a new layout is asked for.
+    let correlation = |dir: &std::path::Path| {
+        let read = |name: &str| {
+            ffdic::image::read_tiff(&dir.join("frames").join(name))
+                .unwrap()
+                .0
+        };
+        let (a, b) = (read("a_rep1_ref.tif"), read("a_rep2_ref.tif"));
+        let (a, b) = (a.data(), b.data());
+        let mean = |x: &[f32]| x.iter().map(|&v| v as f64).sum::<f64>() / x.len() as f64;
+        let (ma, mb) = (mean(a), mean(b));
+        let (mut ab, mut aa, mut bb) = (0.0, 0.0, 0.0);
+        for (&x, &y) in a.iter().zip(b) {
+            let (x, y) = (x as f64 - ma, y as f64 - mb);
+            ab += x * y;
+            aa += x * x;
+            bb += y * y;
+        }
+        ab / (aa * bb).sqrt()
+    };
+    let same = correlation(&dir);
+    let (new_id, _) = run(2, true).await;
+    let new = correlation(&server.service.store.run_dir(&new_id.parse().unwrap()));
+    assert!(same > 0.9, "same print, new noise: r = {same}");
+    assert!(new.abs() < 0.2, "a new layout: r = {new}");
+}
+
+/// Posts `request`, waits for success, and returns the run's id and its `results` (study.json).
+async fn run_to_results(server: &TestServer, request: &Value) -> (String, Value) {
+    let c = client();
+    let url = server.url("/experiments");
+    let r = c.post(&url).json(request).send().await.unwrap();
+    assert_eq!(r.status(), 202);
+    let id = r.json::<Value>().await.unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let record = wait_terminal(&format!("{url}/{id}")).await;
+    assert_eq!(record["status"], "succeeded", "{record}");
+    let results: Value = c
+        .get(format!("{url}/{id}/results"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    (id, results)
 }

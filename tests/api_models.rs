@@ -38,7 +38,9 @@ fn simulate(dir: &Path) {
         patterns: vec![PatternSpec::Preset("a".into())],
         moves: vec![mv("x2", 2.0, 0.0), mv("x4", 4.0, 0.0), mv("y3", 0.0, 3.0)],
         step_series: vec![],
+        static_frames: 1,
         repeats: 1,
+        new_layout_per_repeat: false,
         schemes: vec![],
         dic: DicSettings::default(),
     };

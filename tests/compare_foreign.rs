@@ -29,7 +29,9 @@ fn eight_bit_small_frames_without_optional_fields() {
             dy_mm: 0.0,
         }],
         step_series: vec![],
-        repeats: 0,
+        static_frames: 0,
+        repeats: 1,
+        new_layout_per_repeat: false,
         schemes: vec![],
         dic: Default::default(),
     };

@@ -39,7 +39,7 @@ fn mv(id: &str, dx_mm: f64, dy_mm: f64) -> MoveSpec {
     }
 }
 
-fn spec(pattern: &str, moves: Vec<MoveSpec>, steps: bool, repeats: usize) -> ExperimentSpec {
+fn spec(pattern: &str, moves: Vec<MoveSpec>, steps: bool, static_frames: usize) -> ExperimentSpec {
     ExperimentSpec {
         name: "hidden".into(),
         seed: 11,
@@ -71,7 +71,9 @@ fn spec(pattern: &str, moves: Vec<MoveSpec>, steps: bool, repeats: usize) -> Exp
         } else {
             Vec::new()
         },
-        repeats,
+        static_frames,
+        repeats: 1,
+        new_layout_per_repeat: false,
         schemes: vec![],
         dic: DicSettings::default(),
     }

@@ -33,6 +33,13 @@ pub struct ReproduceArgs {
     /// Seed of the speckle layouts (default: the experiment's).
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Independent captures of every pair (default: the experiment's, 1): the study then reports
+    /// the mean over captures with a 95 % interval.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=32))]
+    pub repeats: Option<u64>,
+    /// A new speckle layout for every capture (with --repeats).
+    #[arg(long)]
+    pub new_layouts: bool,
     /// Print the table as one JSON document and nothing else.
     #[arg(long)]
     pub json: bool,
@@ -65,7 +72,9 @@ pub fn run(args: &ReproduceArgs) -> Result<()> {
         patterns: spec.patterns.clone(),
         moves: spec.moves.clone(),
         step_series: spec.step_series.clone(),
-        repeats: spec.repeats,
+        static_frames: spec.static_frames,
+        repeats: args.repeats.map_or(spec.repeats, |n| n as usize),
+        new_layout_per_repeat: args.new_layouts || spec.new_layout_per_repeat,
         settle_ms: 0,
         schemes: spec
             .schemes

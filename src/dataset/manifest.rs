@@ -61,6 +61,10 @@ pub struct Run {
     pub repeat: Vec<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub exposure_us: Option<f64>,
+    /// One independent capture of the run named here (an experiment with `repeats` > 1): the
+    /// study pools the runs that share it into one row with an interval over captures.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub repeat_of: Option<String>,
     #[serde(flatten)]
     pub extra: Map<String, Value>,
 }

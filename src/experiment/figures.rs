@@ -21,8 +21,19 @@ pub fn rows_json(rows: &[StudyRow]) -> serde_json::Value {
             "exx": ms(&r.summary.exx), "eyy": ms(&r.summary.eyy), "exy": ms(&r.summary.exy),
             "increase_pct": r.increase_pct,
             "increase_ci95": r.increase_ci95,
+            "repeats": r.repeats,
         })).collect::<Vec<_>>()
     })
+}
+
+/// `results/study.json`: the rows (pooled over captures), and with repeats every capture's own
+/// rows under `"captures"`.
+pub fn study_json(rows: &[StudyRow], captures: &[StudyRow]) -> serde_json::Value {
+    let mut doc = rows_json(rows);
+    if rows.iter().any(|r| r.repeats > 1) {
+        doc["captures"] = rows_json(captures)["rows"].take();
+    }
+    doc
 }
 
 /// One reported statistic: its label with units, how to read it, and its % increase.
@@ -144,12 +155,26 @@ pub fn figures_text(rows: &[StudyRow]) -> String {
         + &table("Figure 6 — error of the small y component (std over the ROI)", &[&STD_V, &STD_EYY])
         + &table("Shear", &[&STD_EXY])
         + &format!("\nmean motion over all rows: u = {mean_u:.4} px, v = {mean_v:.4} px (reduced images)\n")
-        + &format!(
+        + &interval_footnote(rows)
+}
+
+/// What the brackets of the tables mean: over captures when the rows pool repeats, else the
+/// block bootstrap of one capture.
+fn interval_footnote(rows: &[StudyRow]) -> String {
+    let captures = rows.iter().map(|r| r.repeats).min().unwrap_or(1);
+    if captures > 1 {
+        format!(
+            "each row: the mean over {captures} independent captures; […]: its 95 % interval (Student t over the\n\
+             captures; the increases paired per capture); n.s.: the interval holds 0, no significant change.\n"
+        )
+    } else {
+        format!(
             "[…]: 95 % interval of the increase, a paired block bootstrap over the grid (one frame pair;\n\
              it runs ≈ 25 % narrow, README); n.s.: the interval holds 0, no significant change. No\n\
              interval: the grid holds fewer than {MIN_BLOCKS} blocks of {BLOCK_PER_CORRELATION_LENGTH}x the field's correlation\n\
-             length (strains: the virtual strain gauge).\n"
+             length (strains: the virtual strain gauge). `--repeats N` gives intervals over captures.\n"
         )
+    }
 }
 
 /// The study as CSV, one row per run and scheme.
@@ -182,6 +207,7 @@ pub fn study_csv(rows: &[StudyRow]) -> String {
         "eyy_std_hi",
         "exy_std_lo",
         "exy_std_hi",
+        "repeats",
     ];
     let body: Vec<Vec<String>> = rows
         .iter()
@@ -212,6 +238,7 @@ pub fn study_csv(rows: &[StudyRow]) -> String {
                     .iter()
                     .flat_map(|st| st.std_ci95.map(|v| v.to_string())),
             )
+            .chain([r.repeats.to_string()])
             .collect()
         })
         .collect();

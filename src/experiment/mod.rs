@@ -3,10 +3,12 @@
 //! the fill-factor study run on it.
 
 mod bench;
+mod captures;
 mod figures;
 mod limits;
 mod maps;
 mod model_scene;
+mod pool;
 mod request;
 mod runner;
 mod simulate;
@@ -17,12 +19,14 @@ pub use bench::{
     BenchError, BenchHandle, BenchHardware, BenchLease, BenchStatus, CameraStatus, Owner,
     StageStatus, TargetMount,
 };
-pub use figures::{figure_svgs, figures_text, rows_json, study_csv};
+pub use captures::{capture_plan, layout_seed, CaptureRun, TargetCapture};
+pub use figures::{figure_svgs, figures_text, rows_json, study_csv, study_json};
 pub use limits::{
     BenchLimits, OutOfTravel, StageAxis, DOT_DIAMETER_PX, EXPOSURE_US, MIN_DOT_SPACING_PX,
 };
 pub use maps::{field_map_svgs, map_file_name};
 pub use model_scene::ModelScene;
+pub use pool::{mean_interval, pool_captures, t_975};
 pub use request::{
     check_dic, check_schemes, ExperimentPlan, ExperimentRequest, FieldError, SchemeSpec,
 };

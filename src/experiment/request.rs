@@ -31,8 +31,14 @@ pub struct ExperimentRequest {
     /// Sub-pixel step series: `count` moves of k·step for k = 1..=count.
     #[schema(value_type = Vec<Object>)]
     pub step_series: Vec<StepSeries>,
-    /// Static frames of the reference position per pattern (noise floor).
+    /// Static frames of the reference position per pattern and capture (noise floor).
+    pub static_frames: usize,
+    /// Independent captures of every reference/deformed pair (new noise each): the study reports
+    /// the mean over captures and its 95 % interval (Student t). 1 = a single capture.
     pub repeats: usize,
+    /// With `repeats` > 1, a new speckle layout for every capture (a bench with a target changer,
+    /// such as the mock bench, only): the interval then holds the layout-to-layout spread too.
+    pub new_layout_per_repeat: bool,
     /// Frames averaged into each stored frame.
     pub frames_averaged: usize,
     /// Extra wait after the stage reports settled, ms.
@@ -56,7 +62,9 @@ impl Default for ExperimentRequest {
             patterns: paper.patterns,
             moves: paper.moves,
             step_series: paper.step_series,
+            static_frames: paper.static_frames,
             repeats: paper.repeats,
+            new_layout_per_repeat: paper.new_layout_per_repeat,
             frames_averaged: 1,
             settle_ms: 50,
             exposure_us: None,
@@ -88,7 +96,9 @@ pub struct ExperimentPlan {
     pub name: String,
     pub patterns: Vec<SpecklePattern>,
     pub moves: Vec<MoveSpec>,
+    pub static_frames: usize,
     pub repeats: usize,
+    pub new_layout_per_repeat: bool,
     pub frames_averaged: usize,
     pub settle_ms: u64,
     pub exposure_us: Option<f64>,
@@ -99,7 +109,10 @@ pub struct ExperimentPlan {
 
 /// Limits that keep one request from occupying the bench for days.
 const MAX_MOVES: usize = 200;
+/// Frames one experiment may capture (patterns × repeats × (reference, static frames, moves)).
+const MAX_FRAMES: usize = 2000;
 const MAX_FRAMES_AVERAGED: usize = 64;
+const MAX_STATIC_FRAMES: usize = 32;
 const MAX_REPEATS: usize = 32;
 const MAX_PATTERNS: usize = 16;
 const MAX_SCHEMES: usize = 16;
@@ -117,8 +130,27 @@ impl ExperimentRequest {
                 format!("1 to {MAX_FRAMES_AVERAGED}"),
             ));
         }
-        if self.repeats > MAX_REPEATS {
-            return Err(field_error("repeats", format!("at most {MAX_REPEATS}")));
+        if self.static_frames > MAX_STATIC_FRAMES {
+            return Err(field_error(
+                "static_frames",
+                format!("at most {MAX_STATIC_FRAMES}"),
+            ));
+        }
+        if !(1..=MAX_REPEATS).contains(&self.repeats) {
+            return Err(field_error("repeats", format!("1 to {MAX_REPEATS}")));
+        }
+        if self.new_layout_per_repeat && !limits.has_target_mount() {
+            return Err(field_error(
+                "new_layout_per_repeat",
+                "this bench has no target changer: the mounted target's layout cannot change",
+            ));
+        }
+        let frames = (1 + self.static_frames + moves.len()) * patterns.len() * self.repeats;
+        if frames > MAX_FRAMES {
+            return Err(field_error(
+                "repeats",
+                format!("{frames} frames in all; at most {MAX_FRAMES}"),
+            ));
         }
         if self.settle_ms > MAX_SETTLE_MS {
             return Err(field_error("settle_ms", format!("at most {MAX_SETTLE_MS}")));
@@ -132,7 +164,9 @@ impl ExperimentRequest {
             name: self.name.clone(),
             patterns,
             moves,
+            static_frames: self.static_frames,
             repeats: self.repeats,
+            new_layout_per_repeat: self.new_layout_per_repeat,
             frames_averaged: self.frames_averaged,
             settle_ms: self.settle_ms,
             exposure_us: self.exposure_us,
@@ -324,6 +358,14 @@ mod tests {
         };
         assert_eq!(bad(r#"{"patterns":["z"]}"#), "patterns[0]");
         assert_eq!(bad(r#"{"frames_averaged":0}"#), "frames_averaged");
+        assert_eq!(bad(r#"{"repeats":0}"#), "repeats");
+        assert_eq!(bad(r#"{"static_frames":33}"#), "static_frames");
+        assert_eq!(
+            bad(
+                r#"{"repeats":32,"static_frames":32,"step_series":[{"id":"s","dx_step_mm":0.01,"count":100}]}"#
+            ),
+            "repeats"
+        );
         assert_eq!(bad(r#"{"schemes":["ff7"]}"#), "schemes[0]");
         assert_eq!(bad(r#"{"dic":{"subset_px":40}}"#), "dic.subset");
         assert_eq!(bad(r#"{"moves":[{"id":"../x","dx_mm":1}]}"#), "moves[0].id");
@@ -357,5 +399,12 @@ mod tests {
             .plan(&BenchLimits::analysis_only(26.0))
             .unwrap_err();
         assert_eq!(one_target.field, "patterns");
+        let fixed_target = serde_json::from_str::<ExperimentRequest>(
+            r#"{"patterns":["a"],"repeats":3,"new_layout_per_repeat":true}"#,
+        )
+        .unwrap()
+        .plan(&BenchLimits::analysis_only(26.0))
+        .unwrap_err();
+        assert_eq!(fixed_target.field, "new_layout_per_repeat");
     }
 }

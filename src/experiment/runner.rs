@@ -7,8 +7,10 @@
 //! service implements over the run store and the event stream, and `ffdic reproduce` over the same.
 
 use super::bench::{BenchError, BenchHandle, BenchLease, Owner};
-use super::figures::{figure_svgs, rows_json, study_csv};
+use super::captures::{capture_plan, layout_seed, TargetCapture};
+use super::figures::{figure_svgs, study_csv, study_json};
 use super::maps::field_map_svgs;
+use super::pool::pool_captures;
 use super::request::ExperimentPlan;
 use super::study::{analyze_dataset_with, StudyError, StudyRow};
 use crate::dataset::{CameraInfo, Manifest, Run, StageMove};
@@ -137,31 +139,38 @@ fn capture_and_analyse(
         bench.home(owner.clone(), timeouts.home)?;
     }
 
-    let frames_per_pattern = 1 + plan.repeats + plan.moves.len();
-    let total_frames = plan.patterns.len() * frames_per_pattern;
+    let labels: Vec<&str> = plan.patterns.iter().map(|p| p.label.as_str()).collect();
+    let captures = capture_plan(&labels, &plan.moves, plan.static_frames, plan.repeats);
+    let total_frames: usize = captures.iter().map(TargetCapture::frame_count).sum();
     let mut captured = 0usize;
     let mut manifest = Manifest::new(&plan.name, scale_px_per_mm);
     let mut size: Option<(usize, usize, u8)> = None;
     let mut frames_dir = PathBuf::new();
 
-    for (pi, pattern) in plan.patterns.iter().enumerate() {
+    for target in &captures {
         check()?;
+        let pi = target.pattern_index;
+        let pattern = &plan.patterns[pi];
         let label = &pattern.label;
-        if status.has_target_mount {
+        let new_layout = target.capture == 1 || plan.new_layout_per_repeat;
+        if status.has_target_mount && new_layout {
             bench.mount(
                 owner.clone(),
                 label,
                 pattern,
-                plan.seed.wrapping_add(pi as u64),
+                layout_seed(plan.seed.wrapping_add(pi as u64), target.capture),
             )?;
             sink.event(
                 "target_mounted",
                 progress(captured, total_frames, CAPTURE_SHARE),
-                &format!("pattern {label} in front of the camera"),
-                json!({ "pattern": label }),
+                &format!(
+                    "pattern {label} in front of the camera (capture {} of {})",
+                    target.capture, plan.repeats
+                ),
+                json!({ "pattern": label, "capture": target.capture }),
             );
         }
-        let mut shoot = |name: String,
+        let mut shoot = |name: &str,
                          at: StagePosition,
                          write: &mut FrameWriter<'_>|
          -> Result<(), RunnerError> {
@@ -201,34 +210,31 @@ fn capture_and_analyse(
             Ok(())
         };
         let home = StagePosition::default();
-        let reference = format!("{label}_ref.tif");
-        shoot(reference.clone(), home, &mut write)?;
-        let repeat: Vec<String> = (1..=plan.repeats)
-            .map(|k| format!("{label}_ref_r{k}.tif"))
-            .collect();
-        for name in &repeat {
-            shoot(name.clone(), home, &mut write)?;
+        shoot(&target.reference, home, &mut write)?;
+        for name in &target.static_frames {
+            shoot(name, home, &mut write)?;
         }
-        for m in &plan.moves {
-            let deformed = format!("{label}_{}.tif", m.id);
+        for run in &target.runs {
+            let m = &plan.moves[run.move_index];
             let at = StagePosition {
                 x_mm: m.dx_mm,
                 y_mm: m.dy_mm,
             };
-            shoot(deformed.clone(), at, &mut write)?;
+            shoot(&run.deformed, at, &mut write)?;
             manifest.runs.push(Run {
-                id: format!("{label}-{}", m.id),
+                id: run.id.clone(),
                 pattern: Some(super::simulate::pattern_info(label, pattern, false)),
-                reference: reference.clone(),
-                deformed,
+                reference: target.reference.clone(),
+                deformed: run.deformed.clone(),
                 stage: StageMove {
                     dx_mm: m.dx_mm,
                     dy_mm: m.dy_mm,
                 },
-                repeat: repeat.clone(),
+                repeat: target.static_frames.clone(),
                 exposure_us: plan
                     .exposure_us
                     .or(Some(status.camera.settings.exposure_us)),
+                repeat_of: run.repeat_of.clone(),
                 extra: Default::default(),
             });
         }
@@ -316,12 +322,20 @@ fn capture_and_analyse(
         .expect("map list")
         .map_err(RunnerError::Write)?;
 
-    let json_text = serde_json::to_string_pretty(&rows_json(&rows)).expect("rows serialise");
+    let captures = rows;
+    let rows = pool_captures(&manifest, &captures);
+    let json_text =
+        serde_json::to_string_pretty(&study_json(&rows, &captures)).expect("rows serialise");
     write("results/study.json".into(), json_text.as_bytes())?;
     write("results/study.csv".into(), study_csv(&rows).as_bytes())?;
-    // The rows as the library holds them, for clients that read them back (`ffdic reproduce`).
+    // The rows as the library holds them, for clients that read them back (`ffdic reproduce`);
+    // with repeats, every capture's own rows beside them.
     let rows_text = serde_json::to_string(&rows).expect("rows serialise");
     write("results/rows.json".into(), rows_text.as_bytes())?;
+    if plan.repeats > 1 {
+        let text = serde_json::to_string(&captures).expect("rows serialise");
+        write("results/captures.json".into(), text.as_bytes())?;
+    }
     for (file, svg) in figure_svgs(&rows) {
         write(format!("plots/{file}"), svg.as_bytes())?;
     }

@@ -2,6 +2,7 @@
 //! and writes them as a dataset (`ffdic-dataset/1`). Deterministic for a seed: every frame's
 //! noise seed is derived from (seed, pattern, frame), every pattern's dots from (seed, pattern).
 
+use super::captures::{capture_plan, layout_seed, TargetCapture};
 use super::spec::ExperimentSpec;
 use crate::dataset::{CameraInfo, DatasetError, Manifest, PatternInfo, Run, StageMove};
 use crate::image::{write_tiff_u16, Image, ImageError};
@@ -81,7 +82,9 @@ pub fn simulate_dataset(
     })?;
     let moves = spec.all_moves();
     let patterns = spec.patterns();
-    let total = patterns.len() * (1 + spec.repeats + moves.len());
+    let labels: Vec<&str> = patterns.iter().map(|p| p.label.as_str()).collect();
+    let captures = capture_plan(&labels, &moves, spec.static_frames, spec.repeats);
+    let total: usize = captures.iter().map(TargetCapture::frame_count).sum();
     let mut done = 0;
     let mut manifest = Manifest::new(&spec.name, spec.camera.scale_px_per_mm);
     manifest.camera = Some(CameraInfo {
@@ -94,46 +97,48 @@ pub fn simulate_dataset(
         "simulated_with".into(),
         serde_json::json!({"model": model.name, "seed": seed}),
     );
-    for (pi, pattern) in patterns.iter().enumerate() {
-        let dots = pattern_dots(spec, pattern, pi, seed)?;
-        let mut frame_no = 0u64;
+    // Frame numbers run on over a pattern's captures: every frame gets its own noise.
+    let mut frame_no = vec![0u64; patterns.len()];
+    let mut dots = Vec::new();
+    for target in &captures {
+        let pi = target.pattern_index;
+        let pattern = &patterns[pi];
+        if target.capture == 1 || spec.new_layout_per_repeat {
+            dots = pattern_dots(spec, pattern, pi, layout_seed(seed, target.capture))?;
+        }
         let mut shoot = |name: &str, stage: (f64, f64)| -> Result<(), SimulateError> {
             let img = render_stage_frame(
                 spec,
                 model,
                 &dots,
                 stage,
-                derive_seed(seed, pi as u64, frame_no),
+                derive_seed(seed, pi as u64, frame_no[pi]),
             );
-            frame_no += 1;
+            frame_no[pi] += 1;
             write_tiff_u16(&out.join(name), &img)?;
             done += 1;
             progress(done, total);
             Ok(())
         };
-        let label = &pattern.label;
-        let reference = format!("{label}_ref.tif");
-        shoot(&reference, (0.0, 0.0))?;
-        let repeat: Vec<String> = (1..=spec.repeats)
-            .map(|k| format!("{label}_ref_r{k}.tif"))
-            .collect();
-        for name in &repeat {
+        shoot(&target.reference, (0.0, 0.0))?;
+        for name in &target.static_frames {
             shoot(name, (0.0, 0.0))?;
         }
-        for m in &moves {
-            let deformed = format!("{label}_{}.tif", m.id);
-            shoot(&deformed, (m.dx_mm, m.dy_mm))?;
+        for run in &target.runs {
+            let m = &moves[run.move_index];
+            shoot(&run.deformed, (m.dx_mm, m.dy_mm))?;
             manifest.runs.push(Run {
-                id: format!("{label}-{}", m.id),
-                pattern: Some(pattern_info(label, pattern, true)),
-                reference: reference.clone(),
-                deformed,
+                id: run.id.clone(),
+                pattern: Some(pattern_info(&pattern.label, pattern, true)),
+                reference: target.reference.clone(),
+                deformed: run.deformed.clone(),
                 stage: StageMove {
                     dx_mm: m.dx_mm,
                     dy_mm: m.dy_mm,
                 },
-                repeat: repeat.clone(),
+                repeat: target.static_frames.clone(),
                 exposure_us: None,
+                repeat_of: run.repeat_of.clone(),
                 extra: Default::default(),
             });
         }

@@ -19,14 +19,24 @@ pub struct ExperimentSpec {
     /// Sub-pixel step series: `count` moves of k·step for k = 1..=count.
     #[serde(default)]
     pub step_series: Vec<StepSeries>,
-    /// Static frames of the reference position per pattern (noise floor).
+    /// Static frames of the reference position per pattern and capture (noise floor).
     #[serde(default)]
+    pub static_frames: usize,
+    /// Independent captures of every reference/deformed pair (see `ExperimentRequest::repeats`).
+    #[serde(default = "one")]
     pub repeats: usize,
+    /// A new speckle layout for every capture (mock bench and simulation).
+    #[serde(default)]
+    pub new_layout_per_repeat: bool,
     /// Reduction schemes by preset name.
     #[serde(default = "default_schemes")]
     pub schemes: Vec<String>,
     #[serde(default)]
     pub dic: DicSettings,
+}
+
+fn one() -> usize {
+    1
 }
 
 fn default_schemes() -> Vec<String> {
@@ -92,6 +102,12 @@ impl ExperimentSpec {
                     )));
                 }
             }
+        }
+        if !(1..=32).contains(&spec.repeats) {
+            return Err(parse(format!(
+                "repeats must be 1 to 32 captures, got {}",
+                spec.repeats
+            )));
         }
         if spec.camera.width < 64 || spec.camera.height < 64 || !(spec.camera.scale_px_per_mm > 0.0)
         {
@@ -162,11 +178,11 @@ mod tests {
 
     #[test]
     fn unknown_keys_are_named() {
-        let text = PAPER_TOML.replace("repeats", "repeatz");
+        let text = PAPER_TOML.replace("static_frames", "static_framez");
         let err = ExperimentSpec::from_toml(&text, Path::new("x.toml"))
             .unwrap_err()
             .to_string();
-        assert!(err.contains("repeatz"), "{err}");
+        assert!(err.contains("static_framez"), "{err}");
     }
 
     #[test]

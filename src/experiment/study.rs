@@ -81,6 +81,14 @@ pub struct StudyRow {
     /// None for the baseline, and where the two grids differ in shape or hold too few blocks.
     #[serde(default)]
     pub increase_ci95: Option<IncreaseInterval>,
+    /// Independent captures pooled into this row (`pool::pool_captures`); 1 for a single capture,
+    /// whose intervals are the block bootstrap's.
+    #[serde(default = "one_capture")]
+    pub repeats: usize,
+}
+
+fn one_capture() -> usize {
+    1
 }
 
 /// Runs the study over every run of a dataset in `dir`. `progress(done, total)` after each pair;
@@ -166,6 +174,7 @@ pub fn analyze_dataset_with(
                 summary,
                 increase_pct,
                 increase_ci95,
+                repeats: 1,
             });
             if !progress(rows.len(), total) {
                 return Err(StudyError::Cancelled);

@@ -9,8 +9,9 @@ use crate::diagnose::{
 };
 use crate::dic::DicSettings;
 use crate::experiment::{
-    analyze_dataset, check_dic, check_schemes, figure_svgs, rows_json, run_experiment, study_csv,
-    ExperimentPlan, ExperimentRequest, FieldError, RunSink, RunnerError, SchemeSpec, StudyError,
+    analyze_dataset, check_dic, check_schemes, figure_svgs, pool_captures, run_experiment,
+    study_csv, study_json, ExperimentPlan, ExperimentRequest, FieldError, RunSink, RunnerError,
+    SchemeSpec, StudyError,
 };
 use crate::model::ModelConfig;
 use crate::reduce::Scheme;
@@ -120,7 +121,10 @@ pub fn analysis(service: Service, dataset: DatasetId, plan: AnalysisPlan) -> Wor
             StudyError::Cancelled => JobError::Cancelled,
             other => fail(other),
         })?;
-        let text = serde_json::to_string_pretty(&rows_json(&rows)).expect("rows serialise");
+        let captures = rows;
+        let rows = pool_captures(&manifest, &captures);
+        let text =
+            serde_json::to_string_pretty(&study_json(&rows, &captures)).expect("rows serialise");
         ctx.write("results/study.json", text.as_bytes())
             .map_err(fail)?;
         ctx.write("results/study.csv", study_csv(&rows).as_bytes())
