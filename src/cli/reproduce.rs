@@ -9,7 +9,10 @@ use super::ProgressBar;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use ffdic::diagnose::Diagnosis;
-use ffdic::experiment::{figures_text, rows_json, ExperimentRequest, SchemeSpec, StudyRow};
+use ffdic::experiment::{
+    figures_text, findings_text, paper_findings, study_json, ExperimentRequest, SchemeSpec,
+    StudyRow,
+};
 use ffdic::service::{
     mock_bench, CameraConfig, CompareRequest, DaemonConfig, NewModel, Service,
     PAPER_BENCH_DISTORTION_TOML,
@@ -40,7 +43,8 @@ pub struct ReproduceArgs {
     /// A new speckle layout for every capture (with --repeats).
     #[arg(long)]
     pub new_layouts: bool,
-    /// Print the table as one JSON document and nothing else.
+    /// Print the table as one JSON document and nothing else (with --repeats, every capture's
+    /// rows under "captures").
     #[arg(long)]
     pub json: bool,
     /// Stop after the study: no comparison with the baseline model, no diagnosis.
@@ -105,8 +109,21 @@ pub fn run(args: &ReproduceArgs) -> Result<()> {
         &std::fs::read(&rows_path)
             .with_context(|| format!("cannot read {}", rows_path.display()))?,
     )?;
+    let captures_path = run_dir.join("results/captures.json");
+    let captures: Vec<StudyRow> = match std::fs::read(&captures_path) {
+        Ok(bytes) => serde_json::from_slice(&bytes)
+            .with_context(|| format!("cannot read {}", captures_path.display()))?,
+        // A single capture writes no captures.json.
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
+        Err(e) => {
+            return Err(e).with_context(|| format!("cannot read {}", captures_path.display()))
+        }
+    };
     if args.json {
-        let mut doc = rows_json(&rows);
+        let mut doc = study_json(&rows, &captures);
+        if !captures.is_empty() {
+            doc["findings"] = serde_json::to_value(paper_findings(&captures))?;
+        }
         doc["run"] = serde_json::json!(record.id.to_string());
         doc["folder"] = serde_json::json!(run_dir.display().to_string());
         if let Some(story) = &story {
@@ -115,6 +132,7 @@ pub fn run(args: &ReproduceArgs) -> Result<()> {
         println!("{doc}");
     } else {
         print!("{}", figures_text(&rows));
+        print!("{}", findings_text(&paper_findings(&captures)));
         println!(
             "\nrun {} in {} (frames/ as ffdic-dataset/1, results/study.csv, study.json, plots/figure5_*.svg, figure6_*.svg)",
             record.id,

@@ -1,0 +1,261 @@
+//! The paper's findings (Hijazi, Rawashdeh & Kähler, § 4) tested on a study with repeated
+//! captures: each finding becomes a difference with a 95 % t interval over the captures, and a
+//! verdict — it holds, it is contradicted, or this bench cannot resolve it. Differences within
+//! one pattern are paired per capture (one pair of frames reduced twice); differences between
+//! patterns compare independent captures (Welch's t, Satterthwaite's degrees of freedom, rounded
+//! down: conservative).
+
+use super::pool::{mean_interval, t_975};
+use super::study::{Increase, StudyRow};
+use serde::Serialize;
+
+/// What the interval says about a finding.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Verdict {
+    Holds,
+    Contradicted,
+    NotResolved,
+}
+
+/// One tested statement.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Finding {
+    /// The paper's statement.
+    pub claim: String,
+    /// The difference tested, in words.
+    pub measure: String,
+    pub mean: f64,
+    pub ci95: [f64; 2],
+    /// Captures behind each side.
+    pub captures: usize,
+    pub verdict: Verdict,
+}
+
+/// The paper's findings on `captures` (every capture's own rows, `results/captures.json`):
+/// those whose patterns and schemes the study holds, with at least two captures each.
+pub fn paper_findings(captures: &[StudyRow]) -> Vec<Finding> {
+    let inc = |pattern: &str, scheme: &str, f: fn(&Increase) -> f64| -> Vec<f64> {
+        captures
+            .iter()
+            .filter(|r| r.pattern == pattern && r.scheme == scheme)
+            .filter_map(|r| r.increase_pct.as_ref().map(f))
+            .collect()
+    };
+    let std = |pattern: &str, scheme: &str, f: fn(&StudyRow) -> f64| -> Vec<f64> {
+        captures
+            .iter()
+            .filter(|r| r.pattern == pattern && r.scheme == scheme)
+            .map(f)
+            .collect()
+    };
+    let u: fn(&Increase) -> f64 = |i| i.u;
+    let v: fn(&Increase) -> f64 = |i| i.v;
+    let exx: fn(&Increase) -> f64 = |i| i.exx;
+    let eyy: fn(&Increase) -> f64 = |i| i.eyy;
+    let mut out = Vec::new();
+    let mut push = |claim: &str, measure: String, xs: (f64, [f64; 2], usize), verdict: Verdict| {
+        let (mean, ci95, n) = xs;
+        if n >= 2 && ci95.iter().all(|x| x.is_finite()) {
+            out.push(Finding {
+                claim: claim.to_string(),
+                measure,
+                mean,
+                ci95,
+                captures: n,
+                verdict,
+            });
+        }
+    };
+    for scheme in ["ff50", "ff25"] {
+        // § 4: "for speckle (a) the fill factor has no effect on the error"; read as within ±5 %.
+        for (name, f) in [("u", u), ("exx", exx)] {
+            let x = summary(&inc("a", scheme, f));
+            push(
+                "pattern a: the fill factor has no effect (within ±5 %)",
+                format!("a {scheme} increase of std {name} [%]"),
+                x,
+                within(x.1, 5.0),
+            );
+        }
+        // "for speckles (b) and (c), the fill factor has some effect".
+        for p in ["b", "c"] {
+            for (name, f) in [("u", u), ("v", v), ("exx", exx), ("eyy", eyy)] {
+                let x = summary(&inc(p, scheme, f));
+                push(
+                    "patterns b and c: the error grows at a lower fill factor",
+                    format!("{p} {scheme} increase of std {name} [%]"),
+                    x,
+                    above(x.1, 0.0),
+                );
+            }
+        }
+    }
+    // "speckle (b) shows the largest fill factor dependence" (x: +13.2 % displacement,
+    // +19.8 % strain).
+    for other in ["a", "c"] {
+        for (name, f) in [("u", u), ("exx", exx)] {
+            let x = welch(&inc("b", "ff25", f), &inc(other, "ff25", f));
+            push(
+                "pattern b shows the largest fill-factor dependence",
+                format!("b minus {other}, ff25 increase of std {name} [points]"),
+                x,
+                above(x.1, 0.0),
+            );
+        }
+    }
+    // Figure 6: the sub-pixel y component is affected more than the x translation.
+    for p in ["b", "c"] {
+        for ((nx, fx), (ny, fy)) in [(("u", u), ("v", v)), (("exx", exx), ("eyy", eyy))] {
+            let x = paired(&inc(p, "ff25", fy), &inc(p, "ff25", fx));
+            push(
+                "the sub-pixel y component is affected more than the x move",
+                format!("{p} ff25: increase of std {ny} minus that of std {nx} [points]"),
+                x,
+                above(x.1, 0.0),
+            );
+        }
+    }
+    // "the most significant increase in error occurs with the 25 % fill factor images".
+    for p in ["b", "c"] {
+        for (name, f) in [("u", u), ("v", v)] {
+            let x = paired(&inc(p, "ff25", f), &inc(p, "ff50", f));
+            push(
+                "the largest increase is at 25 %",
+                format!("{p}: ff25 minus ff50 increase of std {name} [points]"),
+                x,
+                above(x.1, 0.0),
+            );
+        }
+    }
+    // "speckle (a) consistently shows the lowest magnitude of strain error".
+    for other in ["b", "c"] {
+        for scheme in ["ff100", "ff50", "ff25"] {
+            let exx_std: fn(&StudyRow) -> f64 = |r| 1e6 * r.summary.exx.std;
+            let x = welch(&std(other, scheme, exx_std), &std("a", scheme, exx_std));
+            push(
+                "pattern a has the lowest strain error",
+                format!("{other} minus a, {scheme} std exx [µε]"),
+                x,
+                above(x.1, 0.0),
+            );
+        }
+    }
+    out
+}
+
+fn summary(xs: &[f64]) -> (f64, [f64; 2], usize) {
+    let (m, ci) = mean_interval(xs);
+    (m, ci, xs.len())
+}
+
+/// The mean difference of two paired samples, with its t interval.
+fn paired(a: &[f64], b: &[f64]) -> (f64, [f64; 2], usize) {
+    if a.len() != b.len() {
+        return (f64::NAN, [f64::NAN; 2], 0);
+    }
+    let d: Vec<f64> = a.iter().zip(b).map(|(x, y)| x - y).collect();
+    summary(&d)
+}
+
+/// The difference of the means of two independent samples with Welch's interval.
+fn welch(a: &[f64], b: &[f64]) -> (f64, [f64; 2], usize) {
+    let n = a.len().min(b.len());
+    if n < 2 {
+        return (f64::NAN, [f64::NAN; 2], 0);
+    }
+    let moments = |xs: &[f64]| {
+        let m = xs.iter().sum::<f64>() / xs.len() as f64;
+        let var = xs.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (xs.len() - 1) as f64;
+        (m, var / xs.len() as f64)
+    };
+    let ((ma, sa), (mb, sb)) = (moments(a), moments(b));
+    let se2 = sa + sb;
+    let df = se2 * se2
+        / (sa * sa / (a.len() - 1) as f64 + sb * sb / (b.len() - 1) as f64).max(f64::MIN_POSITIVE);
+    let half = t_975((df.floor() as usize).max(1)) * se2.sqrt();
+    let d = ma - mb;
+    (d, [d - half, d + half], n)
+}
+
+/// Holds when the whole interval is above `x`, contradicted when it is all below.
+fn above([lo, hi]: [f64; 2], x: f64) -> Verdict {
+    if lo > x {
+        Verdict::Holds
+    } else if hi < x {
+        Verdict::Contradicted
+    } else {
+        Verdict::NotResolved
+    }
+}
+
+/// Holds when the interval lies within ±`tolerance`, contradicted when it lies outside.
+fn within([lo, hi]: [f64; 2], tolerance: f64) -> Verdict {
+    if lo >= -tolerance && hi <= tolerance {
+        Verdict::Holds
+    } else if lo > tolerance || hi < -tolerance {
+        Verdict::Contradicted
+    } else {
+        Verdict::NotResolved
+    }
+}
+
+/// The findings as a terminal table.
+pub fn findings_text(findings: &[Finding]) -> String {
+    if findings.is_empty() {
+        return String::new();
+    }
+    let headers = [
+        "paper's finding",
+        "tested",
+        "mean [95 % interval]",
+        "verdict",
+    ];
+    let body: Vec<Vec<String>> = findings
+        .iter()
+        .map(|f| {
+            vec![
+                f.claim.clone(),
+                f.measure.clone(),
+                format!("{:+.1} [{:+.1}, {:+.1}]", f.mean, f.ci95[0], f.ci95[1]),
+                match f.verdict {
+                    Verdict::Holds => "holds",
+                    Verdict::Contradicted => "contradicted",
+                    Verdict::NotResolved => "not resolved",
+                }
+                .to_string(),
+            ]
+        })
+        .collect();
+    format!(
+        "\nThe paper's findings on this bench ({} captures per row; 95 % t intervals; between patterns Welch's t):\n{}",
+        findings[0].captures,
+        crate::report::text_table(&headers, &body)
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn verdicts_follow_the_interval() {
+        assert_eq!(above([1.0, 2.0], 0.0), Verdict::Holds);
+        assert_eq!(above([-2.0, -1.0], 0.0), Verdict::Contradicted);
+        assert_eq!(above([-1.0, 1.0], 0.0), Verdict::NotResolved);
+        assert_eq!(within([-4.0, 4.0], 5.0), Verdict::Holds);
+        assert_eq!(within([6.0, 9.0], 5.0), Verdict::Contradicted);
+        assert_eq!(within([3.0, 9.0], 5.0), Verdict::NotResolved);
+    }
+
+    /// Welch's interval against a hand computation: a = (1, 2, 3), b = (2, 4, 6, 8):
+    /// means 2 and 5, variances of the means 1/3 and 20/12; se² = 2; df = 4 / (1/18 + 25/27)
+    /// = 4.08 → 4, t = 2.7764.
+    #[test]
+    fn welch_by_hand() {
+        let (d, [lo, hi], _) = welch(&[1.0, 2.0, 3.0], &[2.0, 4.0, 6.0, 8.0]);
+        assert!((d + 3.0).abs() < 1e-12);
+        let half = 2.7764 * 2f64.sqrt();
+        assert!((lo - (-3.0 - half)).abs() < 1e-9 && (hi - (-3.0 + half)).abs() < 1e-9);
+    }
+}
