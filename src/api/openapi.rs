@@ -57,6 +57,8 @@ pub fn router(max_upload_bytes: usize) -> OpenApiRouter<Service> {
         .routes(routes!(datasets::diagnose))
         .routes(routes!(datasets::history))
         .routes(routes!(datasets::history_svg))
+        .routes(routes!(datasets::jobs))
+        .routes(routes!(datasets::details))
         .routes(routes!(models::list, models::add))
         .routes(routes!(models::get))
         .routes(routes!(jobs::get_job))

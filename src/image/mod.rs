@@ -6,10 +6,12 @@
 mod error;
 mod gray;
 mod roi;
+pub mod speckle_quality;
 mod tiff_io;
 mod tiff_layout;
 
 pub use error::ImageError;
 pub use gray::Image;
 pub use roi::Roi;
+pub use speckle_quality::{speckle_quality, SpeckleQuality, SpeckleQualityError};
 pub use tiff_io::{read_tiff, tiff_u16_bytes, write_tiff_u16, write_tiff_u8, TiffInfo};

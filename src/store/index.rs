@@ -125,6 +125,28 @@ pub fn list_runs(
     rows.map(|text| decode(&text?)).collect()
 }
 
+/// Runs of `kinds` that name dataset `dataset`, newest first, at most `limit`. The dataset id
+/// lives in the record's JSON only (the table has no column for it): the index is small and a
+/// dataset's page asks once per load.
+pub fn list_runs_of_dataset(
+    conn: &Connection,
+    dataset: &str,
+    kinds: &[RunKind],
+    limit: usize,
+) -> Result<Vec<RunRecord>> {
+    let limit = i64::try_from(limit).unwrap_or(i64::MAX);
+    let kinds: Vec<&str> = kinds.iter().map(|k| k.as_str()).collect();
+    let kinds = serde_json::to_string(&kinds).expect("a list of words serialises");
+    let mut stmt = conn.prepare_cached(
+        "SELECT record FROM runs
+         WHERE json_extract(record, '$.dataset_id') = ?1
+           AND kind IN (SELECT value FROM json_each(?2))
+         ORDER BY created_at DESC, id DESC LIMIT ?3",
+    )?;
+    let rows = stmt.query_map(params![dataset, kinds, limit], |r| r.get::<_, String>(0))?;
+    rows.map(|text| decode(&text?)).collect()
+}
+
 /// The run of `kind` created with idempotency `key`, if any (the first, should there be more).
 pub fn find_by_key(conn: &Connection, kind: RunKind, key: &str) -> Result<Option<RunId>> {
     let id: Option<String> = conn

@@ -256,6 +256,17 @@ impl RunStore {
         index::list_runs(&self.db(), status, kind, limit)
     }
 
+    /// Runs of `kinds` made for dataset `dataset` (comparisons and diagnoses of it, say), newest
+    /// first, at most `limit`.
+    pub fn list_for_dataset(
+        &self,
+        dataset: &DatasetId,
+        kinds: &[RunKind],
+        limit: usize,
+    ) -> Result<Vec<RunRecord>> {
+        index::list_runs_of_dataset(&self.db(), dataset.as_str(), kinds, limit)
+    }
+
     /// Moves run `id` to `next` (see [`RunStatus::can_become`]) with `message`; stamps
     /// `started_at` / `finished_at`, sets progress 1 on success and writes the matching event
     /// (`started`, `succeeded`, `failed` or `cancelled`). After a terminal status nothing more can
@@ -708,6 +719,38 @@ mod tests {
         }
         assert_eq!(is_terminal_event("cancelled"), Some(RunStatus::Cancelled));
         assert_eq!(is_terminal_event("running"), None);
+    }
+
+    #[test]
+    fn runs_of_a_dataset_are_listed_by_kind_newest_first() {
+        let dir = tempfile::tempdir().unwrap();
+        let (store, _) = RunStore::open(dir.path()).unwrap();
+        let (a, b) = (DatasetId::generate(), DatasetId::generate());
+        let mut made = Vec::new();
+        for (kind, ds) in [
+            (RunKind::Comparison, Some(a.clone())),
+            (RunKind::Diagnosis, Some(a.clone())),
+            (RunKind::Comparison, Some(b.clone())),
+            (RunKind::Experiment, Some(a.clone())),
+            (RunKind::Comparison, None),
+        ] {
+            let (r, _) = store.create_run(kind, json!({}), None, ds).unwrap();
+            made.push(r.id);
+            std::thread::sleep(std::time::Duration::from_millis(2));
+        }
+        let kinds = [RunKind::Comparison, RunKind::Diagnosis];
+        let ids: Vec<RunId> = store
+            .list_for_dataset(&a, &kinds, 10)
+            .unwrap()
+            .into_iter()
+            .map(|r| r.id)
+            .collect();
+        assert_eq!(ids, vec![made[1].clone(), made[0].clone()]);
+        assert_eq!(store.list_for_dataset(&a, &kinds, 1).unwrap().len(), 1);
+        assert_eq!(
+            store.list_for_dataset(&b, &kinds, 10).unwrap()[0].id,
+            made[2]
+        );
     }
 
     #[test]

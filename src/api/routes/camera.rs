@@ -1,5 +1,6 @@
 //! The camera: its state, its settings (`PATCH` applies and answers with what the camera really
-//! set), and a snapshot as a 16-bit TIFF or, for a quick look, an 8-bit PNG.
+//! set), and a snapshot as a 16-bit TIFF or, for a quick look, an 8-bit PNG — with, on request,
+//! the speckle-quality figures of that very frame in a header (no second acquisition).
 
 use super::blocking;
 use crate::api::json::ApiJson;
@@ -84,10 +85,34 @@ pub async fn patch_camera(
 pub struct SnapshotQuery {
     /// `tiff` (16-bit, the default) or `png` (8-bit, stretched for a quick look).
     pub format: Option<String>,
+    /// With `true`, the `X-Speckle-Quality` header carries the frame's speckle-quality figures
+    /// (JSON: mean intensity gradient, speckle size, SSSIG over `subset_px` subsets).
+    pub quality: Option<bool>,
+    /// Subset side for the SSSIG, px (default: the DIC default subset).
+    pub subset_px: Option<usize>,
+}
+
+/// The header that carries the speckle-quality figures of a snapshot.
+pub const SPECKLE_QUALITY_HEADER: &str = "x-speckle-quality";
+
+/// Side of the centred crop the quality figures are computed on: enough subsets for a median,
+/// and a bounded cost on a large sensor (the autocorrelation is O(pixels × lags)).
+const QUALITY_CROP_PX: usize = 1024;
+
+/// The speckle-quality figures of a 16-bit frame, over its centred crop, as header JSON.
+fn quality_json(width: usize, height: usize, data: &[u16], subset_px: usize) -> ApiResult<String> {
+    let (cw, ch) = (width.min(QUALITY_CROP_PX), height.min(QUALITY_CROP_PX));
+    let (x0, y0) = ((width - cw) / 2, (height - ch) / 2);
+    let crop = crate::image::Image::from_fn(cw, ch, |c, r| data[(y0 + r) * width + x0 + c] as f32);
+    let q = crate::image::speckle_quality(&crop, subset_px)
+        .map_err(|e| ApiError::invalid("subset_px", e.to_string()))?;
+    Ok(serde_json::to_string(&q).expect("speckle quality serialises"))
 }
 
 #[utoipa::path(post, path = "/camera/snapshot", tag = "bench", params(SnapshotQuery),
-    responses((status = 200, description = "One frame", content_type = "image/tiff"),
+    responses((status = 200, description = "One frame", content_type = "image/tiff",
+               headers(("X-Speckle-Quality" = String, description = "With quality=true: the frame's speckle-quality figures as JSON (mean_gradient_dn_per_px, speckle_size_x_px, speckle_size_y_px, speckle_size_px, subset_px, subsets, sssig_x_median_dn2, sssig_y_median_dn2, sssig_x_min_dn2, sssig_y_min_dn2, std_u_px_per_noise_dn, std_v_px_per_noise_dn)"))),
+              (status = 422, description = "Unknown format, or a subset larger than the frame", body = Problem),
               (status = 409, body = Problem), (status = 503, body = Problem), (status = 504, body = Problem)))]
 pub async fn snapshot(
     State(svc): State<Service>,
@@ -103,12 +128,21 @@ pub async fn snapshot(
             ))
         }
     };
+    let subset_px = q
+        .subset_px
+        .unwrap_or(crate::dic::DicSettings::default().subset_px);
     let bench = svc.bench.clone();
     let timeout = Duration::from_millis(svc.config.bench.frame_timeout_ms);
     let frame = blocking(move || bench.capture(Owner::Direct, 1, timeout))
         .await??
         .pop()
         .ok_or_else(|| ApiError::unavailable("the camera delivered no frame"))?;
+    let quality = if q.quality == Some(true) {
+        let f = frame.clone();
+        Some(blocking(move || quality_json(f.width, f.height, &f.data, subset_px)).await??)
+    } else {
+        None
+    };
     let (bytes, mime) = blocking(move || {
         if png {
             crate::report::png_quicklook(frame.width, frame.height, &frame.data)
@@ -121,5 +155,11 @@ pub async fn snapshot(
     })
     .await?
     .map_err(|e| ApiError::internal("encoding the snapshot", e))?;
-    Ok(([(header::CONTENT_TYPE, mime)], bytes).into_response())
+    let mut response = ([(header::CONTENT_TYPE, mime)], bytes).into_response();
+    if let Some(json) = quality {
+        let value = header::HeaderValue::from_str(&json)
+            .map_err(|e| ApiError::internal("the speckle-quality header", e))?;
+        response.headers_mut().insert(SPECKLE_QUALITY_HEADER, value);
+    }
+    Ok(response)
 }

@@ -286,3 +286,190 @@ pub async fn history_svg(
     let svg = history_chart(&entries);
     Ok(([(header::CONTENT_TYPE, "image/svg+xml")], svg).into_response())
 }
+
+/// Kinds of run a dataset page lists: what was done to the dataset.
+const DATASET_JOB_KINDS: [RunKind; 3] =
+    [RunKind::Comparison, RunKind::Diagnosis, RunKind::Analysis];
+
+/// Most jobs `GET /datasets/{id}/jobs` lists.
+const DATASET_JOBS_LIMIT: usize = 200;
+
+/// One comparison, diagnosis or analysis of a dataset, with its headline figures.
+#[derive(serde::Serialize, utoipa::ToSchema)]
+pub struct DatasetJob {
+    pub id: String,
+    /// `comparison`, `diagnosis` or `analysis`.
+    pub kind: String,
+    pub status: String,
+    pub created_at: String,
+    pub finished_at: Option<String>,
+    pub message: String,
+    /// The model the request named (comparisons and diagnoses).
+    pub model: Option<String>,
+    /// The discrepancy against that model, full-resolution px (once succeeded).
+    pub discrepancy_px: Option<f64>,
+    /// A diagnosis's verdict (`none` when no candidate explains the discrepancy); several
+    /// rounds give their verdicts in order.
+    pub verdicts: Vec<String>,
+    /// After the diagnosis's found effects were added, px.
+    pub final_discrepancy_px: Option<f64>,
+    /// Files the job wrote (`results/…`, `plots/…`), as `GET /jobs/{id}/files/…` serves them.
+    pub result_files: Vec<String>,
+}
+
+impl DatasetJob {
+    /// The record and, for a succeeded comparison or diagnosis, its results file's headline.
+    fn of(record: crate::store::RunRecord, results: Option<serde_json::Value>) -> Self {
+        let r = results.unwrap_or(serde_json::Value::Null);
+        let verdicts = match r.get("verdicts").and_then(|v| v.as_array()) {
+            Some(list) if !list.is_empty() => list
+                .iter()
+                .filter_map(|v| v.as_str().map(str::to_string))
+                .collect(),
+            _ => r
+                .get("verdict")
+                .and_then(|v| v.as_str())
+                .map(|v| vec![v.to_string()])
+                .unwrap_or_default(),
+        };
+        DatasetJob {
+            id: record.id.to_string(),
+            kind: record.kind.as_str().to_string(),
+            status: record.status.as_str().to_string(),
+            created_at: record.created_at,
+            finished_at: record.finished_at,
+            message: record.message,
+            model: record
+                .request
+                .get("model")
+                .and_then(|m| m.as_str())
+                .map(str::to_string),
+            discrepancy_px: r.get("discrepancy_px").and_then(|v| v.as_f64()),
+            verdicts,
+            final_discrepancy_px: r.get("final_discrepancy_px").and_then(|v| v.as_f64()),
+            result_files: record.result_files,
+        }
+    }
+}
+
+/// The results file whose headline a job's row shows.
+fn results_file(kind: RunKind) -> Option<&'static str> {
+    match kind {
+        RunKind::Comparison => Some("results/comparison.json"),
+        RunKind::Diagnosis => Some("results/diagnosis.json"),
+        _ => None,
+    }
+}
+
+#[utoipa::path(get, path = "/datasets/{id}/jobs", tag = "datasets",
+    params(("id" = String, Path, description = "Dataset id")),
+    responses((status = 200, description = "The dataset's comparisons, diagnoses and analyses, newest first, with their headline figures", body = Vec<DatasetJob>),
+              (status = 404, body = Problem)))]
+pub async fn jobs(
+    State(svc): State<Service>,
+    Path(id): Path<String>,
+) -> ApiResult<Json<Vec<DatasetJob>>> {
+    let id = dataset_id(&id)?;
+    let store = svc.store.clone();
+    Ok(Json(
+        blocking(move || -> ApiResult<Vec<DatasetJob>> {
+            store.get_dataset(&id)?;
+            let runs = store.list_for_dataset(&id, &DATASET_JOB_KINDS, DATASET_JOBS_LIMIT)?;
+            Ok(runs
+                .into_iter()
+                .map(|run| {
+                    let results = results_file(run.kind)
+                        .filter(|f| run.result_files.iter().any(|r| r == f))
+                        .and_then(|f| store.read_file(&run.id, f).ok())
+                        .and_then(|bytes| serde_json::from_slice(&bytes).ok());
+                    DatasetJob::of(run, results)
+                })
+                .collect())
+        })
+        .await??,
+    ))
+}
+
+/// One run of a dataset's manifest: its frames and the commanded move in mm and in px.
+#[derive(serde::Serialize, utoipa::ToSchema)]
+pub struct DatasetRun {
+    pub id: String,
+    /// The speckle pattern's label, when the manifest names one.
+    pub pattern: Option<String>,
+    pub reference: String,
+    pub deformed: String,
+    /// Commanded stage move, mm.
+    pub dx_mm: f64,
+    pub dy_mm: f64,
+    /// The same move in full-resolution px (× scale_px_per_mm).
+    pub dx_px: f64,
+    pub dy_px: f64,
+    /// Further static frames of the reference position.
+    pub static_repeats: usize,
+}
+
+/// `GET /datasets/{id}/details`: what the manifest and the frames say of the measurement.
+#[derive(serde::Serialize, utoipa::ToSchema)]
+pub struct DatasetDetails {
+    pub id: String,
+    pub name: String,
+    pub scale_px_per_mm: f64,
+    /// Significant bits per sample: the manifest's camera, else the first reference frame's.
+    pub bit_depth: Option<u8>,
+    pub width: usize,
+    pub height: usize,
+    /// The stage's stated repeatability, 1σ per axis, µm.
+    pub stage_repeatability_um: Option<f64>,
+    pub runs: Vec<DatasetRun>,
+}
+
+#[utoipa::path(get, path = "/datasets/{id}/details", tag = "datasets",
+    params(("id" = String, Path, description = "Dataset id")),
+    responses((status = 200, body = DatasetDetails), (status = 404, body = Problem)))]
+pub async fn details(
+    State(svc): State<Service>,
+    Path(id): Path<String>,
+) -> ApiResult<Json<DatasetDetails>> {
+    let id = dataset_id(&id)?;
+    let store = svc.store.clone();
+    Ok(Json(
+        blocking(move || -> ApiResult<DatasetDetails> {
+            let record = store.get_dataset(&id)?;
+            let dir = store.dataset_dir(&id);
+            let m = Manifest::read(&dir)
+                .map_err(|e| ApiError::internal("reading a stored dataset's manifest", e))?;
+            let bit_depth = m.camera.as_ref().map(|c| c.bit_depth).or_else(|| {
+                let first = m.runs.first()?;
+                read_tiff(&dir.join(&first.reference))
+                    .ok()
+                    .map(|(_, info)| info.bit_depth)
+            });
+            let scale = m.scale_px_per_mm;
+            Ok(DatasetDetails {
+                id: record.id.to_string(),
+                name: m.name.clone(),
+                scale_px_per_mm: scale,
+                bit_depth,
+                width: record.width,
+                height: record.height,
+                stage_repeatability_um: m.stage_repeatability_um,
+                runs: m
+                    .runs
+                    .iter()
+                    .map(|r| DatasetRun {
+                        id: r.id.clone(),
+                        pattern: r.pattern.as_ref().map(|p| p.label.clone()),
+                        reference: r.reference.clone(),
+                        deformed: r.deformed.clone(),
+                        dx_mm: r.stage.dx_mm,
+                        dy_mm: r.stage.dy_mm,
+                        dx_px: r.stage.dx_mm * scale,
+                        dy_px: r.stage.dy_mm * scale,
+                        static_repeats: r.repeat.len(),
+                    })
+                    .collect(),
+            })
+        })
+        .await??,
+    ))
+}

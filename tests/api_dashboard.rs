@@ -1,0 +1,134 @@
+//! What the dashboard reads beside the runs themselves (issue 13): a dataset's jobs with their
+//! headline figures, a dataset's details (scale, bit depth, moves in mm and px), and the
+//! speckle-quality figures of a snapshot.
+
+#[path = "common/daemon.rs"]
+mod daemon;
+
+use daemon::{client, small_config, small_request, wait_terminal, TestServer, SCALE_PX_PER_MM};
+use serde_json::{json, Value};
+
+async fn post_json(server: &TestServer, path: &str, body: &Value) -> Value {
+    let r = client()
+        .post(server.url(path))
+        .json(body)
+        .send()
+        .await
+        .unwrap();
+    r.json().await.unwrap()
+}
+
+async fn get_json(server: &TestServer, path: &str) -> (u16, Value) {
+    let r = client().get(server.url(path)).send().await.unwrap();
+    let status = r.status().as_u16();
+    (status, r.json().await.unwrap())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_dataset_lists_its_comparisons_and_details() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = TestServer::start(small_config(dir.path())).await;
+    let run = post_json(&server, "/experiments", &small_request(2)).await;
+    let run =
+        wait_terminal(&server.url(&format!("/experiments/{}", run["id"].as_str().unwrap()))).await;
+    assert_eq!(run["status"], "succeeded", "{run}");
+    let ds = run["dataset_id"]
+        .as_str()
+        .expect("the experiment made a dataset");
+
+    let (status, d) = get_json(&server, &format!("/datasets/{ds}/details")).await;
+    assert_eq!(status, 200, "{d}");
+    assert_eq!(d["scale_px_per_mm"], SCALE_PX_PER_MM);
+    assert_eq!(d["bit_depth"], 16, "{d}");
+    let runs = d["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 2, "{d}");
+    // small_request moves 0.5 mm and 1 mm along x: 6.5 and 13 px at 13 px/mm.
+    for (r, mm) in runs.iter().zip([0.5, 1.0]) {
+        assert_eq!(r["dx_mm"], mm, "{r}");
+        assert!(
+            (r["dx_px"].as_f64().unwrap() - mm * SCALE_PX_PER_MM).abs() < 1e-9,
+            "{r}"
+        );
+        assert_eq!(r["dy_px"], 0.0);
+        assert_eq!(r["pattern"], "a", "{r}");
+    }
+
+    // No job yet; then one comparison, listed with its discrepancy.
+    let (status, jobs) = get_json(&server, &format!("/datasets/{ds}/jobs")).await;
+    assert_eq!((status, jobs.as_array().unwrap().len()), (200, 0), "{jobs}");
+    let body = json!({"model": "baseline", "schemes": ["ff100"],
+                      "dic": {"subset_px": 21, "step_px": 10, "strain_window": 5}});
+    let job = post_json(&server, &format!("/datasets/{ds}/comparisons"), &body).await;
+    let job = wait_terminal(&server.url(&format!("/jobs/{}", job["id"].as_str().unwrap()))).await;
+    assert_eq!(job["status"], "succeeded", "{job}");
+    let (_, jobs) = get_json(&server, &format!("/datasets/{ds}/jobs")).await;
+    let jobs = jobs.as_array().unwrap();
+    assert_eq!(jobs.len(), 1, "{jobs:?}");
+    assert_eq!(jobs[0]["id"], job["id"]);
+    assert_eq!(jobs[0]["kind"], "comparison");
+    assert_eq!(jobs[0]["status"], "succeeded");
+    assert_eq!(jobs[0]["model"], "baseline");
+    let (_, cmp) = get_json(
+        &server,
+        &format!(
+            "/jobs/{}/files/results/comparison.json",
+            job["id"].as_str().unwrap()
+        ),
+    )
+    .await;
+    assert_eq!(jobs[0]["discrepancy_px"], cmp["discrepancy_px"]);
+    assert!(jobs[0]["discrepancy_px"].as_f64().unwrap() >= 0.0);
+
+    let (status, _) = get_json(&server, "/datasets/ds-20260101t000000-nonexx/jobs").await;
+    assert_eq!(status, 404);
+    let (status, _) = get_json(&server, "/datasets/nope/details").await;
+    assert_eq!(status, 404);
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_snapshot_carries_its_speckle_quality_only_on_request() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = TestServer::start(small_config(dir.path())).await;
+    let plain = client()
+        .post(server.url("/camera/snapshot"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(plain.status(), 200);
+    assert!(plain.headers().get("x-speckle-quality").is_none());
+
+    let r = client()
+        .post(server.url("/camera/snapshot?quality=true&subset_px=31"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(r.headers()["content-type"], "image/tiff");
+    let q: Value =
+        serde_json::from_str(r.headers()["x-speckle-quality"].to_str().unwrap()).unwrap();
+    assert_eq!(q["subset_px"], 31);
+    // 400x320 px tiled by 31 px subsets (a one-pixel border kept for the gradients).
+    assert_eq!(q["subsets"], (398 / 31) * (318 / 31), "{q}");
+    assert!(q["mean_gradient_dn_per_px"].as_f64().unwrap() > 0.0, "{q}");
+    // The mock bench's speckles are a few px wide: neither sub-pixel nor the whole frame.
+    let size = q["speckle_size_px"].as_f64().expect("a speckle size");
+    assert!((1.5..40.0).contains(&size), "{q}");
+    let (sx, std_u) = (
+        q["sssig_x_median_dn2"].as_f64().unwrap(),
+        q["std_u_px_per_noise_dn"].as_f64().unwrap(),
+    );
+    assert!(
+        (std_u - (2.0 / sx).sqrt()).abs() < 1e-12 * std_u.max(1.0),
+        "{q}"
+    );
+    assert!(q["sssig_x_min_dn2"].as_f64().unwrap() <= sx);
+
+    let too_big = client()
+        .post(server.url("/camera/snapshot?quality=true&subset_px=999"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(too_big.status(), 422);
+    server.stop().await;
+}
