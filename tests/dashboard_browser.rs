@@ -4,7 +4,9 @@
 //! experiment from the form and sees its progress reach 100 % and both bar charts with
 //! patterns × schemes bars; uploads a dataset whose bench has a lens distortion the baseline model
 //! lacks; diagnoses it and sees the verdict; adds the winner and sees the history chart gain a
-//! lower point. Screenshots land in `target/browser-artifacts/`.
+//! lower point; reloads the page and reopens those jobs; uploads a second dataset of the same bench
+//! (another seed) and adds its winner, which must get a name of its own (issue 13). Screenshots
+//! land in `target/browser-artifacts/`.
 //!
 //! Needs `node`, `/usr/bin/chromium` and `npm ci --prefix tests/browser` (scripts/test-all.sh
 //! installs all three). Missing any of them is a failure, not a skip: CI has them.
@@ -20,11 +22,11 @@ use std::time::Instant;
 
 /// One pattern, a reference repeat and three moves (x, larger x, y): what makes a lens
 /// distortion identifiable and tells it from rotation and scale (see tests/hidden_effect.rs).
+/// The seed comes first, from [`simulate`]: two seeds make two datasets of one bench.
 const EXPERIMENT_TOML: &str = r#"
 name = "hidden-lens"
-seed = 11
 patterns = ["a"]
-repeats = 1
+static_frames = 1
 schemes = ["ff100"]
 
 [camera]
@@ -101,13 +103,14 @@ fn require_tools() {
     );
 }
 
-fn simulate(dir: &Path) -> PathBuf {
-    std::fs::write(dir.join("experiment.toml"), EXPERIMENT_TOML).unwrap();
+fn simulate(dir: &Path, seed: u64) -> PathBuf {
+    let experiment = dir.join(format!("experiment-{seed}.toml"));
+    std::fs::write(&experiment, format!("seed = {seed}\n{EXPERIMENT_TOML}")).unwrap();
     std::fs::write(dir.join("bench.toml"), BENCH_TOML).unwrap();
-    let out = dir.join("dataset");
+    let out = dir.join(format!("dataset-{seed}"));
     let status = Command::new(env!("CARGO_BIN_EXE_ffdic"))
         .args(["simulate", "--experiment"])
-        .arg(dir.join("experiment.toml"))
+        .arg(&experiment)
         .arg("--model")
         .arg(dir.join("bench.toml"))
         .arg("--out")
@@ -123,7 +126,10 @@ fn simulate(dir: &Path) -> PathBuf {
 async fn dashboard_in_headless_chromium() {
     require_tools();
     let work = tempfile::tempdir().unwrap();
-    let dataset = simulate(work.path());
+    let dataset = simulate(work.path(), 11);
+    // The same bench again, another speckle layout and noise: the diagnosis finds the same effect
+    // with other fitted parameters, so its winner is another model under the same name.
+    let second = simulate(work.path(), 12);
     let data = work.path().join("data");
     let server = TestServer::start(small_config(&data)).await;
 
@@ -165,6 +171,7 @@ async fn dashboard_in_headless_chromium() {
             .arg(&dataset)
             .arg(&artefacts)
             .arg("lens_distortion")
+            .arg(&second)
             .status()
             .unwrap()
     })
@@ -188,6 +195,7 @@ async fn dashboard_in_headless_chromium() {
         .unwrap();
     let uploaded = datasets
         .iter()
+        .rev()
         .find(|d| d["source"] == "upload")
         .expect("the upload made a dataset");
     let history: Value = client()
@@ -215,6 +223,8 @@ async fn dashboard_in_headless_chromium() {
         "3-dataset-compared",
         "4-dataset-diagnosed",
         "5-dataset-winner-added",
+        "6-dataset-reloaded",
+        "7-second-dataset-added",
     ] {
         assert!(
             artefact_dir().join(format!("{shot}.png")).is_file(),

@@ -1,13 +1,20 @@
 // End-to-end test of the ffdic dashboard in headless Chromium (Debian's /usr/bin/chromium),
 // driven over the DevTools protocol by playwright-core.
 //
-//   node tests/browser/dashboard.mjs <base-url> <dataset-dir> <artefact-dir> [expected-verdict]
+//   node tests/browser/dashboard.mjs <base-url> <dataset-dir> <artefact-dir> [expected-verdict] [second-dataset-dir]
 //
 // Against a running daemon at <base-url> (loopback, no token): starts an experiment from the form,
 // sees its progress reach 100 % and both bar charts with patterns × schemes bars; uploads the
 // dataset in <dataset-dir> (dataset.json + TIFFs, with a hidden effect) through the upload form,
 // compares it with the baseline, diagnoses it and sees the verdict (default lens_distortion),
-// adds the winner as a new model version and sees the history chart gain a lower point.
+// adds the winner as a new model version and sees the history chart gain a lower point. Then
+// (issue 13) the page, reloaded, lists those jobs and reopens one; a second dataset of the same
+// bench (another seed) diagnosed and added must not claim the first dataset's model as its own;
+// the home page takes no snapshot until asked; a finished experiment replays its events; the
+// study charts carry error bars; moves and errors carry µm beside px.
+//
+// Defects are collected (each check says what it saw) and reported together at the end, so one
+// run shows every one that is still there.
 // Screenshots of every page go to <artefact-dir>. Exit 0 when everything held.
 //
 // Chromium is started by this script with exactly these flags (and a fresh user data dir):
@@ -21,7 +28,7 @@ import fs from "node:fs";
 import os from "node:os";
 import path from "node:path";
 
-const [base, datasetDir, artefacts, expectedVerdict = "lens_distortion"] = process.argv.slice(2);
+const [base, datasetDir, artefacts, expectedVerdict = "lens_distortion", secondDatasetDir] = process.argv.slice(2);
 if (!base || !datasetDir || !artefacts) {
   console.error("usage: node dashboard.mjs <base-url> <dataset-dir> <artefact-dir> [expected-verdict]");
   process.exit(2);
@@ -47,6 +54,22 @@ const log = (msg) => console.log(`[${((Date.now() - t0) / 1000).toFixed(1).padSt
 
 function fail(msg) {
   throw new Error(msg);
+}
+
+/** Defects seen so far; the run fails at the end when there is any. */
+const defects = [];
+function expect(ok, msg) {
+  if (ok) log(`ok: ${msg}`);
+  else {
+    defects.push(msg);
+    log(`DEFECT: ${msg}`);
+  }
+  return ok;
+}
+
+/** Waits for `selector` up to `ms`; false (not an exception) when it never appears. */
+async function appears(page, selector, ms = 10 * SECOND, state = "attached") {
+  return page.waitForSelector(selector, { timeout: ms, state }).then(() => true, () => false);
 }
 
 /** Starts Chromium with the flags above and a fresh profile; resolves with its CDP URL. */
@@ -88,7 +111,10 @@ async function main() {
     page.setDefaultTimeout(30 * SECOND);
     page.on("pageerror", (e) => problems.push(`page error: ${e.message}`));
     page.on("console", (m) => {
-      if (m.type() === "error") problems.push(`console error: ${m.text()}`);
+      // The second dataset's add meets a 409 on purpose (the name holds the first's model):
+      // the browser logs that response; the page handles it.
+      const expected409 = /status of 409/.test(m.text()) && /\/api\/v1\/models$/.test(m.location().url || "");
+      if (m.type() === "error" && !expected409) problems.push(`console error: ${m.text()}`);
     });
     page.on("response", (r) => {
       if (r.status() >= 400 && new URL(r.url()).pathname.startsWith("/assets/")) {
@@ -96,11 +122,32 @@ async function main() {
       }
     });
 
+    // Every snapshot the pages ask for: on real hardware each one is an acquisition.
+    let snapshots = 0;
+    page.on("request", (r) => {
+      if (new URL(r.url()).pathname.endsWith("/camera/snapshot")) snapshots++;
+    });
+
     // ---- home: the bench, the experiment form ----
     await page.goto(`${base}/`);
+    await page.waitForSelector("#camera-state dd");
+    await page.waitForTimeout(2 * SECOND);
+    expect(snapshots === 0, `the home page takes no snapshot on load (it made ${snapshots} requests to /camera/snapshot)`);
+    await page.locator("#snapshot-btn").click();
     await page.waitForSelector("#snapshot[data-loaded=true]", { timeout: 60 * SECOND });
+    expect(snapshots === 1, `one click, one snapshot (${snapshots})`);
     const bins = await page.locator("#histogram rect.hist-bin").count();
     if (bins < 5) fail(`the snapshot histogram has ${bins} bins`);
+    if (expect(await appears(page, "#snapshot-zoom[data-loaded=true]", 10 * SECOND), "the snapshot has a 1:1 zoom")) {
+      const zoom = await page.locator("#snapshot-zoom").evaluate((c) => ({ w: c.width, h: c.height, cssW: c.getBoundingClientRect().width }));
+      expect(zoom.w > 0 && Math.abs(zoom.cssW - zoom.w) < 1.5, `the zoom shows native pixels (${zoom.w} px drawn ${zoom.cssW.toFixed(1)} px wide)`);
+    }
+    if (expect(await appears(page, "#snapshot-quality [data-figure=mean_gradient]", 10 * SECOND), "the snapshot has speckle-quality figures")) {
+      const q = await page.locator("#snapshot-quality").innerText();
+      expect(/gradient/i.test(q) && /speckle size/i.test(q) && /SSSIG/.test(q) && /DIC/.test(q), `quality figures with what they mean: ${q.replace(/\s+/g, " ").slice(0, 300)}`);
+      const mig = Number(await page.locator("#snapshot-quality [data-figure=mean_gradient]").getAttribute("data-value"));
+      expect(mig > 0, `mean intensity gradient ${mig} DN/px`);
+    }
     await page.waitForSelector("#camera-state dd");
     const cameraText = await page.locator("#camera-state").innerText();
     if (!/exposure/.test(cameraText) || !/µs/.test(cameraText)) fail(`camera state: ${cameraText}`);
@@ -117,8 +164,10 @@ async function main() {
     }
     await form.locator("textarea[name=moves]").fill("x1 1.0 0.0");
     await form.locator("input[name=settle_ms]").fill("0");
-    await form.locator("input[name=subset_px]").fill("21");
-    await form.locator("input[name=step_px]").fill("10");
+    // A grid of 20 x 16 points on the reduced 200 x 160 px frames: enough bootstrap blocks
+    // (dic::bootstrap::MIN_BLOCKS of 2 correlation lengths) for the displacement intervals.
+    await form.locator("input[name=subset_px]").fill("17");
+    await form.locator("input[name=step_px]").fill("9");
     await form.locator("input[name=strain_window]").fill("5");
     await Promise.all([
       page.waitForURL(/\/experiments\/[^/]+$/, { timeout: 30 * SECOND }),
@@ -159,15 +208,32 @@ async function main() {
       }
       log(`${fig}: ${bars} bars, labels ${pctLabels.join(" ")}`);
     }
+    for (const fig of ["figure5_u", "figure6_v"]) {
+      const bars = await page.locator(`#${fig} svg path.error-bar`).count();
+      expect(bars >= PATTERNS.length * SCHEMES.length, `${fig}: error bars on the bars (${bars})`);
+    }
+    const studyText = await page.locator("#study-table").innerText();
+    expect(/\[[-+−]?\d/.test(studyText), "the study table carries intervals");
     const maps = await page.locator("#maps .figure.map svg").count();
-    if (maps !== 3) fail(`${maps} of the u, v, εxx maps shown`);
+    if (maps < 3) fail(`${maps} of the u, v, εxx maps shown`);
     const legends = await page.locator("#maps svg rect.legend").count();
-    if (legends !== 3) fail(`maps without colour scales (${legends} legends)`);
+    if (legends !== maps) fail(`maps without colour scales (${legends} legends for ${maps} maps)`);
+    const moves = await page.locator("#run-info").innerText();
+    expect(/px/.test(moves.split("\n").find((l) => /x1/.test(l)) || ""), `the moves carry px beside mm: ${moves.replace(/\s+/g, " ").slice(0, 200)}`);
+    expect(/µm/.test(await page.locator("#study-table thead").innerText()), "the study table gives µm beside px");
     const csv = await page.locator("#downloads a", { hasText: "study.csv" }).count();
     const tifs = await page.locator("#downloads a", { hasText: ".tif" }).count();
     if (csv !== 1 || tifs < 2) fail(`downloads: ${csv} CSV, ${tifs} TIFF links`);
     log(`maps: ${maps} with colour scales; downloads: CSV and ${tifs} TIFF frames`);
     await shot(page, "2-experiment");
+
+    // A finished experiment, opened afresh: its events are replayed into the Events box.
+    await page.goto(experimentUrl);
+    await page.waitForSelector("#results[data-loaded=true]", { timeout: 60 * SECOND });
+    await page.waitForTimeout(1 * SECOND);
+    const events = await page.locator("#events li").count();
+    expect(events >= 5 && (await page.locator("#events li[data-kind=succeeded]").count()) === 1,
+      `the Events box of a finished run shows its replayed events (${events})`);
 
     // ---- upload the hidden-effect dataset through the form ----
     await page.goto(`${base}/`);
@@ -233,9 +299,75 @@ async function main() {
     if (pointsAfter.length !== pointsBefore.length + 1) fail("the history did not gain exactly one point");
     if (!(last < previous) || !(last < baselinePx)) fail(`the new point (${last} px) is not lower than before (${previous} px, baseline ${baselinePx} px)`);
     await page.waitForFunction(() => /added/.test(document.querySelector("#add-notice").textContent));
+    const firstModel = (await page.locator("#comparison-model").innerText()).split(" (")[0];
+    const summary = await page.locator("#comparison-summary").innerText();
+    expect(/µm/.test(summary), `the discrepancy carries µm beside px: ${summary.replace(/\s+/g, " ").slice(0, 120)}`);
+    expect(/how to read/i.test(await page.locator("#comparison").innerText()) && /how to read/i.test(await page.locator("#diagnosis").innerText()),
+      "a 'how to read this' beside the discrepancy and the ΔBIC");
+    const info = await page.locator("#dataset-info").innerText();
+    expect(/px\/mm/.test(info) && /bit/.test(info) && /x2/.test(info) && /mm/.test(info) && /µm|px/.test(info),
+      `the dataset card gives the scale, bit depth and runs with moves: ${info.replace(/\s+/g, " ").slice(0, 300)}`);
     await shot(page, "5-dataset-winner-added");
 
+    // ---- reload: the comparisons and diagnoses are still listed and reopen ----
+    const datasetUrl = page.url();
+    await page.reload();
+    if (expect(await appears(page, "#job-list tr[data-kind=diagnosis]", 15 * SECOND), "the dataset page lists its jobs after a reload")) {
+      const kinds = await page.locator("#job-list tr[data-kind]").evaluateAll((rs) => rs.map((r) => r.dataset.kind));
+      expect(kinds.filter((k) => k === "comparison").length === 2 && kinds.filter((k) => k === "diagnosis").length === 1,
+        `two comparisons and one diagnosis listed (${kinds.join(", ")})`);
+      await page.locator("#job-list tr[data-kind=diagnosis] button.open").first().click();
+      expect(await appears(page, `#diagnosis-verdict[data-verdict=${expectedVerdict}]`, 15 * SECOND, "visible"), "a listed diagnosis reopens");
+      await page.locator("#job-list tr[data-kind=comparison] button.open").first().click();
+      expect(await appears(page, "#comparison-discrepancy", 15 * SECOND, "visible"), "a listed comparison reopens");
+    }
+    await shot(page, "6-dataset-reloaded");
+
+    // ---- a second dataset of the same bench: its winner must not pass for the first's ----
+    if (secondDatasetDir) {
+      await page.goto(`${base}/`);
+      const files2 = fs.readdirSync(secondDatasetDir).filter((f) => f === "dataset.json" || /\.tiff?$/i.test(f)).map((f) => path.join(secondDatasetDir, f));
+      await page.locator("#upload-files").setInputFiles(files2);
+      await Promise.all([
+        page.waitForURL((u) => /\/datasets\/[^/]+$/.test(u.pathname) && u.href !== datasetUrl, { timeout: 60 * SECOND }),
+        page.locator("#upload-btn").click(),
+      ]);
+      const second = page.url();
+      log(`uploaded the second dataset: ${second}`);
+      await page.waitForSelector("#model option[value=baseline]", { state: "attached" });
+      await page.locator("#model").selectOption("baseline");
+      await page.locator("#model-form summary").click();
+      for (const s of ["ff50", "ff25", "native"]) await mf.locator(`input[name=scheme][value=${s}]`).setChecked(false);
+      await mf.locator("input[name=scheme][value=ff100]").setChecked(true);
+      await mf.locator("input[name=subset_px]").fill("21");
+      await mf.locator("input[name=step_px]").fill("10");
+      await mf.locator("input[name=strain_window]").fill("5");
+      await page.locator("#diagnose-btn").click();
+      await page.waitForSelector("#diagnosis-verdict[data-verdict]", { timeout: 400 * SECOND });
+      const verdict2 = await page.locator("#diagnosis-verdict").getAttribute("data-verdict");
+      if (verdict2 !== expectedVerdict) fail(`second dataset: verdict ${verdict2}, want ${expectedVerdict}`);
+      await add.waitFor({ state: "visible" });
+      await add.click();
+      // Done when the button is enabled again (the add and its comparison, or an error).
+      await page.waitForFunction(() => !document.querySelector("#add-winner").disabled && !/…$/.test(document.querySelector("#add-notice").textContent), null, { timeout: 300 * SECOND });
+      const notice = await page.locator("#add-notice").innerText();
+      const error = await page.locator("#job-error").innerText();
+      const compared = (await page.locator("#comparison-model").innerText().catch(() => "")).split(" (")[0];
+      log(`second add: notice "${notice}", error "${error}", comparison with "${compared}"`);
+      expect(!new RegExp(`model ${firstModel.replace(/[+.]/g, "\\$&")} added`).test(notice),
+        `the second add does not report the first dataset's model ${firstModel} as added ("${notice}")`);
+      const models = await page.evaluate(async () => (await (await fetch("/api/v1/models")).json()).map((m) => m.name));
+      const fresh = models.filter((n) => n !== firstModel && n.startsWith(firstModel));
+      expect(fresh.length === 1, `the second winner is stored under a fresh name (${models.join(", ")})`);
+      if (fresh.length === 1) {
+        expect(notice.includes(fresh[0]) && notice.includes(firstModel), `the notice names both models: "${notice}"`);
+        expect(compared === fresh[0], `the comparison after the add uses the new model (${compared})`);
+      }
+      await shot(page, "7-second-dataset-added");
+    }
+
     if (problems.length) fail(`the pages reported problems:\n  ${problems.join("\n  ")}`);
+    if (defects.length) fail(`${defects.length} defects:\n  ${defects.join("\n  ")}`);
     log("all checks passed");
   } finally {
     if (browser) await browser.close().catch(() => {});

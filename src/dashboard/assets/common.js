@@ -96,6 +96,21 @@ export function badge(status) {
 
 export const TERMINAL = ["succeeded", "failed", "cancelled"];
 
+/** How long an ended run's event stream may take to replay its events, ms. */
+const REPLAY_GRACE_MS = 5000;
+
+/** µm for `px` full-resolution pixels at `scalePxPerMm` (µm = px / (px/mm) · 1000). */
+export function um(px, scalePxPerMm) {
+  if (!Number.isFinite(Number(px)) || !(scalePxPerMm > 0)) return null;
+  return (1000 * Number(px)) / scalePxPerMm;
+}
+
+/** "0.0264 px (2.03 µm)": a length in px with its µm when the scale is known. */
+export function pxUm(px, scalePxPerMm, digits = 4) {
+  const u = um(px, scalePxPerMm);
+  return u === null ? `${num(px, digits)} px` : `${num(px, digits)} px (${num(u, 3)} µm)`;
+}
+
 /** Known event kinds of runs and jobs (EventSource only delivers named events one listens to). */
 const EVENT_KINDS = [
   "message", "queued", "started", "progress", "homing", "camera_set", "target_mounted",
@@ -119,19 +134,29 @@ export function follow(recordUrl, eventsUrl, onEvent, onRecord) {
       done = true;
       if (source) source.close();
       clearInterval(timer);
+      clearTimeout(replayTimer);
       const record = await api(recordUrl);
       if (onRecord) onRecord(record);
       resolve(record);
     };
+    // A run the poll finds ended may still be replaying its events over SSE (a finished run's
+    // stream replays them all, then ends): give the stream that long before closing it, so a
+    // page opened on a finished run shows its events too.
+    let replayTimer = null;
+    let streamOpen = false;
     const poll = async () => {
       try {
         const record = await api(recordUrl);
         if (onRecord && !done) onRecord(record);
-        if (TERMINAL.includes(record.status)) finish();
+        if (TERMINAL.includes(record.status)) {
+          if (!streamOpen) finish();
+          else if (!replayTimer) replayTimer = setTimeout(finish, REPLAY_GRACE_MS);
+        }
       } catch (_) { /* keep trying */ }
     };
     try {
       source = new EventSource(API + eventsUrl);
+      streamOpen = true;
       const handler = (msg) => {
         let data = null;
         try { data = JSON.parse(msg.data); } catch (_) { return; }
@@ -139,7 +164,10 @@ export function follow(recordUrl, eventsUrl, onEvent, onRecord) {
         if (TERMINAL.includes(data.kind || msg.type)) finish();
       };
       for (const kind of EVENT_KINDS) source.addEventListener(kind, handler);
-      source.onerror = () => { if (!done) poll(); };
+      source.onerror = () => {
+        if (source.readyState === EventSource.CLOSED) streamOpen = false;
+        if (!done) poll();
+      };
     } catch (_) { /* polling only */ }
     timer = setInterval(poll, 2000);
     poll();

@@ -1,6 +1,6 @@
 // One dataset: compare it with a model, diagnose the missing effect, add the winner as a new
 // model version, and watch the discrepancy fall in the history chart.
-import { api, apiText, el, $, clear, num, when, showError, setupToken, follow, progressBar, inlineSvg, pageId, API, ApiError } from "./common.js";
+import { api, apiText, el, $, clear, num, when, badge, showError, setupToken, follow, progressBar, inlineSvg, pageId, pxUm, API, ApiError } from "./common.js";
 import { historySvg } from "./charts.js";
 
 setupToken();
@@ -11,6 +11,8 @@ document.title = `ffdic — dataset ${id}`;
 $("#history-svg-link").href = `${API}${base}/history.svg`;
 let models = [];
 let busy = false;
+/** The dataset's scale, px/mm (from its manifest): µm beside every px. */
+let scale = null;
 
 const NATIVE = { name: "native", x: { block: 1, first: 0, active: 1 }, y: { block: 1, first: 0, active: 1 } };
 
@@ -31,20 +33,66 @@ function settings(model) {
 
 async function loadDataset() {
   try {
-    const d = await api(base);
+    const [d, details] = await Promise.all([api(base), api(`${base}/details`).catch(() => null)]);
     $("#dataset-name").textContent = d.name;
     const m = /^experiment:(.+)$/.exec(d.source || "");
     const tifs = d.files.filter((f) => /\.tiff?$/i.test(f));
+    scale = details ? details.scale_px_per_mm : null;
+    const runs = details ? details.runs.map((r) => el("li", { "data-run": r.id },
+      el("span", { class: "mono" }, r.id),
+      r.pattern ? ` pattern ${r.pattern}: ` : ": ",
+      `move (${num(r.dx_mm)}, ${num(r.dy_mm)}) mm = (${num(r.dx_px)}, ${num(r.dy_px)}) px`,
+      r.static_repeats ? `, ${r.static_repeats} static repeat${r.static_repeats > 1 ? "s" : ""}` : "")) : [];
     clear($("#dataset-info"), [
       ["name", d.name],
       ["source", m ? el("a", { href: `/experiments/${m[1]}` }, `experiment ${m[1]}`) : d.source],
-      ["runs", String(d.runs)],
-      ["frames", `${tifs.length} TIFF, ${d.width} × ${d.height} px`],
+      ["scale", details ? `${num(details.scale_px_per_mm)} px/mm (1 px = ${num(1000 / details.scale_px_per_mm, 3)} µm)` : "—"],
+      ["frames", `${tifs.length} TIFF, ${d.width} × ${d.height} px${details && details.bit_depth ? `, ${details.bit_depth} bit` : ""}`],
+      ["stage repeatability", details && details.stage_repeatability_um != null ? `${num(details.stage_repeatability_um)} µm (1σ)` : "—"],
+      ["runs", runs.length ? el("ol", { class: "runs" }, runs) : String(d.runs)],
       ["created", when(d.created_at)],
       ["files", el("span", { class: "mono small" }, d.files.join(", "))],
     ].flatMap(([k, v]) => [el("dt", {}, k), el("dd", {}, v)]));
   } catch (e) {
     showError($("#dataset-error"), e);
+  }
+}
+
+/** The dataset's comparisons and diagnoses, newest first, each reopenable. */
+async function loadJobs() {
+  try {
+    const jobs = await api(`${base}/jobs`);
+    const headline = (j) => {
+      if (j.kind === "diagnosis" && j.verdicts.length) {
+        return `${j.verdicts.join(", ")} — ${pxUm(j.discrepancy_px, scale)}` +
+          (j.final_discrepancy_px != null ? ` → ${pxUm(j.final_discrepancy_px, scale)}` : "");
+      }
+      return j.discrepancy_px != null ? pxUm(j.discrepancy_px, scale) : "—";
+    };
+    const rows = jobs.map((j) => el("tr", { "data-kind": j.kind, "data-id": j.id },
+      el("td", {}, when(j.created_at)),
+      el("td", {}, j.kind),
+      el("td", { class: "mono" }, j.model || "—"),
+      el("td", {}, badge(j.status)),
+      el("td", { class: "num" }, headline(j)),
+      el("td", {}, j.status === "succeeded" && j.kind !== "analysis"
+        ? el("button", { type: "button", class: "open secondary", onclick: () => guard(() => reopen(j)) }, "open")
+        : el("span", { class: "muted small" }, j.message || ""))));
+    clear($("#job-list"), rows.length ? rows : [el("tr", {}, el("td", { colspan: 6, class: "muted" }, "nothing yet: compare or diagnose above"))]);
+  } catch (e) {
+    clear($("#job-list"), el("tr", {}, el("td", { colspan: 6, class: "error" }, e.message)));
+  }
+}
+
+/** Shows a listed job's results again, as when it had just run. */
+async function reopen(j) {
+  const job = await api(`/jobs/${j.id}`);
+  if (j.kind === "comparison") {
+    await showComparison(job);
+    $("#comparison").scrollIntoView({ block: "start" });
+  } else {
+    await showDiagnosis(job, { ...(job.request || {}) });
+    $("#diagnosis").scrollIntoView({ block: "start" });
   }
 }
 
@@ -100,22 +148,22 @@ async function showComparison(job) {
   $("#comparison").classList.remove("hidden");
   $("#comparison-model").textContent = `${cmp.model.name} (version ${cmp.model.version})`;
   clear($("#comparison-summary"), [
-    ["discrepancy", el("strong", { id: "comparison-discrepancy", "data-discrepancy": cmp.discrepancy_px }, `${num(cmp.discrepancy_px)} px`)],
-    ["rigid (stage landing, bias)", `${num(cmp.parts && cmp.parts.rigid_px)} px`],
-    ["systematic (field)", `${num(cmp.parts && cmp.parts.field_px)} px`],
-    ["random (std)", `${num(cmp.parts && cmp.parts.std_px)} px`],
+    ["discrepancy", el("strong", { id: "comparison-discrepancy", "data-discrepancy": cmp.discrepancy_px }, pxUm(cmp.discrepancy_px, scale))],
+    ["rigid (stage landing, bias)", pxUm(cmp.parts && cmp.parts.rigid_px, scale)],
+    ["systematic (field)", pxUm(cmp.parts && cmp.parts.field_px, scale)],
+    ["random (std)", pxUm(cmp.parts && cmp.parts.std_px, scale)],
     ["model effects", (cmp.model.effects && (Array.isArray(cmp.model.effects) ? cmp.model.effects : Object.keys(cmp.model.effects)).join(", ")) || "—"],
   ].flatMap(([k, v]) => [el("dt", {}, k), el("dd", {}, v)]));
   const runs = [...(cmp.runs || [])].sort((a, b) => b.discrepancy_px - a.discrepancy_px);
   clear($("#comparison-runs"), el("table", {},
-    el("thead", {}, el("tr", {}, ["run", "scheme", "discrepancy [px]", "rigid [px]", "field [px]", "std [px]", "mean Δu [px]", "mean Δv [px]"].map((h, i) => el("th", { class: i > 1 ? "num" : "" }, h)))),
+    el("thead", {}, el("tr", {}, ["run", "scheme", "discrepancy", "rigid", "field", "std", "mean Δu", "mean Δv"].map((h, i) => el("th", { class: i > 1 ? "num" : "" }, i > 1 ? `${h} [px (µm)]` : h)))),
     el("tbody", {}, runs.map((r) => el("tr", {},
       el("td", {}, r.id), el("td", {}, r.scheme),
-      el("td", { class: "num" }, num(r.discrepancy_px)), el("td", { class: "num" }, num(r.rigid_px)),
-      el("td", { class: "num" }, num(r.field_px)),
-      el("td", { class: "num" }, num(r.std_px)),
-      el("td", { class: "num" }, num(r.mean_diff_px && r.mean_diff_px[0])),
-      el("td", { class: "num" }, num(r.mean_diff_px && r.mean_diff_px[1])))))));
+      el("td", { class: "num" }, pxUm(r.discrepancy_px, scale)), el("td", { class: "num" }, pxUm(r.rigid_px, scale)),
+      el("td", { class: "num" }, pxUm(r.field_px, scale)),
+      el("td", { class: "num" }, pxUm(r.std_px, scale)),
+      el("td", { class: "num" }, pxUm(r.mean_diff_px && r.mean_diff_px[0], scale)),
+      el("td", { class: "num" }, pxUm(r.mean_diff_px && r.mean_diff_px[1], scale)))))));
   await showPlots(job, $("#comparison-plots"));
 }
 
@@ -142,7 +190,7 @@ async function showDiagnosis(job, body) {
   const d = await api(`/jobs/${job.id}/files/results/diagnosis.json`);
   lastDiagnosis = { job, d, body };
   $("#diagnosis").classList.remove("hidden");
-  $("#diagnosis-model").textContent = `${d.model.name} (version ${d.model.version}), discrepancy ${num(d.discrepancy_px)} px`;
+  $("#diagnosis-model").textContent = `${d.model.name} (version ${d.model.version}), discrepancy ${pxUm(d.discrepancy_px, scale)}`;
   const v = $("#diagnosis-verdict");
   v.dataset.verdict = d.verdict;
   v.className = `verdict ${d.verdict !== "none" ? "found" : ""}`;
@@ -151,16 +199,16 @@ async function showDiagnosis(job, body) {
     : "Verdict: none — no candidate explains the discrepancy beyond its noise";
   const rounds = (d.rounds || []).length > 1 ? d.rounds : [];
   clear($("#diagnosis-rounds"), rounds.map((r) => el("li", { "data-verdict": r.verdict },
-    `${r.model}: ${num(r.discrepancy_px)} ± ${num(r.discrepancy_se_px)} px → ${r.verdict}` +
-    (r.after_px != null ? ` → ${num(r.after_px)} px` : ""))));
+    `${r.model}: ${num(r.discrepancy_px)} ± ${pxUm(r.discrepancy_se_px, scale)} → ${r.verdict}` +
+    (r.after_px != null ? ` → ${pxUm(r.after_px, scale)}` : ""))));
   if ((d.verdicts || []).length > 1) {
-    v.textContent = `Found, in order: ${d.verdicts.join(", ")} — discrepancy ${num(d.discrepancy_px)} → ${num(d.final_discrepancy_px)} px`;
+    v.textContent = `Found, in order: ${d.verdicts.join(", ")} — discrepancy ${pxUm(d.discrepancy_px, scale)} → ${pxUm(d.final_discrepancy_px, scale)}`;
   }
   clear($("#candidates"), el("table", { id: "candidate-table" },
-    el("thead", {}, el("tr", {}, ["#", "effect", "fitted parameters ± standard error", "discrepancy with it [px]", "drop [px]", "ΔBIC", "significant"].map((h, i) => el("th", { class: i >= 3 && i <= 5 ? "num" : "" }, h)))),
+    el("thead", {}, el("tr", {}, ["#", "effect", "fitted parameters ± standard error", "discrepancy with it [px (µm)]", "drop [px (µm)]", "ΔBIC", "significant"].map((h, i) => el("th", { class: i >= 3 && i <= 5 ? "num" : "" }, h)))),
     el("tbody", {}, d.candidates.map((c, i) => el("tr", { class: c.effect === d.verdict ? "winner" : "", "data-effect": c.effect },
       el("td", {}, String(i + 1)), el("td", {}, c.effect), el("td", { class: "small" }, paramText(c)),
-      el("td", { class: "num" }, num(c.discrepancy_px)), el("td", { class: "num" }, num(c.drop_px)),
+      el("td", { class: "num" }, pxUm(c.discrepancy_px, scale)), el("td", { class: "num" }, pxUm(c.drop_px, scale)),
       el("td", { class: "num" }, num(c.delta_bic, 5)), el("td", {}, c.significant ? "yes" : "no"))))));
   const notes = [];
   for (const c of d.confounded || []) {
@@ -198,6 +246,7 @@ $("#compare-btn").addEventListener("click", () => guard(async () => {
   const job = await runJob("comparisons", settings($("#model").value));
   await showComparison(job);
   await loadHistory();
+  await loadJobs();
 }));
 
 $("#find-all-btn").addEventListener("click", () => guard(async () => {
@@ -205,6 +254,7 @@ $("#find-all-btn").addEventListener("click", () => guard(async () => {
   const job = await runJob("diagnoses", body);
   await showDiagnosis(job, body);
   await loadHistory();
+  await loadJobs();
 }));
 
 $("#diagnose-btn").addEventListener("click", () => guard(async () => {
@@ -212,30 +262,64 @@ $("#diagnose-btn").addEventListener("click", () => guard(async () => {
   const job = await runJob("diagnoses", body);
   await showDiagnosis(job, body);
   await loadHistory();
+  await loadJobs();
 }));
+
+/** The winner's TOML under another `name` (its first `name = "…"` line). */
+function renamed(toml, name) {
+  return toml.replace(/^(\s*name\s*=\s*)"[^"]*"/m, `$1"${name}"`);
+}
+
+/** Most fresh names tried when the winner's name, and then the derived ones, hold other models. */
+const FRESH_NAMES = 5;
+
+/**
+ * Stores the diagnosis's winner. A model name is a version for good, so when the name holds
+ * another model (fitted on another dataset: 409) the winner is stored under a fresh name, the
+ * name with this dataset's id (then .2, .3…), and the page says so. Never reports another model
+ * as added; any other error is shown and nothing is compared.
+ */
+async function addWinner(toml) {
+  const m = /^\s*name\s*=\s*"([^"]+)"/m.exec(toml);
+  if (!m) throw new Error("the winner model has no name");
+  const wanted = m[1];
+  const names = [wanted, `${wanted}.${id}`, ...Array.from({ length: FRESH_NAMES - 1 }, (_, k) => `${wanted}.${id}.${k + 2}`)];
+  for (const name of names) {
+    try {
+      const added = await api("/models", { method: "POST", body: { toml: name === wanted ? toml : renamed(toml, name) } });
+      return { added, wanted };
+    } catch (e) {
+      if (!(e instanceof ApiError && e.status === 409)) throw e;
+      // The name holds another model (or is an embedded one): try the next.
+    }
+  }
+  throw new Error(`the names ${names.join(", ")} all hold other models: nothing was added`);
+}
 
 $("#add-winner").addEventListener("click", () => guard(async () => {
   if (!lastDiagnosis) return;
   const { job, body } = lastDiagnosis;
   const toml = await apiText(`/jobs/${job.id}/files/results/winner-model.toml`);
-  let name;
+  $("#add-notice").textContent = "adding…";
+  let added, wanted;
   try {
-    const added = await api("/models", { method: "POST", body: { toml } });
-    name = added.name;
-    $("#add-notice").textContent = `model ${added.name} (version ${added.version}) added; comparing…`;
+    ({ added, wanted } = await addWinner(toml));
   } catch (e) {
-    // Added before (same name): compare with the stored one.
-    const m = /^\s*name\s*=\s*"([^"]+)"/m.exec(toml);
-    if (!(e instanceof ApiError && e.status === 409 && m)) throw e;
-    name = m[1];
-    $("#add-notice").textContent = `model ${name} exists already; comparing…`;
+    $("#add-notice").textContent = "";
+    throw e;
   }
+  const name = added.name;
+  const what = name === wanted
+    ? `model ${name} (version ${added.version})`
+    : `a different model named ${wanted} is stored already (fitted on another dataset); this dataset's winner is model ${name}`;
+  $("#add-notice").textContent = `${what}; comparing…`;
   await loadModels(name);
   const cmp = await runJob("comparisons", { ...body, model: name });
   await showComparison(cmp);
   const entries = await loadHistory();
+  await loadJobs();
   const last = entries[entries.length - 1];
-  $("#add-notice").textContent = `model ${name} added: discrepancy now ${last ? num(last.discrepancy_px) : "—"} px`;
+  $("#add-notice").textContent = `${what} added: discrepancy now ${last ? pxUm(last.discrepancy_px, scale) : "—"}`;
   $("#add-winner").classList.add("hidden");
 }));
 
@@ -247,6 +331,7 @@ async function main() {
     showError($("#job-error"), e);
   }
   await loadHistory();
+  await loadJobs();
 }
 
 main();

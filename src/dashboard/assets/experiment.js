@@ -1,5 +1,5 @@
 // One experiment: live progress over SSE, then Figures 5 and 6, the study, maps and downloads.
-import { api, el, $, clear, num, when, badge, showError, setupToken, follow, progressBar, inlineSvg, pageId, TERMINAL, API } from "./common.js";
+import { api, el, $, clear, num, when, badge, showError, setupToken, follow, progressBar, inlineSvg, pageId, um, TERMINAL, API } from "./common.js";
 
 setupToken();
 const id = pageId();
@@ -8,8 +8,22 @@ const bar = progressBar("progress");
 $("#progress-slot").append(bar.node);
 $("#run-id").textContent = id;
 document.title = `ffdic — experiment ${id}`;
+/** The bench scale, px/mm, from the dataset the run made (null until known). */
+let scale = null;
+let lastRecord = null;
+
+/** The scale of the run's dataset; the record is shown again with moves in px once known. */
+async function loadScale(r) {
+  if (scale || !r.dataset_id) return;
+  try {
+    scale = (await api(`/datasets/${encodeURIComponent(r.dataset_id)}/details`)).scale_px_per_mm;
+    if (lastRecord) showRecord(lastRecord);
+  } catch (_) { /* moves stay in mm only */ }
+}
 
 function showRecord(r) {
+  lastRecord = r;
+  if (r.dataset_id && !scale) loadScale(r);
   clear($("#run-status"), badge(r.status));
   bar.set(r.progress, r.status);
   $("#run-message").textContent = r.message || "";
@@ -20,7 +34,9 @@ function showRecord(r) {
   clear($("#run-info"), [
     ["name", req.name || "—"],
     ["patterns", patterns.join(", ") || "—"],
-    ["moves", (req.moves || []).map((m) => `${m.id} (${m.dx_mm}, ${m.dy_mm}) mm`).join("; ") || "—"],
+    ["moves", (req.moves || []).map((m) => `${m.id} (${m.dx_mm}, ${m.dy_mm}) mm` +
+      (scale ? ` = (${num(m.dx_mm * scale)}, ${num(m.dy_mm * scale)}) px` : "")).join("; ") || "—"],
+    ["scale", scale ? `${num(scale)} px/mm (1 px = ${num(1000 / scale, 3)} µm)` : "—"],
     ["schemes", schemes.join(", ") || "—"],
     ["DIC", `subset ${dic.subset_px ?? "—"} px, step ${dic.step_px ?? "—"} px, strain window ${dic.strain_window ?? "—"}`],
     ["created", when(r.created_at)],
@@ -49,7 +65,16 @@ async function showResults(r) {
   // The study as a table.
   try {
     const study = await api(`${base}/results`);
-    const head = ["pattern", "scheme", "valid points", "std u [px]", "std v [px]", "std εxx [µε]", "std εyy [µε]", "Δ std u [95 %]", "Δ std v [95 %]", "Δ std εxx"];
+    // Reduced-image px: a reduced pixel spans `block` sensor pixels, so µm = px · block / scale.
+    const blockOf = (scheme) => {
+      const s = (r.request && r.request.schemes || []).find((x) => (typeof x === "string" ? x : x.name) === scheme);
+      return s && typeof s === "object" && s.x ? s.x.block : (scheme === "native" ? 1 : 2);
+    };
+    const stdUm = (row, k) => {
+      const v = um(row[k].std * blockOf(row.scheme), scale);
+      return v === null ? "" : ` (${num(v, 3)})`;
+    };
+    const head = ["pattern", "scheme", "captures", "valid points", "std u [px (µm)]", "std v [px (µm)]", "std εxx [µε]", "std εyy [µε]", "Δ std u [95 %]", "Δ std v [95 %]", "Δ std εxx"];
     const signed = (x) => `${x >= 0 ? "+" : ""}${x.toFixed(1)}`;
     // The increase, its paired-bootstrap interval when there is one, "n.s." when it holds 0.
     const inc = (row, k) => {
@@ -62,22 +87,34 @@ async function showResults(r) {
       }
       return text;
     };
+    // A std with its 95 % interval when the grid held enough blocks for one.
+    const std = (row, k, factor = 1) => {
+      const s = row[k];
+      const ci = s.ci95;
+      const text = num(s.std * factor);
+      return ci && ci[0] !== null && ci[1] !== null ? `${text} [${num(ci[0] * factor, 3)}, ${num(ci[1] * factor, 3)}]` : text;
+    };
+    // Rows pooling several independent captures say so; absent means one capture.
+    const captures = (row) => ((row.repeats || 1) > 1 ? `n = ${row.repeats} captures` : "1");
     clear($("#study-table"), el("table", {},
       el("thead", {}, el("tr", {}, head.map((h, i) => el("th", { class: i > 1 ? "num" : "" }, h)))),
-      el("tbody", {}, study.rows.map((row) => el("tr", {},
+      el("tbody", {}, study.rows.map((row) => el("tr", { "data-repeats": row.repeats || 1 },
         el("td", {}, row.pattern), el("td", {}, row.scheme),
+        el("td", { class: "num" }, captures(row)),
         el("td", { class: "num" }, `${row.valid} / ${row.points}`),
-        el("td", { class: "num" }, num(row.u.std)), el("td", { class: "num" }, num(row.v.std)),
-        el("td", { class: "num" }, num(row.exx.std * 1e6)), el("td", { class: "num" }, num(row.eyy.std * 1e6)),
+        el("td", { class: "num" }, std(row, "u") + stdUm(row, "u")), el("td", { class: "num" }, std(row, "v") + stdUm(row, "v")),
+        el("td", { class: "num" }, std(row, "exx", 1e6)), el("td", { class: "num" }, std(row, "eyy", 1e6)),
         el("td", { class: "num" }, inc(row, "u")), el("td", { class: "num" }, inc(row, "v")),
         el("td", { class: "num" }, inc(row, "exx")))))));
   } catch (e) {
     clear($("#study-table"), el("p", { class: "error" }, e.message));
   }
 
-  // Maps: map_{pattern}_{scheme}_{field}.svg, chosen by pattern and scheme.
+  // Maps: map_{pattern}_{scheme}_{field}.svg, chosen by pattern and scheme; every field the run
+  // drew is shown, in this order.
+  const FIELDS = ["u", "v", "exx", "eyy", "exy"];
   const maps = (r.result_files || [])
-    .map((f) => /^plots\/map_(.+)_([^_]+)_(u|v|exx)\.svg$/.exec(f))
+    .map((f) => /^plots\/map_(.+)_([^_]+)_(u|v|exx|eyy|exy)\.svg$/.exec(f))
     .filter(Boolean)
     .map((m) => ({ file: m[0].slice("plots/".length), pattern: m[1], scheme: m[2], field: m[3] }));
   const patterns = [...new Set(maps.map((m) => m.pattern))];
@@ -90,7 +127,7 @@ async function showResults(r) {
     clear($("#map-pickers"), pick("pattern", patterns), pick("scheme", schemes));
     const draw = async () => {
       const [p, s] = [$("#map-pattern").value, $("#map-scheme").value];
-      const chosen = ["u", "v", "exx"].map((f) => maps.find((m) => m.pattern === p && m.scheme === s && m.field === f)).filter(Boolean);
+      const chosen = FIELDS.map((f) => maps.find((m) => m.pattern === p && m.scheme === s && m.field === f)).filter(Boolean);
       const boxes = chosen.map((m) => el("div", { class: "figure map", "data-field": m.field }));
       clear($("#maps"), boxes);
       await Promise.all(chosen.map((m, i) => inlineSvg(boxes[i], `${API}${base}/plots/${m.file}`)));

@@ -82,12 +82,74 @@ function decodeTiff(buf) {
   return { width: w, height: h, bits, data: out };
 }
 
+/** Side of the 1:1 zoom, px: a crop of the frame's centre drawn at native pixels. */
+const ZOOM_PX = 160;
+
+/** Draws the centre of the frame, one frame pixel per canvas pixel, with the same stretch. */
+function drawZoom(img, lo, hi) {
+  const side = Math.min(ZOOM_PX, img.width, img.height);
+  const x0 = Math.floor((img.width - side) / 2);
+  const y0 = Math.floor((img.height - side) / 2);
+  const canvas = $("#snapshot-zoom");
+  canvas.width = side;
+  canvas.height = side;
+  // CSS size = canvas size: the browser never resamples the pixels.
+  canvas.style.width = `${side}px`;
+  canvas.style.height = `${side}px`;
+  const ctx = canvas.getContext("2d");
+  const rgba = ctx.createImageData(side, side);
+  for (let r = 0; r < side; r++) {
+    for (let c = 0; c < side; c++) {
+      const v = img.data[(y0 + r) * img.width + x0 + c];
+      const g = Math.max(0, Math.min(255, Math.round((255 * (v - lo)) / (hi - lo))));
+      rgba.data.set([g, g, g, 255], 4 * (r * side + c));
+    }
+  }
+  ctx.putImageData(rgba, 0, 0);
+  canvas.title = `pixels ${x0}…${x0 + side - 1} × ${y0}…${y0 + side - 1} at 1:1`;
+  canvas.dataset.loaded = "true";
+}
+
+/** The speckle-quality figures the server computed on this frame, each with what it means. */
+function showQuality(q, bits) {
+  const box = $("#snapshot-quality");
+  if (!q) {
+    clear(box, el("p", { class: "muted" }, "no quality figures for this frame"));
+    return;
+  }
+  const full = 2 ** bits - 1;
+  const row = (key, name, value, why, raw) => [
+    el("dt", {}, name),
+    el("dd", { "data-figure": key, "data-value": raw }, value, el("span", { class: "why" }, why)),
+  ];
+  const size = q.speckle_size_px;
+  const perDn = (x) => (Number.isFinite(x) ? `${num(x, 3)} px per DN of noise` : "—");
+  clear(box, el("dl", { class: "kv quality" },
+    row("mean_gradient", "mean intensity gradient",
+      `${num(q.mean_gradient_dn_per_px, 3)} DN/px (${num((100 * q.mean_gradient_dn_per_px) / full, 3)} % of full scale per px)`,
+      "Pan et al. 2010: the random error of every subset falls as this rises (σ_u ∝ noise / gradient); a sharp, high-contrast pattern has a large one.",
+      q.mean_gradient_dn_per_px),
+    row("speckle_size", "mean speckle size",
+      size == null ? "— (no speckle: the autocorrelation stays above ½)" : `${num(size, 3)} px (x ${num(q.speckle_size_x_px, 3)}, y ${num(q.speckle_size_y_px, 3)})`,
+      "Width of the autocorrelation at half its height. About 3–5 px suits DIC: smaller speckles alias, larger ones need larger subsets.",
+      size ?? ""),
+    row("sssig", `SSSIG over ${q.subset_px} px subsets`,
+      `median ${num(q.sssig_x_median_dn2, 3)} (x) / ${num(q.sssig_y_median_dn2, 3)} (y) DN², worst ${num(q.sssig_x_min_dn2, 3)} / ${num(q.sssig_y_min_dn2, 3)} DN², over ${q.subsets} subsets`,
+      "Pan et al. 2008: the sum of squared intensity gradients in one subset. The larger, the better that subset is matched; a small worst value marks a featureless region.",
+      q.sssig_x_median_dn2),
+    row("predicted_std", "expected DIC error",
+      `σ_u ≈ ${perDn(q.std_u_px_per_noise_dn)}, σ_v ≈ ${perDn(q.std_v_px_per_noise_dn)}`,
+      "√2 · noise / √SSSIG for a median subset: multiply by the camera's noise (DN, 1σ) for the displacement error this pattern allows.",
+      q.std_u_px_per_noise_dn)));
+}
+
 async function snapshot() {
   const btn = $("#snapshot-btn");
   btn.disabled = true;
   showError($("#snapshot-error"), null);
   try {
-    const resp = await api("/camera/snapshot", { method: "POST", raw: true });
+    const resp = await api("/camera/snapshot?quality=true", { method: "POST", raw: true });
+    const qualityHeader = resp.headers.get("X-Speckle-Quality");
     const img = decodeTiff(await resp.arrayBuffer());
     const sorted = Uint16Array.from(img.data).sort();
     const q = (f) => sorted[Math.min(sorted.length - 1, Math.floor(f * sorted.length))];
@@ -108,6 +170,10 @@ async function snapshot() {
       rgba.data.set([g, g, g, 255], 4 * i);
     }
     ctx.putImageData(rgba, 0, 0);
+    drawZoom(img, lo, hi);
+    let quality = null;
+    try { quality = qualityHeader ? JSON.parse(qualityHeader) : null; } catch (_) { /* shown as none */ }
+    showQuality(quality, img.bits);
     // Histogram over the 16-bit range the frame uses (bins of a power of two).
     const top = Math.max(256, 2 ** Math.ceil(Math.log2(max + 1)));
     const bins = 128;
@@ -198,7 +264,7 @@ $("#experiment-form").addEventListener("submit", async (ev) => {
       schemes: checked("scheme"),
       moves: parseMoves(f.moves.value),
       step_series: [],
-      repeats: Number(f.repeats.value),
+      static_frames: Number(f.static_frames.value),
       frames_averaged: Number(f.frames_averaged.value),
       settle_ms: Number(f.settle_ms.value),
       dic: {
@@ -266,6 +332,6 @@ $("#upload-form").addEventListener("submit", async (ev) => {
 loadBench();
 loadExperiments();
 loadDatasets();
-snapshot();
+// No snapshot here: on real hardware every snapshot is an acquisition, taken only on request.
 setInterval(() => { loadBench(); loadExperiments(); }, 4000);
 
