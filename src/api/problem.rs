@@ -172,6 +172,14 @@ impl From<StoreError> for ApiError {
                 "invalid-dataset",
                 e.to_string(),
             ),
+            full if full.is_storage_full() => {
+                tracing::error!("the run store: {full}");
+                Self::new(
+                    StatusCode::INSUFFICIENT_STORAGE,
+                    "storage-full",
+                    "the data folder's disk is full: free space and try again".to_string(),
+                )
+            }
             other => Self::internal("the run store", other),
         }
     }

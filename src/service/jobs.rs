@@ -8,6 +8,7 @@ use crate::store::{DatasetId, Event, RunId, RunKind, RunRecord, RunStatus, RunSt
 use serde_json::Value;
 use std::collections::HashMap;
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{mpsc, Arc, Mutex};
 use std::time::Duration;
 use tokio::sync::broadcast;
@@ -44,6 +45,9 @@ struct Queued {
 struct Live {
     cancel: CancellationToken,
     events: broadcast::Sender<Event>,
+    /// Set when the work has returned: a run still not terminal then is one whose end could not
+    /// be written yet (a full disk), which cancel ends itself.
+    work_done: Arc<AtomicBool>,
 }
 
 /// The context a job runs in; also the experiment runner's [`RunSink`].
@@ -161,6 +165,7 @@ impl Jobs {
             Live {
                 cancel: CancellationToken::new(),
                 events,
+                work_done: Arc::new(AtomicBool::new(false)),
             },
         );
         let sent = self
@@ -201,8 +206,23 @@ impl Jobs {
         if record.status.is_terminal() {
             return Err(StoreError::Finished(id.clone()));
         }
-        if let Some(live) = self.live.lock().expect("live").get(id) {
-            live.cancel.cancel();
+        let work_done = match self.live.lock().expect("live").get(id) {
+            Some(live) => {
+                live.cancel.cancel();
+                live.work_done.load(Ordering::SeqCst)
+            }
+            // Not queued or running here: a run of another process's lifetime, left behind.
+            None => true,
+        };
+        if record.status == RunStatus::Running && work_done {
+            // Nothing will check the token any more: end the run here, or say why not.
+            let r = self.store.set_status(
+                id,
+                RunStatus::Cancelled,
+                "cancelled after its work had ended (its end could not be recorded)",
+            )?;
+            self.publish_terminal(id);
+            return Ok(r);
         }
         if record.status == RunStatus::Queued {
             let r =
@@ -270,11 +290,11 @@ fn worker(
     live: Arc<Mutex<HashMap<RunId, Live>>>,
 ) {
     while let Ok(job) = rx.recv() {
-        let Some((cancel, events)) = live
+        let Some((cancel, events, work_done)) = live
             .lock()
             .expect("live")
             .get(&job.id)
-            .map(|l| (l.cancel.clone(), l.events.clone()))
+            .map(|l| (l.cancel.clone(), l.events.clone(), l.work_done.clone()))
         else {
             continue;
         };
@@ -314,10 +334,53 @@ fn worker(
                 "internal error: the job panicked (see the server log)".to_string(),
             ),
         };
-        if let Err(e) = store.set_status(&job.id, status, &message) {
-            tracing::warn!(run = %job.id, "cannot record the end: {e}");
+        work_done.store(true, Ordering::SeqCst);
+        match store.set_status(&job.id, status, &message) {
+            Ok(_) => {
+                tracing::info!(run = %job.id, ?status, "{message}");
+                publish_last(&store, &live, &job.id);
+            }
+            Err(StoreError::Finished(_)) => publish_last(&store, &live, &job.id),
+            Err(e) => {
+                tracing::warn!(run = %job.id, "cannot record the end ({status:?}): {e}");
+                record_end_when_possible(store.clone(), live.clone(), job.id, status, message);
+            }
         }
-        tracing::info!(run = %job.id, ?status, "{message}");
-        publish_last(&store, &live, &job.id);
+    }
+}
+
+/// How often a run whose end could not be written tries again.
+const END_RETRY: Duration = Duration::from_millis(500);
+
+/// A run whose terminal write failed (a full disk, say) would otherwise stay `running` for ever:
+/// retry in the background until the store takes it — as `failed`, since the run's files may be
+/// incomplete — or until someone else (cancel) has ended it.
+fn record_end_when_possible(
+    store: Arc<RunStore>,
+    live: Arc<Mutex<HashMap<RunId, Live>>>,
+    id: RunId,
+    status: RunStatus,
+    message: String,
+) {
+    let spawned = std::thread::Builder::new()
+        .name("jobs-end-retry".into())
+        .spawn(move || {
+            let message = format!(
+                "could not record the end of the run when it came ({}: {message}); its files may be incomplete",
+                status.as_str()
+            );
+            loop {
+                std::thread::sleep(END_RETRY);
+                match store.set_status(&id, RunStatus::Failed, &message) {
+                    Ok(_) | Err(StoreError::Finished(_)) => break,
+                    Err(StoreError::NotFound(_)) => return,
+                    Err(_) => continue,
+                }
+            }
+            tracing::info!(run = %id, "end recorded after a failed write");
+            publish_last(&store, &live, &id);
+        });
+    if let Err(e) = spawned {
+        tracing::error!("cannot start the end-retry thread: {e}");
     }
 }

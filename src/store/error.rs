@@ -47,6 +47,22 @@ pub enum StoreError {
     Corrupt { path: PathBuf, message: String },
 }
 
+impl StoreError {
+    /// The disk (or the user's quota) is full: the caller can try again once space returns.
+    pub fn is_storage_full(&self) -> bool {
+        match self {
+            StoreError::Io { source, .. } => matches!(
+                source.kind(),
+                std::io::ErrorKind::StorageFull | std::io::ErrorKind::QuotaExceeded
+            ),
+            StoreError::Sqlite(rusqlite::Error::SqliteFailure(e, _)) => {
+                e.code == rusqlite::ErrorCode::DiskFull
+            }
+            _ => false,
+        }
+    }
+}
+
 pub type Result<T, E = StoreError> = std::result::Result<T, E>;
 
 /// `map_err` helper: an I/O error at `path`.
