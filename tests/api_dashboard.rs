@@ -123,6 +123,44 @@ async fn a_snapshot_carries_its_speckle_quality_only_on_request() {
         "{q}"
     );
     assert!(q["sssig_x_min_dn2"].as_f64().unwrap() <= sx);
+    // The frame's own noise estimate against the temporal noise of two snapshots of the same
+    // scene (an independent measurement: σ of their difference / √2).
+    let noise_dn = q["noise_dn"].as_f64().unwrap();
+    assert!(
+        (q["std_u_px"].as_f64().unwrap() - std_u * noise_dn).abs() < 1e-12,
+        "{q}"
+    );
+    let frame = |bytes: &[u8]| {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("f.tif");
+        std::fs::write(&path, bytes).unwrap();
+        ffdic::image::read_tiff(&path).unwrap().0
+    };
+    let a = frame(&r.bytes().await.unwrap());
+    let b = client()
+        .post(server.url("/camera/snapshot"))
+        .send()
+        .await
+        .unwrap()
+        .bytes()
+        .await
+        .unwrap();
+    let b = frame(&b);
+    let d: Vec<f64> = a
+        .data()
+        .iter()
+        .zip(b.data())
+        .map(|(x, y)| (*x - *y) as f64)
+        .collect();
+    let m = d.iter().sum::<f64>() / d.len() as f64;
+    let temporal_dn =
+        (d.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (d.len() - 1) as f64 / 2.0).sqrt();
+    println!("noise: the header's {noise_dn:.2} DN, two later snapshots' {temporal_dn:.2} DN");
+    // Two estimates of one noise from ≈ 128,000 pixel pairs each agree to a few per cent.
+    assert!(
+        (noise_dn / temporal_dn - 1.0).abs() < 0.1,
+        "{noise_dn} vs {temporal_dn}"
+    );
 
     let too_big = client()
         .post(server.url("/camera/snapshot?quality=true&subset_px=999"))

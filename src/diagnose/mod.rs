@@ -113,7 +113,7 @@ pub use history::{
     append_history, history_chart, history_path, read_history, HistoryEntry, HISTORY_FILE,
 };
 pub use identifiability::{design_of, Confounded, DatasetDesign, NotIdentifiable};
-pub use image_stats::{FrameStats, MeanMap, PsdBin, PtcPoint};
+pub use image_stats::{noise_variance, FrameStats, MeanMap, PsdBin, PtcPoint};
 pub use nominal::{Nominal, BASELINE_TOML};
 pub use print::{PrintCalibration, PrintKnowledge};
 pub use residuals::{comparison_svgs, ResidualMap};

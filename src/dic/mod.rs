@@ -43,6 +43,8 @@ pub use result::{DicResult, PoiResult, PoiStatus};
 pub use sequence::{analyze_sequence, SequenceFrame, REFERENCE_UPDATE_FRACTION};
 pub use settings::{DicSettings, ShapeFunction, DEFAULT_ROI_SIDE_PX};
 pub use similarity::{estimate_similarity, Similarity};
-pub use stats::{f64_or_nan, interval_or_nan, valid_fields, CorrelationLengths, Stats, Summary};
+pub use stats::{
+    f64_or_nan, interval_or_nan, median, valid_fields, CorrelationLengths, Stats, Summary,
+};
 pub use validate::{MAX_PLAUSIBLE_GRADIENT, RELATIVE_ZNCC_FLOOR};
 pub use warp::Warp;

@@ -1,6 +1,7 @@
 //! Whether a correlated point can be trusted: its own evidence (ZNCC, a plausible shape, a
 //! texture that pins its position down) and its neighbours' (the normalised median test).
 
+use super::stats::median;
 use super::{DicSettings, PoiResult, PoiStatus};
 
 /// Largest displacement gradient a subset may converge to. Beyond ±0.5 (a 50 % strain, or a
@@ -147,16 +148,6 @@ pub fn median_test_failures(
         }
     }
     failures
-}
-
-fn median(values: &mut [f64]) -> f64 {
-    values.sort_by(f64::total_cmp);
-    let n = values.len();
-    if n % 2 == 1 {
-        values[n / 2]
-    } else {
-        0.5 * (values[n / 2 - 1] + values[n / 2])
-    }
 }
 
 #[cfg(test)]

@@ -16,7 +16,7 @@ struct Field {
     about_mean: bool,
 }
 
-const FIELDS: [Field; 3] = [
+const FIELDS: [Field; 5] = [
     Field {
         key: "u",
         name: "u",
@@ -38,14 +38,28 @@ const FIELDS: [Field; 3] = [
         value: |p| p.exx * 1e6,
         about_mean: false,
     },
+    Field {
+        key: "eyy",
+        name: "εyy",
+        unit: "µε",
+        value: |p| p.eyy * 1e6,
+        about_mean: false,
+    },
+    Field {
+        key: "exy",
+        name: "εxy",
+        unit: "µε",
+        value: |p| p.exy * 1e6,
+        about_mean: false,
+    },
 ];
 
-/// The file name of a map: `map_{pattern}_{scheme}_{u|v|exx}.svg`.
+/// The file name of a map: `map_{pattern}_{scheme}_{u|v|exx|eyy|exy}.svg`.
 pub fn map_file_name(pattern: &str, scheme: &str, field: &str) -> String {
     format!("map_{pattern}_{scheme}_{field}.svg")
 }
 
-/// The u, v and εxx maps of `result` (run `run` of `pattern`, reduced with `scheme`):
+/// The u, v, εxx, εyy and εxy maps of `result` (run `run` of `pattern`, reduced with `scheme`):
 /// `(file name, svg)` for each.
 pub fn field_map_svgs(
     result: &DicResult,
@@ -110,7 +124,7 @@ mod tests {
     use crate::image::Image;
 
     #[test]
-    fn three_maps_with_one_cell_per_point_and_units() {
+    fn five_maps_with_one_cell_per_point_and_units() {
         // A smooth random-ish texture shifted by 0.5 px.
         let (w, h) = (96usize, 80usize);
         let tex = |x: f64, y: f64| {
@@ -136,7 +150,9 @@ mod tests {
             [
                 "map_a_ff100_u.svg",
                 "map_a_ff100_v.svg",
-                "map_a_ff100_exx.svg"
+                "map_a_ff100_exx.svg",
+                "map_a_ff100_eyy.svg",
+                "map_a_ff100_exy.svg"
             ]
         );
         let cells = result.grid.xs.len() * result.grid.ys.len();
@@ -147,5 +163,7 @@ mod tests {
         }
         assert!(maps[0].1.contains("u − mean [px]"));
         assert!(maps[2].1.contains("εxx [µε]"));
+        assert!(maps[3].1.contains("εyy [µε]"));
+        assert!(maps[4].1.contains("εxy [µε]"));
     }
 }

@@ -19,6 +19,7 @@
 //! Pure numerics: an image in, numbers out; nothing here knows of files or HTTP.
 
 use super::Image;
+use crate::dic::median;
 use serde::Serialize;
 
 /// Longest autocorrelation lag looked at, px: a pattern whose autocorrelation is still above
@@ -189,16 +190,6 @@ pub fn speckle_quality(
 }
 
 /// Sorts `v` (ascending) and returns its median.
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -164,6 +164,8 @@ async function main() {
     }
     await form.locator("textarea[name=moves]").fill("x1 1.0 0.0");
     await form.locator("input[name=settle_ms]").fill("0");
+    // Three independent captures: the study pools them (mean and t interval over captures).
+    await form.locator("input[name=repeats]").fill("3");
     // A grid of 20 x 16 points on the reduced 200 x 160 px frames: enough bootstrap blocks
     // (dic::bootstrap::MIN_BLOCKS of 2 correlation lengths) for the displacement intervals.
     await form.locator("input[name=subset_px]").fill("17");
@@ -214,8 +216,13 @@ async function main() {
     }
     const studyText = await page.locator("#study-table").innerText();
     expect(/\[[-+−]?\d/.test(studyText), "the study table carries intervals");
+    expect(/n = 3 captures/.test(studyText), `the study table says it pools 3 captures: ${studyText.slice(0, 200)}`);
     const maps = await page.locator("#maps .figure.map svg").count();
-    if (maps < 3) fail(`${maps} of the u, v, εxx maps shown`);
+    if (maps < 5) fail(`${maps} of the u, v, εxx, εyy, εxy maps shown`);
+    const mapText = await page.locator("#maps").innerText();
+    for (const f of ["εyy", "εxy"]) {
+      if (!mapText.includes(f) && (await page.locator(`#maps svg:has-text("${f}")`).count()) === 0) fail(`no ${f} map`);
+    }
     const legends = await page.locator("#maps svg rect.legend").count();
     if (legends !== maps) fail(`maps without colour scales (${legends} legends for ${maps} maps)`);
     const moves = await page.locator("#run-info").innerText();

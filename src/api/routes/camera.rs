@@ -11,7 +11,7 @@ use axum::extract::{Query, State};
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
 use axum::Json;
-use ffdic_hw::{CameraSettings, PixelFormat, SensorRoi};
+use ffdic_hw::{CameraSettings, Frame, PixelFormat, SensorRoi};
 use serde::Deserialize;
 use serde_json::Value;
 use std::time::Duration;
@@ -86,7 +86,8 @@ pub struct SnapshotQuery {
     /// `tiff` (16-bit, the default) or `png` (8-bit, stretched for a quick look).
     pub format: Option<String>,
     /// With `true`, the `X-Speckle-Quality` header carries the frame's speckle-quality figures
-    /// (JSON: mean intensity gradient, speckle size, SSSIG over `subset_px` subsets).
+    /// (JSON: mean intensity gradient, speckle size, SSSIG over `subset_px` subsets, and the
+    /// temporal noise from a second frame taken for it, with the displacement error it predicts).
     pub quality: Option<bool>,
     /// Subset side for the SSSIG, px (default: the DIC default subset).
     pub subset_px: Option<usize>,
@@ -100,18 +101,48 @@ pub const SPECKLE_QUALITY_HEADER: &str = "x-speckle-quality";
 const QUALITY_CROP_PX: usize = 1024;
 
 /// The speckle-quality figures of a 16-bit frame, over its centred crop, as header JSON.
-fn quality_json(width: usize, height: usize, data: &[u16], subset_px: usize) -> ApiResult<String> {
+/// `second` is another frame of the same scene: the temporal noise comes from the pair (a
+/// single frame's estimate takes speckle for noise: 2.3x the temporal σ on the mock bench).
+fn quality_json(first: &Frame, second: &Frame, subset_px: usize) -> ApiResult<String> {
+    let (width, height) = (first.width, first.height);
     let (cw, ch) = (width.min(QUALITY_CROP_PX), height.min(QUALITY_CROP_PX));
     let (x0, y0) = ((width - cw) / 2, (height - ch) / 2);
-    let crop = crate::image::Image::from_fn(cw, ch, |c, r| data[(y0 + r) * width + x0 + c] as f32);
-    let q = crate::image::speckle_quality(&crop, subset_px)
+    let crop = |f: &Frame| {
+        crate::image::Image::from_fn(cw, ch, |c, r| f.data[(y0 + r) * width + x0 + c] as f32)
+    };
+    let crop_first = crop(first);
+    let figures = crate::image::speckle_quality(&crop_first, subset_px)
         .map_err(|e| ApiError::invalid("subset_px", e.to_string()))?;
+    let noise_dn = if (second.width, second.height) == (width, height) {
+        crate::diagnose::noise_variance(&crop_first, Some(&crop(second))).sqrt()
+    } else {
+        f64::NAN
+    };
+    let q = SnapshotQuality {
+        std_u_px: figures.std_u_px_per_noise_dn * noise_dn,
+        std_v_px: figures.std_v_px_per_noise_dn * noise_dn,
+        figures,
+        noise_dn,
+    };
     Ok(serde_json::to_string(&q).expect("speckle quality serialises"))
+}
+
+/// The speckle-quality figures with the frame's own noise: what they predict for DIC here.
+#[derive(serde::Serialize)]
+struct SnapshotQuality {
+    #[serde(flatten)]
+    figures: crate::image::SpeckleQuality,
+    /// Temporal image noise σ from the frame and a second one of the same scene, DN (NaN, JSON
+    /// null, when the two differ in size).
+    noise_dn: f64,
+    /// σ_u and σ_v a median subset would show at that noise: √2·σ/√SSSIG (Pan et al. 2008), px.
+    std_u_px: f64,
+    std_v_px: f64,
 }
 
 #[utoipa::path(post, path = "/camera/snapshot", tag = "bench", params(SnapshotQuery),
     responses((status = 200, description = "One frame", content_type = "image/tiff",
-               headers(("X-Speckle-Quality" = String, description = "With quality=true: the frame's speckle-quality figures as JSON (mean_gradient_dn_per_px, speckle_size_x_px, speckle_size_y_px, speckle_size_px, subset_px, subsets, sssig_x_median_dn2, sssig_y_median_dn2, sssig_x_min_dn2, sssig_y_min_dn2, std_u_px_per_noise_dn, std_v_px_per_noise_dn)"))),
+               headers(("X-Speckle-Quality" = String, description = "With quality=true: the frame's speckle-quality figures as JSON (mean_gradient_dn_per_px, speckle_size_x_px, speckle_size_y_px, speckle_size_px, subset_px, subsets, sssig_x_median_dn2, sssig_y_median_dn2, sssig_x_min_dn2, sssig_y_min_dn2, std_u_px_per_noise_dn, std_v_px_per_noise_dn, noise_dn: the temporal noise σ in DN from a second frame taken for it, std_u_px, std_v_px: the displacement error that noise predicts)"))),
               (status = 422, description = "Unknown format, or a subset larger than the frame", body = Problem),
               (status = 409, body = Problem), (status = 503, body = Problem), (status = 504, body = Problem)))]
 pub async fn snapshot(
@@ -133,15 +164,21 @@ pub async fn snapshot(
         .unwrap_or(crate::dic::DicSettings::default().subset_px);
     let bench = svc.bench.clone();
     let timeout = Duration::from_millis(svc.config.bench.frame_timeout_ms);
-    let frame = blocking(move || bench.capture(Owner::Direct, 1, timeout))
-        .await??
-        .pop()
-        .ok_or_else(|| ApiError::unavailable("the camera delivered no frame"))?;
-    let quality = if q.quality == Some(true) {
-        let f = frame.clone();
-        Some(blocking(move || quality_json(f.width, f.height, &f.data, subset_px)).await??)
-    } else {
-        None
+    // The quality figures need the noise: a second frame of the same scene measures it.
+    let frames_wanted = if q.quality == Some(true) { 2 } else { 1 };
+    let mut frames =
+        blocking(move || bench.capture(Owner::Direct, frames_wanted, timeout)).await??;
+    if frames.len() < frames_wanted {
+        return Err(ApiError::unavailable("the camera delivered too few frames"));
+    }
+    let second = (frames_wanted == 2).then(|| frames.pop()).flatten();
+    let frame = frames.remove(0);
+    let quality = match second {
+        Some(second) => {
+            let f = frame.clone();
+            Some(blocking(move || quality_json(&f, &second, subset_px)).await??)
+        }
+        None => None,
     };
     let (bytes, mime) = blocking(move || {
         if png {

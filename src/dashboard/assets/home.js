@@ -138,8 +138,9 @@ function showQuality(q, bits) {
       "Pan et al. 2008: the sum of squared intensity gradients in one subset. The larger, the better that subset is matched; a small worst value marks a featureless region.",
       q.sssig_x_median_dn2),
     row("predicted_std", "expected DIC error",
-      `σ_u ≈ ${perDn(q.std_u_px_per_noise_dn)}, σ_v ≈ ${perDn(q.std_v_px_per_noise_dn)}`,
-      "√2 · noise / √SSSIG for a median subset: multiply by the camera's noise (DN, 1σ) for the displacement error this pattern allows.",
+      `σ_u ≈ ${perDn(q.std_u_px_per_noise_dn)}, σ_v ≈ ${perDn(q.std_v_px_per_noise_dn)}` +
+        (Number.isFinite(q.noise_dn) ? `; at the measured noise (σ ≈ ${num(q.noise_dn, 3)} DN) σ_u ≈ ${num(q.std_u_px, 3)} px, σ_v ≈ ${num(q.std_v_px, 3)} px` : ""),
+      "√2 · noise / √SSSIG for a median subset (Pan et al. 2008). The noise is the temporal σ of this frame against a second one the snapshot took for it.",
       q.std_u_px_per_noise_dn)));
 }
 
@@ -264,6 +265,8 @@ $("#experiment-form").addEventListener("submit", async (ev) => {
       schemes: checked("scheme"),
       moves: parseMoves(f.moves.value),
       step_series: [],
+      repeats: Number(f.repeats.value),
+      new_layout_per_repeat: f.new_layout_per_repeat.checked,
       static_frames: Number(f.static_frames.value),
       frames_averaged: Number(f.frames_averaged.value),
       settle_ms: Number(f.settle_ms.value),
