@@ -218,10 +218,10 @@ async function main() {
     expect(/\[[-+−]?\d/.test(studyText), "the study table carries intervals");
     expect(/n = 3 captures/.test(studyText), `the study table says it pools 3 captures: ${studyText.slice(0, 200)}`);
     const maps = await page.locator("#maps .figure.map svg").count();
-    if (maps < 5) fail(`${maps} of the u, v, εxx, εyy, εxy maps shown`);
+    expect(maps >= 5, `all five maps shown (u, v, εxx, εyy, εxy): ${maps}`);
     const mapText = await page.locator("#maps").innerText();
     for (const f of ["εyy", "εxy"]) {
-      if (!mapText.includes(f) && (await page.locator(`#maps svg:has-text("${f}")`).count()) === 0) fail(`no ${f} map`);
+      expect(mapText.includes(f) || (await page.locator(`#maps svg:has-text("${f}")`).count()) > 0, `an ${f} map`);
     }
     const legends = await page.locator("#maps svg rect.legend").count();
     if (legends !== maps) fail(`maps without colour scales (${legends} legends for ${maps} maps)`);
