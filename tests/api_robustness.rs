@@ -107,11 +107,12 @@ async fn bad_requests_are_problems_and_write_nothing() {
         "runs": [{"id": "r1", "reference": "ref.tif", "deformed": "def.tif",
                   "stage": {"dx_mm": 0.5, "dy_mm": 0.0}}]})
     .to_string();
-    let good_tiff = {
-        // A 2-D random texture (a hash of the pixel position): a sawtooth in one direction
-        // would leave any motion along its ridges undetermined.
+    // A 2-D random texture (a hash of the pixel position), shifted by `dx` px: a sawtooth in one
+    // direction would leave any motion along its ridges undetermined.
+    let texture_tiff = |dx: i64| {
         let img = ffdic::image::Image::from_fn(96, 80, |c, r| {
-            let mut s = (c as u64).wrapping_mul(73_856_093) ^ (r as u64).wrapping_mul(19_349_663);
+            let c = (c as i64 - dx) as u64;
+            let mut s = c.wrapping_mul(73_856_093) ^ (r as u64).wrapping_mul(19_349_663);
             s ^= s >> 13;
             s = s.wrapping_mul(0x9E37_79B9_7F4A_7C15);
             (s >> 56) as f32
@@ -119,24 +120,19 @@ async fn bad_requests_are_problems_and_write_nothing() {
         let data: Vec<u16> = img.data().iter().map(|&v| v as u16).collect();
         ffdic::image::tiff_u16_bytes(96, 80, &data).unwrap()
     };
+    let good_tiff = texture_tiff(0);
     let part = |name: &str, bytes: Vec<u8>| {
         reqwest::multipart::Part::bytes(bytes).file_name(name.to_string())
     };
+    let post_form =
+        |form: reqwest::multipart::Form| c.post(server.url("/datasets")).multipart(form).send();
     let traversal = reqwest::multipart::Form::new()
         .part(
             "dataset.json",
             part("dataset.json", manifest.clone().into_bytes()),
         )
         .part("x", part("../../evil.tif", good_tiff.clone()));
-    let p = problem(
-        c.post(server.url("/datasets"))
-            .multipart(traversal)
-            .send()
-            .await
-            .unwrap(),
-        422,
-    )
-    .await;
+    let p = problem(post_form(traversal).await.unwrap(), 422).await;
     assert_eq!(p["field"], "file");
     let corrupt = reqwest::multipart::Form::new()
         .part(
@@ -148,15 +144,7 @@ async fn bad_requests_are_problems_and_write_nothing() {
             "def.tif",
             part("def.tif", good_tiff[..good_tiff.len() / 2].to_vec()),
         );
-    let p = problem(
-        c.post(server.url("/datasets"))
-            .multipart(corrupt)
-            .send()
-            .await
-            .unwrap(),
-        422,
-    )
-    .await;
+    let p = problem(post_form(corrupt).await.unwrap(), 422).await;
     assert!(p["detail"].as_str().unwrap().contains("def.tif"), "{p}");
     let missing = reqwest::multipart::Form::new()
         .part(
@@ -164,15 +152,33 @@ async fn bad_requests_are_problems_and_write_nothing() {
             part("dataset.json", manifest.clone().into_bytes()),
         )
         .part("ref.tif", part("ref.tif", good_tiff.clone()));
-    problem(
-        c.post(server.url("/datasets"))
-            .multipart(missing)
-            .send()
-            .await
-            .unwrap(),
-        422,
-    )
-    .await;
+    problem(post_form(missing).await.unwrap(), 422).await;
+    // Issue 12: a manifest whose move contradicts its frames (they moved 20 px = 1.5 mm, it says
+    // 0.001 mm) is refused with the measured figure; so is a file the manifest does not name.
+    let mislabelled = json!({"format": "ffdic-dataset/1", "name": "up", "scale_px_per_mm": 13.0,
+        "runs": [{"id": "r1", "reference": "ref.tif", "deformed": "def.tif",
+                  "stage": {"dx_mm": 0.001, "dy_mm": 0.0}}]})
+    .to_string();
+    let form = reqwest::multipart::Form::new()
+        .part(
+            "dataset.json",
+            part("dataset.json", mislabelled.into_bytes()),
+        )
+        .part("ref.tif", part("ref.tif", good_tiff.clone()))
+        .part("def.tif", part("def.tif", texture_tiff(20)));
+    let p = problem(post_form(form).await.unwrap(), 422).await;
+    assert_eq!(p["field"], "runs[r1].stage", "{p}");
+    assert!(p["detail"].as_str().unwrap().contains("20.0 px"), "{p}");
+    let form = reqwest::multipart::Form::new()
+        .part(
+            "dataset.json",
+            part("dataset.json", manifest.clone().into_bytes()),
+        )
+        .part("ref.tif", part("ref.tif", good_tiff.clone()))
+        .part("def.tif", part("def.tif", good_tiff.clone()))
+        .part("notes.txt", part("notes.txt", b"hello".to_vec()));
+    let p = problem(post_form(form).await.unwrap(), 422).await;
+    assert!(p["detail"].as_str().unwrap().contains("notes.txt"), "{p}");
     assert!(!tmp.path().join("evil.tif").exists());
     assert_eq!((tree(&runs), tree(&datasets)), before, "nothing written");
 
@@ -452,5 +458,55 @@ async fn requests_that_killed_the_daemon_are_refused_at_the_door() {
         Some(0),
         "nothing queued: {runs}"
     );
+    server.stop().await;
+}
+
+/// Issue 12: `datasets_quota_bytes` holds: an upload that would pass it is refused (507) with the
+/// figures, and nothing of it is kept.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_upload_past_the_datasets_quota_is_refused_and_nothing_kept() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut config = small_config(tmp.path());
+    let tiff = {
+        let data: Vec<u16> = (0..96 * 80u32)
+            .map(|k| (k.wrapping_mul(2_654_435_761) >> 20) as u16)
+            .collect();
+        ffdic::image::tiff_u16_bytes(96, 80, &data).unwrap()
+    };
+    // Room for one dataset of two frames, not for two.
+    config.datasets_quota_bytes = 3 * tiff.len() as u64;
+    let server = TestServer::start(config).await;
+    let manifest = json!({"format": "ffdic-dataset/1", "name": "q", "scale_px_per_mm": 13.0,
+        "runs": [{"id": "r1", "reference": "ref.tif", "deformed": "def.tif",
+                  "stage": {"dx_mm": 0.0, "dy_mm": 0.0}}]})
+    .to_string();
+    let upload = || {
+        let part = |name: &str, bytes: Vec<u8>| {
+            reqwest::multipart::Part::bytes(bytes).file_name(name.to_string())
+        };
+        let form = reqwest::multipart::Form::new()
+            .part(
+                "dataset.json",
+                part("dataset.json", manifest.clone().into_bytes()),
+            )
+            .part("ref.tif", part("ref.tif", tiff.clone()))
+            .part("def.tif", part("def.tif", tiff.clone()));
+        client()
+            .post(server.url("/datasets"))
+            .multipart(form)
+            .send()
+    };
+    assert_eq!(upload().await.unwrap().status(), 201);
+    let datasets = tmp.path().join("datasets");
+    let before = tree(&datasets);
+    let p = problem(upload().await.unwrap(), 507).await;
+    assert!(
+        p["detail"]
+            .as_str()
+            .unwrap()
+            .contains("datasets_quota_bytes"),
+        "{p}"
+    );
+    assert_eq!(tree(&datasets), before, "nothing kept");
     server.stop().await;
 }

@@ -4,7 +4,12 @@
 //! field is an error naming it.
 
 mod manifest;
+mod move_check;
 
 pub use manifest::{
     is_plain_file_name, CameraInfo, DatasetError, Manifest, PatternInfo, Run, StageMove, FORMAT,
+};
+pub use move_check::{
+    check_stated_move, measure_move, MeasuredMove, MoveContradiction, MAX_RATIO, MIN_DIFFERENCE_PX,
+    MIN_NCC,
 };

@@ -16,6 +16,7 @@ use super::print::{spectral_shape_chi2, PrintCalibration, PrintKnowledge};
 use super::residuals::{residual_map, ResidualMap};
 use super::stage::{fit_stage, StageObservation};
 use super::{CompareOptions, DiagnoseError, Progress};
+use crate::dataset::check_stated_move;
 use crate::dataset::Manifest;
 use crate::dic::{DicResult, PreparedReference, Summary};
 use crate::image::{read_tiff, Image};
@@ -206,6 +207,18 @@ pub fn load_measurement(
         let (_, reference, prepared) = cached.as_ref().expect("just filled");
         let (deformed, _) = read_tiff(&dir.join(&run.deformed))?;
         check_sizes(run, reference, &deformed)?;
+        // A move stated an order of magnitude off would send the fit chasing a travel scale of
+        // hundreds: say so with the measured figure instead.
+        check_stated_move(
+            reference,
+            &deformed,
+            (run.stage.dx_mm, run.stage.dy_mm),
+            manifest.scale_px_per_mm,
+        )
+        .map_err(|e| DiagnoseError::Frames {
+            run: run.id.clone(),
+            message: e.to_string(),
+        })?;
         match size {
             None => size = Some((reference.width(), reference.height())),
             Some(s) if s != (reference.width(), reference.height()) => {

@@ -63,6 +63,30 @@ fn tiff_size(path: &Path) -> Result<(usize, usize)> {
 }
 
 impl RunStore {
+    /// Bytes the stored datasets take (every file under `DATA/datasets`, staged uploads
+    /// included): what the datasets quota is held against.
+    pub fn datasets_bytes(&self) -> Result<u64> {
+        fn walk(dir: &Path) -> std::io::Result<u64> {
+            let mut total = 0;
+            for entry in std::fs::read_dir(dir)? {
+                let entry = entry?;
+                let kind = entry.file_type()?;
+                if kind.is_dir() {
+                    total += walk(&entry.path())?;
+                } else if kind.is_file() {
+                    total += entry.metadata()?.len();
+                }
+            }
+            Ok(total)
+        }
+        let dir = self.data_dir().join(DATASETS);
+        match walk(&dir) {
+            Ok(n) => Ok(n),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(0),
+            Err(e) => Err(io(dir)(e)),
+        }
+    }
+
     /// A fresh, empty staging folder for a dataset being uploaded or imported.
     pub fn stage_dataset(&self) -> Result<StagingDir> {
         let datasets = self.data_dir().join(DATASETS);

@@ -47,10 +47,16 @@ fn multipart_error(e: axum::extract::multipart::MultipartError) -> ApiError {
     responses((status = 201, description = "Stored; Location names it", body = Object),
               (status = 400, body = Problem), (status = 401, body = Problem),
               (status = 413, body = Problem),
+              (status = 507, description = "The stored datasets and this upload would pass datasets_quota_bytes", body = Problem),
               (status = 422, description = "Invalid manifest, missing or corrupt frame", body = Problem)))]
 pub async fn upload(State(svc): State<Service>, mut form: Multipart) -> ApiResult<Response> {
     let store = svc.store.clone();
-    let staging = blocking(move || store.stage_dataset()).await??;
+    let (staging, used_bytes) = blocking(move || -> Result<_, crate::store::StoreError> {
+        Ok((store.stage_dataset()?, store.datasets_bytes()?))
+    })
+    .await??;
+    let quota_bytes = svc.config.datasets_quota_bytes;
+    let mut received_bytes = 0u64;
     let mut names: Vec<String> = Vec::new();
     while let Some(mut field) = form.next_field().await.map_err(multipart_error)? {
         let name = field
@@ -75,6 +81,11 @@ pub async fn upload(State(svc): State<Service>, mut form: Multipart) -> ApiResul
             .await
             .map_err(|e| ApiError::internal("staging an upload", e))?;
         while let Some(chunk) = field.chunk().await.map_err(multipart_error)? {
+            received_bytes += chunk.len() as u64;
+            // Refused as soon as it would pass the quota: the staging folder goes with it.
+            if used_bytes + received_bytes > quota_bytes {
+                return Err(over_quota(used_bytes, received_bytes, quota_bytes));
+            }
             file.write_all(&chunk)
                 .await
                 .map_err(|e| ApiError::internal("staging an upload", e))?;
@@ -94,6 +105,26 @@ pub async fn upload(State(svc): State<Service>, mut form: Multipart) -> ApiResul
     let record = blocking(move || -> ApiResult<DatasetRecord> {
         let manifest = Manifest::read(staging.path())
             .map_err(|e| ApiError::invalid("dataset.json", e.to_string()))?;
+        // A dataset holds what its manifest names: a stray part would be kept, counted against
+        // the quota and never read.
+        let named: std::collections::HashSet<&str> = manifest
+            .runs
+            .iter()
+            .flat_map(|r| {
+                [r.reference.as_str(), r.deformed.as_str()]
+                    .into_iter()
+                    .chain(r.repeat.iter().map(String::as_str))
+            })
+            .chain(["dataset.json"])
+            .collect();
+        if let Some(stray) = names.iter().find(|n| !named.contains(n.as_str())) {
+            return Err(ApiError::invalid(
+                "file",
+                format!(
+                    "'{stray}' is not named by dataset.json: send only the manifest and its frames"
+                ),
+            ));
+        }
         check_frames(staging.path(), &manifest)?;
         let name = manifest.name.clone();
         Ok(store.commit_dataset(staging, &name, "upload")?)
@@ -108,48 +139,83 @@ pub async fn upload(State(svc): State<Service>, mut form: Multipart) -> ApiResul
         .into_response())
 }
 
-/// Every frame the manifest names decodes, and each run's two frames have one size.
+/// 507: the stored datasets and this upload would pass `datasets_quota_bytes`.
+fn over_quota(used_bytes: u64, received_bytes: u64, quota_bytes: u64) -> ApiError {
+    ApiError::new(
+        StatusCode::INSUFFICIENT_STORAGE,
+        "datasets-quota",
+        format!(
+            "the stored datasets take {used_bytes} bytes of the {quota_bytes}-byte quota (datasets_quota_bytes); this upload passed it after {received_bytes} bytes: delete datasets or raise the quota"
+        ),
+    )
+}
+
+/// Every frame the manifest names decodes and is at least 64x64 px, each run's frames have one
+/// size, and no run's stated move contradicts its frames by an order of magnitude
+/// (`dataset::check_stated_move`, the measured figure in the refusal).
 fn check_frames(dir: &std::path::Path, m: &Manifest) -> ApiResult<()> {
-    let mut sizes = std::collections::HashMap::new();
-    for run in &m.runs {
-        for name in std::iter::once(&run.reference)
-            .chain([&run.deformed])
-            .chain(&run.repeat)
-        {
-            if sizes.contains_key(name) {
-                continue;
-            }
-            let path = dir.join(name);
-            if !path.is_file() {
-                return Err(ApiError::invalid(
-                    "file",
-                    format!("run {}: '{name}' was not uploaded", run.id),
-                ));
-            }
-            let (img, _) = read_tiff(&path).map_err(|e| {
-                ApiError::invalid(
-                    "file",
-                    format!("run {}: '{name}': {e}", run.id)
-                        .replace(&dir.display().to_string(), ""),
-                )
-            })?;
-            if img.width() < 64 || img.height() < 64 {
-                return Err(ApiError::invalid(
-                    "file",
-                    format!(
-                        "'{name}' is {}x{} px; at least 64x64",
-                        img.width(),
-                        img.height()
-                    ),
-                ));
-            }
-            sizes.insert(name.clone(), (img.width(), img.height()));
+    let read = |run: &str, name: &str| -> ApiResult<crate::image::Image> {
+        let path = dir.join(name);
+        if !path.is_file() {
+            return Err(ApiError::invalid(
+                "file",
+                format!("run {run}: '{name}' was not uploaded"),
+            ));
         }
-        if sizes[&run.reference] != sizes[&run.deformed] {
+        let (img, _) = read_tiff(&path).map_err(|e| {
+            ApiError::invalid(
+                "file",
+                format!("run {run}: '{name}': {e}").replace(&dir.display().to_string(), ""),
+            )
+        })?;
+        if img.width() < 64 || img.height() < 64 {
+            return Err(ApiError::invalid(
+                "file",
+                format!(
+                    "'{name}' is {}x{} px; at least 64x64",
+                    img.width(),
+                    img.height()
+                ),
+            ));
+        }
+        Ok(img)
+    };
+    let mut checked = std::collections::HashSet::new();
+    // Runs of one pattern share their reference: keep the last one read.
+    let mut reference: Option<(String, crate::image::Image)> = None;
+    for run in &m.runs {
+        if reference.as_ref().map(|r| &r.0) != Some(&run.reference) {
+            reference = Some((run.reference.clone(), read(&run.id, &run.reference)?));
+        }
+        let (_, ref_img) = reference.as_ref().expect("just read");
+        let deformed = read(&run.id, &run.deformed)?;
+        let size = |i: &crate::image::Image| (i.width(), i.height());
+        if size(ref_img) != size(&deformed) {
             return Err(ApiError::invalid(
                 "file",
                 format!("run {}: reference and deformed differ in size", run.id),
             ));
+        }
+        crate::dataset::check_stated_move(
+            ref_img,
+            &deformed,
+            (run.stage.dx_mm, run.stage.dy_mm),
+            m.scale_px_per_mm,
+        )
+        .map_err(|e| ApiError::invalid(format!("runs[{}].stage", run.id), e.to_string()))?;
+        for name in &run.repeat {
+            if checked.insert(name.clone()) {
+                let r = read(&run.id, name)?;
+                if size(&r) != size(ref_img) {
+                    return Err(ApiError::invalid(
+                        "file",
+                        format!(
+                            "run {}: '{name}' differs in size from the reference",
+                            run.id
+                        ),
+                    ));
+                }
+            }
         }
     }
     Ok(())
