@@ -15,7 +15,8 @@ cd "$(dirname "$0")/.."
 #   numpy and tifffile from PyPI into target/independent-venv, made by the tests on first use);
 # - chromium, nodejs, npm: the dashboard's end-to-end test (tests/dashboard_browser.rs) drives
 #   headless Chromium with playwright-core, pinned in tests/browser/package-lock.json.
-APT_PACKAGES=(libaravis-dev libusb-1.0-0-dev aravis-tools-cli aravis-tools libclang-dev libudev-dev pkg-config iproute2 chromium python3-venv)
+# - curl: tests/schemathesis/run.sh fetches the daemon's OpenAPI document with it.
+APT_PACKAGES=(libaravis-dev libusb-1.0-0-dev aravis-tools-cli aravis-tools libclang-dev libudev-dev pkg-config iproute2 chromium python3-venv curl)
 missing=()
 for pkg in "${APT_PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
@@ -43,5 +44,8 @@ echo "== cargo clippy"
 cargo clippy --workspace --all-targets --all-features -- -D warnings
 echo "== cargo test"
 cargo test --all-features --workspace
+echo "== schemathesis against ffdic serve (every phase, bounded; see tests/schemathesis/)"
+# The daemon binary the tests just built (test profile, in the target dir cargo used).
+bash tests/schemathesis/run.sh "${CARGO_TARGET_DIR:-target}/debug/ffdic"
 echo "== benchmarks compile (they are run by hand: cargo bench)"
 cargo bench --no-run --quiet

@@ -279,6 +279,34 @@ async fn openapi_matches_its_snapshot_and_lists_every_route() {
             assert!(entry.get(*m).is_some(), "{m} {path} missing");
         }
     }
+    // Issue 12: operation ids are unique; every error is documented as problem+json; every
+    // operation lists the statuses the middleware can answer with.
+    let mut ids = std::collections::HashSet::new();
+    for (path, item) in paths {
+        for (method, op) in item.as_object().unwrap() {
+            let id = op["operationId"].as_str().unwrap_or_default();
+            assert!(
+                ids.insert(id.to_string()),
+                "{method} {path}: operationId {id:?} twice"
+            );
+            for (status, response) in op["responses"].as_object().unwrap() {
+                let content = response["content"].as_object();
+                let problem_as_json = content
+                    .and_then(|c| c.get("application/json"))
+                    .is_some_and(|j| j["schema"]["$ref"] == "#/components/schemas/Problem");
+                assert!(
+                    !problem_as_json,
+                    "{method} {path} {status}: problem documented as application/json"
+                );
+            }
+            for status in ["400", "401", "403", "421", "500", "503"] {
+                assert!(
+                    op["responses"].get(status).is_some(),
+                    "{method} {path}: no {status}"
+                );
+            }
+        }
+    }
     let snapshot = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/snapshots/openapi.json");
     let text = serde_json::to_string_pretty(&doc).unwrap() + "\n";
     if std::env::var_os("UPDATE_SNAPSHOTS").is_some() {
@@ -508,5 +536,53 @@ async fn an_upload_past_the_datasets_quota_is_refused_and_nothing_kept() {
         "{p}"
     );
     assert_eq!(tree(&datasets), before, "nothing kept");
+    server.stop().await;
+}
+
+/// Issue 12 (schemathesis findings): a malformed Last-Event-ID is refused instead of replaying
+/// from the start; a name no model can have is simply absent (404, not a 422 about TOML).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_malformed_last_event_id_is_refused_and_an_impossible_model_name_is_absent() {
+    let tmp = tempfile::tempdir().unwrap();
+    let server = TestServer::start(small_config(tmp.path())).await;
+    let c = client();
+    let r = c
+        .post(server.url("/experiments"))
+        .json(&daemon::small_request(1))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let id = r.json::<Value>().await.unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let events = server.url(&format!("/experiments/{id}/events"));
+    let p = problem(
+        c.get(&events)
+            .header("last-event-id", "null")
+            .send()
+            .await
+            .unwrap(),
+        400,
+    )
+    .await;
+    assert!(
+        p["detail"].as_str().unwrap().contains("Last-Event-ID"),
+        "{p}"
+    );
+    wait_terminal(&server.url(&format!("/experiments/{id}"))).await;
+    let ok = c
+        .get(&events)
+        .header("last-event-id", "3")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(ok.status(), 200);
+    problem(
+        c.get(server.url("/models/%C3%91%07")).send().await.unwrap(),
+        404,
+    )
+    .await;
     server.stop().await;
 }

@@ -32,7 +32,8 @@ const REQUEST_ID: &str = "x-request-id";
 /// root (the dashboard).
 pub fn app(service: Service, extra: Router<Service>) -> Router {
     let (api, spec) = openapi::router(service.config.max_upload_bytes).split_for_parts();
-    let spec_json = serde_json::to_string_pretty(&spec).expect("the OpenAPI document serialises");
+    let spec_json = serde_json::to_string_pretty(&openapi::finish_document(&spec))
+        .expect("the OpenAPI document serialises");
     let auth = auth::AuthConfig {
         token: service.config.token(),
         reads_need_token: service.config.reads_need_token(),

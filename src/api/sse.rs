@@ -21,11 +21,19 @@ const SHUTDOWN_EVENT: &str = "server_shutdown";
 /// How long a stream waits, at shutdown, for its run's terminal event.
 const SHUTDOWN_WAIT: Duration = Duration::from_secs(2);
 
-pub fn last_event_id(headers: &HeaderMap) -> Option<u64> {
-    headers
-        .get("last-event-id")
-        .and_then(|v| v.to_str().ok())
+/// The `Last-Event-ID` a reconnecting client sends: absent, or an event id (a whole number);
+/// anything else is refused (400) rather than silently replaying from the start.
+pub fn last_event_id(headers: &HeaderMap) -> Result<Option<u64>, crate::api::ApiError> {
+    let Some(v) = headers.get("last-event-id") else {
+        return Ok(None);
+    };
+    v.to_str()
+        .ok()
         .and_then(|v| v.trim().parse().ok())
+        .map(Some)
+        .ok_or_else(|| {
+            crate::api::ApiError::bad_request("Last-Event-ID must be an event id (a whole number)")
+        })
 }
 
 fn to_sse(e: &RunEvent) -> Event {

@@ -21,4 +21,4 @@ mod apply;
 mod scheme;
 
 pub use apply::{reduce, reduce_u16};
-pub use scheme::{AxisScheme, ReduceError, Scheme};
+pub use scheme::{AxisScheme, ReduceError, Scheme, MAX_BLOCK_PX};

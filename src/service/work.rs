@@ -24,7 +24,7 @@ use serde_json::json;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct AnalysisRequest {
-    #[schema(value_type = Vec<Object>)]
+    #[schema(value_type = Vec<Object>, min_items = 1)]
     pub schemes: Vec<SchemeSpec>,
     #[schema(value_type = Object)]
     pub dic: DicSettings,
@@ -146,7 +146,7 @@ pub fn analysis(service: Service, dataset: DatasetId, plan: AnalysisPlan) -> Wor
 pub struct CompareRequest {
     /// A name from `GET /models`.
     pub model: String,
-    #[schema(value_type = Vec<Object>)]
+    #[schema(value_type = Vec<Object>, min_items = 1)]
     pub schemes: Vec<SchemeSpec>,
     #[schema(value_type = Object)]
     pub dic: DicSettings,

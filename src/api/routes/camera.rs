@@ -84,13 +84,16 @@ pub async fn patch_camera(
 #[derive(Debug, Deserialize, utoipa::IntoParams)]
 pub struct SnapshotQuery {
     /// `tiff` (16-bit, the default) or `png` (8-bit, stretched for a quick look).
+    #[param(pattern = "^(tiff|png)$")]
     pub format: Option<String>,
     /// With `true`, the `X-Speckle-Quality` header carries the frame's speckle-quality figures
     /// (JSON: mean intensity gradient, speckle size, SSSIG over `subset_px` subsets, and the
     /// temporal noise from a second frame taken for it, with the displacement error it predicts).
     pub quality: Option<bool>,
-    /// Subset side for the SSSIG, px (default: the DIC default subset).
-    pub subset_px: Option<usize>,
+    /// Subset side for the SSSIG, px (default: the DIC default subset); at most the frame's
+    /// smaller side less 2 (422 otherwise: the frame size is the camera's).
+    #[param(minimum = 3, maximum = 4096)]
+    pub subset_px: Option<u32>,
 }
 
 /// The header that carries the speckle-quality figures of a snapshot.
@@ -141,7 +144,7 @@ struct SnapshotQuality {
 }
 
 #[utoipa::path(post, path = "/camera/snapshot", tag = "bench", params(SnapshotQuery),
-    responses((status = 200, description = "One frame", content_type = "image/tiff",
+    responses((status = 200, description = "One frame: 16-bit TIFF, or with format=png an 8-bit PNG", content(("image/tiff"), ("image/png")),
                headers(("X-Speckle-Quality" = String, description = "With quality=true: the frame's speckle-quality figures as JSON (mean_gradient_dn_per_px, speckle_size_x_px, speckle_size_y_px, speckle_size_px, subset_px, subsets, sssig_x_median_dn2, sssig_y_median_dn2, sssig_x_min_dn2, sssig_y_min_dn2, std_u_px_per_noise_dn, std_v_px_per_noise_dn, noise_dn: the temporal noise σ in DN from a second frame taken for it, std_u_px, std_v_px: the displacement error that noise predicts)"))),
               (status = 422, description = "Unknown format, or a subset larger than the frame", body = Problem),
               (status = 409, body = Problem), (status = 503, body = Problem), (status = 504, body = Problem)))]
@@ -161,7 +164,10 @@ pub async fn snapshot(
     };
     let subset_px = q
         .subset_px
-        .unwrap_or(crate::dic::DicSettings::default().subset_px);
+        .map_or(crate::dic::DicSettings::default().subset_px, |n| n as usize);
+    if !(3..=4096).contains(&subset_px) {
+        return Err(ApiError::invalid("subset_px", "3 to 4096 px"));
+    }
     let bench = svc.bench.clone();
     let timeout = Duration::from_millis(svc.config.bench.frame_timeout_ms);
     // The quality figures need the noise: a second frame of the same scene measures it.

@@ -73,9 +73,11 @@ pub async fn create(
 #[serde(deny_unknown_fields)]
 pub struct ListQuery {
     /// queued, running, succeeded, failed or cancelled
+    #[param(pattern = "^(queued|running|succeeded|failed|cancelled)$")]
     pub status: Option<String>,
     /// At most this many, newest first (default 50, at most 1000).
-    pub limit: Option<usize>,
+    #[param(minimum = 1, maximum = 1000)]
+    pub limit: Option<u32>,
 }
 
 #[utoipa::path(get, path = "/experiments", tag = "experiments", params(ListQuery),
@@ -92,7 +94,7 @@ pub async fn list(
             })?,
         ),
     };
-    let limit = q.limit.unwrap_or(50);
+    let limit = q.limit.unwrap_or(50) as usize;
     if !(1..=1000).contains(&limit) {
         return Err(ApiError::invalid("limit", "1 to 1000"));
     }
@@ -135,7 +137,7 @@ pub async fn events(
 ) -> ApiResult<SseResponse> {
     let id = run_id(&id)?;
     load(&svc, &id, Some(RunKind::Experiment)).await?;
-    Ok(sse::stream(svc, id, sse::last_event_id(&headers)))
+    Ok(sse::stream(svc, id, sse::last_event_id(&headers)?))
 }
 
 #[utoipa::path(get, path = "/experiments/{id}/results", tag = "experiments",
@@ -168,7 +170,7 @@ pub async fn results_csv(
 
 #[utoipa::path(get, path = "/experiments/{id}/frames/{name}", tag = "experiments",
     params(("id" = String, Path, description = "Experiment id"),
-           ("name" = String, Path, description = "Frame file, e.g. b_ref.tif, or dataset.json")),
+           ("name" = String, Path, description = "Frame file, e.g. b_ref.tif, or dataset.json", pattern = r"^[A-Za-z0-9_][A-Za-z0-9._+\-]{0,127}$")),
     responses((status = 200, description = "16-bit TIFF", content_type = "image/tiff"),
               (status = 404, body = Problem)))]
 pub async fn frame(
@@ -181,7 +183,7 @@ pub async fn frame(
 
 #[utoipa::path(get, path = "/experiments/{id}/plots/{name}", tag = "experiments",
     params(("id" = String, Path, description = "Experiment id"),
-           ("name" = String, Path, description = "figure5_u.svg, figure5_exx.svg, figure6_v.svg, figure6_eyy.svg")),
+           ("name" = String, Path, description = "figure5_u.svg, figure5_exx.svg, figure6_v.svg, figure6_eyy.svg", pattern = r"^[A-Za-z0-9_][A-Za-z0-9._+\-]{0,127}$")),
     responses((status = 200, description = "SVG", content_type = "image/svg+xml"),
               (status = 404, body = Problem)))]
 pub async fn plot(

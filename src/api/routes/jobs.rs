@@ -127,13 +127,13 @@ pub async fn job_events(
 ) -> ApiResult<SseResponse> {
     let id = run_id(&id)?;
     load(&svc, &id, None).await?;
-    Ok(sse::stream(svc, id, sse::last_event_id(&headers)))
+    Ok(sse::stream(svc, id, sse::last_event_id(&headers)?))
 }
 
 #[utoipa::path(get, path = "/jobs/{id}/files/{folder}/{name}", tag = "jobs",
     params(("id" = String, Path, description = "Run id"),
-           ("folder" = String, Path, description = "frames, results or plots"),
-           ("name" = String, Path, description = "File name")),
+           ("folder" = String, Path, description = "frames, results or plots", pattern = "^(frames|results|plots)$"),
+           ("name" = String, Path, description = "File name", pattern = r"^[A-Za-z0-9_][A-Za-z0-9._+\-]{0,127}$")),
     responses((status = 200, description = "The file"), (status = 404, body = Problem)))]
 pub async fn job_file(
     State(svc): State<Service>,

@@ -28,13 +28,19 @@ pub async fn list(State(svc): State<Service>) -> ApiResult<Json<Vec<ModelSummary
 }
 
 #[utoipa::path(get, path = "/models/{name}", tag = "models",
-    params(("name" = String, Path, description = "Model name")),
+    params(("name" = String, Path, description = "Model name", pattern = r"^[A-Za-z0-9_+.\-]{1,96}$")),
     responses((status = 200, body = ModelDetail), (status = 404, body = Problem)))]
 pub async fn get(
     State(svc): State<Service>,
     Path(name): Path<String>,
 ) -> ApiResult<Json<ModelDetail>> {
-    Ok(Json(blocking(move || svc.model(&name)).await??))
+    // A name no model can have names no model: 404, as for any other absent one.
+    Ok(Json(blocking(move || svc.model(&name)).await?.map_err(
+        |e| match e {
+            ModelStoreError::Invalid(m) => ApiError::not_found(m),
+            other => other.into(),
+        },
+    )?))
 }
 
 #[utoipa::path(post, path = "/models", tag = "models", request_body = NewModel,
