@@ -9,6 +9,15 @@ use daemon::{client, small_config_toml, small_request, wait_terminal, wait_until
 use serde_json::Value;
 use std::time::{Duration, Instant};
 
+/// `127.0.0.1:PORT` of a base URL `http://127.0.0.1:PORT`.
+fn host_port(base: &str) -> String {
+    base.trim_start_matches("http://")
+        .split('/')
+        .next()
+        .unwrap()
+        .to_string()
+}
+
 fn config_file(dir: &std::path::Path) -> String {
     let data = dir.join("data");
     let path = dir.join("ffdic.toml");
@@ -88,6 +97,13 @@ async fn sigterm_cancels_the_running_experiment_and_exits_within_ten_seconds() {
     let url = start_experiment(&server, 20).await;
     wait_until(&url, |r| r["progress"].as_f64().unwrap_or(0.0) > 0.0).await;
     let id = url.rsplit('/').next().unwrap().to_string();
+    // A stalled client: a request head begun and never finished (it once held shutdown 39 s).
+    let mut stalled = std::net::TcpStream::connect(host_port(&server.base)).unwrap();
+    std::io::Write::write_all(
+        &mut stalled,
+        b"GET /api/v1/health HTTP/1.1\r\nHost: 127.0.0.1\r\n",
+    )
+    .unwrap();
     let t0 = Instant::now();
     let status = std::process::Command::new("kill")
         .args(["-TERM", &server.child.id().to_string()])
@@ -176,4 +192,56 @@ async fn requests_are_logged_one_line_each_without_colour_in_a_file() {
             .any(|l| l.contains("/api/v1/experiments/nope") && l.contains("404")),
         "{text}"
     );
+}
+
+/// Issue 12: 2,000 half-open connections (each a request head begun and never finished; 1,100
+/// once took the daemon offline at a 1024 open-files limit) leave `/health` answering.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn two_thousand_half_open_connections_leave_health_answering() {
+    const CONNECTIONS: usize = 2000;
+    // This test process needs the descriptors too.
+    // SAFETY: getrlimit/setrlimit only read and write the struct passed.
+    unsafe {
+        let mut l = libc::rlimit {
+            rlim_cur: 0,
+            rlim_max: 0,
+        };
+        assert_eq!(libc::getrlimit(libc::RLIMIT_NOFILE, &mut l), 0);
+        let want = (CONNECTIONS as libc::rlim_t + 512).min(l.rlim_max);
+        if l.rlim_cur < want {
+            l.rlim_cur = want;
+            assert_eq!(libc::setrlimit(libc::RLIMIT_NOFILE, &l), 0);
+        }
+        assert!(
+            l.rlim_cur >= CONNECTIONS as libc::rlim_t + 256,
+            "the hard open-files limit ({}) is below the test's need",
+            l.rlim_max
+        );
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let config = config_file(tmp.path());
+    let server = ServeProcess::spawn(&["--config", &config]);
+    let addr = host_port(&server.base);
+    let mut open = Vec::with_capacity(CONNECTIONS);
+    for _ in 0..CONNECTIONS {
+        let mut c = std::net::TcpStream::connect(&addr).unwrap();
+        std::io::Write::write_all(&mut c, b"GET /api/v1/health HTTP/1.1\r\n").unwrap();
+        open.push(c);
+    }
+    let t = Instant::now();
+    let health = reqwest::Client::builder()
+        .timeout(Duration::from_secs(5))
+        .build()
+        .unwrap()
+        .get(server.url("/health"))
+        .send()
+        .await
+        .expect("/health answers beside 2000 half-open connections");
+    println!(
+        "/health beside {CONNECTIONS} half-open connections: {} in {:.1} ms",
+        health.status(),
+        t.elapsed().as_secs_f64() * 1e3
+    );
+    assert_eq!(health.status(), 200);
+    drop(open);
 }

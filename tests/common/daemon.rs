@@ -212,6 +212,17 @@ pub struct ServeProcess {
     pub base: String,
 }
 
+/// A daemon a test leaves (by returning or by panicking) is killed: left running it would keep
+/// the test runner's output pipe open, and CI waiting.
+impl Drop for ServeProcess {
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
 impl ServeProcess {
     pub fn spawn(args: &[&str]) -> Self {
         let mut command = std::process::Command::new(env!("CARGO_BIN_EXE_ffdic"));
