@@ -210,10 +210,7 @@ fn add_links(paths: &mut serde_json::Map<String, serde_json::Value>) {
             "#/paths/{}/{to_method}",
             to.replace('~', "~0").replace('/', "~1")
         );
-        let name = format!("{to_method}{}", to.trim_start_matches("/api/v1"))
-            .chars()
-            .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
-            .collect::<String>();
+        let name = operation_id(to_method, to);
         if let Some(response) = paths
             .get_mut(from)
             .and_then(|p| p.get_mut(method))
@@ -230,6 +227,15 @@ fn add_links(paths: &mut serde_json::Map<String, serde_json::Value>) {
             });
         }
     }
+}
+
+/// An operation's id, and the name of a link to it: method and path without `/api/v1`, every
+/// other character `_` (`get_experiments__id__events`).
+fn operation_id(method: &str, path: &str) -> String {
+    format!("{method}{}", path.trim_start_matches("/api/v1"))
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .collect()
 }
 
 /// The served document from utoipa's: every error response is `application/problem+json` (RFC
@@ -256,24 +262,8 @@ pub fn finish_document(spec: &utoipa::openapi::OpenApi) -> serde_json::Value {
     let Some(paths) = doc.get_mut("paths").and_then(|p| p.as_object_mut()) else {
         return doc;
     };
-    // Unique operation ids (utoipa uses the handler's name: three `get`s), from method and path.
-    for (path, item) in paths.iter_mut() {
-        let Some(item) = item.as_object_mut() else {
-            continue;
-        };
-        for (method, op) in item.iter_mut() {
-            if let Some(op) = op.as_object_mut() {
-                let id: String = format!("{method}{}", path.trim_start_matches("/api/v1"))
-                    .chars()
-                    .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
-                    .collect();
-                op.insert("operationId".into(), serde_json::Value::String(id));
-            }
-        }
-    }
     add_links(paths);
-    for item in paths.values_mut() {
-        // (every operation: see the loop below)
+    for (path, item) in paths.iter_mut() {
         let Some(item) = item.as_object_mut() else {
             continue;
         };
@@ -281,6 +271,8 @@ pub fn finish_document(spec: &utoipa::openapi::OpenApi) -> serde_json::Value {
             if !["get", "post", "patch", "put", "delete"].contains(&method.as_str()) {
                 continue;
             }
+            // Unique (utoipa uses the handler's name: three `get`s).
+            op["operationId"] = serde_json::Value::String(operation_id(method, path));
             let has_body = op.get("requestBody").is_some();
             let idempotent = op
                 .get("parameters")

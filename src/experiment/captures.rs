@@ -9,6 +9,7 @@
 //! earlier versions.
 
 use super::spec::MoveSpec;
+use crate::dataset::{PatternInfo, Run, StageMove};
 
 /// One mounting of one target: a reference, its static frames, and one deformed frame per move.
 #[derive(Clone, Debug, PartialEq)]
@@ -92,6 +93,30 @@ impl TargetCapture {
     /// Frames this capture takes.
     pub fn frame_count(&self) -> usize {
         1 + self.static_frames.len() + self.runs.len()
+    }
+
+    /// The manifest entry of `run` (one of this capture's), moved by `m`.
+    pub fn manifest_run(
+        &self,
+        run: &CaptureRun,
+        m: &MoveSpec,
+        pattern: PatternInfo,
+        exposure_us: Option<f64>,
+    ) -> Run {
+        Run {
+            id: run.id.clone(),
+            pattern: Some(pattern),
+            reference: self.reference.clone(),
+            deformed: run.deformed.clone(),
+            stage: StageMove {
+                dx_mm: m.dx_mm,
+                dy_mm: m.dy_mm,
+            },
+            repeat: self.static_frames.clone(),
+            exposure_us,
+            repeat_of: run.repeat_of.clone(),
+            extra: Default::default(),
+        }
     }
 }
 

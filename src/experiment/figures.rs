@@ -26,6 +26,30 @@ pub fn rows_json(rows: &[StudyRow]) -> serde_json::Value {
     })
 }
 
+/// The study's files from every capture's rows, beside the pooled rows they show:
+/// `results/study.json`, `results/study.csv` and the figures under `plots/` — one writer for the
+/// experiment runner and the dataset analysis job.
+pub fn study_files(
+    manifest: &crate::dataset::Manifest,
+    captures: &[StudyRow],
+) -> (Vec<StudyRow>, Vec<(String, Vec<u8>)>) {
+    let rows = super::pool::pool_captures(manifest, captures);
+    let json = serde_json::to_string_pretty(&study_json(&rows, captures)).expect("rows serialise");
+    let mut files = vec![
+        ("results/study.json".to_string(), json.into_bytes()),
+        (
+            "results/study.csv".to_string(),
+            study_csv(&rows).into_bytes(),
+        ),
+    ];
+    files.extend(
+        figure_svgs(&rows)
+            .into_iter()
+            .map(|(name, svg)| (format!("plots/{name}"), svg.into_bytes())),
+    );
+    (rows, files)
+}
+
 /// `results/study.json`: the rows (pooled over captures), and with repeats every capture's own
 /// rows under `"captures"`.
 pub fn study_json(rows: &[StudyRow], captures: &[StudyRow]) -> serde_json::Value {

@@ -5,7 +5,7 @@
 //! patterns compare independent captures (Welch's t, Satterthwaite's degrees of freedom, rounded
 //! down: conservative).
 
-use super::pool::{mean_interval, t_975};
+use super::pool::{mean_and_variance_of_mean, mean_interval, t_975};
 use super::study::{Increase, StudyRow};
 use serde::Serialize;
 
@@ -164,12 +164,7 @@ fn welch(a: &[f64], b: &[f64]) -> (f64, [f64; 2], usize) {
     if n < 2 {
         return (f64::NAN, [f64::NAN; 2], 0);
     }
-    let moments = |xs: &[f64]| {
-        let m = xs.iter().sum::<f64>() / xs.len() as f64;
-        let var = xs.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (xs.len() - 1) as f64;
-        (m, var / xs.len() as f64)
-    };
-    let ((ma, sa), (mb, sb)) = (moments(a), moments(b));
+    let ((ma, sa), (mb, sb)) = (mean_and_variance_of_mean(a), mean_and_variance_of_mean(b));
     let se2 = sa + sb;
     let df = se2 * se2
         / (sa * sa / (a.len() - 1) as f64 + sb * sb / (b.len() - 1) as f64).max(f64::MIN_POSITIVE);

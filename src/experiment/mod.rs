@@ -21,7 +21,7 @@ pub use bench::{
     StageStatus, TargetMount,
 };
 pub use captures::{capture_plan, layout_seed, CaptureRun, TargetCapture};
-pub use figures::{figure_svgs, figures_text, rows_json, study_csv, study_json};
+pub use figures::{figure_svgs, figures_text, rows_json, study_csv, study_files, study_json};
 pub use findings::{findings_text, paper_findings, Finding, Verdict};
 pub use limits::{
     BenchLimits, OutOfTravel, StageAxis, DOT_DIAMETER_PX, EXPOSURE_US, MIN_DOT_SPACING_PX,

@@ -11,6 +11,7 @@
 use super::study::{Increase, IncreaseInterval, StudyRow};
 use crate::dataset::Manifest;
 use crate::dic::{Stats, Summary};
+use std::collections::HashMap;
 
 /// The 0.975 quantile of Student's t with `df` degrees of freedom, 1 ≤ df ≤ 31 tabulated (to
 /// 4 decimals, e.g. NIST/SEMATECH e-Handbook of Statistical Methods, table 1.4.2.7.2); beyond,
@@ -40,48 +41,53 @@ pub fn mean_interval(xs: &[f64]) -> (f64, [f64; 2]) {
     if n == 0 || xs.iter().any(|x| !x.is_finite()) {
         return (f64::NAN, [f64::NAN; 2]);
     }
-    let mean = xs.iter().sum::<f64>() / n as f64;
+    let (mean, var_of_mean) = mean_and_variance_of_mean(xs);
     if n < 2 {
         return (mean, [f64::NAN; 2]);
     }
-    let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
-    let half = t_975(n - 1) * (var / n as f64).sqrt();
+    let half = t_975(n - 1) * var_of_mean.sqrt();
     (mean, [mean - half, mean + half])
+}
+
+/// Mean of `xs` and the variance of that mean (sample variance / n; NaN for fewer than two).
+pub(super) fn mean_and_variance_of_mean(xs: &[f64]) -> (f64, f64) {
+    let n = xs.len() as f64;
+    let mean = xs.iter().sum::<f64>() / n;
+    let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    (mean, if xs.len() < 2 { f64::NAN } else { var / n })
 }
 
 /// The study's rows with the captures of every repeated run pooled (runs whose manifest entry
 /// names `repeat_of`), in the order of first appearance; rows of other runs pass unchanged.
 pub fn pool_captures(manifest: &Manifest, rows: &[StudyRow]) -> Vec<StudyRow> {
-    let pooled_id = |run: &str| {
-        manifest
-            .runs
-            .iter()
-            .find(|r| r.id == run)
-            .and_then(|r| r.repeat_of.clone())
-    };
-    let mut groups: Vec<(String, String, Vec<&StudyRow>)> = Vec::new();
-    let mut out: Vec<Option<StudyRow>> = Vec::new();
-    let mut slot_of_group: Vec<usize> = Vec::new();
+    let repeat_of: HashMap<&str, &str> = manifest
+        .runs
+        .iter()
+        .filter_map(|r| Some((r.id.as_str(), r.repeat_of.as_deref()?)))
+        .collect();
+    // One slot per output row: a row passed through (no pooled id), or the captures of one
+    // (pooled run, scheme), at the place of its first capture.
+    let mut slots: Vec<(Option<&str>, Vec<&StudyRow>)> = Vec::new();
+    let mut slot_of: HashMap<(&str, &str), usize> = HashMap::new();
     for row in rows {
-        match pooled_id(&row.run) {
-            None => out.push(Some(row.clone())),
-            Some(id) => match groups
-                .iter_mut()
-                .find(|(g, scheme, _)| *g == id && *scheme == row.scheme)
-            {
-                Some((_, _, members)) => members.push(row),
-                None => {
-                    groups.push((id, row.scheme.clone(), vec![row]));
-                    slot_of_group.push(out.len());
-                    out.push(None);
-                }
-            },
+        match repeat_of.get(row.run.as_str()) {
+            None => slots.push((None, vec![row])),
+            Some(&id) => {
+                let k = *slot_of.entry((id, row.scheme.as_str())).or_insert_with(|| {
+                    slots.push((Some(id), Vec::new()));
+                    slots.len() - 1
+                });
+                slots[k].1.push(row);
+            }
         }
     }
-    for ((id, _, members), slot) in groups.iter().zip(slot_of_group) {
-        out[slot] = Some(pool(id, members));
-    }
-    out.into_iter().flatten().collect()
+    slots
+        .into_iter()
+        .map(|(id, members)| match id {
+            None => members[0].clone(),
+            Some(id) => pool(id, &members),
+        })
+        .collect()
 }
 
 fn pool(id: &str, members: &[&StudyRow]) -> StudyRow {

@@ -8,12 +8,11 @@
 
 use super::bench::{BenchError, BenchHandle, BenchLease, Owner};
 use super::captures::{capture_plan, layout_seed, TargetCapture};
-use super::figures::{figure_svgs, study_csv, study_json};
+use super::figures::study_files;
 use super::maps::field_map_svgs;
-use super::pool::pool_captures;
 use super::request::ExperimentPlan;
 use super::study::{analyze_dataset_with, StudyError, StudyRow};
-use crate::dataset::{CameraInfo, Manifest, Run, StageMove};
+use crate::dataset::{CameraInfo, Manifest, Run};
 use crate::image::{tiff_u16_bytes, ImageError};
 use ffdic_hw::{CameraSettings, Frame, StagePosition};
 use serde_json::{json, Value};
@@ -221,22 +220,15 @@ fn capture_and_analyse(
                 y_mm: m.dy_mm,
             };
             shoot(&run.deformed, at, &mut write)?;
-            manifest.runs.push(Run {
-                id: run.id.clone(),
-                pattern: Some(super::simulate::pattern_info(label, pattern, false)),
-                reference: target.reference.clone(),
-                deformed: run.deformed.clone(),
-                stage: StageMove {
-                    dx_mm: m.dx_mm,
-                    dy_mm: m.dy_mm,
-                },
-                repeat: target.static_frames.clone(),
-                exposure_us: plan
-                    .exposure_us
-                    .or(Some(status.camera.settings.exposure_us)),
-                repeat_of: run.repeat_of.clone(),
-                extra: Default::default(),
-            });
+            manifest.runs.push(
+                target.manifest_run(
+                    run,
+                    m,
+                    super::simulate::pattern_info(label, pattern, false),
+                    plan.exposure_us
+                        .or(Some(status.camera.settings.exposure_us)),
+                ),
+            );
         }
         if status.stage.is_some() {
             bench.move_to(owner.clone(), home, timeouts.settle)?;
@@ -323,11 +315,10 @@ fn capture_and_analyse(
         .map_err(RunnerError::Write)?;
 
     let captures = rows;
-    let rows = pool_captures(&manifest, &captures);
-    let json_text =
-        serde_json::to_string_pretty(&study_json(&rows, &captures)).expect("rows serialise");
-    write("results/study.json".into(), json_text.as_bytes())?;
-    write("results/study.csv".into(), study_csv(&rows).as_bytes())?;
+    let (rows, study) = study_files(&manifest, &captures);
+    for (rel, bytes) in study {
+        write(rel, &bytes)?;
+    }
     // The rows as the library holds them, for clients that read them back (`ffdic reproduce`);
     // with repeats, every capture's own rows beside them.
     let rows_text = serde_json::to_string(&rows).expect("rows serialise");
@@ -335,9 +326,6 @@ fn capture_and_analyse(
     if plan.repeats > 1 {
         let text = serde_json::to_string(&captures).expect("rows serialise");
         write("results/captures.json".into(), text.as_bytes())?;
-    }
-    for (file, svg) in figure_svgs(&rows) {
-        write(format!("plots/{file}"), svg.as_bytes())?;
     }
     files.extend(map_files);
     Ok(ExperimentOutcome {

@@ -4,7 +4,7 @@
 
 use super::captures::{capture_plan, layout_seed, TargetCapture};
 use super::spec::ExperimentSpec;
-use crate::dataset::{CameraInfo, DatasetError, Manifest, PatternInfo, Run, StageMove};
+use crate::dataset::{CameraInfo, DatasetError, Manifest, PatternInfo};
 use crate::image::{write_tiff_u16, Image, ImageError};
 use crate::model::{render_frame, FrameSpec, ModelConfig, SpecklePattern, TargetDot, TooManyDots};
 use std::path::Path;
@@ -127,20 +127,12 @@ pub fn simulate_dataset(
         for run in &target.runs {
             let m = &moves[run.move_index];
             shoot(&run.deformed, (m.dx_mm, m.dy_mm))?;
-            manifest.runs.push(Run {
-                id: run.id.clone(),
-                pattern: Some(pattern_info(&pattern.label, pattern, true)),
-                reference: target.reference.clone(),
-                deformed: run.deformed.clone(),
-                stage: StageMove {
-                    dx_mm: m.dx_mm,
-                    dy_mm: m.dy_mm,
-                },
-                repeat: target.static_frames.clone(),
-                exposure_us: None,
-                repeat_of: run.repeat_of.clone(),
-                extra: Default::default(),
-            });
+            manifest.runs.push(target.manifest_run(
+                run,
+                m,
+                pattern_info(&pattern.label, pattern, true),
+                None,
+            ));
         }
     }
     manifest.write(out)?;

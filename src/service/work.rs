@@ -9,9 +9,8 @@ use crate::diagnose::{
 };
 use crate::dic::DicSettings;
 use crate::experiment::{
-    analyze_dataset, check_dic, check_schemes, figure_svgs, pool_captures, run_experiment,
-    study_csv, study_json, ExperimentPlan, ExperimentRequest, FieldError, RunSink, RunnerError,
-    SchemeSpec, StudyError,
+    analyze_dataset, check_dic, check_schemes, run_experiment, study_files, ExperimentPlan,
+    ExperimentRequest, FieldError, RunSink, RunnerError, SchemeSpec, StudyError,
 };
 use crate::model::ModelConfig;
 use crate::reduce::Scheme;
@@ -121,17 +120,9 @@ pub fn analysis(service: Service, dataset: DatasetId, plan: AnalysisPlan) -> Wor
             StudyError::Cancelled => JobError::Cancelled,
             other => fail(other),
         })?;
-        let captures = rows;
-        let rows = pool_captures(&manifest, &captures);
-        let text =
-            serde_json::to_string_pretty(&study_json(&rows, &captures)).expect("rows serialise");
-        ctx.write("results/study.json", text.as_bytes())
-            .map_err(fail)?;
-        ctx.write("results/study.csv", study_csv(&rows).as_bytes())
-            .map_err(fail)?;
-        for (file, svg) in figure_svgs(&rows) {
-            ctx.write(&format!("plots/{file}"), svg.as_bytes())
-                .map_err(fail)?;
+        let (rows, files) = study_files(&manifest, &rows);
+        for (rel, bytes) in files {
+            ctx.write(&rel, &bytes).map_err(fail)?;
         }
         Ok(JobOutput {
             message: format!("{} rows from dataset {dataset}", rows.len()),
