@@ -61,6 +61,41 @@ async fn bad_requests_are_problems_and_write_nothing() {
     assert_eq!(p["field"], "dic.subset");
     let p = problem(post(r#"{"patterns": ["q"]}"#).await.unwrap(), 422).await;
     assert_eq!(p["field"], "patterns[0]");
+    // The constraints the OpenAPI document states are the daemon's own (issue 12).
+    for roi in [
+        r#"{"x": 0, "y": 0, "width": 0, "height": 10}"#,
+        r#"{"x": 2000000, "y": 0, "width": 10, "height": 10}"#,
+    ] {
+        let body = format!(r#"{{"dic": {{"roi": {roi}}}}}"#);
+        let resp = c
+            .post(server.url("/experiments"))
+            .header("content-type", "application/json")
+            .body(body)
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(problem(resp, 422).await["field"], "dic.roi", "{roi}");
+    }
+    for (body, field) in [
+        (r#"{"binning": [0, 1]}"#, "binning"),
+        (r#"{"binning": [1, 65]}"#, "binning"),
+        (
+            r#"{"roi": {"x": 0, "y": 0, "width": 16, "height": 0}}"#,
+            "roi",
+        ),
+    ] {
+        let p = problem(
+            c.patch(server.url("/camera"))
+                .header("content-type", "application/json")
+                .body(body)
+                .send()
+                .await
+                .unwrap(),
+            422,
+        )
+        .await;
+        assert_eq!(p["field"], field, "{body}");
+    }
     let huge = format!("{{\"name\": \"{}\"}}", "x".repeat(200_000));
     problem(
         c.post(server.url("/experiments"))
@@ -307,6 +342,20 @@ async fn openapi_matches_its_snapshot_and_lists_every_route() {
             }
         }
     }
+    // Issue 12: request bodies carry their constraints — no object without its properties, no
+    // integer without its bounds, anywhere a JSON body reaches through `$ref`s.
+    let mut loose = Vec::new();
+    for (path, item) in paths {
+        for (method, op) in item.as_object().unwrap() {
+            if let Some(schema) = op.pointer("/requestBody/content/application~1json/schema") {
+                unconstrained(&doc, schema, &format!("{method} {path}"), &mut loose, 0);
+            }
+        }
+    }
+    assert!(
+        loose.is_empty(),
+        "request bodies without constraints: {loose:#?}"
+    );
     let snapshot = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/snapshots/openapi.json");
     let text = serde_json::to_string_pretty(&doc).unwrap() + "\n";
     if std::env::var_os("UPDATE_SNAPSHOTS").is_some() {
@@ -319,6 +368,55 @@ async fn openapi_matches_its_snapshot_and_lists_every_route() {
         "the OpenAPI document changed: review it and run with UPDATE_SNAPSHOTS=1"
     );
     server.stop().await;
+}
+
+/// Collects the places in `schema` (resolving `#/components/schemas/…`) where an object has no
+/// properties or an integer no bounds.
+fn unconstrained(doc: &Value, schema: &Value, at: &str, out: &mut Vec<String>, depth: usize) {
+    assert!(depth < 16, "{at}: schema nested too deep (a cycle?)");
+    if let Some(r) = schema["$ref"].as_str() {
+        let name = r.trim_start_matches("#/components/schemas/");
+        let target = &doc["components"]["schemas"][name];
+        assert!(!target.is_null(), "{at}: dangling $ref {r}");
+        return unconstrained(doc, target, &format!("{at} > {name}"), out, depth + 1);
+    }
+    let types: Vec<&str> = match &schema["type"] {
+        Value::String(t) => vec![t.as_str()],
+        Value::Array(ts) => ts.iter().filter_map(Value::as_str).collect(),
+        _ => vec![],
+    };
+    if types.contains(&"object")
+        && schema.get("properties").is_none()
+        && schema.get("additionalProperties").is_none()
+    {
+        out.push(format!("{at}: object without properties"));
+    }
+    if types.contains(&"integer")
+        && (schema.get("minimum").is_none() || schema.get("maximum").is_none())
+    {
+        out.push(format!("{at}: integer without minimum and maximum"));
+    }
+    for key in ["oneOf", "anyOf", "allOf"] {
+        for (i, s) in schema[key].as_array().into_iter().flatten().enumerate() {
+            unconstrained(doc, s, &format!("{at}/{key}[{i}]"), out, depth + 1);
+        }
+    }
+    for (name, s) in schema["properties"].as_object().into_iter().flatten() {
+        unconstrained(doc, s, &format!("{at}.{name}"), out, depth + 1);
+    }
+    for key in ["items", "additionalProperties"] {
+        if schema[key].is_object() {
+            unconstrained(doc, &schema[key], &format!("{at}[]"), out, depth + 1);
+        }
+    }
+    for (i, s) in schema["prefixItems"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .enumerate()
+    {
+        unconstrained(doc, s, &format!("{at}[{i}]"), out, depth + 1);
+    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -7,6 +7,7 @@ mod guard;
 mod json;
 mod openapi;
 mod problem;
+mod request_schemas;
 mod routes;
 mod server;
 mod sse;

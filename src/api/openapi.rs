@@ -120,36 +120,6 @@ fn upload_schema() -> serde_json::Value {
 /// A file name in a run or dataset folder, as the routes' path parameters document it.
 pub const FILE_NAME_PATTERN: &str = r"^[A-Za-z0-9_][A-Za-z0-9._+\-]{0,127}$";
 
-/// A reduction scheme of a request: a preset name or one spelled out per axis.
-fn scheme_spec_schema() -> serde_json::Value {
-    let axis = serde_json::json!({
-        "type": "object",
-        "required": ["block", "first", "active"],
-        "additionalProperties": false,
-        "properties": {
-            "block": { "type": "integer", "minimum": 1, "maximum": crate::reduce::MAX_BLOCK_PX },
-            "first": { "type": "integer", "minimum": 0, "maximum": crate::reduce::MAX_BLOCK_PX - 1 },
-            "active": { "type": "integer", "minimum": 1, "maximum": crate::reduce::MAX_BLOCK_PX }
-        }
-    });
-    serde_json::json!({
-        "description": "A preset (ff100, ff50, ff25) or per axis: `active` pixels from `first` in every `block`, first + active <= block",
-        "oneOf": [
-            { "type": "string", "pattern": "^(?i:ff100|ff50|ff25)$" },
-            {
-                "type": "object",
-                "required": ["name", "x", "y"],
-                "additionalProperties": false,
-                "properties": {
-                    "name": { "type": "string", "pattern": r"^[A-Za-z0-9_+\-][A-Za-z0-9_.+\-]{0,63}$" },
-                    "x": axis,
-                    "y": axis
-                }
-            }
-        ]
-    })
-}
-
 /// OpenAPI links from each submission to what its answer names (the run or dataset `id` in the
 /// body), so a client — and schemathesis' stateful phase — can follow them.
 fn add_links(paths: &mut serde_json::Map<String, serde_json::Value>) {
@@ -247,17 +217,13 @@ pub fn finish_document(spec: &utoipa::openapi::OpenApi) -> serde_json::Value {
     let problem_content = serde_json::json!({
         "application/problem+json": { "schema": problem_ref.clone() }
     });
-    // `schemes` is typed as bare objects in the derive (SchemeSpec lives in the numerics and
-    // knows no OpenAPI): spell its two forms out.
+    // The request bodies' nested types are bare objects in the derive (they live in the
+    // numerics and the experiment layer, which know no OpenAPI): spell them out.
     if let Some(schemas) = doc
         .pointer_mut("/components/schemas")
         .and_then(|s| s.as_object_mut())
     {
-        for schema in schemas.values_mut() {
-            if let Some(items) = schema.pointer_mut("/properties/schemes/items") {
-                *items = scheme_spec_schema();
-            }
-        }
+        super::request_schemas::apply(schemas);
     }
     let Some(paths) = doc.get_mut("paths").and_then(|p| p.as_object_mut()) else {
         return doc;

@@ -41,7 +41,10 @@ pub use mask::{Polygon, PolygonMask, RasterMask, MAX_MASK_VERTICES};
 pub use prefilter::gaussian_blur;
 pub use result::{DicResult, PoiResult, PoiStatus};
 pub use sequence::{analyze_sequence, SequenceFrame, REFERENCE_UPDATE_FRACTION};
-pub use settings::{DicSettings, ShapeFunction, DEFAULT_ROI_SIDE_PX};
+pub use settings::{
+    DicSettings, ShapeFunction, DEFAULT_ROI_SIDE_PX, MAX_ITERATIONS, MAX_MOTION_PX,
+    MAX_ROI_COORDINATE_PX, MAX_SEARCH_RADIUS_PX, MAX_STEP_PX, MAX_STRAIN_WINDOW, MAX_SUBSET_PX,
+};
 pub use similarity::{estimate_similarity, Similarity};
 pub use stats::{
     f64_or_nan, interval_or_nan, median, valid_fields, CorrelationLengths, Stats, Summary,

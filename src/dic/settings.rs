@@ -93,6 +93,9 @@ pub const MAX_STRAIN_WINDOW: usize = 101;
 pub const MAX_ITERATIONS: u32 = 1_000;
 pub const MAX_MOTION_PX: usize = 4_096;
 pub const MAX_SEARCH_RADIUS_PX: usize = 256;
+/// The largest ROI corner or side: a million pixels, beyond any sensor, and small enough that
+/// no sum of two overflows.
+pub const MAX_ROI_COORDINATE_PX: usize = 1 << 20;
 
 impl Default for DicSettings {
     fn default() -> Self {
@@ -184,8 +187,17 @@ impl DicSettings {
             );
         }
         if let Some(roi) = self.roi {
-            if roi.x.checked_add(roi.width).is_none() || roi.y.checked_add(roi.height).is_none() {
-                return bad("roi", "the ROI does not fit in any image".into());
+            if roi.width == 0 || roi.height == 0 {
+                return bad("roi", "width and height must be at least 1 px".into());
+            }
+            if [roi.x, roi.y, roi.width, roi.height]
+                .iter()
+                .any(|&v| v > MAX_ROI_COORDINATE_PX)
+            {
+                return bad(
+                    "roi",
+                    format!("x, y, width and height at most {MAX_ROI_COORDINATE_PX} px"),
+                );
             }
         }
         Ok(())

@@ -31,6 +31,8 @@ pub use model_scene::ModelScene;
 pub use pool::{mean_interval, pool_captures, t_975};
 pub use request::{
     check_dic, check_schemes, ExperimentPlan, ExperimentRequest, FieldError, SchemeSpec,
+    MAX_FRAMES_AVERAGED, MAX_MOVES, MAX_PATTERNS, MAX_REPEATS, MAX_SCHEMES, MAX_SETTLE_MS,
+    MAX_STATIC_FRAMES,
 };
 pub use runner::{run_experiment, BenchTimeouts, ExperimentOutcome, RunSink, RunnerError};
 pub use simulate::{

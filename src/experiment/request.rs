@@ -20,6 +20,8 @@ pub enum SchemeSpec {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct ExperimentRequest {
+    /// Shown in lists and written into manifests: 1 to 128 printable characters, not only
+    /// spaces.
     pub name: String,
     /// Speckle targets: presets `a`, `b`, `c` or full descriptions. A bench without a target
     /// changer (real hardware) takes exactly one: the target mounted by hand.
@@ -34,7 +36,8 @@ pub struct ExperimentRequest {
     /// Static frames of the reference position per pattern and capture (noise floor).
     pub static_frames: usize,
     /// Independent captures of every reference/deformed pair (new noise each): the study reports
-    /// the mean over captures and its 95 % interval (Student t). 1 = a single capture.
+    /// the mean over captures and its 95 % interval (Student t). 1 = a single capture. At most
+    /// 2000 frames in all: patterns × repeats × (1 + static frames + moves).
     pub repeats: usize,
     /// With `repeats` > 1, a new speckle layout for every capture (a bench with a target changer,
     /// such as the mock bench, only): the interval then holds the layout-to-layout spread too.
@@ -43,10 +46,13 @@ pub struct ExperimentRequest {
     pub frames_averaged: usize,
     /// Extra wait after the stage reports settled, ms.
     pub settle_ms: u64,
-    /// Camera exposure for the experiment, µs (`None`: keep the camera's).
+    /// Camera exposure for the experiment, µs (null: keep the camera's); within the camera's
+    /// range (`GET /camera`).
     pub exposure_us: Option<f64>,
+    /// Reduction schemes (fill factors) to synthesise.
     #[schema(value_type = Vec<Object>)]
     pub schemes: Vec<SchemeSpec>,
+    /// 2D DIC settings.
     #[schema(value_type = Object)]
     pub dic: DicSettings,
     /// Seed of the mock bench's speckle layouts and of its noise (per target and exposure):
@@ -108,15 +114,15 @@ pub struct ExperimentPlan {
 }
 
 /// Limits that keep one request from occupying the bench for days.
-const MAX_MOVES: usize = 200;
+pub const MAX_MOVES: usize = 200;
 /// Frames one experiment may capture (patterns × repeats × (reference, static frames, moves)).
-const MAX_FRAMES: usize = 2000;
-const MAX_FRAMES_AVERAGED: usize = 64;
-const MAX_STATIC_FRAMES: usize = 32;
-const MAX_REPEATS: usize = 32;
-const MAX_PATTERNS: usize = 16;
-const MAX_SCHEMES: usize = 16;
-const MAX_SETTLE_MS: u64 = 60_000;
+pub const MAX_FRAMES: usize = 2000;
+pub const MAX_FRAMES_AVERAGED: usize = 64;
+pub const MAX_STATIC_FRAMES: usize = 32;
+pub const MAX_REPEATS: usize = 32;
+pub const MAX_PATTERNS: usize = 16;
+pub const MAX_SCHEMES: usize = 16;
+pub const MAX_SETTLE_MS: u64 = 60_000;
 
 impl ExperimentRequest {
     /// Checks everything that does not need the hardware, against what the bench can do.

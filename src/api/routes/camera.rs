@@ -27,6 +27,10 @@ pub async fn get_camera(State(svc): State<Service>) -> ApiResult<Json<Value>> {
     ))
 }
 
+/// The largest binning factor a request may ask for: beyond what GenICam cameras offer (2–8),
+/// so the camera, not this check, names its own limit.
+pub const MAX_BINNING: u32 = 64;
+
 /// The settings to change; absent fields keep their value.
 #[derive(Debug, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
@@ -62,6 +66,22 @@ pub async fn patch_camera(
     ] {
         if v.is_some_and(|v| !v.is_finite()) {
             return Err(ApiError::invalid(field, "must be a finite number"));
+        }
+    }
+    if let Some(Some(roi)) = patch.roi {
+        if roi.width == 0 || roi.height == 0 {
+            return Err(ApiError::invalid(
+                "roi",
+                "width and height must be at least 1",
+            ));
+        }
+    }
+    if let Some((h, v)) = patch.binning {
+        if !(1..=MAX_BINNING).contains(&h) || !(1..=MAX_BINNING).contains(&v) {
+            return Err(ApiError::invalid(
+                "binning",
+                format!("each factor 1 to {MAX_BINNING}"),
+            ));
         }
     }
     let bench = svc.bench.clone();
