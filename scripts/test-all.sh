@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The whole test suite, as CI runs it. Installs what the suite needs on a fresh Debian machine
 # (as root; nothing is installed when everything is already there), then: format check, clippy
-# with every feature and target, all tests in the optimised test profile, and a benchmark build.
+# with every feature and target, all tests in the optimised test profile, schemathesis, a benchmark
+# build, and the Python package (wheel, pytest, example).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -16,6 +17,8 @@ cd "$(dirname "$0")/.."
 # - chromium, nodejs, npm: the dashboard's end-to-end test (tests/dashboard_browser.rs) drives
 #   headless Chromium with playwright-core, pinned in tests/browser/package-lock.json.
 # - curl: tests/schemathesis/run.sh fetches the daemon's OpenAPI document with it.
+# - python3-venv also holds the Python package's tests (python/run-tests.sh: maturin, numpy and
+#   pytest from PyPI into target/python-venv).
 APT_PACKAGES=(libaravis-dev libusb-1.0-0-dev aravis-tools-cli aravis-tools libclang-dev libudev-dev pkg-config iproute2 chromium python3-venv curl)
 missing=()
 for pkg in "${APT_PACKAGES[@]}"; do
@@ -49,3 +52,6 @@ echo "== schemathesis against ffdic serve (every phase, bounded; see tests/schem
 bash tests/schemathesis/run.sh "${CARGO_TARGET_DIR:-target}/debug/ffdic"
 echo "== benchmarks compile (they are run by hand: cargo bench)"
 cargo bench --no-run --quiet
+# After the benchmark build: the wheel's release build reuses the dependencies it compiled.
+echo "== Python package: pip install ./python in a venv, pytest, the example (see python/run-tests.sh)"
+bash python/run-tests.sh "${CARGO_TARGET_DIR:-target}/debug/ffdic"

@@ -11,7 +11,6 @@ use ffdic::dic::{
 };
 use ffdic::image::{read_tiff, Image, Roi};
 use serde_json::json;
-use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -178,7 +177,7 @@ fn run_pair(
             serde_json::to_string_pretty(&doc)?.as_bytes(),
         )?;
     }
-    let mut doc = summary_json(&result);
+    let mut doc = ffdic::report::dic_summary_json(&result);
     doc["elapsed_s"] = json!(elapsed_s);
     doc["settings"] = settings_json(&result, args, &args.deformed[0]);
     let mut out = std::io::stdout().lock();
@@ -207,7 +206,7 @@ fn run_pair(
 /// Why an analysis kept no point, from the most common status of the points it analysed.
 fn no_valid_point(result: &DicResult, settings: &DicSettings) -> String {
     // In name order, so that a tie goes to the same status every time.
-    let counts = status_counts(result);
+    let counts = result.status_counts();
     let masked = counts
         .iter()
         .find(|(s, _)| *s == PoiStatus::Masked)
@@ -294,7 +293,7 @@ fn run_sequence(
     let frame_docs: Vec<serde_json::Value> = results
         .iter()
         .map(|f| {
-            let mut doc = summary_json(&f.result);
+            let mut doc = ffdic::report::dic_summary_json(&f.result);
             doc["index"] = json!(f.index);
             doc["file"] = json!(frames[f.index - 1]);
             doc["reference_index"] = json!(f.reference_index);
@@ -347,36 +346,8 @@ fn run_sequence(
     Ok(())
 }
 
-/// How many points got each status, in the order of the statuses' names.
-fn status_counts(result: &DicResult) -> Vec<(PoiStatus, usize)> {
-    let mut counts: Vec<(PoiStatus, usize)> = Vec::new();
-    for p in &result.points {
-        match counts.iter_mut().find(|(s, _)| *s == p.status) {
-            Some((_, n)) => *n += 1,
-            None => counts.push((p.status, 1)),
-        }
-    }
-    counts.sort_by_key(|(s, _)| s.as_str());
-    counts
-}
-
-fn summary_json(result: &DicResult) -> serde_json::Value {
-    let s = result.summary;
-    json!({
-        "points": s.points,
-        "valid": s.valid,
-        "statuses": status_counts(result)
-            .into_iter()
-            .map(|(status, n)| (status.as_str(), n))
-            .collect::<BTreeMap<_, _>>(),
-        "u": s.u, "v": s.v,
-        "exx": s.exx, "eyy": s.eyy, "exy": s.exy,
-        "global_offset_px": result.global_offset_px,
-    })
-}
-
 fn write_statuses(out: &mut impl Write, result: &DicResult) -> Result<()> {
-    let counts = status_counts(result);
+    let counts = result.status_counts();
     if counts.len() > 1 {
         let parts: Vec<String> = counts
             .iter()

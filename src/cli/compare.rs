@@ -3,18 +3,15 @@
 //! residual maps and image statistics as SVG with `--out`; every comparison kept in the dataset's
 //! history.
 
-use super::simulate::load_model;
 use super::ProgressBar;
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::Args;
 use ffdic::diagnose::{
     append_history, compare, comparison_svgs, CompareOptions, Comparison, HistoryEntry,
-    BASELINE_TOML,
 };
 use ffdic::dic::DicSettings;
 use ffdic::model::ModelConfig;
 use ffdic::reduce::Scheme;
-use ffdic::store::ModelFolder;
 use std::path::PathBuf;
 
 /// How the comparison analyses both sides (shared by compare and diagnose).
@@ -83,40 +80,13 @@ pub struct CompareArgs {
     pub analysis: AnalysisArgs,
 }
 
-/// The analysis model `--model` names: a file if one exists at that path, else an embedded
-/// model, else one the daemon stored in `data/models`; the baseline when not given.
+/// The analysis model `--model` names (see `ffdic::service::find_analysis_model`).
 pub fn load_analysis_model(given: &Option<String>, data: &std::path::Path) -> Result<ModelConfig> {
-    let Some(given) = given else {
-        return load_model(&None, BASELINE_TOML, "config/models/baseline.toml");
-    };
-    let as_path = PathBuf::from(given);
-    if as_path.is_file() {
-        return load_model(&Some(as_path), BASELINE_TOML, "config/models/baseline.toml");
-    }
-    if let Some(model) = ffdic::service::embedded_model(given) {
-        return Ok(model);
-    }
-    let stored = ModelFolder::in_data_dir(data);
-    if let Ok(path) = stored.path(given) {
-        if path.is_file() {
-            return Ok(ModelConfig::load(&path)?);
-        }
-    }
-    let embedded: Vec<&str> = ffdic::service::EMBEDDED_MODELS
-        .iter()
-        .map(|m| m.0)
-        .collect();
-    let names = stored.list()?;
-    bail!(
-        "--model {given}: no such file, and no model of that name (embedded: {}; stored in {}: {})",
-        embedded.join(", "),
-        stored.dir().display(),
-        if names.is_empty() {
-            "none".to_string()
-        } else {
-            names.join(", ")
-        }
-    )
+    use ffdic::service::ModelLookupError;
+    ffdic::service::find_analysis_model(given.as_deref(), data).map_err(|e| match e {
+        ModelLookupError::NotFound { .. } => anyhow::anyhow!("--model {e}"),
+        other => other.into(),
+    })
 }
 
 /// Appends the comparison to the dataset's history.

@@ -152,6 +152,23 @@ impl Manifest {
         Ok(())
     }
 
+    /// Every frame file the runs name (reference, deformed, static frames), each once, in
+    /// the order the runs name them.
+    pub fn frame_files(&self) -> Vec<String> {
+        let mut files: Vec<String> = Vec::new();
+        for run in &self.runs {
+            for file in std::iter::once(&run.reference)
+                .chain([&run.deformed])
+                .chain(&run.repeat)
+            {
+                if !files.contains(file) {
+                    files.push(file.clone());
+                }
+            }
+        }
+        files
+    }
+
     /// Writes `DIR/dataset.json` atomically.
     pub fn write(&self, dir: &Path) -> Result<(), DatasetError> {
         let path = dir.join("dataset.json");

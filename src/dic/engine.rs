@@ -34,7 +34,7 @@ use super::validate::{
 use super::{
     DicError, DicResult, DicSettings, PoiGrid, PoiResult, PoiStatus, ShapeFunction, Summary, Warp,
 };
-use crate::image::Image;
+use crate::image::{Image, ImageView};
 use rayon::prelude::*;
 
 /// Progress callback: (points done, points in all). Called from the calling thread.
@@ -81,17 +81,23 @@ impl Guess {
 }
 
 impl PreparedReference {
-    pub fn new(image: &Image, settings: &DicSettings) -> Result<Self, DicError> {
+    /// The reference, pre-filtered, its B-spline gradients and its grid. `image` is an
+    /// [`Image`] or any borrowed [`ImageView`]: it is read once, by the pre-filter.
+    pub fn new<'a>(
+        image: impl Into<ImageView<'a>>,
+        settings: &DicSettings,
+    ) -> Result<Self, DicError> {
         Self::with_mask(image, settings, None)
     }
 
     /// As [`PreparedReference::new`], with a raster mask (non-zero pixels analysed) on top of
     /// the settings' polygons.
-    pub fn with_mask(
-        image: &Image,
+    pub fn with_mask<'a>(
+        image: impl Into<ImageView<'a>>,
         settings: &DicSettings,
         mask: Option<&RasterMask>,
     ) -> Result<Self, DicError> {
+        let image = image.into();
         settings.validate()?;
         if let Some(m) = mask {
             if m.size() != (image.width(), image.height()) {
@@ -128,11 +134,12 @@ impl PreparedReference {
     }
 
     /// Correlates `deformed` against the reference and derives strains and statistics.
-    pub fn correlate(
+    pub fn correlate<'a>(
         &self,
-        deformed: &Image,
+        deformed: impl Into<ImageView<'a>>,
         progress: Option<Progress<'_>>,
     ) -> Result<DicResult, DicError> {
+        let deformed = deformed.into();
         let (w, h) = (self.image.width(), self.image.height());
         if (deformed.width(), deformed.height()) != (w, h) {
             return Err(DicError::SizeMismatch {
@@ -547,9 +554,9 @@ fn subset_stds(image: &Image, grid: &PoiGrid, half: usize) -> Vec<f64> {
 }
 
 /// Prepares the reference and correlates one deformed image: the whole analysis of one pair.
-pub fn analyze(
-    reference: &Image,
-    deformed: &Image,
+pub fn analyze<'r, 'd>(
+    reference: impl Into<ImageView<'r>>,
+    deformed: impl Into<ImageView<'d>>,
     settings: &DicSettings,
     progress: Option<Progress<'_>>,
 ) -> Result<DicResult, DicError> {

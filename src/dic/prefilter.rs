@@ -6,13 +6,14 @@
 //! equalises them and also damps the interpolation error of high frequencies.
 
 use super::bspline::mirror;
-use crate::image::Image;
+use crate::image::{Image, ImageView};
 use rayon::prelude::*;
 
 /// Separable Gaussian blur with kernel radius ceil(3σ) and mirrored borders; σ ≤ 0 is a copy.
-pub fn gaussian_blur(image: &Image, sigma_px: f64) -> Image {
+pub fn gaussian_blur<'a>(image: impl Into<ImageView<'a>>, sigma_px: f64) -> Image {
+    let image = image.into();
     if !(sigma_px > 0.0) {
-        return image.clone();
+        return image.to_image();
     }
     let radius = (3.0 * sigma_px).ceil() as isize;
     let mut kernel: Vec<f64> = (-radius..=radius)

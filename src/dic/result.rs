@@ -34,6 +34,19 @@ pub enum PoiStatus {
 }
 
 impl PoiStatus {
+    /// Every status, in declaration order (the codes the Python bindings give them).
+    pub const ALL: [PoiStatus; 9] = [
+        PoiStatus::Converged,
+        PoiStatus::NotConverged,
+        PoiStatus::LowCorrelation,
+        PoiStatus::LeftImage,
+        PoiStatus::NoContrast,
+        PoiStatus::NoTexture,
+        PoiStatus::Implausible,
+        PoiStatus::Outlier,
+        PoiStatus::Masked,
+    ];
+
     pub fn as_str(self) -> &'static str {
         match self {
             PoiStatus::Converged => "converged",
@@ -139,5 +152,18 @@ pub struct DicResult {
 impl DicResult {
     pub fn valid_count(&self) -> usize {
         self.points.iter().filter(|p| p.status.is_valid()).count()
+    }
+
+    /// How many points got each status, in the order of the statuses' names.
+    pub fn status_counts(&self) -> Vec<(PoiStatus, usize)> {
+        let mut counts: Vec<(PoiStatus, usize)> = Vec::new();
+        for p in &self.points {
+            match counts.iter_mut().find(|(s, _)| *s == p.status) {
+                Some((_, n)) => *n += 1,
+                None => counts.push((p.status, 1)),
+            }
+        }
+        counts.sort_by_key(|(s, _)| s.as_str());
+        counts
     }
 }

@@ -23,13 +23,7 @@ impl Image {
 
     /// Wraps a row-major buffer; its length must be `width * height`.
     pub fn from_vec(width: usize, height: usize, data: Vec<f32>) -> Result<Self, ImageError> {
-        if data.len() != width * height {
-            return Err(ImageError::Shape {
-                width,
-                height,
-                len: data.len(),
-            });
-        }
+        super::ImageView::new(width, height, &data)?;
         Ok(Self {
             width,
             height,

@@ -9,9 +9,13 @@ mod roi;
 pub mod speckle_quality;
 mod tiff_io;
 mod tiff_layout;
+mod view;
 
 pub use error::ImageError;
 pub use gray::Image;
 pub use roi::Roi;
 pub use speckle_quality::{speckle_quality, SpeckleQuality, SpeckleQualityError};
-pub use tiff_io::{read_tiff, tiff_u16_bytes, write_tiff_u16, write_tiff_u8, TiffInfo};
+pub use tiff_io::{
+    decode_tiff, read_tiff, tiff_u16_bytes, write_tiff_u16, write_tiff_u8, TiffInfo,
+};
+pub use view::ImageView;

@@ -28,6 +28,12 @@ pub fn read_tiff(path: &Path) -> Result<(Image, TiffInfo), ImageError> {
         path: path.to_owned(),
         source,
     })?;
+    decode_tiff(&bytes, path)
+}
+
+/// As [`read_tiff`], from the file's bytes (a frame fetched over HTTP); `path` names it in
+/// errors.
+pub fn decode_tiff(bytes: &[u8], path: &Path) -> Result<(Image, TiffInfo), ImageError> {
     let decode_err = |e: tiff::TiffError| ImageError::Decode {
         path: path.to_owned(),
         reason: e.to_string(),
@@ -36,15 +42,15 @@ pub fn read_tiff(path: &Path) -> Result<(Image, TiffInfo), ImageError> {
         path: path.to_owned(),
         kind,
     };
-    let colortype = Decoder::new(Cursor::new(&bytes)).and_then(|mut d| d.colortype());
+    let colortype = Decoder::new(Cursor::new(bytes)).and_then(|mut d| d.colortype());
     match colortype {
         Ok(ColorType::Gray(8 | 16 | 32)) => {
-            let mut decoder = Decoder::new(Cursor::new(&bytes)).map_err(decode_err)?;
+            let mut decoder = Decoder::new(Cursor::new(bytes)).map_err(decode_err)?;
             decode_grey(&mut decoder, path)
         }
-        other => match rewrite_as_grey(&bytes) {
+        other => match rewrite_as_grey(bytes) {
             Some(Rewritten::Palette(copy)) => {
-                let mut decoder = Decoder::new(Cursor::new(&copy)).map_err(decode_err)?;
+                let mut decoder = Decoder::new(Cursor::new(copy.as_slice())).map_err(decode_err)?;
                 let (indices, info) = decode_grey(&mut decoder, path)?;
                 let map = decoder.get_tag_u16_vec(Tag::ColorMap).map_err(decode_err)?;
                 palette_to_grey(&indices, info, &map).ok_or_else(|| ImageError::Decode {
@@ -53,7 +59,7 @@ pub fn read_tiff(path: &Path) -> Result<(Image, TiffInfo), ImageError> {
                 })
             }
             Some(Rewritten::GreyAlpha(copy)) => {
-                let mut decoder = Decoder::new(Cursor::new(&copy)).map_err(decode_err)?;
+                let mut decoder = Decoder::new(Cursor::new(copy.as_slice())).map_err(decode_err)?;
                 let (both, info) = decode_grey(&mut decoder, path)?;
                 let width = info.width / 2;
                 let grey: Vec<f32> = both.data().iter().step_by(2).copied().collect();
@@ -74,7 +80,7 @@ pub fn read_tiff(path: &Path) -> Result<(Image, TiffInfo), ImageError> {
 
 /// Decodes a grey first page (8/16-bit integer or 32-bit float).
 fn decode_grey(
-    decoder: &mut Decoder<Cursor<&Vec<u8>>>,
+    decoder: &mut Decoder<Cursor<&[u8]>>,
     path: &Path,
 ) -> Result<(Image, TiffInfo), ImageError> {
     let decode_err = |e: tiff::TiffError| ImageError::Decode {

@@ -3,6 +3,7 @@
 //! so nothing depends on system fonts and every asset ships in the binary.
 
 mod bar_chart;
+mod dic_summary;
 mod heatmap;
 mod history_chart;
 mod png;
@@ -11,6 +12,7 @@ mod table;
 mod xy_plot;
 
 pub use bar_chart::{BarChart, Series};
+pub use dic_summary::dic_summary_json;
 pub use heatmap::Heatmap;
 pub use history_chart::{history_svg, HistoryPoint};
 pub use png::png_quicklook;

@@ -15,8 +15,8 @@ pub use config::{
 pub use hardware::{mock_bench, open_bench, HardwareError, SwappableScene};
 pub use jobs::{JobContext, JobError, JobOutput, Jobs, Lane, Work};
 pub use models::{
-    embedded_model, ModelDetail, ModelSource, ModelStoreError, ModelSummary, NewModel,
-    EMBEDDED_MODELS, PAPER_BENCH_DISTORTION_TOML,
+    embedded_model, find_analysis_model, ModelDetail, ModelLookupError, ModelSource,
+    ModelStoreError, ModelSummary, NewModel, EMBEDDED_MODELS, PAPER_BENCH_DISTORTION_TOML,
 };
 pub use work::{AnalysisRequest, CompareRequest};
 

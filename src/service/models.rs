@@ -38,6 +38,62 @@ pub fn embedded_model(name: &str) -> Option<ModelConfig> {
         })
 }
 
+/// A model that `find_analysis_model` could not find or read.
+#[derive(Debug, thiserror::Error)]
+pub enum ModelLookupError {
+    #[error(transparent)]
+    Model(#[from] crate::model::ModelError),
+    #[error(transparent)]
+    Store(#[from] StoreError),
+    #[error(
+        "{given}: no such file, and no model of that name (embedded: {embedded}; stored in {}: {stored})",
+        dir.display()
+    )]
+    NotFound {
+        given: String,
+        embedded: String,
+        dir: std::path::PathBuf,
+        stored: String,
+    },
+}
+
+/// The analysis model `given` names, as `ffdic compare --model` and the Python bindings take
+/// it: a file if one exists at that path, else an embedded model, else one the daemon stored
+/// in `data_dir/models`; the baseline when not given.
+pub fn find_analysis_model(
+    given: Option<&str>,
+    data_dir: &Path,
+) -> Result<ModelConfig, ModelLookupError> {
+    let Some(given) = given else {
+        return Ok(embedded_model("baseline").expect("baseline is embedded"));
+    };
+    let as_path = Path::new(given);
+    if as_path.is_file() {
+        return Ok(ModelConfig::load(as_path)?);
+    }
+    if let Some(model) = embedded_model(given) {
+        return Ok(model);
+    }
+    let stored = crate::store::ModelFolder::in_data_dir(data_dir);
+    if let Ok(path) = stored.path(given) {
+        if path.is_file() {
+            return Ok(ModelConfig::load(&path)?);
+        }
+    }
+    let embedded: Vec<&str> = EMBEDDED_MODELS.iter().map(|m| m.0).collect();
+    let names = stored.list()?;
+    Err(ModelLookupError::NotFound {
+        given: given.to_string(),
+        embedded: embedded.join(", "),
+        dir: stored.dir().to_owned(),
+        stored: if names.is_empty() {
+            "none".to_string()
+        } else {
+            names.join(", ")
+        },
+    })
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum ModelSource {

@@ -1,0 +1,214 @@
+"""ffdic from Python: the DIC engine, fill-factor reductions, the imaging model and the
+diagnosis on numpy arrays (``analyze``, ``reduce``, ``render``, ``compare``, ``diagnose``), and
+the daemon from a lab script (``Client``).
+
+The heavy calls run in Rust and release the GIL; their numbers are those of the ``ffdic`` CLI
+on the same inputs.
+"""
+
+from __future__ import annotations
+
+import enum
+import json
+import os
+from typing import Any, Dict, Mapping, Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from . import _ffdic
+from ._ffdic import AnalysisResult, decode_tiff, read_image
+from .client import Client, Event, JobResult, ProblemError, RunFailed
+
+__version__: str = _ffdic.__version__
+
+__all__ = [
+    "AnalysisResult",
+    "Client",
+    "Event",
+    "JobResult",
+    "ProblemError",
+    "RunFailed",
+    "Status",
+    "analyze",
+    "compare",
+    "decode_tiff",
+    "diagnose",
+    "read_image",
+    "reduce",
+    "render",
+]
+
+Status = enum.IntEnum("Status", [(name.upper(), code) for code, name in enumerate(_ffdic.STATUSES)])  # type: ignore[misc]
+Status.__doc__ = "Status of a point of interest: the codes of ``AnalysisResult.status``."
+
+Roi = Tuple[int, int, int, int]
+SchemeAxis = Union[Tuple[int, int, int], Mapping[str, int]]
+
+
+def analyze(
+    reference: np.ndarray,
+    deformed: np.ndarray,
+    *,
+    subset: Optional[int] = None,
+    step: Optional[int] = None,
+    roi: Optional[Roi] = None,
+    strain_window: Optional[int] = None,
+    interp: Optional[str] = None,
+    shape: Optional[str] = None,
+    prefilter_sigma: Optional[float] = None,
+    min_zncc: Optional[float] = None,
+    max_motion: Optional[int] = None,
+    max_displacement_std: Optional[float] = None,
+    outlier_threshold: Optional[float] = None,
+    outlier_test: bool = True,
+    threads: Optional[int] = None,
+) -> AnalysisResult:
+    """2D DIC of ``deformed`` against ``reference``.
+
+    Both are 2-D numpy arrays of one shape (uint8, uint16, float32 or float64; C- or
+    F-ordered). A C-contiguous float32 array is read where it lies, without a copy. Every
+    keyword left at ``None`` takes the value of ``ffdic analyze``: subset 41 px (odd), step
+    20 px, the centred 800x800 ROI ``(x, y, width, height)``, strain window 7 points,
+    ``interp="bspline3"`` (or ``"bspline5"``), ``shape="affine"`` (or ``"quadratic"``),
+    pre-filter σ 0.7 px, min ZNCC 0.6, max motion 160 px, max predicted displacement std
+    0.1 px, outlier threshold 2 (``outlier_test=False`` turns the test off). ``threads``
+    bounds the worker threads (default: every core). Releases the GIL while it runs.
+
+    Bad input (not 2-D, shapes that differ, an unsupported dtype, NaN or infinite pixels,
+    settings out of range) raises ``ValueError``.
+    """
+    return _ffdic.analyze(
+        reference,
+        deformed,
+        subset=subset,
+        step=step,
+        roi=None if roi is None else (int(roi[0]), int(roi[1]), int(roi[2]), int(roi[3])),
+        strain_window=strain_window,
+        interp=interp,
+        shape=shape,
+        prefilter_sigma=prefilter_sigma,
+        min_zncc=min_zncc,
+        max_motion=max_motion,
+        max_displacement_std=max_displacement_std,
+        outlier_threshold=outlier_threshold,
+        outlier_test=outlier_test,
+        threads=threads,
+    )
+
+
+def _axis(axis: SchemeAxis) -> Dict[str, int]:
+    if isinstance(axis, Mapping):
+        return {k: int(axis[k]) for k in ("block", "first", "active")}
+    block, first, active = axis
+    return {"block": int(block), "first": int(first), "active": int(active)}
+
+
+def reduce(
+    frame: np.ndarray,
+    scheme: Union[str, Mapping[str, Any]] = "ff50",
+    *,
+    x: Optional[SchemeAxis] = None,
+    y: Optional[SchemeAxis] = None,
+) -> np.ndarray:
+    """The frame with a lower fill factor synthesised from it (float32).
+
+    ``scheme`` is a preset — ``"ff100"`` (2x2 binning), ``"ff50"`` (rows binned, columns
+    subsampled), ``"ff25"`` (both subsampled) — or a scheme per axis: give ``x`` and ``y`` as
+    ``(block, first, active)`` (``active`` pixels from ``first`` in every ``block``) and
+    ``scheme`` as its name, or a dict ``{"name", "x": {...}, "y": {...}}``.
+    """
+    if x is not None or y is not None:
+        if x is None or y is None:
+            raise ValueError("reduce: give both x and y, or neither")
+        name = scheme if isinstance(scheme, str) else "custom"
+        spec: Union[str, Mapping[str, Any]] = {"name": name, "x": _axis(x), "y": _axis(y)}
+    else:
+        spec = scheme
+    text = spec if isinstance(spec, str) else json.dumps(
+        {"name": spec["name"], "x": _axis(spec["x"]), "y": _axis(spec["y"])}
+    )
+    return _ffdic.reduce(frame, text)
+
+
+def render(
+    experiment: Optional[str] = None,
+    model: Optional[str] = None,
+    seed: Optional[int] = None,
+    *,
+    data_dir: str = "data",
+) -> Dict[str, Any]:
+    """The frames the imaging model renders for an experiment, as ``ffdic simulate`` writes them.
+
+    ``experiment``: a TOML file or TOML text (default: the paper's study). ``model``: a TOML
+    file, a model name (embedded, or stored by the daemon in ``data_dir/models``) or TOML text
+    (default: ``paper-bench``). Returns ``{"manifest": dict, "frames": {file name: uint16
+    array}}``.
+    """
+    result: Dict[str, Any] = _ffdic.render(experiment, model, seed, data_dir)
+    return result
+
+
+def compare(
+    dataset: Union[str, "os.PathLike[str]"],
+    model: Optional[str] = None,
+    *,
+    schemes: Sequence[str] = ("ff100", "ff50", "ff25"),
+    subset: Optional[int] = None,
+    step: Optional[int] = None,
+    prefilter_sigma: Optional[float] = None,
+    seed: Optional[int] = None,
+    history: bool = True,
+    data_dir: str = "data",
+) -> Dict[str, Any]:
+    """A dataset folder against the model: the document of ``ffdic compare --json``.
+
+    DIC runs on the measured frames and on the frames the model renders for the same nominal
+    experiment; the discrepancy per run and scheme and in total (px). Recorded in the
+    dataset's history (``ffdic-history.jsonl``) unless ``history=False``.
+    """
+    result: Dict[str, Any] = _ffdic.compare(
+        dataset,
+        model,
+        schemes=list(schemes),
+        subset=subset,
+        step=step,
+        prefilter_sigma=prefilter_sigma,
+        seed=seed,
+        history=history,
+        data_dir=data_dir,
+    )
+    return result
+
+
+def diagnose(
+    dataset: Union[str, "os.PathLike[str]"],
+    model: Optional[str] = None,
+    *,
+    rounds: int = 1,
+    schemes: Sequence[str] = ("ff100", "ff50", "ff25"),
+    subset: Optional[int] = None,
+    step: Optional[int] = None,
+    prefilter_sigma: Optional[float] = None,
+    seed: Optional[int] = None,
+    data_dir: str = "data",
+) -> Dict[str, Any]:
+    """Which physical effect the model misses: the document of ``ffdic diagnose --json``.
+
+    Every candidate effect is fitted and ranked (verdict, ΔBIC, parameters with their
+    uncertainty); with ``rounds`` > 1 the winner is added and the dataset diagnosed again.
+    When a round found an effect, ``final_model_toml`` holds the model with every winner
+    added (add it to a daemon with ``Client.add_model``).
+    """
+    result: Dict[str, Any] = _ffdic.diagnose(
+        dataset,
+        model,
+        rounds=rounds,
+        schemes=list(schemes),
+        subset=subset,
+        step=step,
+        prefilter_sigma=prefilter_sigma,
+        seed=seed,
+        data_dir=data_dir,
+    )
+    return result
+

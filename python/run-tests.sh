@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# The Python package as a user installs it, tested: a venv in target/python-venv with the pinned
+# test requirements, `pip install ./python` (maturin from PyPI builds the wheel: release profile,
+# the workspace's target dir), pytest over python/tests, then the example end to end.
+#
+#   python/run-tests.sh [DAEMON_BINARY]     (default: target/debug/ffdic)
+#
+# The daemon binary is what the client tests and the example start (`ffdic serve`) and what
+# test_engine.py compares the bindings' numbers with (`ffdic analyze`, `simulate`, `compare`).
+set -euo pipefail
+
+HERE="$(cd "$(dirname "$0")" && pwd)"
+ROOT="$(cd "$HERE/.." && pwd)"
+cd "$ROOT"
+
+BIN="${1:-target/debug/ffdic}"
+[ -x "$BIN" ] || { echo "python tests: no daemon binary at $BIN (cargo build --bin ffdic)" >&2; exit 2; }
+BIN="$(cd "$(dirname "$BIN")" && pwd)/$(basename "$BIN")"
+VENV="${CARGO_TARGET_DIR:-$ROOT/target}/python-venv"
+
+STAMP="$VENV/.requirements.sha256"
+want="$(sha256sum "$HERE/tests/requirements.txt" | cut -d' ' -f1)"
+if [ ! -x "$VENV/bin/pytest" ] || [ "$(cat "$STAMP" 2>/dev/null)" != "$want" ]; then
+  echo "python: installing the pinned test requirements into $VENV"
+  [ -x "$VENV/bin/python" ] || python3 -m venv "$VENV"
+  "$VENV/bin/pip" install --quiet --disable-pip-version-check -r "$HERE/tests/requirements.txt"
+  echo "$want" >"$STAMP"
+fi
+
+echo "python: pip install ./python"
+"$VENV/bin/pip" install --quiet --disable-pip-version-check --force-reinstall --no-deps ./python
+
+echo "python: pytest python/tests"
+FFDIC_BIN="$BIN" "$VENV/bin/python" -m pytest python/tests -q -p no:cacheprovider
+
+echo "python: the example (python/examples/paper_study.py) on the mock bench"
+EXAMPLE_DIR="$(mktemp -d "${TMPDIR:-/tmp}/ffdic-example.XXXXXX")"
+trap 'rm -rf "$EXAMPLE_DIR"' EXIT
+(cd "$EXAMPLE_DIR" && FFDIC_BIN="$BIN" "$VENV/bin/python" "$ROOT/python/examples/paper_study.py" >example.log 2>&1) || {
+  cat "$EXAMPLE_DIR/example.log"; echo "python: the example failed" >&2; exit 1; }
+tail -n 5 "$EXAMPLE_DIR/example.log"
