@@ -17,6 +17,7 @@ pub mod reduce;
 pub mod report;
 pub mod service;
 pub mod store;
+pub mod sweep;
 
 /// The crate version, recorded in every result's settings.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");

@@ -35,6 +35,8 @@ enum Command {
     Diagnose(cli::diagnose::DiagnoseArgs),
     /// The discrepancy of a dataset over model versions.
     History(cli::history::HistoryArgs),
+    /// A design map: error against dot size, fill factor, noise, blur and sub-pixel motion.
+    Sweep(cli::sweep::SweepArgs),
 }
 
 fn main() {
@@ -64,6 +66,7 @@ fn main() {
         Command::Compare(args) => cli::compare::run(args),
         Command::Diagnose(args) => cli::diagnose::run(args),
         Command::History(args) => cli::history::run(args),
+        Command::Sweep(args) => cli::sweep::run(args),
     };
     if let Err(err) = outcome {
         // One line naming the problem: the whole cause chain, each cause once.

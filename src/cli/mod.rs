@@ -12,6 +12,7 @@ pub mod reproduce;
 pub mod serve;
 pub mod simulate;
 pub mod store;
+pub mod sweep;
 
 pub use error_line::error_line;
 pub use progress::ProgressBar;

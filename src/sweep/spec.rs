@@ -1,0 +1,254 @@
+//! A sweep as a user writes it (TOML): the sensor, the axes, the model and the DIC settings.
+
+use crate::dic::DicSettings;
+use crate::model::{Camera, SpecklePattern};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The most tasks one plan may hold (a typo in an axis should not plan a year of work).
+pub const MAX_TASKS: usize = 1_000_000;
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SweepSpec {
+    pub name: String,
+    /// Base seed; each realisation `k` of a cell mixes it with `k`.
+    #[serde(default)]
+    pub seed: u64,
+    /// Speckle realisations (layout and noise) per cell.
+    pub seeds: usize,
+    /// The full-resolution sensor the fill factors are synthesised from.
+    pub camera: Camera,
+    /// The imaging model's effects besides the axes' (noise and PSF come from the axes): an
+    /// embedded model name or a model file, read when planning. Default: none (an ideal bench).
+    #[serde(default)]
+    pub model: Option<String>,
+    /// The commanded move, mm, before the sub-pixel axes add to it.
+    #[serde(default)]
+    pub move_mm: [f64; 2],
+    pub axes: Axes,
+    #[serde(default)]
+    pub dic: DicSettings,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Axes {
+    /// Prints by dot diameter in pixels of the reduced image (the camera being designed),
+    /// spacing 1.5 diameters, contrast 0.85 — or the paper's presets with `patterns`.
+    #[serde(default)]
+    pub dot_diameter_px: Vec<f64>,
+    #[serde(default)]
+    pub patterns: Vec<String>,
+    /// Reduction schemes: presets (`ff100`, `ff50`, `ff25`) or per-axis schemes as JSON-like
+    /// tables `{ name, x = { block, first, active }, y = {…} }`.
+    pub schemes: Vec<crate::experiment::SchemeSpec>,
+    /// Sensor noise levels; empty = noiseless.
+    #[serde(default)]
+    pub noise: Vec<NoiseLevel>,
+    /// Gaussian PSF σ at full resolution, px (0 = none).
+    #[serde(default = "zero_list")]
+    pub psf_sigma_px: Vec<f64>,
+    /// Sub-pixel part of the move in reduced px, added to `move_mm`.
+    #[serde(default = "zero_list")]
+    pub subpixel_x: Vec<f64>,
+    #[serde(default = "zero_list")]
+    pub subpixel_y: Vec<f64>,
+}
+
+fn zero_list() -> Vec<f64> {
+    vec![0.0]
+}
+
+/// A sensor's noise: shot noise of a full well and read noise, electrons.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NoiseLevel {
+    pub full_well_e: f64,
+    pub read_noise_e: f64,
+    /// Electrons per DN.
+    #[serde(default = "default_gain")]
+    pub gain: f64,
+}
+
+fn default_gain() -> f64 {
+    0.46
+}
+
+/// One value of the print axis.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PrintAxis {
+    /// Dot diameter in reduced-image px.
+    DotDiameterPx(f64),
+    /// A preset of the paper (`a`, `b`, `c`).
+    Pattern(String),
+}
+
+impl PrintAxis {
+    /// The print on the target, for a camera of `scale_px_per_mm` reduced by `block_px`.
+    pub fn pattern(&self, scale_px_per_mm: f64, block_px: f64) -> SpecklePattern {
+        match self {
+            PrintAxis::DotDiameterPx(d) => {
+                let diameter_mm = d * block_px / scale_px_per_mm;
+                SpecklePattern {
+                    label: format!("d{d}px"),
+                    dot_diameter_mm: diameter_mm,
+                    dot_spacing_mm: 1.5 * diameter_mm,
+                    contrast: 0.85,
+                    edge_softness_mm: 0.0,
+                }
+            }
+            PrintAxis::Pattern(label) => {
+                SpecklePattern::preset(label).expect("checked when the spec was read")
+            }
+        }
+    }
+
+    pub fn label(&self) -> String {
+        match self {
+            PrintAxis::DotDiameterPx(d) => format!("{d}"),
+            PrintAxis::Pattern(p) => p.clone(),
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum SweepError {
+    #[error("cannot read {path}: {source}")]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("cannot write {path}: {source}")]
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("sweep {path}: {message}")]
+    Invalid { path: PathBuf, message: String },
+    #[error("sweep task: {0}")]
+    Task(String),
+}
+
+impl SweepSpec {
+    pub fn from_toml(text: &str, origin: &Path) -> Result<Self, SweepError> {
+        let invalid = |message: String| SweepError::Invalid {
+            path: origin.to_owned(),
+            message,
+        };
+        let spec: SweepSpec = toml::from_str(text).map_err(|e| invalid(e.message().to_string()))?;
+        spec.validate().map_err(invalid)?;
+        Ok(spec)
+    }
+
+    pub fn load(path: &Path) -> Result<Self, SweepError> {
+        let text = std::fs::read_to_string(path).map_err(|source| SweepError::Read {
+            path: path.to_owned(),
+            source,
+        })?;
+        Self::from_toml(&text, path)
+    }
+
+    /// The print axis: dot diameters, or presets.
+    pub fn prints(&self) -> Vec<PrintAxis> {
+        let dots = self
+            .axes
+            .dot_diameter_px
+            .iter()
+            .map(|&d| PrintAxis::DotDiameterPx(d));
+        let presets = self.axes.patterns.iter().cloned().map(PrintAxis::Pattern);
+        dots.chain(presets).collect()
+    }
+
+    /// The noise axis; one noiseless level when empty.
+    pub fn noise_levels(&self) -> Vec<Option<NoiseLevel>> {
+        if self.axes.noise.is_empty() {
+            vec![None]
+        } else {
+            self.axes.noise.iter().copied().map(Some).collect()
+        }
+    }
+
+    pub fn task_count(&self) -> usize {
+        [
+            self.prints().len(),
+            self.axes.schemes.len(),
+            self.noise_levels().len(),
+            self.axes.psf_sigma_px.len(),
+            self.axes.subpixel_x.len(),
+            self.axes.subpixel_y.len(),
+            self.seeds,
+        ]
+        .iter()
+        .try_fold(1usize, |n, &k| n.checked_mul(k))
+        .unwrap_or(usize::MAX)
+    }
+
+    fn validate(&self) -> Result<(), String> {
+        if self.seeds == 0 {
+            return Err("seeds: at least 1".into());
+        }
+        if self.prints().is_empty() {
+            return Err("axes: give dot_diameter_px or patterns".into());
+        }
+        for d in &self.axes.dot_diameter_px {
+            if !(d.is_finite() && (0.5..=100.0).contains(d)) {
+                return Err(format!("axes.dot_diameter_px: {d} is not in [0.5, 100] px"));
+            }
+        }
+        for p in &self.axes.patterns {
+            if SpecklePattern::preset(p).is_none() {
+                return Err(format!("axes.patterns: unknown preset '{p}' (a, b or c)"));
+            }
+        }
+        crate::experiment::check_schemes(&self.axes.schemes)
+            .map_err(|e| format!("axes.{}: {}", e.field, e.reason))?;
+        for n in &self.axes.noise {
+            let sane = n.full_well_e > 0.0
+                && n.read_noise_e >= 0.0
+                && n.gain > 0.0
+                && [n.full_well_e, n.read_noise_e, n.gain]
+                    .iter()
+                    .all(|v| v.is_finite());
+            if !sane {
+                return Err("axes.noise: full_well_e and gain positive, read_noise_e ≥ 0".into());
+            }
+        }
+        let finite = |name: &str, xs: &[f64], lo: f64, hi: f64| -> Result<(), String> {
+            if xs.is_empty() {
+                return Err(format!("axes.{name}: at least one value"));
+            }
+            match xs
+                .iter()
+                .find(|v| !(v.is_finite() && (lo..=hi).contains(*v)))
+            {
+                Some(v) => Err(format!("axes.{name}: {v} is not in [{lo}, {hi}]")),
+                None => Ok(()),
+            }
+        };
+        finite("psf_sigma_px", &self.axes.psf_sigma_px, 0.0, 20.0)?;
+        finite("subpixel_x", &self.axes.subpixel_x, -1.0, 1.0)?;
+        finite("subpixel_y", &self.axes.subpixel_y, -1.0, 1.0)?;
+        if !self
+            .move_mm
+            .iter()
+            .all(|v| v.is_finite() && v.abs() <= 100.0)
+        {
+            return Err("move_mm: each within ±100 mm".into());
+        }
+        let c = &self.camera;
+        if !(16..=16384).contains(&c.width) || !(16..=16384).contains(&c.height) {
+            return Err("camera: width and height 16 to 16384 px".into());
+        }
+        if !(c.scale_px_per_mm.is_finite() && c.scale_px_per_mm > 0.0) {
+            return Err("camera.scale_px_per_mm must be positive".into());
+        }
+        self.dic.validate().map_err(|e| format!("dic: {e}"))?;
+        let n = self.task_count();
+        if n > MAX_TASKS {
+            return Err(format!("{n} tasks; at most {MAX_TASKS}"));
+        }
+        Ok(())
+    }
+}
