@@ -17,9 +17,11 @@ cd "$(dirname "$0")/.."
 # - chromium, nodejs, npm: the dashboard's end-to-end test (tests/dashboard_browser.rs) drives
 #   headless Chromium with playwright-core, pinned in tests/browser/package-lock.json.
 # - curl: tests/schemathesis/run.sh fetches the daemon's OpenAPI document with it.
+# - slurmctld, slurmd, munge: tests/sweep_slurm.rs starts a single-node Slurm cluster on
+#   localhost (its own slurm.conf, munge key and socket, free ports) and runs a sweep on it.
 # - python3-venv also holds the Python package's tests (python/run-tests.sh: maturin, numpy and
 #   pytest from PyPI into target/python-venv).
-APT_PACKAGES=(libaravis-dev libusb-1.0-0-dev aravis-tools-cli aravis-tools libclang-dev libudev-dev pkg-config iproute2 chromium python3-venv curl)
+APT_PACKAGES=(libaravis-dev libusb-1.0-0-dev aravis-tools-cli aravis-tools libclang-dev libudev-dev pkg-config iproute2 chromium python3-venv curl slurmctld slurmd munge)
 missing=()
 for pkg in "${APT_PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")

@@ -205,3 +205,90 @@ fn bad_specs_and_selections_are_refused_with_the_reason() {
         assert_eq!(results(&dir), 0);
     }
 }
+
+#[test]
+fn the_cluster_files_have_what_slurm_and_kubernetes_need() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("s");
+    let p = plan(&smoke_spec(), &dir);
+    let shards = p["shards"].as_array().unwrap().len();
+    ok(ffdic()
+        .args([
+            "sweep",
+            "slurm",
+            "--no-submit",
+            "--partition",
+            "short",
+            "--array-max",
+            "4",
+        ])
+        .arg(&dir));
+    let run = std::fs::read_to_string(dir.join("slurm/run.sbatch")).unwrap();
+    assert!(run.starts_with("#!/bin/bash\n"));
+    assert!(
+        run.contains(&format!("#SBATCH --array=0-{}%4\n", shards - 1)),
+        "{run}"
+    );
+    assert!(run.contains("#SBATCH --partition=short\n"));
+    assert!(run.contains("sweep run") && run.contains("--index \"$SLURM_ARRAY_TASK_ID\""));
+    let merge = std::fs::read_to_string(dir.join("slurm/merge.sbatch")).unwrap();
+    assert!(merge.contains("sweep merge"));
+
+    ok(ffdic()
+        .args([
+            "sweep",
+            "k8s",
+            "--image",
+            "registry.example/ffdic:0.1",
+            "--claim",
+            "sweeps",
+        ])
+        .args(["--sub-path", "smoke", "--parallelism", "4"])
+        .arg(&dir));
+    let job: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("k8s/job.json")).unwrap()).unwrap();
+    // The fields a batch/v1 Indexed Job must have (Kubernetes API reference, Job v1).
+    assert_eq!(job["apiVersion"], "batch/v1");
+    assert_eq!(job["kind"], "Job");
+    let name = job["metadata"]["name"].as_str().unwrap();
+    assert!(
+        name.len() <= 63
+            && name
+                .chars()
+                .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '-')
+            && !name.starts_with('-')
+            && !name.ends_with('-'),
+        "a DNS-1123 label: {name}"
+    );
+    let spec = &job["spec"];
+    assert_eq!(spec["completionMode"], "Indexed");
+    assert_eq!(spec["completions"], shards);
+    assert_eq!(spec["parallelism"], 4);
+    let pod = &spec["template"]["spec"];
+    assert!(["Never", "OnFailure"].contains(&pod["restartPolicy"].as_str().unwrap()));
+    let container = &pod["containers"][0];
+    assert_eq!(container["image"], "registry.example/ffdic:0.1");
+    let args: Vec<&str> = container["args"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a.as_str().unwrap())
+        .collect();
+    assert_eq!(
+        &args[..5],
+        [
+            "sweep",
+            "run",
+            "/sweep/smoke",
+            "--index",
+            "$(JOB_COMPLETION_INDEX)"
+        ]
+    );
+    let mount = &container["volumeMounts"][0];
+    let volume = &pod["volumes"][0];
+    assert_eq!(
+        mount["name"], volume["name"],
+        "the mount names a volume of the pod"
+    );
+    assert_eq!(volume["persistentVolumeClaim"]["claimName"], "sweeps");
+}

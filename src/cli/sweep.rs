@@ -5,7 +5,8 @@ use super::ProgressBar;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use ffdic::sweep::{
-    merge_folder, plan, recommendations_text, run_shards, shard_done, write_plan, Plan, SweepSpec,
+    k8s_job, merge_folder, plan, recommendations_text, run_shards, shard_done, slurm_scripts,
+    write_plan, K8sOptions, Plan, SlurmOptions, SweepSpec,
 };
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -44,6 +45,46 @@ pub enum SweepCommand {
     },
     /// Gather the results into DIR/map.csv, the heat maps and DIR/recommendations.txt.
     Merge { dir: PathBuf },
+    /// Submit the shards as a Slurm array job (`sbatch`) and a merge job that depends on it.
+    /// DIR and this ffdic must be at the same path on every node (shared storage).
+    Slurm {
+        dir: PathBuf,
+        #[arg(long)]
+        partition: Option<String>,
+        /// Wall-time limit per array task (`30:00`, `1-00:00:00`).
+        #[arg(long)]
+        time: Option<String>,
+        /// At most K array tasks at once.
+        #[arg(long, value_name = "K")]
+        array_max: Option<usize>,
+        #[arg(long, default_value_t = 1)]
+        cpus_per_task: usize,
+        /// Write DIR/slurm/run.sbatch and merge.sbatch without submitting them.
+        #[arg(long)]
+        no_submit: bool,
+    },
+    /// Write a Kubernetes Indexed Job (DIR/k8s/job.json; `kubectl apply -f` it) whose pods run
+    /// one shard each from a shared volume.
+    K8s {
+        dir: PathBuf,
+        /// Container image with `ffdic` on its PATH.
+        #[arg(long)]
+        image: String,
+        /// PersistentVolumeClaim holding the sweep folder (ReadWriteMany).
+        #[arg(long)]
+        claim: String,
+        /// Where the claim is mounted in the pods.
+        #[arg(long, default_value = "/sweep")]
+        mount_path: String,
+        /// The sweep folder inside the claim.
+        #[arg(long, default_value = ".")]
+        sub_path: String,
+        /// Pods at once.
+        #[arg(long, default_value_t = 8)]
+        parallelism: usize,
+        #[arg(long, default_value_t = 1)]
+        cpus_per_pod: usize,
+    },
 }
 
 pub fn run(args: &SweepArgs) -> Result<()> {
@@ -56,6 +97,42 @@ pub fn run(args: &SweepArgs) -> Result<()> {
             threads,
         } => run_command(dir, shard.as_deref(), *index, *threads),
         SweepCommand::Merge { dir } => merge_command(dir),
+        SweepCommand::Slurm {
+            dir,
+            partition,
+            time,
+            array_max,
+            cpus_per_task,
+            no_submit,
+        } => slurm_command(
+            dir,
+            &SlurmOptions {
+                partition: partition.clone(),
+                time: time.clone(),
+                array_max: *array_max,
+                cpus_per_task: *cpus_per_task,
+            },
+            !no_submit,
+        ),
+        SweepCommand::K8s {
+            dir,
+            image,
+            claim,
+            mount_path,
+            sub_path,
+            parallelism,
+            cpus_per_pod,
+        } => k8s_command(
+            dir,
+            &K8sOptions {
+                image: image.clone(),
+                claim: claim.clone(),
+                mount_path: mount_path.clone(),
+                sub_path: sub_path.clone(),
+                parallelism: *parallelism,
+                cpus_per_pod: *cpus_per_pod,
+            },
+        ),
     }
 }
 
@@ -149,5 +226,82 @@ fn merge_command(dir: &Path) -> Result<()> {
             dir.display()
         );
     }
+    Ok(())
+}
+
+fn write_file(path: &Path, text: &str) -> Result<()> {
+    if let Some(parent) = path.parent() {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("cannot create {}", parent.display()))?;
+    }
+    std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Runs `sbatch --parsable ARGS SCRIPT`; the job id it prints.
+fn sbatch(args: &[String], script: &Path) -> Result<String> {
+    let out = std::process::Command::new("sbatch")
+        .arg("--parsable")
+        .args(args)
+        .arg(script)
+        .output()
+        .context("cannot run sbatch (is Slurm's client installed and SLURM_CONF set?)")?;
+    if !out.status.success() {
+        bail!(
+            "sbatch {} failed: {}",
+            script.display(),
+            String::from_utf8_lossy(&out.stderr).trim()
+        );
+    }
+    let text = String::from_utf8_lossy(&out.stdout);
+    // `--parsable` prints "jobid" or "jobid;cluster".
+    Ok(text
+        .trim()
+        .split(';')
+        .next()
+        .unwrap_or_default()
+        .to_string())
+}
+
+fn slurm_command(dir: &Path, options: &SlurmOptions, submit: bool) -> Result<()> {
+    let dir = dir
+        .canonicalize()
+        .with_context(|| format!("{} (plan the sweep first)", dir.display()))?;
+    let plan = Plan::read(&dir)?;
+    let exe = std::env::current_exe().context("cannot locate this ffdic")?;
+    let scripts = slurm_scripts(&plan.spec.name, &dir, &exe, plan.shards.len(), options);
+    let (run, merge) = (dir.join("slurm/run.sbatch"), dir.join("slurm/merge.sbatch"));
+    write_file(&run, &scripts.run)?;
+    write_file(&merge, &scripts.merge)?;
+    if !submit {
+        println!(
+            "{} and {} written ({} array tasks for {} shards)",
+            run.display(),
+            merge.display(),
+            scripts.array_tasks,
+            plan.shards.len()
+        );
+        return Ok(());
+    }
+    let array = sbatch(&[], &run)?;
+    let merge_job = sbatch(&[format!("--dependency=afterok:{array}")], &merge)?;
+    println!(
+        "submitted array job {array} ({} tasks for {} shards) and merge job {merge_job} (after it); logs in {}",
+        scripts.array_tasks,
+        plan.shards.len(),
+        dir.join("slurm").display()
+    );
+    Ok(())
+}
+
+fn k8s_command(dir: &Path, options: &K8sOptions) -> Result<()> {
+    let plan = Plan::read(dir)?;
+    let job = k8s_job(&plan.spec.name, plan.shards.len(), options);
+    let path = dir.join("k8s/job.json");
+    write_file(&path, &(serde_json::to_string_pretty(&job)? + "\n"))?;
+    println!(
+        "{} written: an Indexed Job of {} completions (`kubectl apply -f` it; merge afterwards with `ffdic sweep merge`)",
+        path.display(),
+        plan.shards.len()
+    );
     Ok(())
 }

@@ -12,12 +12,16 @@
 //! share a folder. Merging groups the tasks of a cell (everything but the seed) into means with
 //! 95 % Student-t intervals, the map.
 
+mod cluster;
 mod folder;
 mod merge;
 mod plan;
 mod spec;
 mod task;
 
+pub use cluster::{
+    k8s_job, slurm_scripts, K8sOptions, SlurmOptions, SlurmScripts, SLURM_MAX_ARRAY_TASKS,
+};
 pub use folder::{
     map_csv, map_svgs, merge_folder, read_results, recommendations_text, run_shards, shard_done,
     write_plan, RunCounts,
