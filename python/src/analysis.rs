@@ -111,9 +111,18 @@ impl AnalysisResult {
     }
 }
 
-/// Settings of one call: the library's defaults, overridden by what the caller gave.
+/// DIC of `deformed` against `reference` (2-D arrays of one shape). Every keyword defaults to
+/// `ffdic analyze`'s value. Releases the GIL while it runs; `threads` bounds its worker
+/// threads (default: every core).
+#[pyfunction]
+#[pyo3(signature = (reference, deformed, *, subset=None, step=None, roi=None, strain_window=None,
+    interp=None, shape=None, prefilter_sigma=None, min_zncc=None, max_motion=None,
+    max_displacement_std=None, outlier_threshold=None, outlier_test=true, threads=None))]
 #[allow(clippy::too_many_arguments)]
-fn settings(
+pub fn analyze(
+    py: Python<'_>,
+    reference: &Bound<'_, PyAny>,
+    deformed: &Bound<'_, PyAny>,
     subset: Option<usize>,
     step: Option<usize>,
     roi: Option<(usize, usize, usize, usize)>,
@@ -126,7 +135,9 @@ fn settings(
     max_displacement_std: Option<f64>,
     outlier_threshold: Option<f64>,
     outlier_test: bool,
-) -> PyResult<DicSettings> {
+    threads: Option<usize>,
+) -> PyResult<AnalysisResult> {
+    // The library's defaults, overridden by what the caller gave.
     let d = DicSettings::default();
     let interpolation = match interp {
         None => d.interpolation,
@@ -158,49 +169,6 @@ fn settings(
         ..d
     };
     settings.validate().map_err(dic_error)?;
-    Ok(settings)
-}
-
-/// DIC of `deformed` against `reference` (2-D arrays of one shape). Every keyword defaults to
-/// `ffdic analyze`'s value. Releases the GIL while it runs; `threads` bounds its worker
-/// threads (default: every core).
-#[pyfunction]
-#[pyo3(signature = (reference, deformed, *, subset=None, step=None, roi=None, strain_window=None,
-    interp=None, shape=None, prefilter_sigma=None, min_zncc=None, max_motion=None,
-    max_displacement_std=None, outlier_threshold=None, outlier_test=true, threads=None))]
-#[allow(clippy::too_many_arguments)]
-pub fn analyze(
-    py: Python<'_>,
-    reference: &Bound<'_, PyAny>,
-    deformed: &Bound<'_, PyAny>,
-    subset: Option<usize>,
-    step: Option<usize>,
-    roi: Option<(usize, usize, usize, usize)>,
-    strain_window: Option<usize>,
-    interp: Option<&str>,
-    shape: Option<&str>,
-    prefilter_sigma: Option<f64>,
-    min_zncc: Option<f64>,
-    max_motion: Option<usize>,
-    max_displacement_std: Option<f64>,
-    outlier_threshold: Option<f64>,
-    outlier_test: bool,
-    threads: Option<usize>,
-) -> PyResult<AnalysisResult> {
-    let settings = settings(
-        subset,
-        step,
-        roi,
-        strain_window,
-        interp,
-        shape,
-        prefilter_sigma,
-        min_zncc,
-        max_motion,
-        max_displacement_std,
-        outlier_threshold,
-        outlier_test,
-    )?;
     let reference = InputImage::from_python(reference, "reference")?;
     let deformed = InputImage::from_python(deformed, "deformed")?;
     if reference.shape() != deformed.shape() {
@@ -273,16 +241,6 @@ fn build(
         .collect();
     let iterations: Vec<u32> = p.iter().map(|q| q.iterations).collect();
     let roi = result.grid.roi;
-    let settings = serde_json::json!({
-        "dic": result.settings,
-        "roi": roi,
-        "grid": { "nx": result.grid.nx(), "ny": result.grid.ny() },
-        "strain_gauge_px": result.strain_gauge_px,
-        "criterion": "znssd",
-        "shape_function": result.settings.shape.as_str(),
-        "algorithm": "icgn",
-        "ffdic_version": ffdic::VERSION,
-    });
     let s = result.summary;
     let row = |st: ffdic::dic::Stats| [st.mean, st.std, st.min.abs().max(st.max.abs())];
     let scaled = |st: ffdic::dic::Stats| {
@@ -306,7 +264,7 @@ fn build(
         roi: (roi.x, roi.y, roi.width, roi.height),
         strain_gauge_px: result.strain_gauge_px,
         global_offset_px: result.global_offset_px,
-        settings: json_to_python(py, &settings)?,
+        settings: json_to_python(py, &ffdic::report::dic_settings_json(result))?,
         summary: json_to_python(py, &ffdic::report::dic_summary_json(result))?,
         elapsed_s,
         reference_copied,

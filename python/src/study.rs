@@ -4,11 +4,10 @@
 use crate::errors::{json_to_python, value_error};
 use crate::frames::model_config;
 use ffdic::diagnose::{
-    append_history, compare as compare_dataset, diagnose_rounds, CompareOptions, DiagnoseError,
-    HistoryEntry, MAX_ROUNDS,
+    append_history, compare as compare_dataset, diagnose_rounds, CompareOptions,
+    CompareOptionsError, DiagnoseError, HistoryEntry, MAX_ROUNDS,
 };
 use ffdic::dic::DicSettings;
-use ffdic::reduce::Scheme;
 use pyo3::exceptions::{PyOSError, PyRuntimeError};
 use pyo3::prelude::*;
 use std::path::{Path, PathBuf};
@@ -21,14 +20,6 @@ fn options(
     prefilter_sigma: Option<f64>,
     seed: Option<u64>,
 ) -> PyResult<CompareOptions> {
-    let schemes = schemes
-        .iter()
-        .map(|s| Scheme::preset(s.trim()))
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| value_error(format!("schemes: {e}")))?;
-    if schemes.is_empty() {
-        return Err(value_error("schemes: at least one"));
-    }
     let d = DicSettings::default();
     let dic = DicSettings {
         subset_px: subset.unwrap_or(d.subset_px),
@@ -36,12 +27,10 @@ fn options(
         prefilter_sigma_px: prefilter_sigma.unwrap_or(d.prefilter_sigma_px),
         ..d
     };
-    dic.validate().map_err(value_error)?;
-    let defaults = CompareOptions::default();
-    Ok(CompareOptions {
-        dic,
-        schemes,
-        seed: seed.unwrap_or(defaults.seed),
+    let seed = seed.unwrap_or(CompareOptions::default().seed);
+    CompareOptions::from_presets(&schemes, dic, seed).map_err(|e| match e {
+        CompareOptionsError::Dic(e) => value_error(e),
+        other => value_error(format!("schemes: {other}")),
     })
 }
 

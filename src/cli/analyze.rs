@@ -389,19 +389,11 @@ fn write_summary(out: &mut impl Write, s: &Summary) -> Result<()> {
 }
 
 fn settings_json(result: &DicResult, args: &AnalyzeArgs, deformed: &Path) -> serde_json::Value {
-    json!({
-        "reference": args.reference,
-        "deformed": deformed,
-        "mask": args.mask,
-        "dic": result.settings,
-        "roi": result.grid.roi,
-        "grid": { "nx": result.grid.nx(), "ny": result.grid.ny() },
-        "strain_gauge_px": result.strain_gauge_px,
-        "criterion": "znssd",
-        "shape_function": result.settings.shape.as_str(),
-        "algorithm": "icgn",
-        "ffdic_version": ffdic::VERSION,
-    })
+    let mut doc = ffdic::report::dic_settings_json(result);
+    doc["reference"] = json!(args.reference);
+    doc["deformed"] = json!(deformed);
+    doc["mask"] = json!(args.mask);
+    doc
 }
 
 fn points_csv(result: &DicResult) -> String {

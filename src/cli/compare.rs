@@ -11,7 +11,6 @@ use ffdic::diagnose::{
 };
 use ffdic::dic::DicSettings;
 use ffdic::model::ModelConfig;
-use ffdic::reduce::Scheme;
 use std::path::PathBuf;
 
 /// How the comparison analyses both sides (shared by compare and diagnose).
@@ -39,23 +38,13 @@ pub struct AnalysisArgs {
 
 impl AnalysisArgs {
     pub fn options(&self) -> Result<CompareOptions> {
-        let schemes = self
-            .schemes
-            .iter()
-            .map(|s| Scheme::preset(s.trim()))
-            .collect::<Result<Vec<_>, _>>()?;
         let dic = DicSettings {
             subset_px: self.subset,
             step_px: self.step,
             prefilter_sigma_px: self.prefilter_sigma,
             ..DicSettings::default()
         };
-        dic.validate()?;
-        Ok(CompareOptions {
-            dic,
-            schemes,
-            seed: self.seed,
-        })
+        Ok(CompareOptions::from_presets(&self.schemes, dic, self.seed)?)
     }
 }
 

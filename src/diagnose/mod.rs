@@ -168,6 +168,38 @@ pub struct CompareOptions {
     pub seed: u64,
 }
 
+/// Options a caller spelled wrong.
+#[derive(Debug, thiserror::Error)]
+pub enum CompareOptionsError {
+    #[error(transparent)]
+    Scheme(#[from] ReduceError),
+    #[error("at least one scheme")]
+    NoScheme,
+    #[error(transparent)]
+    Dic(#[from] DicError),
+}
+
+impl CompareOptions {
+    /// Options from preset scheme names (`ff100`, `ff50`, `ff25`, any case, spaces trimmed) and
+    /// the DIC settings both sides are analysed with: what `ffdic compare` and the Python
+    /// bindings take.
+    pub fn from_presets(
+        schemes: &[String],
+        dic: DicSettings,
+        seed: u64,
+    ) -> Result<Self, CompareOptionsError> {
+        let schemes = schemes
+            .iter()
+            .map(|s| Scheme::preset(s.trim()))
+            .collect::<Result<Vec<_>, _>>()?;
+        if schemes.is_empty() {
+            return Err(CompareOptionsError::NoScheme);
+        }
+        dic.validate()?;
+        Ok(Self { dic, schemes, seed })
+    }
+}
+
 impl Default for CompareOptions {
     fn default() -> Self {
         Self {

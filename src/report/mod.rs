@@ -12,7 +12,7 @@ mod table;
 mod xy_plot;
 
 pub use bar_chart::{BarChart, Series};
-pub use dic_summary::dic_summary_json;
+pub use dic_summary::{dic_settings_json, dic_summary_json};
 pub use heatmap::Heatmap;
 pub use history_chart::{history_svg, HistoryPoint};
 pub use png::png_quicklook;

@@ -81,7 +81,7 @@ struct TaskKey<'a> {
     ffdic_version: &'a str,
     camera: &'a crate::model::Camera,
     effects: &'a Effects,
-    pattern: crate::model::SpecklePattern,
+    pattern: &'a crate::model::SpecklePattern,
     move_mm: [f64; 2],
     subpixel_px: [f64; 2],
     seed: u64,
@@ -97,8 +97,10 @@ pub fn plan(spec: &SweepSpec, model: Option<&ModelConfig>) -> Result<Plan, Sweep
         .map_err(|e| SweepError::Task(e.to_string()))?;
     let mut shards = Vec::new();
     for print in spec.prints() {
+        let pattern = print.pattern(spec.camera.scale_px_per_mm, super::task::REFERENCE_BLOCK_PX);
         for noise in spec.noise_levels() {
             for &psf in &spec.axes.psf_sigma_px {
+                let effects = task_effects(&base_effects, noise, psf);
                 for &sx in &spec.axes.subpixel_x {
                     for &sy in &spec.axes.subpixel_y {
                         for realisation in 0..spec.seeds {
@@ -107,7 +109,6 @@ pub fn plan(spec: &SweepSpec, model: Option<&ModelConfig>) -> Result<Plan, Sweep
                                 realisation as u64,
                                 0x5EE9,
                             );
-                            let effects = task_effects(&base_effects, noise, psf);
                             let tasks = schemes
                                 .iter()
                                 .map(|scheme| {
@@ -115,10 +116,7 @@ pub fn plan(spec: &SweepSpec, model: Option<&ModelConfig>) -> Result<Plan, Sweep
                                         ffdic_version: crate::VERSION,
                                         camera: &spec.camera,
                                         effects: &effects,
-                                        pattern: print.pattern(
-                                            spec.camera.scale_px_per_mm,
-                                            super::task::REFERENCE_BLOCK_PX,
-                                        ),
+                                        pattern: &pattern,
                                         move_mm: spec.move_mm,
                                         subpixel_px: [sx, sy],
                                         seed,
