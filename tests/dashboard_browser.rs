@@ -5,7 +5,9 @@
 //! patterns × schemes bars; uploads a dataset whose bench has a lens distortion the baseline model
 //! lacks; diagnoses it and sees the verdict; adds the winner and sees the history chart gain a
 //! lower point; reloads the page and reopens those jobs; uploads a second dataset of the same bench
-//! (another seed) and adds its winner, which must get a name of its own (issue 13). Screenshots
+//! (another seed) and adds its winner, which must get a name of its own (issue 13); starts the
+//! smoke design map from the home page and sees its recommendations, heat maps with the paper's
+//! points, bias plots and cells (issue 15). Screenshots
 //! land in `target/browser-artifacts/`.
 //!
 //! Needs `node`, `/usr/bin/chromium` and `npm ci --prefix tests/browser` (scripts/test-all.sh
@@ -145,7 +147,13 @@ async fn dashboard_in_headless_chromium() {
         .unwrap()
         .starts_with("text/html"));
     assert!(home.headers().contains_key("content-security-policy"));
-    for path in ["/experiments/x", "/datasets/x", "/assets/home.js"] {
+    for path in [
+        "/experiments/x",
+        "/datasets/x",
+        "/sweeps/x",
+        "/assets/home.js",
+        "/assets/sweep.js",
+    ] {
         let r = client()
             .get(format!("{}{path}", server.base))
             .send()
@@ -225,6 +233,7 @@ async fn dashboard_in_headless_chromium() {
         "5-dataset-winner-added",
         "6-dataset-reloaded",
         "7-second-dataset-added",
+        "8-sweep",
     ] {
         assert!(
             artefact_dir().join(format!("{shot}.png")).is_file(),

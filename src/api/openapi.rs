@@ -2,7 +2,7 @@
 //! so the document cannot drift from the router (a test checks it against a snapshot).
 
 use super::problem::Problem;
-use super::routes::{camera, datasets, experiments, jobs, models, stage, system};
+use super::routes::{camera, datasets, experiments, jobs, models, stage, sweeps, system};
 use crate::service::Service;
 use utoipa::OpenApi;
 use utoipa_axum::router::OpenApiRouter;
@@ -22,8 +22,9 @@ use utoipa_axum::routes;
         (name = "bench", description = "Camera and stage, directly"),
         (name = "experiments", description = "Translation experiments on the bench"),
         (name = "datasets", description = "Measurements in format ffdic-dataset/1"),
-        (name = "jobs", description = "Any run: experiments, analyses, comparisons, diagnoses"),
+        (name = "jobs", description = "Any run: experiments, analyses, comparisons, diagnoses, sweeps"),
         (name = "models", description = "Analysis models: embedded and added by users"),
+        (name = "sweeps", description = "Design maps: error against dot size, fill factor, noise, blur and sub-pixel motion"),
     )
 )]
 struct ApiDoc;
@@ -61,6 +62,11 @@ pub fn router(max_upload_bytes: usize) -> OpenApiRouter<Service> {
         .routes(routes!(datasets::details))
         .routes(routes!(models::list, models::add))
         .routes(routes!(models::get))
+        .routes(routes!(sweeps::create, sweeps::list))
+        .routes(routes!(sweeps::get))
+        .routes(routes!(sweeps::map))
+        .routes(routes!(sweeps::map_csv))
+        .routes(routes!(sweeps::plot))
         .routes(routes!(jobs::get_job))
         .routes(routes!(jobs::cancel_job))
         .routes(routes!(jobs::job_events))
@@ -124,7 +130,21 @@ pub const FILE_NAME_PATTERN: &str = r"^[A-Za-z0-9_][A-Za-z0-9._+\-]{0,127}$";
 /// body), so a client — and schemathesis' stateful phase — can follow them.
 fn add_links(paths: &mut serde_json::Map<String, serde_json::Value>) {
     // (Not results: they exist only once the run has succeeded.)
-    const LINKS: [(&str, &str, &str, &str, &str); 7] = [
+    const LINKS: [(&str, &str, &str, &str, &str); 9] = [
+        (
+            "/api/v1/sweeps",
+            "post",
+            "202",
+            "/api/v1/sweeps/{id}",
+            "get",
+        ),
+        (
+            "/api/v1/sweeps",
+            "post",
+            "202",
+            "/api/v1/jobs/{id}/cancel",
+            "post",
+        ),
         (
             "/api/v1/experiments",
             "post",

@@ -33,6 +33,7 @@ pub fn components() -> Vec<(&'static str, Value)> {
         ("MoveSpec", move_spec()),
         ("StepSeries", step_series()),
         ("SchemeSpec", scheme_spec()),
+        ("SweepCamera", sweep_camera()),
     ]
 }
 
@@ -53,6 +54,7 @@ pub fn refinements() -> Vec<(&'static str, &'static str, Value)> {
     for body in ["ExperimentRequest", "CompareRequest"] {
         out.push((body, "seed", json!({ "maximum": u64::MAX })));
     }
+    out.extend(sweep_refinements());
     out.extend([
         (
             "ExperimentRequest",
@@ -142,6 +144,91 @@ pub fn apply(schemas: &mut Map<String, Value>) {
             }
         }
     }
+}
+
+/// `POST /sweeps`: `crate::sweep::SweepSpec`, checked by `SweepSpec::validate` and the daemon's
+/// `[sweeps]` limits (the task count, a product of the axes' lengths, is said in words).
+fn sweep_refinements() -> Vec<(&'static str, &'static str, Value)> {
+    let numbers = |lo: f64, hi: f64| json!({ "items": { "type": "number", "minimum": lo, "maximum": hi }, "minItems": 1 });
+    vec![
+        (
+            "SweepSpec",
+            "name",
+            json!({ "minLength": 1, "maxLength": 128, "pattern": "^[^\\u0000-\\u001F\\u007F-\\u009F]*$" }),
+        ),
+        (
+            "SweepSpec",
+            "seed",
+            json!({ "minimum": 0, "maximum": u64::MAX }),
+        ),
+        (
+            "SweepSpec",
+            "seeds",
+            json!({ "minimum": 1, "maximum": crate::sweep::MAX_SEEDS }),
+        ),
+        ("SweepSpec", "camera", reference("SweepCamera")),
+        ("SweepSpec", "dic", reference("DicSettings")),
+        (
+            "SweepSpec",
+            "move_mm",
+            json!({ "items": { "type": "number", "minimum": -crate::sweep::MAX_MOVE_MM, "maximum": crate::sweep::MAX_MOVE_MM },
+                    "minItems": 2, "maxItems": 2 }),
+        ),
+        (
+            "SweepSpec",
+            "axes",
+            json!({ "description": format!(
+                "The axes; their lengths multiplied by `seeds` give the task count, at most {} (or the daemon's `[sweeps] max_tasks`). Give `dot_diameter_px` or `patterns` (or both).",
+                crate::service::MAX_DAEMON_SWEEP_TASKS) }),
+        ),
+        (
+            "SweepAxes",
+            "dot_diameter_px",
+            json!({ "items": { "type": "number", "minimum": 0.5, "maximum": 100 } }),
+        ),
+        (
+            "SweepAxes",
+            "patterns",
+            json!({ "items": { "type": "string", "enum": ["a", "b", "c"] } }),
+        ),
+        (
+            "SweepAxes",
+            "schemes",
+            json!({ "items": reference("SchemeSpec"), "minItems": 1, "maxItems": MAX_SCHEMES }),
+        ),
+        ("SweepAxes", "psf_sigma_px", numbers(0.0, 20.0)),
+        ("SweepAxes", "subpixel_x", numbers(-1.0, 1.0)),
+        ("SweepAxes", "subpixel_y", numbers(-1.0, 1.0)),
+        (
+            "NoiseLevel",
+            "full_well_e",
+            json!({ "exclusiveMinimum": 0 }),
+        ),
+        ("NoiseLevel", "read_noise_e", json!({ "minimum": 0 })),
+        ("NoiseLevel", "gain", json!({ "exclusiveMinimum": 0 })),
+    ]
+}
+
+/// `crate::model::Camera` as a sweep's full-resolution sensor.
+fn sweep_camera() -> Value {
+    let side = crate::service::MAX_DAEMON_SENSOR_SIDE_PX;
+    let offset = json!({ "type": "number", "minimum": -(side as f64), "maximum": side,
+                         "description": "Principal point relative to the image centre, px; within the sensor." });
+    json!({
+        "type": "object",
+        "additionalProperties": false,
+        "required": ["width", "height", "scale_px_per_mm"],
+        "description": format!("The full-resolution sensor; at most {side} px a side (or the daemon's `[sweeps] max_sensor_side_px`)."),
+        "properties": {
+            "width": { "type": "integer", "minimum": crate::sweep::MIN_SENSOR_SIDE_PX, "maximum": side },
+            "height": { "type": "integer", "minimum": crate::sweep::MIN_SENSOR_SIDE_PX, "maximum": side },
+            "scale_px_per_mm": { "type": "number", "minimum": 0.01, "maximum": 10000 },
+            "exposure_level": { "type": "number", "exclusiveMinimum": 0, "maximum": 1,
+                                "description": "White-background level as a fraction of full scale (default 0.5)." },
+            "principal_dx_px": offset.clone(),
+            "principal_dy_px": offset
+        }
+    })
 }
 
 fn reference(name: &str) -> Value {

@@ -198,7 +198,12 @@ fn run_command(
         .context("cannot start worker threads")?;
     let bar = ProgressBar::new(true, "shards");
     let started = Instant::now();
-    let counts = pool.install(|| run_shards(dir, &plan, &select, &|d, t| bar.update(d, t)))?;
+    let counts = pool.install(|| {
+        run_shards(dir, &plan, &select, &|d, t| {
+            bar.update(d, t);
+            true
+        })
+    })?;
     bar.finish();
     let elapsed_s = started.elapsed().as_secs_f64();
     println!(

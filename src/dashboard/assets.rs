@@ -3,15 +3,17 @@
 pub const HOME_HTML: &str = include_str!("assets/home.html");
 pub const EXPERIMENT_HTML: &str = include_str!("assets/experiment.html");
 pub const DATASET_HTML: &str = include_str!("assets/dataset.html");
+pub const SWEEP_HTML: &str = include_str!("assets/sweep.html");
 
 /// Every asset under `/assets/`: name and bytes.
-pub const ALL: [(&str, &[u8]); 7] = [
+pub const ALL: [(&str, &[u8]); 8] = [
     ("style.css", include_bytes!("assets/style.css")),
     ("common.js", include_bytes!("assets/common.js")),
     ("charts.js", include_bytes!("assets/charts.js")),
     ("home.js", include_bytes!("assets/home.js")),
     ("experiment.js", include_bytes!("assets/experiment.js")),
     ("dataset.js", include_bytes!("assets/dataset.js")),
+    ("sweep.js", include_bytes!("assets/sweep.js")),
     ("favicon.svg", include_bytes!("assets/favicon.svg")),
 ];
 

@@ -2,9 +2,11 @@
 //! Plain HTML, CSS and a little JavaScript that talks only to `/api/v1`; every asset is compiled
 //! into the binary (no CDN: it works on an offline lab network). Pages:
 //! - `/`: the bench (camera, stage, live snapshot with its histogram, exposure and gain), the
-//!   experiments (list, a form to start one) and the datasets (list, upload);
+//!   experiments (list, a form to start one), the design maps (list, a spec to start one) and
+//!   the datasets (list, upload);
 //! - `/experiments/{id}`: live progress, Figures 5 and 6, u/v/strain maps, downloads;
-//! - `/datasets/{id}`: compare against a model, diagnose, add the winner, the history chart.
+//! - `/datasets/{id}`: compare against a model, diagnose, add the winner, the history chart;
+//! - `/sweeps/{id}`: a design map's progress, recommendations, heat maps, bias plots and cells.
 
 mod assets;
 
@@ -31,6 +33,10 @@ pub fn router() -> Router<Service> {
         .route(
             "/datasets/{id}",
             get(|_: Path<String>| async { page(assets::DATASET_HTML) }),
+        )
+        .route(
+            "/sweeps/{id}",
+            get(|_: Path<String>| async { page(assets::SWEEP_HTML) }),
         )
         .route("/assets/{name}", get(asset))
 }
@@ -79,6 +85,7 @@ mod tests {
             assets::HOME_HTML,
             assets::EXPERIMENT_HTML,
             assets::DATASET_HTML,
+            assets::SWEEP_HTML,
         ] {
             for part in html.split("/assets/").skip(1) {
                 let name = &part[..part.find('"').unwrap()];

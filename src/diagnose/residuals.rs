@@ -99,6 +99,9 @@ pub fn comparison_svgs(cmp: &Comparison) -> Vec<(String, String)> {
                 ys: r.residual.ys.clone(),
                 values: values.clone(),
                 diverging: true,
+                x_tick_labels: Vec::new(),
+                y_tick_labels: Vec::new(),
+                markers: Vec::new(),
             };
             out.push((
                 format!(
@@ -212,6 +215,9 @@ pub fn comparison_svgs(cmp: &Comparison) -> Vec<(String, String)> {
                 ys: im.measured.mean_map.ys.clone(),
                 values: ratio,
                 diverging: true,
+                x_tick_labels: Vec::new(),
+                y_tick_labels: Vec::new(),
+                markers: Vec::new(),
             };
             out.push((format!("mean_map_{tag}.svg"), map.to_svg(640, 520)));
         }

@@ -111,6 +111,9 @@ pub fn field_map_svgs(
                 ys: ys.clone(),
                 values,
                 diverging: true,
+                x_tick_labels: Vec::new(),
+                y_tick_labels: Vec::new(),
+                markers: Vec::new(),
             };
             (map_file_name(pattern, scheme, f.key), map.to_svg(520, 400))
         })

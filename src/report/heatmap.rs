@@ -20,6 +20,19 @@ pub struct Heatmap {
     pub values: Vec<f64>,
     /// Symmetric about zero (blue–white–red) when true; white-to-dark otherwise.
     pub diverging: bool,
+    /// Text at given positions instead of numeric ticks (categorical axes); empty = numbers.
+    pub x_tick_labels: Vec<(f64, String)>,
+    pub y_tick_labels: Vec<(f64, String)>,
+    /// Labelled points drawn over the cells (e.g. a paper's measurements), data units.
+    pub markers: Vec<HeatmapMarker>,
+}
+
+/// A labelled point over a heat map.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HeatmapMarker {
+    pub x: f64,
+    pub y: f64,
+    pub label: String,
 }
 
 /// Blue–white–red for t in [-1, 1].
@@ -141,10 +154,7 @@ impl Heatmap {
             s,
             r##"<rect x="{left}" y="{top}" width="{pw}" height="{ph}" fill="none" stroke="#333"/>"##
         );
-        for t in nice_ticks(x0, x1, 5)
-            .into_iter()
-            .filter(|t| *t >= x0 && *t <= x1)
-        {
+        for (t, text) in ticks(&self.x_tick_labels, x0, x1) {
             let _ = write!(
                 s,
                 r##"<line x1="{0:.1}" x2="{0:.1}" y1="{1:.1}" y2="{2:.1}" stroke="#333"/><text x="{0:.1}" y="{3:.1}" text-anchor="middle">{4}</text>"##,
@@ -152,13 +162,10 @@ impl Heatmap {
                 top + ph,
                 top + ph + 4.0,
                 top + ph + 17.0,
-                format_tick(t)
+                escape(&text)
             );
         }
-        for t in nice_ticks(y0, y1, 5)
-            .into_iter()
-            .filter(|t| *t >= y0 && *t <= y1)
-        {
+        for (t, text) in ticks(&self.y_tick_labels, y0, y1) {
             let _ = write!(
                 s,
                 r##"<line x1="{0:.1}" x2="{1:.1}" y1="{2:.1}" y2="{2:.1}" stroke="#333"/><text x="{3:.1}" y="{4:.1}" text-anchor="end">{5}</text>"##,
@@ -167,7 +174,18 @@ impl Heatmap {
                 sy(t),
                 left - 6.0,
                 sy(t) + 4.0,
-                format_tick(t)
+                escape(&text)
+            );
+        }
+        for m in &self.markers {
+            let _ = write!(
+                s,
+                r##"<g class="marker"><circle cx="{0:.1}" cy="{1:.1}" r="5" fill="none" stroke="#D55E00" stroke-width="2"/><text x="{2:.1}" y="{3:.1}" fill="#D55E00" font-weight="bold">{4}</text></g>"##,
+                sx(m.x),
+                sy(m.y),
+                sx(m.x) + 7.0,
+                sy(m.y) - 6.0,
+                escape(&m.label)
             );
         }
         let _ = write!(
@@ -224,6 +242,23 @@ impl Heatmap {
     }
 }
 
+/// The given labels inside [lo, hi], or numeric ticks when there are none.
+fn ticks(labels: &[(f64, String)], lo: f64, hi: f64) -> Vec<(f64, String)> {
+    if labels.is_empty() {
+        nice_ticks(lo, hi, 5)
+            .into_iter()
+            .filter(|t| *t >= lo && *t <= hi)
+            .map(|t| (t, format_tick(t)))
+            .collect()
+    } else {
+        labels
+            .iter()
+            .filter(|(t, _)| *t >= lo && *t <= hi)
+            .cloned()
+            .collect()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -239,8 +274,17 @@ mod tests {
             ys: vec![5.0, 15.0],
             values: vec![-0.1, 0.0, 0.1, f64::NAN, 0.05, -0.02],
             diverging: true,
+            x_tick_labels: Vec::new(),
+            y_tick_labels: vec![(5.0, "first".into()), (15.0, "second".into())],
+            markers: vec![HeatmapMarker {
+                x: 20.0,
+                y: 5.0,
+                label: "paper".into(),
+            }],
         };
         let svg = m.to_svg(500, 360);
+        assert!(svg.contains(">first<") && svg.contains(">second<") && svg.contains(">20<"));
+        assert_eq!(svg.matches(r#"class="marker""#).count(), 1);
         assert_eq!(svg.matches(r#"class="cell""#).count(), 6);
         assert!(svg.contains(r#"class="legend""#));
         assert!(svg.contains("x [px]") && svg.contains("Δu [px]"));

@@ -13,7 +13,7 @@ mod xy_plot;
 
 pub use bar_chart::{BarChart, Series};
 pub use dic_summary::{dic_settings_json, dic_summary_json};
-pub use heatmap::Heatmap;
+pub use heatmap::{Heatmap, HeatmapMarker};
 pub use history_chart::{history_svg, HistoryPoint};
 pub use png::png_quicklook;
 pub use table::{csv, text_table};

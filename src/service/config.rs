@@ -44,6 +44,8 @@ pub struct DaemonConfig {
     pub read_requires_token: Option<bool>,
     #[serde(default)]
     pub http: HttpLimits,
+    #[serde(default)]
+    pub sweeps: SweepLimits,
     pub bench: BenchConfig,
     pub camera: CameraConfig,
     pub stage: StageConfig,
@@ -86,6 +88,25 @@ impl Default for HttpLimits {
             request_timeout_ms: 300_000,
             max_connections: 4_096,
             drain_ms: 3_000,
+        }
+    }
+}
+
+/// How large a sweep (`POST /sweeps`) this daemon takes: it shares its cores with the bench and
+/// every other job. At most the compiled ceilings ([`super::MAX_DAEMON_SWEEP_TASKS`],
+/// [`super::MAX_DAEMON_SENSOR_SIDE_PX`]); larger sweeps belong to `ffdic sweep` on a cluster.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SweepLimits {
+    pub max_tasks: usize,
+    pub max_sensor_side_px: usize,
+}
+
+impl Default for SweepLimits {
+    fn default() -> Self {
+        Self {
+            max_tasks: super::MAX_DAEMON_SWEEP_TASKS,
+            max_sensor_side_px: super::MAX_DAEMON_SENSOR_SIDE_PX,
         }
     }
 }
@@ -214,6 +235,18 @@ impl DaemonConfig {
         }
         if config.http.max_connections == 0 {
             return Err(parse("http.max_connections must be at least 1".into()));
+        }
+        let sweeps = &config.sweeps;
+        if !(1..=super::MAX_DAEMON_SWEEP_TASKS).contains(&sweeps.max_tasks)
+            || !(crate::sweep::MIN_SENSOR_SIDE_PX..=super::MAX_DAEMON_SENSOR_SIDE_PX)
+                .contains(&sweeps.max_sensor_side_px)
+        {
+            return Err(parse(format!(
+                "sweeps: max_tasks 1 to {}, max_sensor_side_px {} to {}",
+                super::MAX_DAEMON_SWEEP_TASKS,
+                crate::sweep::MIN_SENSOR_SIDE_PX,
+                super::MAX_DAEMON_SENSOR_SIDE_PX
+            )));
         }
         Ok(config)
     }

@@ -6,11 +6,12 @@ mod config;
 mod hardware;
 mod jobs;
 mod models;
+mod sweep_job;
 mod work;
 
 pub use config::{
     load_bench_model, BenchConfig, CameraConfig, ConfigError, DaemonConfig, HttpLimits,
-    StageConfig, DEFAULT_CONFIG_TOML, PAPER_BENCH_TOML,
+    StageConfig, SweepLimits, DEFAULT_CONFIG_TOML, PAPER_BENCH_TOML,
 };
 pub use hardware::{mock_bench, open_bench, HardwareError, SwappableScene};
 pub use jobs::{JobContext, JobError, JobOutput, Jobs, Lane, Work};
@@ -18,6 +19,7 @@ pub use models::{
     embedded_model, find_analysis_model, ModelDetail, ModelLookupError, ModelSource,
     ModelStoreError, ModelSummary, NewModel, EMBEDDED_MODELS, PAPER_BENCH_DISTORTION_TOML,
 };
+pub use sweep_job::{plan_sweep, MAX_DAEMON_SENSOR_SIDE_PX, MAX_DAEMON_SWEEP_TASKS};
 pub use work::{AnalysisRequest, CompareRequest};
 
 use crate::experiment::{
@@ -174,13 +176,7 @@ impl Service {
         idempotency_key: Option<&str>,
     ) -> Result<(RunRecord, bool), SubmitError> {
         let options = request.options()?;
-        let model = self.model_config(&request.model).map_err(|e| match e {
-            ModelStoreError::Store(s) => SubmitError::Store(s),
-            other => SubmitError::Field(crate::experiment::FieldError {
-                field: "model".into(),
-                reason: other.to_string(),
-            }),
-        })?;
+        let model = self.requested_model(&request.model)?;
         self.store.get_dataset(dataset)?;
         let work = match kind {
             crate::store::RunKind::Diagnosis => work::diagnosis(
@@ -201,6 +197,18 @@ impl Service {
             Some(dataset.clone()),
             work,
         )?)
+    }
+
+    /// The model a request names (embedded or stored); an unknown or broken one blames the
+    /// request's `model` field.
+    fn requested_model(&self, name: &str) -> Result<crate::model::ModelConfig, SubmitError> {
+        self.model_config(name).map_err(|e| match e {
+            ModelStoreError::Store(s) => SubmitError::Store(s),
+            other => SubmitError::Field(crate::experiment::FieldError {
+                field: "model".into(),
+                reason: other.to_string(),
+            }),
+        })
     }
 
     /// The first step of stopping: no new work, every run cancelled, the stage stopped, then

@@ -110,7 +110,7 @@ id_type!(
 );
 
 impl RunId {
-    /// A fresh id for a run of `kind` (prefix `exp`, `ana`, `cmp` or `dia`).
+    /// A fresh id for a run of `kind` (prefix `exp`, `ana`, `cmp`, `dia` or `swp`).
     pub fn generate(kind: super::record::RunKind) -> Self {
         Self(generate(kind.id_prefix()))
     }

@@ -19,14 +19,17 @@ pub enum RunKind {
     Analysis,
     Comparison,
     Diagnosis,
+    /// A design map (`POST /sweeps`), run on the compute lane.
+    Sweep,
 }
 
 impl RunKind {
-    pub const ALL: [RunKind; 4] = [
+    pub const ALL: [RunKind; 5] = [
         RunKind::Experiment,
         RunKind::Analysis,
         RunKind::Comparison,
         RunKind::Diagnosis,
+        RunKind::Sweep,
     ];
 
     pub fn as_str(self) -> &'static str {
@@ -35,6 +38,7 @@ impl RunKind {
             RunKind::Analysis => "analysis",
             RunKind::Comparison => "comparison",
             RunKind::Diagnosis => "diagnosis",
+            RunKind::Sweep => "sweep",
         }
     }
 
@@ -45,6 +49,7 @@ impl RunKind {
             RunKind::Analysis => "ana",
             RunKind::Comparison => "cmp",
             RunKind::Diagnosis => "dia",
+            RunKind::Sweep => "swp",
         }
     }
 }

@@ -18,17 +18,22 @@ mod merge;
 mod plan;
 mod spec;
 mod task;
+mod views;
 
 pub use cluster::{
     k8s_job, slurm_scripts, K8sOptions, SlurmOptions, SlurmScripts, SLURM_MAX_ARRAY_TASKS,
 };
-pub use folder::{
-    map_csv, map_svgs, merge_folder, read_results, recommendations_text, run_shards, shard_done,
-    write_plan, RunCounts,
-};
+pub use folder::{merge_folder, read_results, run_shards, shard_done, write_plan, RunCounts};
 pub use merge::{
     conditions, merge, recommendations, CellStats, Merged, Recommendation, STAT_NAMES,
 };
 pub use plan::{plan, Plan, Shard, TaskInput};
-pub use spec::{NoiseLevel, PrintAxis, SweepError, SweepSpec};
+pub use spec::{
+    NoiseLevel, PrintAxis, SweepError, SweepSpec, MAX_MOVE_MM, MAX_SEEDS, MAX_SENSOR_SIDE_PX,
+    MAX_TASKS, MIN_SENSOR_SIDE_PX,
+};
 pub use task::{run_shard, TaskResult};
+pub use views::{
+    bias_svgs, map_csv, map_document, map_files, map_svgs, recommendations_text, CellJson,
+    IntervalJson, MapDocument, MapFile, RecommendationJson,
+};

@@ -1,14 +1,23 @@
 //! A sweep as a user writes it (TOML): the sensor, the axes, the model and the DIC settings.
 
 use crate::dic::DicSettings;
+use crate::experiment::FieldError;
 use crate::model::{Camera, SpecklePattern};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 /// The most tasks one plan may hold (a typo in an axis should not plan a year of work).
 pub const MAX_TASKS: usize = 1_000_000;
+/// Realisations per cell.
+pub const MAX_SEEDS: usize = 1_000;
+/// The sensor's side, px (a 16384² frame is 1 GiB of f32).
+pub const MIN_SENSOR_SIDE_PX: usize = 16;
+pub const MAX_SENSOR_SIDE_PX: usize = 16_384;
+/// The commanded move, per axis.
+pub const MAX_MOVE_MM: f64 = 100.0;
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+/// Also the body of `POST /sweeps` (as JSON); its schema is refined in `api::request_schemas`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SweepSpec {
     pub name: String,
@@ -18,9 +27,11 @@ pub struct SweepSpec {
     /// Speckle realisations (layout and noise) per cell.
     pub seeds: usize,
     /// The full-resolution sensor the fill factors are synthesised from.
+    #[schema(value_type = Object)]
     pub camera: Camera,
     /// The imaging model's effects besides the axes' (noise and PSF come from the axes): an
-    /// embedded model name or a model file, read when planning. Default: none (an ideal bench).
+    /// embedded or stored model's name (`ffdic sweep plan` also takes a model file), read when
+    /// planning. Default: none (an ideal bench).
     #[serde(default)]
     pub model: Option<String>,
     /// The commanded move, mm, before the sub-pixel axes add to it.
@@ -28,11 +39,13 @@ pub struct SweepSpec {
     pub move_mm: [f64; 2],
     pub axes: Axes,
     #[serde(default)]
+    #[schema(value_type = Object)]
     pub dic: DicSettings,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
+#[schema(as = SweepAxes)]
 pub struct Axes {
     /// Prints by dot diameter in pixels of the reduced image (the camera being designed),
     /// spacing 1.5 diameters, contrast 0.85 — or the paper's presets with `patterns`.
@@ -42,6 +55,7 @@ pub struct Axes {
     pub patterns: Vec<String>,
     /// Reduction schemes: presets (`ff100`, `ff50`, `ff25`) or per-axis schemes as JSON-like
     /// tables `{ name, x = { block, first, active }, y = {…} }`.
+    #[schema(value_type = Vec<Object>)]
     pub schemes: Vec<crate::experiment::SchemeSpec>,
     /// Sensor noise levels; empty = noiseless.
     #[serde(default)]
@@ -61,7 +75,7 @@ fn zero_list() -> Vec<f64> {
 }
 
 /// A sensor's noise: shot noise of a full well and read noise, electrons.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NoiseLevel {
     pub full_well_e: f64,
@@ -129,6 +143,8 @@ pub enum SweepError {
     Invalid { path: PathBuf, message: String },
     #[error("sweep task: {0}")]
     Task(String),
+    #[error("cancelled")]
+    Cancelled,
 }
 
 impl SweepSpec {
@@ -138,7 +154,7 @@ impl SweepSpec {
             message,
         };
         let spec: SweepSpec = toml::from_str(text).map_err(|e| invalid(e.message().to_string()))?;
-        spec.validate().map_err(invalid)?;
+        spec.validate().map_err(|e| invalid(e.to_string()))?;
         Ok(spec)
     }
 
@@ -185,25 +201,44 @@ impl SweepSpec {
         .unwrap_or(usize::MAX)
     }
 
-    fn validate(&self) -> Result<(), String> {
-        if self.seeds == 0 {
-            return Err("seeds: at least 1".into());
+    /// Checks every field (also what the schema cannot say, e.g. the task count); the field to
+    /// blame on failure.
+    pub fn validate(&self) -> Result<(), FieldError> {
+        let bad = |field: &str, reason: String| {
+            Err(FieldError {
+                field: field.to_string(),
+                reason,
+            })
+        };
+        if self.name.is_empty()
+            || self.name.chars().count() > 128
+            || self.name.chars().any(char::is_control)
+        {
+            return bad("name", "1 to 128 printable characters".into());
+        }
+        if !(1..=MAX_SEEDS).contains(&self.seeds) {
+            return bad("seeds", format!("1 to {MAX_SEEDS}"));
         }
         if self.prints().is_empty() {
-            return Err("axes: give dot_diameter_px or patterns".into());
+            return bad("axes", "give dot_diameter_px or patterns".into());
         }
         for d in &self.axes.dot_diameter_px {
             if !(d.is_finite() && (0.5..=100.0).contains(d)) {
-                return Err(format!("axes.dot_diameter_px: {d} is not in [0.5, 100] px"));
+                return bad(
+                    "axes.dot_diameter_px",
+                    format!("{d} is not in [0.5, 100] px"),
+                );
             }
         }
         for p in &self.axes.patterns {
             if SpecklePattern::preset(p).is_none() {
-                return Err(format!("axes.patterns: unknown preset '{p}' (a, b or c)"));
+                return bad("axes.patterns", format!("unknown preset '{p}' (a, b or c)"));
             }
         }
-        crate::experiment::check_schemes(&self.axes.schemes)
-            .map_err(|e| format!("axes.{}: {}", e.field, e.reason))?;
+        crate::experiment::check_schemes(&self.axes.schemes).map_err(|e| FieldError {
+            field: format!("axes.{}", e.field),
+            reason: e.reason,
+        })?;
         for n in &self.axes.noise {
             let sane = n.full_well_e > 0.0
                 && n.read_noise_e >= 0.0
@@ -212,42 +247,65 @@ impl SweepSpec {
                     .iter()
                     .all(|v| v.is_finite());
             if !sane {
-                return Err("axes.noise: full_well_e and gain positive, read_noise_e ≥ 0".into());
+                return bad(
+                    "axes.noise",
+                    "full_well_e and gain positive, read_noise_e ≥ 0".into(),
+                );
             }
         }
-        let finite = |name: &str, xs: &[f64], lo: f64, hi: f64| -> Result<(), String> {
+        let within = |name: &str, xs: &[f64], lo: f64, hi: f64| -> Result<(), FieldError> {
             if xs.is_empty() {
-                return Err(format!("axes.{name}: at least one value"));
+                return bad(&format!("axes.{name}"), "at least one value".into());
             }
             match xs
                 .iter()
                 .find(|v| !(v.is_finite() && (lo..=hi).contains(*v)))
             {
-                Some(v) => Err(format!("axes.{name}: {v} is not in [{lo}, {hi}]")),
+                Some(v) => bad(
+                    &format!("axes.{name}"),
+                    format!("{v} is not in [{lo}, {hi}]"),
+                ),
                 None => Ok(()),
             }
         };
-        finite("psf_sigma_px", &self.axes.psf_sigma_px, 0.0, 20.0)?;
-        finite("subpixel_x", &self.axes.subpixel_x, -1.0, 1.0)?;
-        finite("subpixel_y", &self.axes.subpixel_y, -1.0, 1.0)?;
+        within("psf_sigma_px", &self.axes.psf_sigma_px, 0.0, 20.0)?;
+        within("subpixel_x", &self.axes.subpixel_x, -1.0, 1.0)?;
+        within("subpixel_y", &self.axes.subpixel_y, -1.0, 1.0)?;
         if !self
             .move_mm
             .iter()
-            .all(|v| v.is_finite() && v.abs() <= 100.0)
+            .all(|v| v.is_finite() && v.abs() <= MAX_MOVE_MM)
         {
-            return Err("move_mm: each within ±100 mm".into());
+            return bad("move_mm", format!("each within ±{MAX_MOVE_MM} mm"));
         }
         let c = &self.camera;
-        if !(16..=16384).contains(&c.width) || !(16..=16384).contains(&c.height) {
-            return Err("camera: width and height 16 to 16384 px".into());
+        let sides = MIN_SENSOR_SIDE_PX..=MAX_SENSOR_SIDE_PX;
+        if !sides.contains(&c.width) || !sides.contains(&c.height) {
+            return bad(
+                "camera",
+                format!("width and height {MIN_SENSOR_SIDE_PX} to {MAX_SENSOR_SIDE_PX} px"),
+            );
         }
-        if !(c.scale_px_per_mm.is_finite() && c.scale_px_per_mm > 0.0) {
-            return Err("camera.scale_px_per_mm must be positive".into());
+        if !(c.scale_px_per_mm.is_finite() && (0.01..=10_000.0).contains(&c.scale_px_per_mm)) {
+            return bad("camera.scale_px_per_mm", "0.01 to 10,000 px/mm".into());
         }
-        self.dic.validate().map_err(|e| format!("dic: {e}"))?;
+        if !(c.exposure_level.is_finite() && c.exposure_level > 0.0 && c.exposure_level <= 1.0) {
+            return bad("camera.exposure_level", "in (0, 1]".into());
+        }
+        let half = c.width.max(c.height) as f64;
+        if ![c.principal_dx_px, c.principal_dy_px]
+            .iter()
+            .all(|v| v.is_finite() && v.abs() <= half)
+        {
+            return bad("camera", "principal point offsets within the sensor".into());
+        }
+        self.dic.validate().map_err(|e| FieldError {
+            field: "dic".into(),
+            reason: e.to_string(),
+        })?;
         let n = self.task_count();
         if n > MAX_TASKS {
-            return Err(format!("{n} tasks; at most {MAX_TASKS}"));
+            return bad("axes", format!("{n} tasks; at most {MAX_TASKS}"));
         }
         Ok(())
     }

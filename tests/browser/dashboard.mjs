@@ -242,6 +242,34 @@ async function main() {
     expect(events >= 5 && (await page.locator("#events li[data-kind=succeeded]").count()) === 1,
       `the Events box of a finished run shows its replayed events (${events})`);
 
+    // ---- a design map from the home page's default spec (the smoke sweep) ----
+    await page.goto(`${base}/`);
+    await page.waitForSelector("#sweep-form textarea[name=spec]");
+    const specText = await page.locator("#sweep-form textarea[name=spec]").inputValue();
+    expect(JSON.parse(specText).name === "smoke", "the sweep form offers the smoke spec");
+    await Promise.all([
+      page.waitForURL(/\/sweeps\/[^/]+$/, { timeout: 30 * SECOND }),
+      page.locator("#start-sweep").click(),
+    ]);
+    log(`sweep started: ${page.url()}`);
+    await page.waitForSelector("#run-status .badge[data-status=succeeded]", { timeout: 180 * SECOND });
+    await page.waitForSelector("#results[data-loaded=true]", { timeout: 60 * SECOND });
+    const recommendationRows = await page.locator("#recommendations tbody tr").count();
+    const cellRows = await page.locator("#cells tbody tr").count();
+    expect(recommendationRows === 6, `6 recommendations (3 schemes x 2 sub-pixel positions): ${recommendationRows}`);
+    expect(cellRows === 18, `18 cells: ${cellRows}`);
+    const heatmaps = await page.locator("#heatmaps .figure svg").count();
+    expect(heatmaps === 2, `one std u heat map per sub-pixel position: ${heatmaps}`);
+    const markers = await page.locator("#heatmaps svg g.marker").count();
+    expect(markers === 12, `the paper's a and b at its three fill factors on both maps: ${markers}`);
+    await page.locator("#stat-pickers button[data-stat=v_std_px]").click();
+    await page.waitForFunction(() => [...document.querySelectorAll("#heatmaps .figure")].every((f) => f.dataset.figure.startsWith("map_v_std_px_") && f.dataset.loaded === "true"), null, { timeout: 30 * SECOND });
+    const biasPlots = await page.locator("#bias .figure svg").count();
+    expect(biasPlots === 3, `a bias plot per scheme (sub-pixel x has two values): ${biasPlots}`);
+    expect(/\[[-+−]?\d/.test(await page.locator("#cells").innerText()), "the cells carry intervals");
+    log(`sweep: ${cellRows} cells, ${recommendationRows} recommendations, ${heatmaps} heat maps with ${markers} paper points, ${biasPlots} bias plots`);
+    await shot(page, "8-sweep");
+
     // ---- upload the hidden-effect dataset through the form ----
     await page.goto(`${base}/`);
     const files = fs.readdirSync(datasetDir).filter((f) => f === "dataset.json" || /\.tiff?$/i.test(f)).map((f) => path.join(datasetDir, f));

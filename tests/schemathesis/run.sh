@@ -68,6 +68,10 @@ height = 320
 kind = "mock"
 speed_mm_s = 25.0
 settle_ms = 10
+# The sweeps schemathesis sends run on the compute lane while it goes on: small ones only.
+[sweeps]
+max_tasks = 64
+max_sensor_side_px = 256
 EOF
 
 NO_COLOR=1 RUST_LOG="${RUST_LOG:-info}" nice -n 5 "$BIN" serve --config "$TMP/ffdic.toml" \

@@ -86,6 +86,15 @@ pub async fn list(
     State(svc): State<Service>,
     Query(q): Query<ListQuery>,
 ) -> ApiResult<Json<Vec<RunRecord>>> {
+    list_runs(&svc, RunKind::Experiment, &q).await
+}
+
+/// The runs of `kind`, newest first, filtered and limited as `q` asks.
+pub async fn list_runs(
+    svc: &Service,
+    kind: RunKind,
+    q: &ListQuery,
+) -> ApiResult<Json<Vec<RunRecord>>> {
     let status = match q.status.as_deref() {
         None => None,
         Some(s) => Some(
@@ -99,8 +108,7 @@ pub async fn list(
         return Err(ApiError::invalid("limit", "1 to 1000"));
     }
     let store = svc.store.clone();
-    let runs =
-        super::blocking(move || store.list(status, Some(RunKind::Experiment), limit)).await??;
+    let runs = super::blocking(move || store.list(status, Some(kind), limit)).await??;
     Ok(Json(runs))
 }
 

@@ -27,19 +27,8 @@ pub async fn load(svc: &Service, id: &RunId, kind: Option<RunKind>) -> ApiResult
     let key = id.clone();
     let record = blocking(move || store.get(&key)).await??;
     match kind {
-        Some(k) if record.kind != k => {
-            Err(ApiError::not_found(format!("no {} '{id}'", kind_name(k))))
-        }
+        Some(k) if record.kind != k => Err(ApiError::not_found(format!("no {k} '{id}'"))),
         _ => Ok(record),
-    }
-}
-
-pub fn kind_name(k: RunKind) -> &'static str {
-    match k {
-        RunKind::Experiment => "experiment",
-        RunKind::Analysis => "analysis",
-        RunKind::Comparison => "comparison",
-        RunKind::Diagnosis => "diagnosis",
     }
 }
 

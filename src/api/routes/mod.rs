@@ -6,6 +6,7 @@ pub mod experiments;
 pub mod jobs;
 pub mod models;
 pub mod stage;
+pub mod sweeps;
 pub mod system;
 
 use super::problem::ApiError;

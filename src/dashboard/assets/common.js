@@ -116,7 +116,7 @@ const EVENT_KINDS = [
   "message", "queued", "started", "progress", "homing", "camera_set", "target_mounted",
   "stage_moved", "frame_captured", "dataset_written", "pair_analyzed", "dataset_registered",
   "measurement_loaded", "compared", "fitted", "candidate_fitted", "diagnosed", "written",
-  "succeeded", "failed", "cancelled",
+  "planned", "shards_run", "merged", "succeeded", "failed", "cancelled",
 ];
 
 /**
@@ -172,6 +172,40 @@ export function follow(recordUrl, eventsUrl, onEvent, onRecord) {
     timer = setInterval(poll, 2000);
     poll();
   });
+}
+
+/**
+ * The handler of a run page's events: moves `bar`, shows the message in `messageNode` and
+ * appends the event to the `list` (at most 200 kept).
+ */
+export function eventLog(bar, messageNode, list) {
+  return (e) => {
+    bar.set(e.progress, e.kind === "succeeded" ? "succeeded" : undefined);
+    if (e.message) messageNode.textContent = e.message;
+    list.append(el("li", { "data-kind": e.kind }, el("span", { class: "mono" }, e.kind), " — ", e.message || ""));
+    while (list.children.length > 200) list.firstElementChild.remove();
+    list.scrollTop = list.scrollHeight;
+  };
+}
+
+/**
+ * Fills `tbody` with the runs `path` lists (id linked to `/{page}/{id}`, name, status,
+ * progress, created, message), or `emptyText` when there is none.
+ */
+export async function loadRunList(path, page, tbody, emptyText) {
+  try {
+    const runs = await api(path);
+    const rows = runs.map((r) => el("tr", { "data-id": r.id },
+      el("td", {}, el("a", { href: `/${page}/${r.id}`, class: "mono" }, r.id)),
+      el("td", {}, (r.request && r.request.name) || ""),
+      el("td", {}, badge(r.status)),
+      el("td", { class: "num" }, pct(r.progress)),
+      el("td", {}, when(r.created_at)),
+      el("td", { class: "small muted" }, r.message || "")));
+    clear(tbody, rows.length ? rows : [el("tr", {}, el("td", { colspan: 6, class: "muted" }, emptyText))]);
+  } catch (e) {
+    clear(tbody, el("tr", {}, el("td", { colspan: 6, class: "error" }, e.message)));
+  }
 }
 
 /** A progress bar with its percentage: returns {node, set(progress, status)}. */

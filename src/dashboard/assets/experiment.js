@@ -1,5 +1,5 @@
 // One experiment: live progress over SSE, then Figures 5 and 6, the study, maps and downloads.
-import { api, el, $, clear, num, when, badge, showError, setupToken, follow, progressBar, inlineSvg, pageId, um, TERMINAL, API } from "./common.js";
+import { api, el, $, clear, num, when, badge, showError, setupToken, follow, progressBar, inlineSvg, pageId, um, TERMINAL, API, eventLog } from "./common.js";
 
 setupToken();
 const id = pageId();
@@ -46,14 +46,7 @@ function showRecord(r) {
   $("#cancel-btn").classList.toggle("hidden", TERMINAL.includes(r.status));
 }
 
-function onEvent(e) {
-  bar.set(e.progress, e.kind === "succeeded" ? "succeeded" : undefined);
-  if (e.message) $("#run-message").textContent = e.message;
-  const list = $("#events");
-  list.append(el("li", { "data-kind": e.kind }, el("span", { class: "mono" }, e.kind), " — ", e.message || ""));
-  while (list.children.length > 200) list.firstElementChild.remove();
-  list.scrollTop = list.scrollHeight;
-}
+const onEvent = eventLog(bar, $("#run-message"), $("#events"));
 
 const FIGURES = ["figure5_u", "figure5_exx", "figure6_v", "figure6_eyy"];
 

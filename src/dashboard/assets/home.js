@@ -1,5 +1,5 @@
 // Home: the bench (state, snapshot with histogram, exposure and gain), experiments, datasets.
-import { api, el, $, clear, num, pct, when, badge, showError, setupToken } from "./common.js";
+import { api, el, $, clear, num, when, showError, setupToken, loadRunList } from "./common.js";
 import { histogramSvg } from "./charts.js";
 
 setupToken();
@@ -222,20 +222,8 @@ $("#camera-form").addEventListener("submit", async (ev) => {
 
 // ---------- experiments ----------
 
-async function loadExperiments() {
-  try {
-    const runs = await api("/experiments?limit=50");
-    const rows = runs.map((r) => el("tr", { "data-id": r.id },
-      el("td", {}, el("a", { href: `/experiments/${r.id}`, class: "mono" }, r.id)),
-      el("td", {}, (r.request && r.request.name) || ""),
-      el("td", {}, badge(r.status)),
-      el("td", { class: "num" }, pct(r.progress)),
-      el("td", {}, when(r.created_at)),
-      el("td", { class: "small muted" }, r.message || "")));
-    clear($("#experiment-list"), rows.length ? rows : [el("tr", {}, el("td", { colspan: 6, class: "muted" }, "no experiment yet: start one below"))]);
-  } catch (e) {
-    clear($("#experiment-list"), el("tr", {}, el("td", { colspan: 6, class: "error" }, e.message)));
-  }
+function loadExperiments() {
+  return loadRunList("/experiments?limit=50", "experiments", $("#experiment-list"), "no experiment yet: start one below");
 }
 
 function parseMoves(text) {
@@ -283,6 +271,51 @@ $("#experiment-form").addEventListener("submit", async (ev) => {
   } catch (e) {
     showError(err, e);
     $("#start-experiment").disabled = false;
+  }
+});
+
+// ---------- design maps ----------
+
+/** config/sweeps/smoke.toml as JSON: 3 prints x 3 schemes x 2 sub-pixel positions x 3 seeds. */
+const SMOKE_SPEC = {
+  name: "smoke",
+  seed: 7,
+  seeds: 3,
+  move_mm: [0.7692307692307693, 0.0],
+  camera: { width: 384, height: 384, scale_px_per_mm: 26.0, exposure_level: 0.5 },
+  axes: {
+    dot_diameter_px: [2.0, 4.0, 7.0],
+    schemes: ["ff100", "ff50", "ff25"],
+    noise: [{ full_well_e: 30000.0, read_noise_e: 1.5, gain: 0.46 }],
+    subpixel_x: [0.0, 0.5],
+  },
+  dic: { subset_px: 31, step_px: 16, strain_window: 5 },
+};
+
+function loadSweeps() {
+  return loadRunList("/sweeps?limit=50", "sweeps", $("#sweep-list"), "no design map yet: start one below");
+}
+
+$("#sweep-form").spec.value = JSON.stringify(SMOKE_SPEC, null, 2);
+
+$("#sweep-form").addEventListener("submit", async (ev) => {
+  ev.preventDefault();
+  const err = $("#sweep-error");
+  showError(err, null);
+  let body;
+  try {
+    body = JSON.parse(ev.target.spec.value);
+  } catch (e) {
+    showError(err, `the spec is not JSON: ${e.message}`);
+    return;
+  }
+  $("#start-sweep").disabled = true;
+  try {
+    const run = await api("/sweeps", { method: "POST", body });
+    location.href = `/sweeps/${run.id}`;
+  } catch (e) {
+    showError(err, e);
+    $("#start-sweep").disabled = false;
   }
 });
 
@@ -334,7 +367,8 @@ $("#upload-form").addEventListener("submit", async (ev) => {
 
 loadBench();
 loadExperiments();
+loadSweeps();
 loadDatasets();
 // No snapshot here: on real hardware every snapshot is an acquisition, taken only on request.
-setInterval(() => { loadBench(); loadExperiments(); }, 4000);
+setInterval(() => { loadBench(); loadExperiments(); loadSweeps(); }, 4000);
 

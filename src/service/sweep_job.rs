@@ -1,0 +1,135 @@
+//! `POST /sweeps`: a design map run by the daemon as a job on the compute lane. The sweep's
+//! folder (`plan.json`, one result per task) lives inside the run's folder as `sweep/`, so a
+//! daemon restarted mid-sweep keeps every finished task; the merged map goes where every run's
+//! outputs go: `results/map.csv`, `results/map.json`, `results/recommendations.txt` and
+//! `plots/*.svg`.
+
+use super::jobs::{JobContext, JobError, JobOutput, Work};
+use super::{Service, SweepLimits};
+use crate::experiment::{FieldError, RunSink};
+use crate::model::ModelConfig;
+use crate::sweep::{
+    map_files, merge, plan, read_results, run_shards, write_plan, Plan, SweepError, SweepSpec,
+};
+use serde_json::json;
+
+/// The largest sweep any daemon runs (larger ones belong to `ffdic sweep` on a cluster: the
+/// daemon shares its cores with the bench and every other job); `[sweeps] max_tasks` may lower it.
+pub const MAX_DAEMON_SWEEP_TASKS: usize = 10_000;
+/// The largest sensor side a daemon sweep renders, px; `[sweeps] max_sensor_side_px` may lower it.
+pub const MAX_DAEMON_SENSOR_SIDE_PX: usize = 4096;
+/// At most this many progress events per sweep (one per shard would flood a long sweep's log).
+const PROGRESS_EVENTS: usize = 200;
+
+/// Checks `spec` against the sweep's own rules and this daemon's `limits`, and plans it with
+/// `model` (the model `spec.model` names, already looked up).
+pub fn plan_sweep(
+    spec: &SweepSpec,
+    model: Option<&ModelConfig>,
+    limits: &SweepLimits,
+) -> Result<Plan, FieldError> {
+    spec.validate()?;
+    let c = &spec.camera;
+    let side = limits.max_sensor_side_px;
+    if c.width > side || c.height > side {
+        return Err(FieldError {
+            field: "camera".into(),
+            reason: format!(
+                "width and height at most {side} px on this daemon (`ffdic sweep` takes larger sensors)"
+            ),
+        });
+    }
+    let (tasks, max) = (spec.task_count(), limits.max_tasks);
+    if tasks > max {
+        return Err(FieldError {
+            field: "axes".into(),
+            reason: format!(
+                "{tasks} tasks; this daemon runs at most {max} (`ffdic sweep slurm` runs larger sweeps on a cluster)"
+            ),
+        });
+    }
+    plan(spec, model).map_err(|e| FieldError {
+        field: "axes".into(),
+        reason: e.to_string(),
+    })
+}
+
+fn fail(e: impl std::fmt::Display) -> JobError {
+    JobError::Failed(e.to_string())
+}
+
+pub fn sweep(plan: Plan) -> Work {
+    Box::new(move |ctx: &JobContext| {
+        let dir = ctx.store().run_dir(&ctx.run_id).join("sweep");
+        write_plan(&dir, &plan).map_err(fail)?;
+        let (tasks, shards) = (plan.task_count(), plan.shards.len());
+        ctx.event(
+            "planned",
+            0.0,
+            &format!("{tasks} tasks in {shards} shards"),
+            json!({ "tasks": tasks, "shards": shards }),
+        );
+        let every = shards.div_ceil(PROGRESS_EVENTS).max(1);
+        let counts = run_shards(&dir, &plan, &|_| true, &|done, total| {
+            if done > 0 && (done % every == 0 || done == total) {
+                ctx.event(
+                    "shards_run",
+                    0.95 * done as f64 / total.max(1) as f64,
+                    &format!("{done} of {total} shards run"),
+                    json!({ "done": done, "total": total }),
+                );
+            }
+            !ctx.cancelled()
+        })
+        .map_err(|e| match e {
+            SweepError::Cancelled => JobError::Cancelled,
+            other => fail(other),
+        })?;
+        let merged = merge(&plan, &read_results(&dir, &plan));
+        for file in map_files(&plan, &merged) {
+            let folder = if file.figure { "plots" } else { "results" };
+            ctx.write(&format!("{folder}/{}", file.name), &file.bytes)
+                .map_err(JobError::Failed)?;
+        }
+        ctx.event(
+            "merged",
+            1.0,
+            &format!("{} cells merged", merged.cells.len()),
+            json!({ "cells": merged.cells.len(), "missing_tasks": merged.missing.len() }),
+        );
+        Ok(JobOutput {
+            message: format!(
+                "{} cells from {tasks} tasks ({} run now, {} shards found done)",
+                merged.cells.len(),
+                counts.tasks_run,
+                counts.shards_skipped
+            ),
+        })
+    })
+}
+
+impl Service {
+    /// Queues a design map on the compute lane (checked and planned first: a bad spec queues
+    /// nothing).
+    pub fn submit_sweep(
+        &self,
+        spec: &SweepSpec,
+        idempotency_key: Option<&str>,
+    ) -> Result<(crate::store::RunRecord, bool), super::SubmitError> {
+        let model = spec
+            .model
+            .as_deref()
+            .map(|name| self.requested_model(name))
+            .transpose()?;
+        let plan = plan_sweep(spec, model.as_ref(), &self.config.sweeps)?;
+        let body = serde_json::to_value(spec).expect("a sweep spec serialises");
+        Ok(self.jobs.submit(
+            crate::store::RunKind::Sweep,
+            super::Lane::Compute,
+            body,
+            idempotency_key,
+            None,
+            sweep(plan),
+        )?)
+    }
+}

@@ -1,0 +1,249 @@
+//! Design maps through the daemon (`POST /sweeps`, issue 15): a sweep runs as a job with
+//! progress, its map equals the one `ffdic sweep plan/run/merge` makes of the same spec, a bad
+//! spec is refused naming the field with nothing queued, and a cancelled sweep stops.
+
+#[path = "common/daemon.rs"]
+mod daemon;
+
+use daemon::{client, read_events, small_config, wait_terminal, wait_until, TestServer};
+use serde_json::{json, Value};
+use std::path::Path;
+use std::process::Command;
+
+/// `config/sweeps/smoke.toml` as the JSON body of `POST /sweeps`.
+fn smoke_spec() -> Value {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sweeps/smoke.toml");
+    let spec: toml::Value = toml::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    serde_json::to_value(spec).unwrap()
+}
+
+/// The CLI's `map.csv` of `spec` (written as TOML into `dir`).
+fn cli_map_csv(spec: &Value, dir: &Path) -> String {
+    let spec_path = dir.join("spec.toml");
+    let toml_spec: toml::Value = serde_json::from_value(spec.clone()).unwrap();
+    std::fs::write(&spec_path, toml::to_string(&toml_spec).unwrap()).unwrap();
+    let sweep = dir.join("sweep");
+    for args in [
+        vec![
+            "sweep".into(),
+            "plan".into(),
+            spec_path.display().to_string(),
+            "--out".into(),
+            sweep.display().to_string(),
+        ],
+        vec!["sweep".into(), "run".into(), sweep.display().to_string()],
+        vec!["sweep".into(), "merge".into(), sweep.display().to_string()],
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_ffdic"))
+            .args(&args)
+            .env("RUST_LOG", "warn")
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    std::fs::read_to_string(sweep.join("map.csv")).unwrap()
+}
+
+async fn post(url: &str, body: &Value) -> reqwest::Response {
+    client().post(url).json(body).send().await.unwrap()
+}
+
+async fn get(url: &str) -> reqwest::Response {
+    client().get(url).send().await.unwrap()
+}
+
+async fn get_json<T: serde::de::DeserializeOwned>(url: &str) -> T {
+    get(url).await.json().await.unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_sweep_through_the_daemon_maps_as_the_cli_does() {
+    let tmp = tempfile::tempdir().unwrap();
+    let server = TestServer::start(small_config(&tmp.path().join("data"))).await;
+    let spec = smoke_spec();
+
+    let r = post(&server.url("/sweeps"), &spec).await;
+    assert_eq!(r.status(), 202);
+    let location = r.headers()["location"].to_str().unwrap().to_string();
+    let run: Value = r.json().await.unwrap();
+    let id = run["id"].as_str().unwrap().to_string();
+    assert!(id.starts_with("swp-"), "{id}");
+    assert_eq!(location, format!("/api/v1/sweeps/{id}"));
+    assert_eq!(run["kind"], "sweep");
+
+    let done = wait_terminal(&server.url(&format!("/sweeps/{id}"))).await;
+    assert_eq!(done["status"], "succeeded", "{done}");
+    let events = read_events(&server.url(&format!("/jobs/{id}/events")), None, 1000).await;
+    let kinds: Vec<&str> = events.iter().map(|e| e.kind.as_str()).collect();
+    for kind in ["planned", "shards_run", "merged", "succeeded"] {
+        assert!(kinds.contains(&kind), "no {kind} event in {kinds:?}");
+    }
+    let last_progress = events.iter().rfind(|e| e.kind == "shards_run").unwrap();
+    assert_eq!(last_progress.data["done"], last_progress.data["total"]);
+
+    // The map: 3 prints x 3 schemes x 2 sub-pixel positions, 3 realisations each.
+    let map: Value = get_json(&server.url(&format!("/sweeps/{id}/map"))).await;
+    assert_eq!(map["name"], "smoke");
+    assert_eq!(map["tasks"], 54);
+    assert_eq!(map["missing_tasks"], 0);
+    let cells = map["cells"].as_array().unwrap();
+    assert_eq!(cells.len(), 18);
+    for c in cells {
+        assert_eq!(c["n"], 3, "{c}");
+        let u = &c["stats"]["u_std_px"];
+        let (mean, lo, hi) = (
+            u["mean"].as_f64().unwrap(),
+            u["lo"].as_f64().unwrap(),
+            u["hi"].as_f64().unwrap(),
+        );
+        assert!(lo <= mean && mean <= hi && mean > 0.0, "{c}");
+    }
+    assert_eq!(map["recommendations"].as_array().unwrap().len(), 6);
+
+    // The same spec through the CLI gives the same table, byte for byte.
+    let csv = get(&server.url(&format!("/sweeps/{id}/map.csv"))).await;
+    assert!(csv.headers()["content-type"]
+        .to_str()
+        .unwrap()
+        .starts_with("text/csv"));
+    let csv = csv.text().await.unwrap();
+    let cli_dir = tmp.path().join("cli");
+    std::fs::create_dir_all(&cli_dir).unwrap();
+    let cli_spec = spec.clone();
+    let cli_csv = tokio::task::spawn_blocking(move || cli_map_csv(&cli_spec, &cli_dir))
+        .await
+        .unwrap();
+    assert_eq!(csv, cli_csv);
+
+    // Every figure the map names is served; the bias plots exist (two sub-pixel positions).
+    let figures: Vec<&str> = map["figures"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f.as_str().unwrap())
+        .collect();
+    assert!(figures.contains(&"map_u_std_px_0.svg"), "{figures:?}");
+    assert!(
+        figures.iter().any(|f| f.starts_with("bias_u_ff25_")),
+        "{figures:?}"
+    );
+    for name in &figures {
+        let r = get(&server.url(&format!("/sweeps/{id}/plots/{name}"))).await;
+        assert_eq!(r.status(), 200, "{name}");
+        assert_eq!(r.headers()["content-type"], "image/svg+xml");
+        assert!(r.text().await.unwrap().starts_with("<svg"));
+    }
+    // The paper's b (3.1 px) lies between the smoke map's 2 and 4 px prints, a (6.5 px) between
+    // 4 and 7: both marked at the three paper schemes.
+    let heat = get(&server.url(&format!("/sweeps/{id}/plots/map_u_std_px_0.svg")))
+        .await
+        .text()
+        .await
+        .unwrap();
+    assert_eq!(heat.matches(r#"class="marker""#).count(), 6);
+
+    let listed: Vec<Value> = get_json(&server.url("/sweeps")).await;
+    assert_eq!(listed.len(), 1);
+    assert_eq!(listed[0]["id"], id.as_str());
+    // A sweep is no experiment, and an experiment id is no sweep.
+    let r = get(&server.url(&format!("/experiments/{id}"))).await;
+    assert_eq!(r.status(), 404);
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_sweeps_are_refused_naming_the_field_and_queue_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut config = small_config(&tmp.path().join("data"));
+    config.sweeps.max_tasks = 50;
+    let server = TestServer::start(config).await;
+    let with = |pointer: &str, value: Value| {
+        let mut spec = smoke_spec();
+        *spec.pointer_mut(pointer).unwrap() = value;
+        spec
+    };
+    let mut unknown_field = smoke_spec();
+    unknown_field["axes"]["dot_size"] = json!([3.0]);
+    let cases = [
+        // 54 tasks over this daemon's 50.
+        (smoke_spec(), "axes"),
+        (with("/camera/width", json!(5000)), "camera"),
+        (with("/seeds", json!(0)), "seeds"),
+        (
+            with("/axes/dot_diameter_px", json!([0.1])),
+            "dot_diameter_px",
+        ),
+        (with("/axes/subpixel_x", json!([2.0])), "subpixel_x"),
+        (with("/axes/schemes", json!(["ff12"])), "schemes"),
+        (with("/dic/subset_px", json!(30)), "dic"),
+        (with("/name", json!("")), "name"),
+        (
+            {
+                let mut s = smoke_spec();
+                s["model"] = json!("no-such-model");
+                s
+            },
+            "model",
+        ),
+        (unknown_field, "dot_size"),
+    ];
+    for (body, field) in cases {
+        let r = post(&server.url("/sweeps"), &body).await;
+        let status = r.status();
+        let problem: Value = r.json().await.unwrap();
+        assert_eq!(status, 422, "{field}: {problem}");
+        assert!(
+            problem.to_string().contains(field),
+            "{field} not named: {problem}"
+        );
+    }
+    let listed: Vec<Value> = get_json(&server.url("/sweeps")).await;
+    assert!(listed.is_empty(), "{listed:?}");
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_cancelled_sweep_stops_and_keeps_what_it_finished() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    let server = TestServer::start(small_config(&data)).await;
+    // 64 shards of 512x512 renderings: long enough to cancel in the middle.
+    let mut spec = smoke_spec();
+    spec["camera"]["width"] = json!(512);
+    spec["camera"]["height"] = json!(512);
+    spec["seeds"] = json!(32);
+    spec["axes"]["dot_diameter_px"] = json!([3.0]);
+    let r = post(&server.url("/sweeps"), &spec).await;
+    assert_eq!(r.status(), 202);
+    let id = r.json::<Value>().await.unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    wait_until(&server.url(&format!("/sweeps/{id}")), |r| {
+        r["progress"].as_f64().unwrap_or(0.0) > 0.0
+    })
+    .await;
+    let r = client()
+        .post(server.url(&format!("/jobs/{id}/cancel")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    let done = wait_terminal(&server.url(&format!("/sweeps/{id}"))).await;
+    assert_eq!(done["status"], "cancelled", "{done}");
+    let results = std::fs::read_dir(data.join("runs").join(&id).join("sweep/results"))
+        .unwrap()
+        .count();
+    assert!(
+        results > 0 && results < 192,
+        "{results} of 192 task results kept"
+    );
+    // No map of a sweep that did not finish.
+    let r = get(&server.url(&format!("/sweeps/{id}/map"))).await;
+    assert_eq!(r.status(), 404);
+    server.stop().await;
+}
