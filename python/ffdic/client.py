@@ -585,6 +585,41 @@ class Client:
             winner = self.job_file(job_id, "results/winner-model.toml").decode("utf-8")
         return JobResult(document, job, winner)
 
+    # --- design maps ------------------------------------------------------------------------
+
+    def start_sweep(
+        self,
+        spec: Mapping[str, Any],
+        *,
+        idempotency_key: Optional[str] = None,
+    ) -> str:
+        """``POST /sweeps``: queues a design map on the daemon's compute lane and returns its
+        run id. ``spec`` has the fields of ``config/sweeps/*.toml`` (``name``, ``seeds``,
+        ``camera``, ``move_mm``, ``axes`` with ``dot_diameter_px`` or ``patterns``,
+        ``schemes``, ``noise``, ``psf_sigma_px``, ``subpixel_x``/``subpixel_y``, ``model``,
+        ``dic``); ``tomllib.load`` of such a file is one. The daemon caps a sweep (``[sweeps]``
+        in its config); larger ones belong to ``ffdic sweep``. Follow it with
+        ``follow(id, kind="job")`` and read it with :meth:`sweep_map`."""
+        return self._submit("/sweeps", spec, idempotency_key)
+
+    def sweeps(self, status: Optional[str] = None, limit: Optional[int] = None) -> List[Dict[str, Any]]:
+        """``GET /sweeps``: design-map records, newest first (filters as :meth:`experiments`)."""
+        return self._json("GET", "/sweeps", query={"status": status, "limit": limit})  # type: ignore[no-any-return]
+
+    def sweep_map(self, run_id: str) -> Dict[str, Any]:
+        """``GET /sweeps/{id}/map``: the merged map of a finished sweep: ``cells`` (each with
+        its axes, ``n`` realisations and ``stats``: ``{name: {"mean", "lo", "hi"}}``, a 95 %
+        Student-t interval over realisations, px or strain), ``recommendations`` and the names of
+        its ``figures`` (SVG, ``job_file(id, "plots/NAME")``)."""
+        return self._json("GET", f"/sweeps/{_quote(run_id)}/map")  # type: ignore[no-any-return]
+
+    def sweep_table(self, run_id: str) -> Dict[str, np.ndarray]:
+        """``GET /sweeps/{id}/map.csv`` as columns (as :meth:`results_table`): one entry per
+        cell; ``u_std_px``, ``u_std_px_lo``, ``u_std_px_hi`` … are each statistic's mean and
+        interval bounds."""
+        raw = self._bytes("GET", f"/sweeps/{_quote(run_id)}/map.csv")
+        return parse_csv_columns(raw.decode("utf-8"))
+
     # --- datasets ---------------------------------------------------------------------------
 
     def upload_dataset(self, folder: Union[str, "os.PathLike[str]"]) -> str:

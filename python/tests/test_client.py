@@ -282,3 +282,30 @@ def test_analyse_a_dataset(client: Client, simulated_dataset: Path) -> None:
     assert len(table["u_mean"]) == len(rows)
     by_run = dict(zip(table["run"], table["u_mean"]))
     assert by_run["a-x4"] == pytest.approx(52.0, abs=1.0)  # 4 mm at 13 px/mm
+
+
+def test_a_design_map(client: Client) -> None:
+    spec = {
+        "name": "tiny",
+        "seeds": 2,
+        "camera": {"width": 192, "height": 192, "scale_px_per_mm": 26.0},
+        "move_mm": [0.5, 0.0],
+        "axes": {"dot_diameter_px": [3.0, 6.0], "schemes": ["ff100", "ff50"], "subpixel_x": [0.0, 0.5]},
+        "dic": {"subset_px": 21, "step_px": 12, "strain_window": 3},
+    }
+    run_id = client.start_sweep(spec)
+    assert run_id in {r["id"] for r in client.sweeps()}
+    job = client.follow(run_id, kind="job")
+    assert job["status"] == "succeeded" and job["kind"] == "sweep"
+    sweep_map = client.sweep_map(run_id)
+    assert sweep_map["tasks"] == 16 and len(sweep_map["cells"]) == 8
+    for cell in sweep_map["cells"]:
+        u = cell["stats"]["u_std_px"]
+        assert cell["n"] == 2 and u["lo"] <= u["mean"] <= u["hi"]
+    table = client.sweep_table(run_id)
+    assert list(table["scheme"]) == [c["scheme"] for c in sweep_map["cells"]]
+    np.testing.assert_allclose(table["u_std_px"], [c["stats"]["u_std_px"]["mean"] for c in sweep_map["cells"]], rtol=1e-12)
+    assert client.job_file(run_id, "plots/" + sweep_map["figures"][0]).startswith(b"<svg")
+    with pytest.raises(ProblemError) as info:
+        client.start_sweep({**spec, "seeds": 0})
+    assert info.value.status == 422 and info.value.field == "seeds"
