@@ -119,6 +119,15 @@ async fn a_sweep_through_the_daemon_maps_as_the_cli_does() {
         .unwrap();
     assert_eq!(csv, cli_csv);
 
+    // The Arrow IPC file (the default feature `arrow`): the file format's magic at both ends.
+    let arrow = get(&server.url(&format!("/sweeps/{id}/map.arrow"))).await;
+    assert_eq!(
+        arrow.headers()["content-type"],
+        "application/vnd.apache.arrow.file"
+    );
+    let arrow = arrow.bytes().await.unwrap();
+    assert!(arrow.starts_with(b"ARROW1") && arrow.ends_with(b"ARROW1"));
+
     // Every figure the map names is served; the bias plots exist (two sub-pixel positions).
     let figures: Vec<&str> = map["figures"]
         .as_array()

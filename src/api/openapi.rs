@@ -66,6 +66,7 @@ pub fn router(max_upload_bytes: usize) -> OpenApiRouter<Service> {
         .routes(routes!(sweeps::get))
         .routes(routes!(sweeps::map))
         .routes(routes!(sweeps::map_csv))
+        .routes(routes!(sweeps::map_arrow))
         .routes(routes!(sweeps::plot))
         .routes(routes!(jobs::get_job))
         .routes(routes!(jobs::cancel_job))

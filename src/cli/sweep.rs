@@ -43,7 +43,8 @@ pub enum SweepCommand {
         #[arg(long)]
         threads: Option<usize>,
     },
-    /// Gather the results into DIR/map.csv, the heat maps and DIR/recommendations.txt.
+    /// Gather the results into DIR/map.csv (and map.arrow, map.json), the heat maps, the bias
+    /// plots and DIR/recommendations.txt.
     Merge { dir: PathBuf },
     /// Submit the shards as a Slurm array job (`sbatch`) and a merge job that depends on it.
     /// DIR and this ffdic must be at the same path on every node (shared storage).
@@ -220,7 +221,7 @@ fn merge_command(dir: &Path) -> Result<()> {
     let merged = merge_folder(dir)?;
     print!("{}", recommendations_text(&merged));
     println!(
-        "{} cells in {}; heat maps map_*.svg, recommendations.txt",
+        "{} cells in {} (and map.arrow, map.json); heat maps map_*.svg, bias plots bias_*.svg, recommendations.txt",
         merged.cells.len(),
         dir.join("map.csv").display()
     );

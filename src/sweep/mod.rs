@@ -12,6 +12,8 @@
 //! share a folder. Merging groups the tasks of a cell (everything but the seed) into means with
 //! 95 % Student-t intervals, the map.
 
+#[cfg(feature = "arrow")]
+mod arrow;
 mod cluster;
 mod folder;
 mod merge;
@@ -20,6 +22,8 @@ mod spec;
 mod task;
 mod views;
 
+#[cfg(feature = "arrow")]
+pub use arrow::map_arrow;
 pub use cluster::{
     k8s_job, slurm_scripts, K8sOptions, SlurmOptions, SlurmScripts, SLURM_MAX_ARRAY_TASKS,
 };

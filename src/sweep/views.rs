@@ -23,7 +23,8 @@ pub struct MapFile {
     pub figure: bool,
 }
 
-/// Every file of a merged sweep: `map.csv`, `map.json`, `recommendations.txt`, the heat maps
+/// Every file of a merged sweep: `map.csv`, `map.json`, `recommendations.txt`, `map.arrow`
+/// (with the default feature `arrow`), the heat maps
 /// `map_{statistic}_{panel}.svg` and, when the sweep has a sub-pixel axis with two values or
 /// more, `bias_{u|v}_{scheme}_{panel}.svg`.
 pub fn map_files(plan: &Plan, merged: &Merged) -> Vec<MapFile> {
@@ -48,6 +49,11 @@ pub fn map_files(plan: &Plan, merged: &Merged) -> Vec<MapFile> {
             recommendations_text(merged).into_bytes(),
         ),
     ];
+    #[cfg(feature = "arrow")]
+    files.push(table(
+        "map.arrow",
+        super::arrow::map_arrow(&plan.spec.name, merged),
+    ));
     files.extend(figures.into_iter().map(|(name, svg)| MapFile {
         name,
         bytes: svg.into_bytes(),

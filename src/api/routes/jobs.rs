@@ -78,6 +78,7 @@ pub async fn file(
         Some("tif") | Some("tiff") => "image/tiff",
         Some("png") => "image/png",
         Some("jsonl") => "application/jsonl",
+        Some("arrow") => "application/vnd.apache.arrow.file",
         _ => "application/octet-stream",
     };
     Ok(([(header::CONTENT_TYPE, mime)], bytes).into_response())

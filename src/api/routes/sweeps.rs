@@ -79,6 +79,21 @@ pub async fn map_csv(State(svc): State<Service>, Path(id): Path<String>) -> ApiR
     .await
 }
 
+#[utoipa::path(get, path = "/sweeps/{id}/map.arrow", tag = "sweeps",
+    params(("id" = String, Path, description = "Sweep id")),
+    responses((status = 200, description = "The map as an Arrow IPC file: the CSV's columns, typed, nulls for NaN", content_type = "application/vnd.apache.arrow.file"),
+              (status = 404, body = Problem)))]
+pub async fn map_arrow(State(svc): State<Service>, Path(id): Path<String>) -> ApiResult<Response> {
+    file(
+        &svc,
+        &run_id(&id)?,
+        Some(RunKind::Sweep),
+        "results",
+        "map.arrow",
+    )
+    .await
+}
+
 #[utoipa::path(get, path = "/sweeps/{id}/plots/{name}", tag = "sweeps",
     params(("id" = String, Path, description = "Sweep id"),
            ("name" = String, Path, description = "A figure named in the map's `figures`: map_u_std_px_0.svg, bias_u_ff50_0.svg, …", pattern = r"^[A-Za-z0-9_][A-Za-z0-9._+\-]{0,127}$")),
