@@ -199,6 +199,14 @@ async fn bad_sweeps_are_refused_naming_the_field_and_queue_nothing() {
             "model",
         ),
         (unknown_field, "dot_size"),
+        (
+            {
+                let mut s = smoke_spec();
+                s["axes"]["pixel_aperture"] = json!([[0.0, 1.0]]);
+                s
+            },
+            "pixel_aperture",
+        ),
     ];
     for (body, field) in cases {
         let r = post(&server.url("/sweeps"), &body).await;

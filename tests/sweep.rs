@@ -167,6 +167,92 @@ fn a_killed_and_sharded_sweep_merges_to_the_map_of_one_local_run() {
     }
 }
 
+/// The smoke spec with an axis added under `[axes]`.
+fn smoke_with(dir: &Path, name: &str, axis_line: &str) -> PathBuf {
+    let text = std::fs::read_to_string(smoke_spec())
+        .unwrap()
+        .replace("[axes]\n", &format!("[axes]\n{axis_line}\n"));
+    let path = dir.join(format!("{name}.toml"));
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+#[test]
+fn the_pixel_aperture_is_an_axis_of_its_own() {
+    let tmp = tempfile::tempdir().unwrap();
+    let one = plan(
+        &smoke_with(tmp.path(), "one", "pixel_aperture = [[1.0, 1.0]]"),
+        &tmp.path().join("one"),
+    );
+    let two = plan(
+        &smoke_with(
+            tmp.path(),
+            "two",
+            "pixel_aperture = [[1.0, 1.0], [0.25, 1.0]]",
+        ),
+        &tmp.path().join("two"),
+    );
+    let (ids_one, ids_two) = (task_ids(&one), task_ids(&two));
+    assert_eq!(ids_two.len(), 2 * ids_one.len());
+    for id in &ids_one {
+        assert!(
+            ids_two.contains(id),
+            "task {id} lost its id when the aperture axis grew"
+        );
+    }
+    // Without the axis, the tasks are the model's own aperture: other renderings, other ids.
+    let none = task_ids(&plan(&smoke_spec(), &tmp.path().join("none")));
+    assert!(none.iter().all(|id| !ids_one.contains(id)));
+
+    // Run the 2-px prints only: each aperture is a cell of its own and reaches the renderer
+    // (a quarter-width aperture changes what the pixels see, so the errors differ).
+    let small = smoke_with(
+        tmp.path(),
+        "small",
+        "pixel_aperture = [[1.0, 1.0], [0.25, 1.0]]",
+    );
+    let text = std::fs::read_to_string(&small)
+        .unwrap()
+        .replace("[2.0, 4.0, 7.0]", "[2.0]");
+    std::fs::write(&small, text).unwrap();
+    let dir = tmp.path().join("small-run");
+    plan(&small, &dir);
+    ok(ffdic().args(["sweep", "run"]).arg(&dir));
+    ok(ffdic().args(["sweep", "merge"]).arg(&dir));
+    let csv = std::fs::read_to_string(dir.join("map.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let rows: Vec<Vec<String>> = lines
+        .map(|l| l.split(',').map(String::from).collect())
+        .collect();
+    assert_eq!(
+        rows.len(),
+        2 * 3 * 2,
+        "2 apertures x 3 schemes x 2 positions"
+    );
+    let u_std = |aperture_x: &str, scheme: &str, subpixel: &str| -> f64 {
+        rows.iter()
+            .find(|r| {
+                r[col("aperture_x")] == aperture_x
+                    && r[col("scheme")] == scheme
+                    && r[col("subpixel_x_px")] == subpixel
+            })
+            .unwrap()[col("u_std_px")]
+        .parse()
+        .unwrap()
+    };
+    for scheme in ["ff100", "ff50", "ff25"] {
+        for subpixel in ["0", "0.5"] {
+            assert_ne!(
+                u_std("1", scheme, subpixel),
+                u_std("0.25", scheme, subpixel),
+                "{scheme} at {subpixel}: the aperture changed nothing"
+            );
+        }
+    }
+}
+
 #[test]
 fn bad_specs_and_selections_are_refused_with_the_reason() {
     let tmp = tempfile::tempdir().unwrap();

@@ -197,6 +197,12 @@ fn sweep_refinements() -> Vec<(&'static str, &'static str, Value)> {
             json!({ "items": reference("SchemeSpec"), "minItems": 1, "maxItems": MAX_SCHEMES }),
         ),
         ("SweepAxes", "psf_sigma_px", numbers(0.0, 20.0)),
+        (
+            "SweepAxes",
+            "pixel_aperture",
+            json!({ "items": { "type": "array", "minItems": 2, "maxItems": 2,
+                               "items": { "type": "number", "exclusiveMinimum": 0, "maximum": 1 } } }),
+        ),
         ("SweepAxes", "subpixel_x", numbers(-1.0, 1.0)),
         ("SweepAxes", "subpixel_y", numbers(-1.0, 1.0)),
         (

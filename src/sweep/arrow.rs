@@ -32,6 +32,8 @@ pub fn map_arrow(name: &str, merged: &Merged) -> Vec<u8> {
     number("full_well_e", &|c| c.task.noise.map(|n| n.full_well_e));
     number("read_noise_e", &|c| c.task.noise.map(|n| n.read_noise_e));
     number("psf_sigma_px", &|c| Some(c.task.psf_sigma_px));
+    number("aperture_x", &|c| c.task.aperture.map(|a| a[0]));
+    number("aperture_y", &|c| c.task.aperture.map(|a| a[1]));
     number("subpixel_x_px", &|c| Some(c.task.subpixel_px[0]));
     number("subpixel_y_px", &|c| Some(c.task.subpixel_px[1]));
     fields.push(Field::new("n", DataType::UInt64, false));
@@ -87,6 +89,7 @@ mod tests {
                 scheme: crate::reduce::Scheme::preset("ff50").unwrap(),
                 noise,
                 psf_sigma_px: 0.5,
+                aperture: None,
                 subpixel_px: [0.25, 0.0],
                 realisation: 0,
                 seed: 1,
@@ -118,7 +121,7 @@ mod tests {
         assert_eq!(batches.len(), 1);
         let b = &batches[0];
         assert_eq!(b.num_rows(), 2);
-        assert_eq!(b.num_columns(), 10 + 3 * STAT_NAMES.len());
+        assert_eq!(b.num_columns(), 12 + 3 * STAT_NAMES.len());
         let text = |name: &str| {
             b.column_by_name(name)
                 .unwrap()

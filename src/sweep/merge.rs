@@ -152,13 +152,21 @@ pub fn recommendations(merged: &Merged, tolerance: f64) -> Vec<Recommendation> {
 /// A cell's axes other than the print and the scheme, for people.
 pub fn conditions(t: &TaskInput) -> String {
     format!(
-        "noise {}, PSF σ {} px, sub-pixel ({}, {}) px",
+        "noise {}, PSF σ {} px{}, sub-pixel ({}, {}) px",
         t.noise.map_or("of the model".to_string(), |n| format!(
             "{} e⁻ full well / {} e⁻ read",
             n.full_well_e, n.read_noise_e
         )),
         t.psf_sigma_px,
+        aperture_text(t),
         t.subpixel_px[0],
         t.subpixel_px[1]
     )
+}
+
+/// ", pixel aperture fx x fy" when the task sets one.
+pub fn aperture_text(t: &TaskInput) -> String {
+    t.aperture.map_or(String::new(), |[fx, fy]| {
+        format!(", pixel aperture {fx} x {fy}")
+    })
 }

@@ -18,6 +18,9 @@ pub struct TaskInput {
     /// `None`: the model's own sensor noise.
     pub noise: Option<NoiseLevel>,
     pub psf_sigma_px: f64,
+    /// The sensor's own pixel aperture `[fx, fy]`; `None`: the model's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub aperture: Option<[f64; 2]>,
     /// Sub-pixel part of the move, reduced px.
     pub subpixel_px: [f64; 2],
     /// Realisation number within its cell, and the seed it renders with.
@@ -29,11 +32,12 @@ impl TaskInput {
     /// The cell this task is a realisation of: every axis but the seed, as text.
     pub fn cell_key(&self) -> String {
         format!(
-            "{}|{}|{:?}|{}|{}|{}",
+            "{}|{}|{:?}|{}|{:?}|{}|{}",
             self.print.label(),
             self.scheme.name,
             self.noise.map(|n| (n.full_well_e, n.read_noise_e, n.gain)),
             self.psf_sigma_px,
+            self.aperture,
             self.subpixel_px[0],
             self.subpixel_px[1]
         )
@@ -99,8 +103,13 @@ pub fn plan(spec: &SweepSpec, model: Option<&ModelConfig>) -> Result<Plan, Sweep
     for print in spec.prints() {
         let pattern = print.pattern(spec.camera.scale_px_per_mm, super::task::REFERENCE_BLOCK_PX);
         for noise in spec.noise_levels() {
-            for &psf in &spec.axes.psf_sigma_px {
-                let effects = task_effects(&base_effects, noise, psf);
+            for (&psf, aperture) in spec
+                .axes
+                .psf_sigma_px
+                .iter()
+                .flat_map(|p| spec.apertures().into_iter().map(move |a| (p, a)))
+            {
+                let effects = task_effects(&base_effects, noise, psf, aperture);
                 for &sx in &spec.axes.subpixel_x {
                     for &sy in &spec.axes.subpixel_y {
                         for realisation in 0..spec.seeds {
@@ -129,6 +138,7 @@ pub fn plan(spec: &SweepSpec, model: Option<&ModelConfig>) -> Result<Plan, Sweep
                                         scheme: scheme.clone(),
                                         noise,
                                         psf_sigma_px: psf,
+                                        aperture,
                                         subpixel_px: [sx, sy],
                                         realisation,
                                         seed,
@@ -153,13 +163,17 @@ pub fn plan(spec: &SweepSpec, model: Option<&ModelConfig>) -> Result<Plan, Sweep
     })
 }
 
-/// The model's effects with the task's noise and PSF blur in place of its own.
+/// The model's effects with the task's noise, PSF blur and pixel aperture in place of its own.
 pub(super) fn task_effects(
     base: &Effects,
     noise: Option<NoiseLevel>,
     psf_sigma_px: f64,
+    aperture: Option<[f64; 2]>,
 ) -> Effects {
     let mut effects = base.clone();
+    if let Some([fx, fy]) = aperture {
+        effects.fill_factor = Some(crate::model::effects::FillFactor { fx, fy });
+    }
     if let Some(n) = noise {
         effects.sensor_noise = Some(crate::model::effects::SensorNoise {
             full_well_e: n.full_well_e,

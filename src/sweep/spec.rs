@@ -63,6 +63,12 @@ pub struct Axes {
     /// Gaussian PSF σ at full resolution, px (0 = none).
     #[serde(default = "zero_list")]
     pub psf_sigma_px: Vec<f64>,
+    /// The full-resolution sensor's own pixel aperture, linear fill factor `[fx, fy]` in
+    /// (0, 1], rendered through the model's `fill_factor` effect (each pixel integrates only
+    /// its centred active part) before any scheme reduces it; empty = the model's aperture.
+    #[serde(default)]
+    #[schema(value_type = Vec<Vec<f64>>)]
+    pub pixel_aperture: Vec<[f64; 2]>,
     /// Sub-pixel part of the move in reduced px, added to `move_mm`.
     #[serde(default = "zero_list")]
     pub subpixel_x: Vec<f64>,
@@ -186,12 +192,22 @@ impl SweepSpec {
         }
     }
 
+    /// The pixel-aperture axis; the model's own aperture when empty.
+    pub fn apertures(&self) -> Vec<Option<[f64; 2]>> {
+        if self.axes.pixel_aperture.is_empty() {
+            vec![None]
+        } else {
+            self.axes.pixel_aperture.iter().copied().map(Some).collect()
+        }
+    }
+
     pub fn task_count(&self) -> usize {
         [
             self.prints().len(),
             self.axes.schemes.len(),
             self.noise_levels().len(),
             self.axes.psf_sigma_px.len(),
+            self.apertures().len(),
             self.axes.subpixel_x.len(),
             self.axes.subpixel_y.len(),
             self.seeds,
@@ -269,6 +285,17 @@ impl SweepSpec {
             }
         };
         within("psf_sigma_px", &self.axes.psf_sigma_px, 0.0, 20.0)?;
+        if let Some(a) = self
+            .axes
+            .pixel_aperture
+            .iter()
+            .find(|a| !a.iter().all(|f| f.is_finite() && *f > 0.0 && *f <= 1.0))
+        {
+            return bad(
+                "axes.pixel_aperture",
+                format!("[{}, {}]: each linear fill factor in (0, 1]", a[0], a[1]),
+            );
+        }
         within("subpixel_x", &self.axes.subpixel_x, -1.0, 1.0)?;
         within("subpixel_y", &self.axes.subpixel_y, -1.0, 1.0)?;
         if !self

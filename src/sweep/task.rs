@@ -40,7 +40,12 @@ pub fn run_shard(plan: &Plan, shard: &Shard) -> Result<Vec<TaskResult>, SweepErr
     let started = Instant::now();
     let spec = &plan.spec;
     let camera = &spec.camera;
-    let effects = task_effects(&plan.base_effects, first.noise, first.psf_sigma_px);
+    let effects = task_effects(
+        &plan.base_effects,
+        first.noise,
+        first.psf_sigma_px,
+        first.aperture,
+    );
     let pattern = first
         .print
         .pattern(camera.scale_px_per_mm, REFERENCE_BLOCK_PX);

@@ -73,6 +73,8 @@ pub fn map_csv(merged: &Merged) -> String {
         "full_well_e",
         "read_noise_e",
         "psf_sigma_px",
+        "aperture_x",
+        "aperture_y",
         "subpixel_x_px",
         "subpixel_y_px",
         "n",
@@ -92,6 +94,9 @@ pub fn map_csv(merged: &Merged) -> String {
             let (well, read) = t.noise.map_or((String::new(), String::new()), |n| {
                 (n.full_well_e.to_string(), n.read_noise_e.to_string())
             });
+            let (ax, ay) = t.aperture.map_or((String::new(), String::new()), |[x, y]| {
+                (x.to_string(), y.to_string())
+            });
             let mut row = vec![
                 t.print.label(),
                 t.scheme.name.clone(),
@@ -100,6 +105,8 @@ pub fn map_csv(merged: &Merged) -> String {
                 well,
                 read,
                 t.psf_sigma_px.to_string(),
+                ax,
+                ay,
                 t.subpixel_px[0].to_string(),
                 t.subpixel_px[1].to_string(),
                 c.n.to_string(),
@@ -132,6 +139,8 @@ pub struct CellJson {
     /// `None`: the model's own sensor noise.
     pub noise: Option<NoiseLevel>,
     pub psf_sigma_px: f64,
+    /// The sensor's own pixel aperture `[fx, fy]`; `None`: the model's.
+    pub pixel_aperture: Option<[f64; 2]>,
     pub subpixel_px: [f64; 2],
     /// Realisations merged.
     pub n: usize,
@@ -183,6 +192,7 @@ pub fn map_document(plan: &Plan, merged: &Merged, figures: Vec<String>) -> MapDo
                 fill_y,
                 noise: t.noise,
                 psf_sigma_px: t.psf_sigma_px,
+                pixel_aperture: t.aperture,
                 subpixel_px: t.subpixel_px,
                 n: c.n,
                 stats: STAT_NAMES
@@ -362,8 +372,9 @@ fn bias_panel(t: &TaskInput, axis: usize) -> String {
     });
     let other = if axis == 0 { "y" } else { "x" };
     format!(
-        "{noise}, PSF σ {} px, sub-pixel {other} {} px",
+        "{noise}, PSF σ {} px{}, sub-pixel {other} {} px",
         t.psf_sigma_px,
+        super::merge::aperture_text(t),
         t.subpixel_px[1 - axis]
     )
 }
