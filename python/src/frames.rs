@@ -3,7 +3,7 @@
 use crate::errors::{image_error, json_to_python, runtime_error, value_error};
 use crate::input::InputImage;
 use ffdic::experiment::{simulate_dataset, ExperimentSpec};
-use ffdic::image::{Image, TiffInfo};
+use ffdic::image::{FrameInfo, Image};
 use ffdic::reduce::Scheme;
 use numpy::ndarray::Array2;
 use numpy::IntoPyArray;
@@ -46,7 +46,7 @@ pub fn reduce(py: Python<'_>, frame: &Bound<'_, PyAny>, scheme_json: &str) -> Py
 }
 
 /// An image as stored: uint8 or uint16 for integer TIFFs, float32 otherwise.
-fn stored(py: Python<'_>, image: Image, info: TiffInfo) -> PyObject {
+fn stored(py: Python<'_>, image: Image, info: FrameInfo) -> PyObject {
     let (w, h) = (image.width(), image.height());
     let data = image.into_vec();
     // Integer grey values are exact in f32 (at most 16 bits).
@@ -73,10 +73,10 @@ pub fn decode_tiff(py: Python<'_>, data: &[u8]) -> PyResult<PyObject> {
     Ok(stored(py, image, info))
 }
 
-/// A TIFF file as a 2-D array (what `ffdic analyze` reads).
+/// A TIFF, PNG or BMP file as a 2-D array (what `ffdic analyze` reads).
 #[pyfunction]
 pub fn read_image(py: Python<'_>, path: std::path::PathBuf) -> PyResult<PyObject> {
-    let (image, info) = ffdic::image::read_tiff(&path).map_err(image_error)?;
+    let (image, info) = ffdic::image::read_image(&path).map_err(image_error)?;
     Ok(stored(py, image, info))
 }
 

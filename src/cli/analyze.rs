@@ -9,7 +9,7 @@ use ffdic::dic::{
     analyze_sequence, DicResult, DicSettings, Interpolation, PoiStatus, PolygonMask,
     PreparedReference, RasterMask, SequenceFrame, ShapeFunction, Summary,
 };
-use ffdic::image::{read_tiff, Image, Roi};
+use ffdic::image::{read_image, Image, Roi};
 use serde_json::json;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -17,9 +17,10 @@ use std::time::Instant;
 
 #[derive(Debug, Args)]
 pub struct AnalyzeArgs {
-    /// Reference image (8- or 16-bit integer or 32-bit float grey, palette or grey+alpha TIFF).
+    /// Reference image: TIFF (8- or 16-bit integer or 32-bit float grey, palette, grey+alpha),
+    /// PNG (8- or 16-bit grey; colour as luma) or BMP, told apart by content.
     pub reference: PathBuf,
-    /// Deformed image(s), same size as the reference. Several images, or one folder of TIFFs
+    /// Deformed image(s), same size as the reference. Several images, or one folder of frames
     /// (taken in name order), are analysed as a sequence: incrementally, the reference moving
     /// to the previous frame when correlation drops, displacements accumulated.
     #[arg(required = true)]
@@ -79,11 +80,11 @@ pub struct AnalyzeArgs {
 }
 
 pub fn run(args: &AnalyzeArgs) -> Result<()> {
-    let (reference, _) = read_tiff(&args.reference)?;
+    let (reference, _) = read_image(&args.reference)?;
     let frames = deformed_paths(&args.deformed)?;
     let settings = settings(args)?;
     let mask = match &args.mask {
-        Some(path) => Some(RasterMask::from_image(&read_tiff(path)?.0)),
+        Some(path) => Some(RasterMask::from_image(&read_image(path)?.0)),
         None => None,
     };
     let pool = rayon::ThreadPoolBuilder::new()
@@ -91,7 +92,7 @@ pub fn run(args: &AnalyzeArgs) -> Result<()> {
         .build()
         .context("cannot start worker threads")?;
     if frames.len() == 1 {
-        let (deformed, _) = read_tiff(&frames[0])?;
+        let (deformed, _) = read_image(&frames[0])?;
         return run_pair(args, &settings, mask.as_ref(), &reference, &deformed, &pool);
     }
     if mask.is_some() {
@@ -128,7 +129,8 @@ fn settings(args: &AnalyzeArgs) -> Result<DicSettings> {
     })
 }
 
-/// The deformed images: the paths given, or the TIFFs of one folder in name order.
+/// The deformed images: the paths given, or the frames (TIFF, PNG, BMP) of one folder in name
+/// order.
 fn deformed_paths(given: &[PathBuf]) -> Result<Vec<PathBuf>> {
     if let [dir] = given {
         if dir.is_dir() {
@@ -136,14 +138,17 @@ fn deformed_paths(given: &[PathBuf]) -> Result<Vec<PathBuf>> {
                 .with_context(|| format!("cannot list {}", dir.display()))?
                 .filter_map(|e| e.ok().map(|e| e.path()))
                 .filter(|p| {
-                    p.extension()
-                        .and_then(|e| e.to_str())
-                        .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "tif" | "tiff"))
+                    p.extension().and_then(|e| e.to_str()).is_some_and(|e| {
+                        matches!(
+                            e.to_ascii_lowercase().as_str(),
+                            "tif" | "tiff" | "png" | "bmp"
+                        )
+                    })
                 })
                 .collect();
             tiffs.sort();
             if tiffs.is_empty() {
-                bail!("{} holds no .tif or .tiff image", dir.display());
+                bail!("{} holds no .tif, .tiff, .png or .bmp image", dir.display());
             }
             return Ok(tiffs);
         }
@@ -261,7 +266,7 @@ fn run_sequence(
 ) -> Result<()> {
     // Frames are read one at a time as the analysis reaches them; a read error stops it.
     let mut read_error: Option<anyhow::Error> = None;
-    let images = frames.iter().map_while(|path| match read_tiff(path) {
+    let images = frames.iter().map_while(|path| match read_image(path) {
         Ok((image, _)) => Some(image),
         Err(e) => {
             read_error = Some(e.into());

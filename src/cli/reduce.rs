@@ -2,7 +2,7 @@
 
 use anyhow::{Context, Result};
 use clap::{ArgGroup, Args};
-use ffdic::image::{read_tiff, write_tiff_u16};
+use ffdic::image::{read_image, write_tiff_u16};
 use ffdic::reduce::{reduce, Scheme};
 use std::path::PathBuf;
 
@@ -36,7 +36,7 @@ pub fn run(args: &ReduceArgs) -> Result<()> {
         }
         _ => anyhow::bail!("give --scheme, or --block with --aperture"),
     };
-    let (image, _) = read_tiff(&args.input)?;
+    let (image, _) = read_image(&args.input)?;
     let reduced = reduce(&image, &scheme)?;
     write_tiff_u16(&args.output, &reduced)
         .with_context(|| format!("writing {}", args.output.display()))?;

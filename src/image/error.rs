@@ -12,6 +12,8 @@ pub enum ImageError {
     Decode { path: PathBuf, reason: String },
     #[error("{path}: unsupported TIFF pixel type {kind} (read: 8- or 16-bit integer or 32-bit float grey, palette, grey+alpha)")]
     Unsupported { path: PathBuf, kind: String },
+    #[error("{path} is not a readable TIFF, PNG or BMP frame: {reason}")]
+    Format { path: PathBuf, reason: String },
     #[error("cannot write {path}: {reason}")]
     Encode { path: PathBuf, reason: String },
     #[error("image buffer of {len} values does not match {width}x{height}")]

@@ -1,9 +1,11 @@
-//! Images for the numerics: one f32 type, a pixel rectangle, and 8/16-bit grayscale TIFF I/O.
+//! Images for the numerics: one f32 type, a pixel rectangle, 8/16-bit grayscale TIFF I/O, and
+//! frames read by content (TIFF, PNG, BMP).
 //!
 //! Pixel coordinates follow DESIGN.md: the origin is the centre of the top-left pixel, x to the
 //! right, y down. Pixel (col, row) therefore covers the square [col-0.5, col+0.5] x [row-0.5, row+0.5].
 
 mod error;
+mod formats;
 mod gray;
 mod roi;
 pub mod speckle_quality;
@@ -12,10 +14,11 @@ mod tiff_layout;
 mod view;
 
 pub use error::ImageError;
+pub use formats::{decode_image, read_image};
 pub use gray::Image;
 pub use roi::Roi;
 pub use speckle_quality::{speckle_quality, SpeckleQuality, SpeckleQualityError};
 pub use tiff_io::{
-    decode_tiff, read_tiff, tiff_u16_bytes, write_tiff_u16, write_tiff_u8, TiffInfo,
+    decode_tiff, read_tiff, tiff_u16_bytes, write_tiff_u16, write_tiff_u8, FrameInfo,
 };
 pub use view::ImageView;

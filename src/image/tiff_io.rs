@@ -12,9 +12,9 @@ use tiff::encoder::{colortype, TiffEncoder};
 use tiff::tags::Tag;
 use tiff::ColorType;
 
-/// What a TIFF file held before conversion to f32.
+/// What a frame file held before conversion to f32: its size and bit depth per sample.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct TiffInfo {
+pub struct FrameInfo {
     pub width: usize,
     pub height: usize,
     pub bit_depth: u8,
@@ -23,7 +23,7 @@ pub struct TiffInfo {
 /// Reads the first page of a grayscale TIFF as f32 grey values on the file's own scale. Palette
 /// images are read through their colour map (grey palettes exactly, colour ones as Rec. 601
 /// luma) on the scale of their index depth; grey+alpha images drop the alpha.
-pub fn read_tiff(path: &Path) -> Result<(Image, TiffInfo), ImageError> {
+pub fn read_tiff(path: &Path) -> Result<(Image, FrameInfo), ImageError> {
     let bytes = std::fs::read(path).map_err(|source| ImageError::Open {
         path: path.to_owned(),
         source,
@@ -33,7 +33,7 @@ pub fn read_tiff(path: &Path) -> Result<(Image, TiffInfo), ImageError> {
 
 /// As [`read_tiff`], from the file's bytes (a frame fetched over HTTP); `path` names it in
 /// errors.
-pub fn decode_tiff(bytes: &[u8], path: &Path) -> Result<(Image, TiffInfo), ImageError> {
+pub fn decode_tiff(bytes: &[u8], path: &Path) -> Result<(Image, FrameInfo), ImageError> {
     let decode_err = |e: tiff::TiffError| ImageError::Decode {
         path: path.to_owned(),
         reason: e.to_string(),
@@ -68,7 +68,7 @@ pub fn decode_tiff(bytes: &[u8], path: &Path) -> Result<(Image, TiffInfo), Image
                         path: path.to_owned(),
                         reason: "pixel data shorter than the image dimensions".into(),
                     })?;
-                Ok((image, TiffInfo { width, ..info }))
+                Ok((image, FrameInfo { width, ..info }))
             }
             None => match other {
                 Ok(color) => Err(unsupported(format!("{color:?}"))),
@@ -82,7 +82,7 @@ pub fn decode_tiff(bytes: &[u8], path: &Path) -> Result<(Image, TiffInfo), Image
 fn decode_grey(
     decoder: &mut Decoder<Cursor<&[u8]>>,
     path: &Path,
-) -> Result<(Image, TiffInfo), ImageError> {
+) -> Result<(Image, FrameInfo), ImageError> {
     let decode_err = |e: tiff::TiffError| ImageError::Decode {
         path: path.to_owned(),
         reason: e.to_string(),
@@ -121,7 +121,7 @@ fn decode_grey(
     })?;
     Ok((
         image,
-        TiffInfo {
+        FrameInfo {
             width,
             height,
             bit_depth: bit_depth as u8,
@@ -132,7 +132,7 @@ fn decode_grey(
 /// Grey values of palette indices: the colour map holds 2^bits red, then green, then blue
 /// entries on a 16-bit scale; the grey is scaled back to the index depth (a grey palette of an
 /// 8-bit image gives its 0..255 values exactly).
-fn palette_to_grey(indices: &Image, info: TiffInfo, map: &[u16]) -> Option<(Image, TiffInfo)> {
+fn palette_to_grey(indices: &Image, info: FrameInfo, map: &[u16]) -> Option<(Image, FrameInfo)> {
     let entries = 1usize << info.bit_depth.min(16);
     if map.len() < 3 * entries {
         return None;
