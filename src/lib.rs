@@ -6,6 +6,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod api;
+pub mod atomic_write;
 pub mod dashboard;
 pub mod dataset;
 pub mod diagnose;
@@ -16,6 +17,7 @@ pub mod model;
 pub mod reduce;
 pub mod report;
 pub mod service;
+pub mod stats;
 pub mod store;
 pub mod sweep;
 

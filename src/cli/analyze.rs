@@ -428,6 +428,6 @@ fn create_dir(dir: &Path) -> Result<()> {
 }
 
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    ffdic::store::write_atomically(path, bytes)
+    ffdic::atomic_write::write_atomically(path, bytes)
         .with_context(|| format!("cannot write {}", path.display()))
 }

@@ -173,7 +173,7 @@ impl Manifest {
     pub fn write(&self, dir: &Path) -> Result<(), DatasetError> {
         let path = dir.join("dataset.json");
         let text = serde_json::to_string_pretty(self).expect("a manifest always serialises");
-        crate::store::write_atomically(&path, text.as_bytes())
+        crate::atomic_write::write_atomically(&path, text.as_bytes())
             .map_err(|source| DatasetError::Write { path, source })
     }
 }

@@ -18,8 +18,8 @@ use super::print::{characterised, PrintCalibration, PrintKnowledge};
 use super::stage::StageLanding;
 use super::DiagnoseError;
 use crate::dataset::{Manifest, Run};
-use crate::experiment::derive_seed;
 use crate::image::Image;
+use crate::model::derive_seed;
 use crate::model::effects::{Quantization, StageMisalignment};
 use crate::model::{
     project, render_frame, Camera, Effects, FrameSpec, SpecklePattern, TargetDot, TooManyDots,

@@ -46,8 +46,6 @@ pub use settings::{
     MAX_ROI_COORDINATE_PX, MAX_SEARCH_RADIUS_PX, MAX_STEP_PX, MAX_STRAIN_WINDOW, MAX_SUBSET_PX,
 };
 pub use similarity::{estimate_similarity, Similarity};
-pub use stats::{
-    f64_or_nan, interval_or_nan, median, valid_fields, CorrelationLengths, Stats, Summary,
-};
+pub use stats::{f64_or_nan, interval_or_nan, valid_fields, CorrelationLengths, Stats, Summary};
 pub use validate::{MAX_PLAUSIBLE_GRADIENT, RELATIVE_ZNCC_FLOOR};
 pub use warp::Warp;

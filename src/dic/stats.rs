@@ -178,18 +178,6 @@ impl Summary {
     }
 }
 
-/// The median of `values` (sorted in place; NaN-free input assumed, the mean of the two middle
-/// values for an even count).
-pub fn median(values: &mut [f64]) -> f64 {
-    values.sort_by(f64::total_cmp);
-    let n = values.len();
-    if n % 2 == 1 {
-        values[n / 2]
-    } else {
-        0.5 * (values[n / 2 - 1] + values[n / 2])
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

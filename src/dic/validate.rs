@@ -1,8 +1,8 @@
 //! Whether a correlated point can be trusted: its own evidence (ZNCC, a plausible shape, a
 //! texture that pins its position down) and its neighbours' (the normalised median test).
 
-use super::stats::median;
 use super::{DicSettings, PoiResult, PoiStatus};
+use crate::stats::median;
 
 /// Largest displacement gradient a subset may converge to. Beyond ±0.5 (a 50 % strain, or a
 /// 30° rotation between neighbouring images) a first-order subset match is not a measurement

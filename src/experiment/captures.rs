@@ -85,7 +85,7 @@ pub fn layout_seed(first: u64, capture: usize) -> u64 {
     if capture <= 1 {
         first
     } else {
-        super::simulate::derive_seed(first, 0x1A70, capture as u64)
+        crate::model::derive_seed(first, 0x1A70, capture as u64)
     }
 }
 

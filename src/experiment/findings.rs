@@ -5,8 +5,8 @@
 //! patterns compare independent captures (Welch's t, Satterthwaite's degrees of freedom, rounded
 //! down: conservative).
 
-use super::pool::{mean_and_variance_of_mean, mean_interval, t_975};
 use super::study::{Increase, StudyRow};
+use crate::stats::{mean_and_variance_of_mean, mean_interval, t_975};
 use serde::Serialize;
 
 /// What the interval says about a finding.

@@ -63,7 +63,7 @@ impl Scene for ModelScene {
             stage_dx_mm: p.x_mm,
             stage_dy_mm: p.y_mm,
             moved: p.x_mm != 0.0 || p.y_mm != 0.0,
-            seed: super::derive_seed(self.seed, 0xCA3E, exposure),
+            seed: crate::model::derive_seed(self.seed, 0xCA3E, exposure),
         };
         let img = render_frame(&self.camera, &self.bench.effects, &self.dots, &frame);
         // The model renders on a 16-bit scale; narrower formats keep the top bits.

@@ -6,6 +6,7 @@ use super::captures::{capture_plan, layout_seed, TargetCapture};
 use super::spec::ExperimentSpec;
 use crate::dataset::{CameraInfo, DatasetError, Manifest, PatternInfo};
 use crate::image::{write_tiff_u16, Image, ImageError};
+use crate::model::derive_seed;
 use crate::model::{render_frame, FrameSpec, ModelConfig, SpecklePattern, TargetDot, TooManyDots};
 use std::path::Path;
 
@@ -22,15 +23,6 @@ pub enum SimulateError {
         path: std::path::PathBuf,
         source: std::io::Error,
     },
-}
-
-/// Mixes seeds (SplitMix64 finaliser) so neighbouring indices give unrelated streams.
-pub fn derive_seed(seed: u64, a: u64, b: u64) -> u64 {
-    let mut z =
-        seed ^ a.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ b.wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
 }
 
 /// The dots of pattern number `index`, covering the field of view plus every move.

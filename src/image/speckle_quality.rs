@@ -19,7 +19,7 @@
 //! Pure numerics: an image in, numbers out; nothing here knows of files or HTTP.
 
 use super::Image;
-use crate::dic::median;
+use crate::stats::median;
 use serde::Serialize;
 
 /// Longest autocorrelation lag looked at, px: a pattern whose autocorrelation is still above

@@ -215,7 +215,8 @@ fn write_atomically(
     };
     let mut buffer = Cursor::new(Vec::new());
     encode(&mut buffer).map_err(|e| encode_err(e.to_string()))?;
-    crate::store::write_atomically(path, buffer.get_ref()).map_err(|e| encode_err(e.to_string()))
+    crate::atomic_write::write_atomically(path, buffer.get_ref())
+        .map_err(|e| encode_err(e.to_string()))
 }
 
 #[cfg(test)]

@@ -8,10 +8,12 @@ mod config;
 pub mod effects;
 mod pattern;
 mod render;
+mod seed;
 mod speckle;
 
 pub use config::{ModelConfig, ModelError};
 pub use effects::{Effects, EFFECT_IDS};
 pub use pattern::{SpecklePattern, TargetDot, TooManyDots, MAX_TARGET_DOTS};
 pub use render::{project, render_frame, Camera, FrameSpec};
+pub use seed::derive_seed;
 pub use speckle::{render_dots, GaussianDot, SpeckleLayout};

@@ -22,7 +22,8 @@ pub enum Lane {
     Compute,
 }
 
-/// What a job reports when it ends well: a message and the files it wrote.
+/// What a job reports when it ends well: a message (the files it wrote are in its record's
+/// `result_files`).
 pub struct JobOutput {
     pub message: String,
 }

@@ -32,7 +32,7 @@ impl StagingDir {
         if let Some(parent) = path.parent() {
             std::fs::create_dir_all(parent).map_err(io(parent))?;
         }
-        super::atomic::write_atomically(&path, bytes).map_err(io(&path))?;
+        crate::atomic_write::write_atomically(&path, bytes).map_err(io(&path))?;
         Ok(path)
     }
 }

@@ -1,8 +1,8 @@
 //! Small file-system helpers shared by the run and dataset halves of the store.
 
-use super::atomic::write_atomically;
 use super::error::{io, Result, StoreError};
 use super::paths::safe_relative_path;
+use crate::atomic_write::write_atomically;
 use serde::{de::DeserializeOwned, Serialize};
 use std::path::Path;
 

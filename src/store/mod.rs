@@ -15,7 +15,6 @@
 //! `set_progress`, `append_event` and `write_file` answer `Finished`. A run left queued or running
 //! by a process that died is failed, with the reason, the next time the store is opened.
 
-mod atomic;
 mod datasets;
 mod error;
 mod events;
@@ -27,7 +26,6 @@ mod paths;
 mod record;
 mod run_store;
 
-pub use atomic::write_atomically;
 pub use datasets::StagingDir;
 pub use error::{Result, StoreError};
 pub use ids::{DatasetId, RunId, MAX_ID_LEN};

@@ -2,9 +2,9 @@
 //! refers to. A name holds one model for good — a changed model is a new name — so a history
 //! entry always points at the model it was computed with.
 
-use super::atomic::write_atomically;
 use super::error::{Result, StoreError};
 use super::run_store::RunStore;
+use crate::atomic_write::write_atomically;
 use std::path::{Path, PathBuf};
 
 /// Longest model name, bytes.

@@ -417,7 +417,7 @@ impl RunStore {
         if let Some(parent) = path.parent() {
             std::fs::create_dir_all(parent).map_err(io(parent))?;
         }
-        super::atomic::write_atomically(&path, bytes).map_err(io(&path))?;
+        crate::atomic_write::write_atomically(&path, bytes).map_err(io(&path))?;
         if !rec.result_files.iter().any(|f| f == rel) {
             rec.result_files.push(rel.to_string());
             self.save(&rec)?;

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 fn write(path: &Path, bytes: &[u8]) -> Result<(), SweepError> {
-    crate::store::write_atomically(path, bytes).map_err(|source| SweepError::Write {
+    crate::atomic_write::write_atomically(path, bytes).map_err(|source| SweepError::Write {
         path: path.to_owned(),
         source,
     })

@@ -3,7 +3,7 @@
 
 use super::plan::{Plan, TaskInput};
 use super::task::TaskResult;
-use crate::experiment::mean_interval;
+use crate::stats::mean_interval;
 use std::collections::HashMap;
 
 /// The statistics of a cell, in the order of [`CellStats::values`].

@@ -113,11 +113,8 @@ pub fn plan(spec: &SweepSpec, model: Option<&ModelConfig>) -> Result<Plan, Sweep
                 for &sx in &spec.axes.subpixel_x {
                     for &sy in &spec.axes.subpixel_y {
                         for realisation in 0..spec.seeds {
-                            let seed = crate::experiment::derive_seed(
-                                spec.seed,
-                                realisation as u64,
-                                0x5EE9,
-                            );
+                            let seed =
+                                crate::model::derive_seed(spec.seed, realisation as u64, 0x5EE9);
                             let tasks = schemes
                                 .iter()
                                 .map(|scheme| {

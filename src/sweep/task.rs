@@ -58,20 +58,20 @@ pub fn run_shard(plan: &Plan, shard: &Shard) -> Result<Vec<TaskResult>, SweepErr
     let dots = pattern
         .dots(
             camera.field_mm(margin_mm),
-            crate::experiment::derive_seed(first.seed, 0, 0xD075),
+            crate::model::derive_seed(first.seed, 0, 0xD075),
         )
         .map_err(|e| SweepError::Task(e.to_string()))?;
     let reference_frame = FrameSpec {
         stage_dx_mm: 0.0,
         stage_dy_mm: 0.0,
         moved: false,
-        seed: crate::experiment::derive_seed(first.seed, 1, 0xF2A3),
+        seed: crate::model::derive_seed(first.seed, 1, 0xF2A3),
     };
     let moved_frame = FrameSpec {
         stage_dx_mm: dx_mm,
         stage_dy_mm: dy_mm,
         moved: true,
-        seed: crate::experiment::derive_seed(first.seed, 2, 0xF2A3),
+        seed: crate::model::derive_seed(first.seed, 2, 0xF2A3),
     };
     let reference = render_frame(camera, &effects, &dots, &reference_frame);
     let moved = render_frame(camera, &effects, &dots, &moved_frame);

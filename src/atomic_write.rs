@@ -1,3 +1,7 @@
+//! Files written whole or not at all: a crash never leaves half a file under its final name. The
+//! lowest floor of the house (no crate imports): the TIFF writer, the dataset manifest, the store,
+//! sweeps and the CLI's outputs all write through it.
+
 use std::io::Write;
 use std::path::Path;
 

@@ -1,0 +1,160 @@
+//! ARCHITECTURE.md's arrows are the code's (issue 16): the fenced `arrows` block lists, for each
+//! top-level module of `src/`, the modules it uses; this test reads every `crate::…` path in
+//! that module's files and fails on an import the block does not list, on a listed arrow the
+//! code no longer uses (the document must stay true), on a module the block forgets, and on a
+//! cycle.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// `module -> [modules]` from the ```arrows block of ARCHITECTURE.md.
+fn documented() -> BTreeMap<String, BTreeSet<String>> {
+    let text = std::fs::read_to_string(root().join("ARCHITECTURE.md")).expect("ARCHITECTURE.md");
+    let block = text
+        .split("```arrows\n")
+        .nth(1)
+        .and_then(|rest| rest.split("```").next())
+        .expect("ARCHITECTURE.md has an ```arrows block");
+    block
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && !l.starts_with('#'))
+        .map(|line| {
+            let (from, to) = line
+                .split_once("->")
+                .unwrap_or_else(|| panic!("not `module -> modules`: {line}"));
+            (
+                from.trim().to_string(),
+                to.split_whitespace().map(String::from).collect(),
+            )
+        })
+        .collect()
+}
+
+fn rust_files(path: &Path, out: &mut Vec<PathBuf>) {
+    if path.is_dir() {
+        for entry in std::fs::read_dir(path).unwrap() {
+            rust_files(&entry.unwrap().path(), out);
+        }
+    } else if path.extension().is_some_and(|e| e == "rs") {
+        out.push(path.to_owned());
+    }
+}
+
+/// The modules a top-level module's files name as `crate::module`.
+fn used_by(module: &str) -> BTreeSet<String> {
+    let dir = root().join("src").join(module);
+    let mut files = Vec::new();
+    if dir.is_dir() {
+        rust_files(&dir, &mut files);
+    } else {
+        files.push(root().join("src").join(format!("{module}.rs")));
+    }
+    let mut used = BTreeSet::new();
+    for file in files {
+        let text = std::fs::read_to_string(&file).unwrap();
+        // Grouped imports (`use crate::{a, b}`) would hide arrows from this reading.
+        assert!(
+            !text.contains("crate::{"),
+            "{}: name each module in its own `use crate::module::…`",
+            file.display()
+        );
+        for (i, _) in text.match_indices("crate::") {
+            // `ffdic::crate::` never occurs; skip `$crate::` in macros.
+            if text[..i].ends_with('$') {
+                continue;
+            }
+            let name: String = text[i + "crate::".len()..]
+                .chars()
+                .take_while(|c| c.is_ascii_lowercase() || *c == '_' || c.is_ascii_digit())
+                .collect();
+            if !name.is_empty() && name != module {
+                used.insert(name);
+            }
+        }
+    }
+    used
+}
+
+/// The library's top-level modules, from `src/lib.rs`.
+fn library_modules() -> BTreeSet<String> {
+    std::fs::read_to_string(root().join("src/lib.rs"))
+        .unwrap()
+        .lines()
+        .filter_map(|l| l.trim().strip_prefix("pub mod "))
+        .map(|m| m.trim_end_matches(';').to_string())
+        .collect()
+}
+
+#[test]
+fn every_import_follows_an_arrow_of_architecture_md() {
+    let arrows = documented();
+    let modules = library_modules();
+    let listed: BTreeSet<String> = arrows.keys().cloned().collect();
+    assert_eq!(
+        listed, modules,
+        "the arrows block lists exactly the library's modules (src/lib.rs)"
+    );
+    let mut problems = Vec::new();
+    for (module, allowed) in &arrows {
+        let used = used_by(module);
+        for m in used.difference(allowed) {
+            problems.push(format!(
+                "{module} uses {m}: not an arrow of ARCHITECTURE.md"
+            ));
+        }
+        for m in allowed.difference(&used) {
+            problems.push(format!(
+                "{module} -> {m} is listed but no longer used: take it out of ARCHITECTURE.md"
+            ));
+        }
+        for m in allowed {
+            assert!(modules.contains(m), "{module} -> {m}: no such module");
+        }
+    }
+    assert!(problems.is_empty(), "{}", problems.join("\n"));
+}
+
+#[test]
+fn the_arrows_have_no_cycle() {
+    let arrows = documented();
+    // Kahn's algorithm: repeatedly take a module whose every target is already taken.
+    let mut placed: BTreeSet<String> = BTreeSet::new();
+    let mut order = Vec::new();
+    while placed.len() < arrows.len() {
+        let next = arrows
+            .iter()
+            .find(|(m, to)| !placed.contains(*m) && to.iter().all(|t| placed.contains(t)))
+            .map(|(m, _)| m.clone());
+        match next {
+            Some(m) => {
+                order.push(m.clone());
+                placed.insert(m);
+            }
+            None => {
+                let left: Vec<&String> = arrows.keys().filter(|m| !placed.contains(*m)).collect();
+                panic!("a cycle among {left:?}");
+            }
+        }
+    }
+    // The numerics know nothing of files, HTTP, cameras or jobs (the mission's rule).
+    for numeric in ["dic", "model", "reduce"] {
+        for forbidden in [
+            "atomic_write",
+            "store",
+            "api",
+            "service",
+            "experiment",
+            "dataset",
+        ] {
+            assert!(
+                !arrows[numeric].contains(forbidden),
+                "{numeric} must not use {forbidden}"
+            );
+        }
+    }
+}
