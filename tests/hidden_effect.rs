@@ -141,7 +141,7 @@ fn run_with(name: &str, truth: Effects, spec: ExperimentSpec, opts: CompareOptio
         before.discrepancy_px,
         before.parts.field_px,
         before.parts.std_px,
-        diagnosis.verdict,
+        ffdic::model::effects::verdict_name(diagnosis.verdict),
         after_px
     );
     for c in &diagnosis.candidates {
@@ -190,7 +190,11 @@ fn run_with(name: &str, truth: Effects, spec: ExperimentSpec, opts: CompareOptio
 
 /// Within 25 % or two standard errors of the truth.
 fn close(d: &Diagnosis, effect: &str, param: &str, truth: f64) {
-    let c = d.candidates.iter().find(|c| c.effect == effect).unwrap();
+    let c = d
+        .candidates
+        .iter()
+        .find(|c| c.effect.as_str() == effect)
+        .unwrap();
     let (v, se) = (c.params[param], c.stderr[param]);
     println!("   {effect}.{param}: fitted {v:.6} ± {se:.6}, truth {truth:.6}");
     assert!(
@@ -200,7 +204,10 @@ fn close(d: &Diagnosis, effect: &str, param: &str, truth: f64) {
 }
 
 fn check(o: &Outcome, effect: &str, ratio: f64) {
-    assert_eq!(o.diagnosis.verdict, effect);
+    assert_eq!(
+        ffdic::model::effects::verdict_name(o.diagnosis.verdict),
+        effect
+    );
     assert!(
         o.after_px <= ratio * o.before_px,
         "{effect}: discrepancy {} px after vs {} px before (limit ratio {ratio})",
@@ -322,7 +329,10 @@ fn fill_factor_outcome() -> Outcome {
 #[test]
 fn hidden_fill_factor() {
     let o = fill_factor_outcome();
-    assert_eq!(o.diagnosis.verdict, "fill_factor");
+    assert_eq!(
+        ffdic::model::effects::verdict_name(o.diagnosis.verdict),
+        "fill_factor"
+    );
     close(&o.diagnosis, "fill_factor", "fx", 0.5);
     close(&o.diagnosis, "fill_factor", "fy", 0.8);
 }
@@ -348,7 +358,10 @@ fn hidden_fill_factor_fine_speckle() {
         edge_softness_mm: 0.01,
     })];
     let o = run_with("fill_factor-fine", truth, sp, options(vec![native()], 0.0));
-    assert_eq!(o.diagnosis.verdict, "fill_factor");
+    assert_eq!(
+        ffdic::model::effects::verdict_name(o.diagnosis.verdict),
+        "fill_factor"
+    );
     close(&o.diagnosis, "fill_factor", "fx", 0.5);
     close(&o.diagnosis, "fill_factor", "fy", 0.8);
 }
@@ -388,7 +401,10 @@ fn hidden_sensor_noise() {
     // Shot noise acts on the photon-transfer curve; the displacement discrepancy sits at its
     // noise floor before and after (a fall there would be smaller than its standard error), so
     // the fall asked for is that curve's χ².
-    assert_eq!(o.diagnosis.verdict, "sensor_noise");
+    assert_eq!(
+        ffdic::model::effects::verdict_name(o.diagnosis.verdict),
+        "sensor_noise"
+    );
     let (before, after) = (
         o.diagnosis.before.as_ref().unwrap(),
         o.diagnosis.after.as_ref().unwrap(),
@@ -421,7 +437,10 @@ fn nothing_hidden() {
         ),
         vec![native(), ff50],
     );
-    assert_eq!(o.diagnosis.verdict, "none");
+    assert_eq!(
+        ffdic::model::effects::verdict_name(o.diagnosis.verdict),
+        "none"
+    );
     for c in &o.diagnosis.candidates {
         assert!(!c.significant, "{} reported significant: {c:?}", c.effect);
     }
@@ -443,15 +462,18 @@ fn sensor_noise_without_repeats_is_not_identifiable() {
         .diagnosis
         .not_identifiable
         .iter()
-        .find(|n| n.effect == "sensor_noise")
+        .find(|n| n.effect.as_str() == "sensor_noise")
         .expect("listed");
     assert!(n.runs_to_add.contains("repeat"), "{}", n.runs_to_add);
     assert!(
         o.diagnosis
             .candidates
             .iter()
-            .all(|c| c.effect != "sensor_noise"),
+            .all(|c| c.effect.as_str() != "sensor_noise"),
         "not fitted, not guessed"
     );
-    assert_ne!(o.diagnosis.verdict, "sensor_noise");
+    assert_ne!(
+        ffdic::model::effects::verdict_name(o.diagnosis.verdict),
+        "sensor_noise"
+    );
 }

@@ -7,6 +7,7 @@ use super::ProgressBar;
 use anyhow::{Context, Result};
 use clap::Args;
 use ffdic::diagnose::{diagnose_rounds, Candidate, Diagnosis, Rounds, MAX_ROUNDS};
+use ffdic::model::effects::{join_effects, verdict_name};
 use std::path::PathBuf;
 
 #[derive(Debug, Args)]
@@ -73,7 +74,7 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
                 })
                 .collect();
             vec![
-                c.effect.clone(),
+                c.effect.to_string(),
                 format!("{:.1}", c.delta_bic),
                 format!("{:.5}", c.discrepancy_px),
                 format!("{:+.5}", c.drop_px),
@@ -95,7 +96,11 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
     );
     s += &format!(
         "\nmodel {} ({}): discrepancy {:.5} ± {:.5} px; verdict: {}\n",
-        d.model.name, d.model.version, d.discrepancy_px, d.discrepancy_se_px, d.verdict
+        d.model.name,
+        d.model.version,
+        d.discrepancy_px,
+        d.discrepancy_se_px,
+        verdict_name(d.verdict)
     );
     for c in d
         .candidates
@@ -105,7 +110,11 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
         s += &format!("{} outside the catalogue's range: {}\n", c.0.effect, c.1);
     }
     if let Some(a) = &d.after {
-        s += &format!("with {} added: {:.5} px\n", d.verdict, a.discrepancy_px);
+        s += &format!(
+            "with {} added: {:.5} px\n",
+            verdict_name(d.verdict),
+            a.discrepancy_px
+        );
     }
     for c in &d.confounded {
         s += &format!(
@@ -140,7 +149,7 @@ pub fn rounds_text(r: &Rounds) -> String {
             round.model,
             round.discrepancy_px,
             round.discrepancy_se_px,
-            round.verdict,
+            verdict_name(round.verdict),
             if params.is_empty() {
                 String::new()
             } else {
@@ -156,7 +165,7 @@ pub fn rounds_text(r: &Rounds) -> String {
         if r.verdicts.is_empty() {
             "none".to_string()
         } else {
-            r.verdicts.join(", ")
+            join_effects(&r.verdicts, ", ")
         },
         r.final_discrepancy_px
     );
@@ -201,7 +210,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         if let (Some(path), false) = (&args.write_model, r.verdicts.is_empty()) {
             println!(
                 "model with {} written to {}",
-                r.verdicts.join(", "),
+                join_effects(&r.verdicts, ", "),
                 path.display()
             );
         }

@@ -174,7 +174,8 @@ fn wait(service: &Service, id: &RunId, what: &'static str, show: bool) -> Result
 struct ModelStory {
     dataset: String,
     baseline_px: f64,
-    verdict: String,
+    #[serde(with = "ffdic::model::effects::verdict_serde")]
+    verdict: Option<ffdic::model::EffectId>,
     /// The winner's fitted parameters and standard errors.
     params: std::collections::BTreeMap<String, f64>,
     stderr: std::collections::BTreeMap<String, f64>,
@@ -232,7 +233,7 @@ fn model_story(
     let winner = diagnosis
         .candidates
         .iter()
-        .find(|c| c.effect == diagnosis.verdict)
+        .find(|c| Some(c.effect) == diagnosis.verdict)
         .cloned();
     let (model, after_px) = match &winner {
         None => (None, None),
@@ -258,7 +259,7 @@ fn model_story(
     Ok(ModelStory {
         dataset: dataset.id.to_string(),
         baseline_px,
-        verdict: diagnosis.verdict.clone(),
+        verdict: diagnosis.verdict,
         params: winner
             .as_ref()
             .map(|c| c.params.clone())
@@ -291,7 +292,7 @@ fn story_text(s: &ModelStory) -> String {
                 .collect();
             t += &format!(
                 "  diagnosis: missing effect {} ({}; ΔBIC {:.1})\n  with it added ({model}): discrepancy {after:.5} px\n",
-                s.verdict,
+                ffdic::model::effects::verdict_name(s.verdict),
                 params.join(", "),
                 s.delta_bic.unwrap_or(f64::NAN)
             );

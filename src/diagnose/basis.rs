@@ -11,6 +11,7 @@
 //!   k1·[g(p+T) − g(p)], g(q) = q|q|²/r0² — quadratic in p for a translation, and proportional to
 //!   T, which is what tells it from a scale change when translations of several sizes are measured.
 
+use crate::model::EffectId;
 use serde::{Deserialize, Serialize};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -25,13 +26,13 @@ pub enum GeometricParam {
 
 impl GeometricParam {
     /// The effect id and parameter name of DESIGN.md.
-    pub fn effect_and_name(self) -> (&'static str, &'static str) {
+    pub fn effect_and_name(self) -> (EffectId, &'static str) {
         match self {
-            GeometricParam::TravelScale => ("stage_misalignment", "travel_scale"),
-            GeometricParam::Misalignment => ("stage_misalignment", "angle_rad"),
-            GeometricParam::Rotation => ("rotation", "angle_rad"),
-            GeometricParam::Scale => ("scale", "ds"),
-            GeometricParam::DistortionK1 => ("lens_distortion", "k1"),
+            GeometricParam::TravelScale => (EffectId::StageMisalignment, "travel_scale"),
+            GeometricParam::Misalignment => (EffectId::StageMisalignment, "angle_rad"),
+            GeometricParam::Rotation => (EffectId::Rotation, "angle_rad"),
+            GeometricParam::Scale => (EffectId::Scale, "ds"),
+            GeometricParam::DistortionK1 => (EffectId::LensDistortion, "k1"),
         }
     }
 }

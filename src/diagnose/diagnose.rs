@@ -29,7 +29,7 @@ pub use super::identifiability::{Confounded, NotIdentifiable};
 use super::print::PrintKnowledge;
 use super::{CompareOptions, DiagnoseError, Progress};
 use crate::model::effects::{LensDistortion, Rotation, Scale};
-use crate::model::{Effects, ModelConfig, EFFECT_IDS};
+use crate::model::{EffectId, Effects, ModelConfig};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -37,7 +37,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Candidate {
-    pub effect: String,
+    pub effect: EffectId,
     pub params: BTreeMap<String, f64>,
     /// Standard errors of the fitted parameters (parameters set rather than fitted have none).
     pub stderr: BTreeMap<String, f64>,
@@ -67,13 +67,14 @@ pub enum Evidence {
 }
 
 impl Evidence {
-    pub fn of(effect: &str) -> Self {
+    pub fn of(effect: EffectId) -> Self {
+        use EffectId::*;
         match effect {
-            "vignetting" | "illumination_change" | "sensor_noise" | "fixed_pattern" => {
-                Evidence::Image
+            Vignetting | IlluminationChange | SensorNoise | FixedPattern => Evidence::Image,
+            PsfBlur | FillFactor | MotionBlur => Evidence::Either,
+            StageMisalignment | StageError | Rotation | Scale | LensDistortion | Quantization => {
+                Evidence::Displacement
             }
-            "psf_blur" | "fill_factor" | "motion_blur" => Evidence::Either,
-            _ => Evidence::Displacement,
         }
     }
 }
@@ -116,8 +117,10 @@ pub struct Diagnosis {
     /// Ranked by ΔBIC, most negative first.
     pub candidates: Vec<Candidate>,
     /// Candidate ids ranked by the drop of the discrepancy, largest first.
-    pub ranking_by_drop: Vec<String>,
-    pub verdict: String,
+    pub ranking_by_drop: Vec<EffectId>,
+    /// The winner, `"none"` on the wire when there is none.
+    #[serde(with = "crate::model::effects::verdict_serde")]
+    pub verdict: Option<EffectId>,
     pub confounded: Vec<Confounded>,
     pub not_identifiable: Vec<NotIdentifiable>,
     /// The model with the winner added (none when the verdict is `none`).
@@ -167,12 +170,12 @@ fn geometric_candidate(
     meas: &Measurement,
     before: &Comparison,
     model: &Effects,
-    id: &str,
+    id: EffectId,
 ) -> Option<ImageFit> {
     let param = match id {
-        "rotation" => GeometricParam::Rotation,
-        "scale" => GeometricParam::Scale,
-        "lens_distortion" => GeometricParam::DistortionK1,
+        EffectId::Rotation => GeometricParam::Rotation,
+        EffectId::Scale => GeometricParam::Scale,
+        EffectId::LensDistortion => GeometricParam::DistortionK1,
         _ => return None,
     };
     let camera = before.model.nominal.camera(0);
@@ -199,13 +202,9 @@ fn geometric_candidate(
         })
         .collect();
     let fit = fit_geometric(&samples, param)?;
-    let (_, name) = param.effect_and_name();
+    let (effect, name) = param.effect_and_name();
     Some(ImageFit {
-        effect: match param {
-            GeometricParam::Rotation => "rotation",
-            GeometricParam::Scale => "scale",
-            _ => "lens_distortion",
-        },
+        effect,
         params: [(name.to_string(), fit.value)].into_iter().collect(),
         stderr: [(name.to_string(), fit.stderr)]
             .into_iter()
@@ -221,18 +220,21 @@ fn fit_candidate(
     meas: &Measurement,
     before: &Comparison,
     model: &Effects,
-    id: &str,
+    id: EffectId,
 ) -> Option<ImageFit> {
+    use EffectId::*;
     match id {
-        "rotation" | "scale" | "lens_distortion" => geometric_candidate(meas, before, model, id),
-        "psf_blur" => Some(fit_psf_blur(meas, before, model)),
-        "fill_factor" => Some(fit_fill_factor(meas, before, model)),
-        "sensor_noise" => fit_sensor_noise(meas, before, model),
-        "vignetting" => fit_vignetting(meas, before, model),
-        "illumination_change" => fit_illumination_change(meas, before, model),
-        "motion_blur" => fit_motion_blur(meas, before, model),
-        "stage_error" => super::stage::fit_stage_error(before, model),
-        _ => None,
+        Rotation | Scale | LensDistortion => geometric_candidate(meas, before, model, id),
+        PsfBlur => Some(fit_psf_blur(meas, before, model)),
+        FillFactor => Some(fit_fill_factor(meas, before, model)),
+        SensorNoise => fit_sensor_noise(meas, before, model),
+        Vignetting => fit_vignetting(meas, before, model),
+        IlluminationChange => fit_illumination_change(meas, before, model),
+        MotionBlur => fit_motion_blur(meas, before, model),
+        StageError => super::stage::fit_stage_error(before, model),
+        // Always part of the nominal experiment (fitted) or known (the frames' ADC), or not
+        // identifiable from speckle frames: never a candidate.
+        StageMisalignment | Quantization | FixedPattern => None,
     }
 }
 
@@ -243,17 +245,17 @@ pub const MODEL_SEEDS: u64 = 2;
 
 /// The non-null bound of every bounded parameter of the image-level fits: a fit that ends there
 /// has not found the effect's value, only that the catalogue's range does not hold it.
-fn bound_of(effect: &str, param: &str) -> Option<(f64, f64)> {
+fn bound_of(effect: EffectId, param: &str) -> Option<(f64, f64)> {
     // (bound, range width)
     match (effect, param) {
-        ("psf_blur", "sigma_px") => Some((3.0, 3.0)),
-        ("fill_factor", "fx" | "fy") => Some((0.05, 0.95)),
-        ("motion_blur", "length_px") => Some((4.0, 4.0)),
+        (EffectId::PsfBlur, "sigma_px") => Some((3.0, 3.0)),
+        (EffectId::FillFactor, "fx" | "fy") => Some((0.05, 0.95)),
+        (EffectId::MotionBlur, "length_px") => Some((4.0, 4.0)),
         _ => None,
     }
 }
 
-fn outside_range(effect: &str, params: &BTreeMap<String, f64>) -> Option<String> {
+fn outside_range(effect: EffectId, params: &BTreeMap<String, f64>) -> Option<String> {
     let at: Vec<String> = params
         .iter()
         .filter_map(|(k, v)| {
@@ -345,8 +347,8 @@ impl Judge<'_> {
             };
         let range = outside_range(fit.effect, &fit.params);
         let separable_from_print = !(self.print_calibrated
-            && matches!(fit.effect, "psf_blur" | "fill_factor")
-            || fit.effect == "vignetting" && self.small_moves);
+            && matches!(fit.effect, EffectId::PsfBlur | EffectId::FillFactor)
+            || fit.effect == EffectId::Vignetting && self.small_moves);
         let criteria = Criteria {
             delta_bic_ok: method != Method::Unchanged && delta < SIGNIFICANT_DELTA_BIC,
             beyond_null: fit.beyond_null,
@@ -361,7 +363,7 @@ impl Judge<'_> {
             separable_from_print,
         };
         Candidate {
-            effect: fit.effect.to_string(),
+            effect: fit.effect,
             params: fit.params.clone(),
             // A parameter whose error could not be estimated has no entry (JSON has no NaN).
             stderr: fit
@@ -401,10 +403,10 @@ fn predict(
     }
     let mut nominal = before.model.nominal.clone();
     let param = match fit.effect {
-        "rotation" => Some(GeometricParam::Rotation),
-        "scale" => Some(GeometricParam::Scale),
-        "lens_distortion" => Some(GeometricParam::DistortionK1),
-        "stage_error" => None,
+        EffectId::Rotation => Some(GeometricParam::Rotation),
+        EffectId::Scale => Some(GeometricParam::Scale),
+        EffectId::LensDistortion => Some(GeometricParam::DistortionK1),
+        EffectId::StageError => None,
         _ => return None,
     };
     let mut dic = before.model_dic.clone();
@@ -457,10 +459,12 @@ pub fn diagnose_prepared(
     let design = design_of(&meas.manifest, meas.width);
     let present = model.effects.enabled();
     // Always part of the nominal experiment: the stage is fitted, the ADC is the TIFFs'.
-    let absent: Vec<&str> = EFFECT_IDS
-        .iter()
-        .copied()
-        .filter(|id| !present.contains(id) && *id != "stage_misalignment" && *id != "quantization")
+    let absent: Vec<EffectId> = EffectId::ALL
+        .into_iter()
+        .filter(|id| {
+            !present.contains(id)
+                && !matches!(id, EffectId::StageMisalignment | EffectId::Quantization)
+        })
         .collect();
     let mut not_identifiable = Vec::new();
     let mut fit_ids = Vec::new();
@@ -515,8 +519,9 @@ pub fn diagnose_prepared(
     };
     let mut candidates = Vec::new();
     // Per candidate: its fit, the model with it, and that model's comparison.
-    let mut models: BTreeMap<String, (ImageFit, ModelConfig, Option<Comparison>)> = BTreeMap::new();
-    for id in &fit_ids {
+    let mut models: BTreeMap<EffectId, (ImageFit, ModelConfig, Option<Comparison>)> =
+        BTreeMap::new();
+    for &id in &fit_ids {
         let Some(fit) = fit_candidate(meas, &before, &model.effects, id) else {
             tick()?;
             continue;
@@ -538,7 +543,7 @@ pub fn diagnose_prepared(
             Some((rendered, Method::Rendered))
         };
         candidates.push(judge.candidate(&fit, after.as_ref()));
-        models.insert(fit.effect.to_string(), (fit, with, after.map(|a| a.0)));
+        models.insert(fit.effect, (fit, with, after.map(|a| a.0)));
         tick()?;
     }
     candidates.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
@@ -546,7 +551,7 @@ pub fn diagnose_prepared(
     // rendering no longer meets the criteria, the next significant candidate is tried.
     let mut winner = None;
     while let Some(pos) = candidates.iter().position(|c| c.significant) {
-        let effect = candidates[pos].effect.clone();
+        let effect = candidates[pos].effect;
         if candidates[pos].method == Method::Rendered {
             winner = Some(effect);
             break;
@@ -574,22 +579,24 @@ pub fn diagnose_prepared(
     candidates.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
     let mut by_drop: Vec<&Candidate> = candidates.iter().collect();
     by_drop.sort_by(|a, b| b.drop_px.total_cmp(&a.drop_px));
-    let ranking_by_drop = by_drop.iter().map(|c| c.effect.clone()).collect();
+    let ranking_by_drop = by_drop.iter().map(|c| c.effect).collect();
     let significant: Vec<&Candidate> = candidates.iter().filter(|c| c.significant).collect();
-    let fitted: Vec<&str> = candidates.iter().map(|c| c.effect.as_str()).collect();
+    let fitted: Vec<EffectId> = candidates.iter().map(|c| c.effect).collect();
     let mut confounded = design.confounded(&fitted);
-    if fitted.contains(&"vignetting") && design.largest_move_fraction < VIGNETTING_MOVE_FRACTION {
+    if fitted.contains(&EffectId::Vignetting)
+        && design.largest_move_fraction < VIGNETTING_MOVE_FRACTION
+    {
         confounded.push(Confounded {
-            effects: ["vignetting".into(), "illumination".into()],
+            effects: [EffectId::Vignetting.as_str().into(), "illumination".into()],
             separate_with: ILLUMINATION_SEPARATION.into(),
             evidence: "design".into(),
         });
     }
     if print_calibrated {
-        for effect in ["psf_blur", "fill_factor"] {
+        for effect in [EffectId::PsfBlur, EffectId::FillFactor] {
             if fitted.contains(&effect) {
                 confounded.push(Confounded {
-                    effects: [effect.into(), "print".into()],
+                    effects: [effect.as_str().into(), "print".into()],
                     separate_with: PRINT_SEPARATION.into(),
                     evidence: "design".into(),
                 });
@@ -597,27 +604,28 @@ pub fn diagnose_prepared(
         }
     }
     // Data: a second significant candidate explaining nearly as much as the winner.
-    if let Some(w) = &winner {
+    if let Some(w) = winner {
         let top = candidates
             .iter()
-            .find(|c| &c.effect == w)
+            .find(|c| c.effect == w)
             .expect("winner is a candidate");
-        for c in significant.iter().filter(|c| &c.effect != w) {
+        for c in significant.iter().filter(|c| c.effect != w) {
+            let names = super::identifiability::pair(w, c.effect);
             let already = confounded
                 .iter()
-                .any(|p| p.effects.contains(&c.effect) && p.effects.contains(w));
+                .any(|p| p.effects.contains(&names[0]) && p.effects.contains(&names[1]));
             if !already && top.drop_px > 0.0 && c.drop_px >= 0.8 * top.drop_px {
                 confounded.push(Confounded {
-                    effects: [w.clone(), c.effect.clone()],
-                    separate_with: separating_run(w, &c.effect),
+                    effects: names,
+                    separate_with: separating_run(w, c.effect),
                     evidence: "data".into(),
                 });
             }
         }
     }
-    let (winner_model, after) = match &winner {
+    let (winner_model, after) = match winner {
         Some(w) => {
-            let (_, m, a) = models.remove(w).expect("fitted");
+            let (_, m, a) = models.remove(&w).expect("fitted");
             (Some(m), a)
         }
         None => (None, None),
@@ -629,7 +637,7 @@ pub fn diagnose_prepared(
         discrepancy_by_seed_px: by_seed,
         candidates,
         ranking_by_drop,
-        verdict: winner.unwrap_or_else(|| "none".into()),
+        verdict: winner,
         confounded,
         not_identifiable,
         winner_model,

@@ -30,6 +30,7 @@ use super::optimise::{curvature_stderr, minimise_1d, nelder_mead};
 use crate::model::effects::{
     FillFactor, IlluminationChange, MotionBlur, PsfBlur, SensorNoise, Vignetting,
 };
+use crate::model::EffectId;
 use crate::model::Effects;
 use std::collections::BTreeMap;
 
@@ -38,7 +39,7 @@ use std::collections::BTreeMap;
 /// errors.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ImageFit {
-    pub effect: &'static str,
+    pub effect: EffectId,
     pub params: BTreeMap<String, f64>,
     pub stderr: BTreeMap<String, f64>,
     pub effects: Effects,
@@ -150,7 +151,7 @@ pub fn fit_psf_blur(meas: &Measurement, before: &Comparison, model: &Effects) ->
     let sigma = minimise_1d(&|s| obj(&[s]), 0.0, 3.0, 9);
     let se = curvature_stderr(&obj, &[sigma], &[0.05], &[0.0], &[3.0])[0];
     ImageFit {
-        effect: "psf_blur",
+        effect: EffectId::PsfBlur,
         params: map(&[("sigma_px", sigma)]),
         stderr: map(&[("sigma_px", se)]),
         effects: with(sigma),
@@ -183,7 +184,7 @@ pub fn fit_fill_factor(meas: &Measurement, before: &Comparison, model: &Effects)
     let x = nelder_mead(&obj, &best.1, &[0.12, 0.12], &lo, &hi, 40);
     let se = curvature_stderr(&obj, &x, &[0.04, 0.04], &lo, &hi);
     ImageFit {
-        effect: "fill_factor",
+        effect: EffectId::FillFactor,
         params: map(&[("fx", x[0]), ("fy", x[1])]),
         stderr: map(&[("fx", se[0]), ("fy", se[1])]),
         effects: with(x[0], x[1]),
@@ -289,7 +290,7 @@ pub fn fit_sensor_noise(
     let se_read =
         ((se_b / (2.0 * sb * a_fit)).powi(2) + (sb * se_a / (a_fit * a_fit)).powi(2)).sqrt();
     Some(ImageFit {
-        effect: "sensor_noise",
+        effect: EffectId::SensorNoise,
         params: map(&[
             ("gain", gain),
             ("read_noise_e", sn.read_noise_e),
@@ -355,7 +356,7 @@ pub fn fit_vignetting(
     let existing = model.vignetting.map_or(0.0, |x| x.v);
     let _ = meas;
     Some(ImageFit {
-        effect: "vignetting",
+        effect: EffectId::Vignetting,
         params: map(&[("v", v + existing)]),
         stderr: map(&[("v", se_v)]),
         effects: Effects {
@@ -412,7 +413,7 @@ pub fn fit_illumination_change(
     se_o = se_o.max(se_g * mean_ref);
     let _ = meas;
     Some(ImageFit {
-        effect: "illumination_change",
+        effect: EffectId::IlluminationChange,
         params: map(&[("gain", g), ("offset", o)]),
         stderr: map(&[("gain", se_g), ("offset", se_o)]),
         effects: Effects {
@@ -509,7 +510,7 @@ pub fn fit_motion_blur(
     let l = minimise_1d(&|l| obj(&[l]), 0.0, 4.0, 9);
     let se = curvature_stderr(&obj, &[l], &[0.2], &[0.0], &[4.0])[0];
     Some(ImageFit {
-        effect: "motion_blur",
+        effect: EffectId::MotionBlur,
         params: map(&[("length_px", l), ("angle_rad", angle)]),
         stderr: map(&[("length_px", se)]),
         effects: with(l),

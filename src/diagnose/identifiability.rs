@@ -16,6 +16,7 @@
 //! - `fixed_pattern` needs flat-field and dark frames, which `ffdic-dataset/1` has no run for.
 
 use crate::dataset::Manifest;
+use crate::model::EffectId;
 use serde::{Deserialize, Serialize};
 
 /// The runs of a dataset as the identifiability rules see them.
@@ -37,13 +38,15 @@ pub struct DatasetDesign {
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct NotIdentifiable {
-    pub effect: String,
+    pub effect: EffectId,
     pub reason: String,
     pub runs_to_add: String,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Confounded {
+    /// Two effect ids, or an effect and what it is confounded with outside the vocabulary
+    /// (`print`, `illumination`).
     pub effects: [String; 2],
     /// The run that would separate them.
     pub separate_with: String,
@@ -116,36 +119,37 @@ pub const STEP_SERIES: &str =
 
 impl DatasetDesign {
     /// Why `effect` cannot be revealed by this dataset, if it cannot.
-    pub fn not_identifiable(&self, effect: &str) -> Option<NotIdentifiable> {
+    pub fn not_identifiable(&self, effect: EffectId) -> Option<NotIdentifiable> {
+        use EffectId::*;
         let no = |reason: &str, runs: &str| {
             Some(NotIdentifiable {
-                effect: effect.into(),
+                effect,
                 reason: reason.into(),
                 runs_to_add: runs.into(),
             })
         };
         let moved = "a translation of the target (any run with a stage move)";
         match effect {
-            "rotation" | "scale" | "illumination_change" | "motion_blur" if self.moved_runs == 0 => {
+            Rotation | Scale | IlluminationChange | MotionBlur if self.moved_runs == 0 => {
                 no("no run moves the target", moved)
             }
-            "lens_distortion" if self.largest_move_fraction < 0.02 => no(
+            LensDistortion if self.largest_move_fraction < 0.02 => no(
                 "the largest translation is below 2 % of the frame width: distortion's field grows with the move and stays below the noise",
                 "a translation of at least 5 % of the field of view, and translations of several sizes",
             ),
-            "psf_blur" if !self.dot_size_known => no(
+            PsfBlur if !self.dot_size_known => no(
                 "the printed dot size is not in the manifest: a speckle estimated from the frames already contains the blur",
                 "the printed dot diameter (pattern.dot_diameter_mm) of every run, or a run of a pattern with a known dot size",
             ),
-            "sensor_noise" if !self.has_repeats => no(
+            SensorNoise if !self.has_repeats => no(
                 "no static repeat frames: noise against mean from one speckle frame is entangled with the speckle",
                 "static repeat frames of the reference position (run.repeat), one or more per pattern",
             ),
-            "stage_error" if !self.repeatability_stated => no(
+            StageError if !self.repeatability_stated => no(
                 "the stage's repeatability is not stated: every run's landing offset is fitted freely, so there is nothing to hold them against",
                 "the stage's stated repeatability (dataset.json stage_repeatability_um, 1σ per axis in µm)",
             ),
-            "fixed_pattern" => no(
+            FixedPattern => no(
                 "PRNU/DSNU need uniform illumination; speckle frames cannot tell a pixel's gain from the pattern",
                 "flat-field frames of a uniform white target at several exposures and dark frames (lens capped)",
             ),
@@ -154,8 +158,8 @@ impl DatasetDesign {
     }
 
     /// Pairs among `candidates` this design cannot separate, with the run that would.
-    pub fn confounded(&self, candidates: &[&str]) -> Vec<Confounded> {
-        let has = |e: &str| candidates.contains(&e);
+    pub fn confounded(&self, candidates: &[EffectId]) -> Vec<Confounded> {
+        let has = |e: EffectId| candidates.contains(&e);
         let mut out = Vec::new();
         let sizes_ok = self.move_sizes_px.len() >= 2
             && self.move_sizes_px.last().copied().unwrap_or(0.0)
@@ -166,19 +170,19 @@ impl DatasetDesign {
                         .copied()
                         .find(|s| *s > 2.0)
                         .unwrap_or(f64::INFINITY);
-        if has("lens_distortion") && has("scale") && !sizes_ok {
+        if has(EffectId::LensDistortion) && has(EffectId::Scale) && !sizes_ok {
             out.push(Confounded {
-                effects: ["lens_distortion".into(), "scale".into()],
+                effects: pair(EffectId::LensDistortion, EffectId::Scale),
                 separate_with: SEVERAL_SIZES.into(),
                 evidence: "design".into(),
             });
         }
-        if has("fill_factor")
-            && has("psf_blur")
+        if has(EffectId::FillFactor)
+            && has(EffectId::PsfBlur)
             && (self.subpixel_steps_x < 3 || self.subpixel_steps_y < 3)
         {
             out.push(Confounded {
-                effects: ["fill_factor".into(), "psf_blur".into()],
+                effects: pair(EffectId::FillFactor, EffectId::PsfBlur),
                 separate_with: STEP_SERIES.into(),
                 evidence: "design".into(),
             });
@@ -187,17 +191,23 @@ impl DatasetDesign {
     }
 }
 
+/// Two effects as a confounded pair's names.
+pub fn pair(a: EffectId, b: EffectId) -> [String; 2] {
+    [a.as_str().into(), b.as_str().into()]
+}
+
 /// The run that separates two effects, for pairs the data show explaining the same residual.
-pub fn separating_run(a: &str, b: &str) -> String {
-    let pair = |x: &str, y: &str| (a == x && b == y) || (a == y && b == x);
-    if pair("lens_distortion", "scale") {
+pub fn separating_run(a: EffectId, b: EffectId) -> String {
+    use EffectId::*;
+    let pair = |x: EffectId, y: EffectId| (a == x && b == y) || (a == y && b == x);
+    if pair(LensDistortion, Scale) {
         SEVERAL_SIZES.into()
-    } else if pair("fill_factor", "psf_blur") {
+    } else if pair(FillFactor, PsfBlur) {
         STEP_SERIES.into()
-    } else if pair("rotation", "lens_distortion") || pair("rotation", "scale") {
+    } else if pair(Rotation, LensDistortion) || pair(Rotation, Scale) {
         "translations along x and along y".into()
     } else {
-        "runs that change one of the two effects alone (see the effects' signatures in DESIGN.md)"
+        "runs that change one of the two effects alone (see the effects' signatures in ARCHITECTURE.md)"
             .into()
     }
 }

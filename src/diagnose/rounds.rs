@@ -6,6 +6,7 @@
 use super::compare::{compare_prepared, load_measurement, Measurement};
 use super::diagnose::{diagnose_prepared, Diagnosis};
 use super::{CompareOptions, DiagnoseError, Progress};
+use crate::model::EffectId;
 use crate::model::ModelConfig;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -18,7 +19,9 @@ pub const MAX_ROUNDS: usize = 8;
 /// round (with its standard error) and with the verdict added.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Round {
-    pub verdict: String,
+    /// `"none"` on the wire when the round found nothing.
+    #[serde(with = "crate::model::effects::verdict_serde")]
+    pub verdict: Option<EffectId>,
     pub params: BTreeMap<String, f64>,
     pub stderr: BTreeMap<String, f64>,
     /// The model this round diagnosed.
@@ -35,7 +38,7 @@ pub struct Round {
 pub struct Rounds {
     pub rounds: Vec<Round>,
     /// The verdicts other than `none`, in the order found.
-    pub verdicts: Vec<String>,
+    pub verdicts: Vec<EffectId>,
     /// The discrepancy of the final model (every verdict added), px.
     pub final_discrepancy_px: f64,
     /// The model with every verdict added.
@@ -89,9 +92,9 @@ pub fn diagnose_rounds_prepared(
     let mut diagnoses: Vec<Diagnosis> = Vec::new();
     for _ in 0..rounds {
         let d = diagnose_prepared(meas, &current, before.take(), progress)?;
-        let winner = d.candidates.iter().find(|c| c.effect == d.verdict);
+        let winner = d.candidates.iter().find(|c| Some(c.effect) == d.verdict);
         out.push(Round {
-            verdict: d.verdict.clone(),
+            verdict: d.verdict,
             params: winner.map(|c| c.params.clone()).unwrap_or_default(),
             stderr: winner.map(|c| c.stderr.clone()).unwrap_or_default(),
             model: current.name.clone(),
@@ -102,12 +105,12 @@ pub fn diagnose_rounds_prepared(
         let next = d.winner_model.clone();
         before = d.after.clone();
         diagnoses.push(d);
-        match next {
-            Some(m) => {
-                verdicts.push(out.last().expect("pushed").verdict.clone());
+        match (next, out.last().and_then(|r| r.verdict)) {
+            (Some(m), Some(verdict)) => {
+                verdicts.push(verdict);
                 current = m;
             }
-            None => break,
+            _ => break,
         }
     }
     let last = diagnoses.last().expect("at least one round");

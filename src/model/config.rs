@@ -107,7 +107,13 @@ mod tests {
             Path::new("m.toml"),
         )
         .unwrap();
-        assert_eq!(m.effects.enabled(), vec!["stage_misalignment", "psf_blur"]);
+        assert_eq!(
+            m.effects.enabled(),
+            vec![
+                crate::model::EffectId::StageMisalignment,
+                crate::model::EffectId::PsfBlur
+            ]
+        );
         let err = ModelConfig::from_toml(
             "name = \"m\"\n[effects.psf_blurr]\nsigma_px = 1\n",
             Path::new("m.toml"),

@@ -12,7 +12,7 @@ mod seed;
 mod speckle;
 
 pub use config::{ModelConfig, ModelError};
-pub use effects::{Effects, EFFECT_IDS};
+pub use effects::{EffectId, Effects, Stage};
 pub use pattern::{SpecklePattern, TargetDot, TooManyDots, MAX_TARGET_DOTS};
 pub use render::{project, render_frame, Camera, FrameSpec};
 pub use seed::derive_seed;

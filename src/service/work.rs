@@ -297,7 +297,7 @@ pub fn diagnosis(
             } else {
                 format!(
                     "verdict {}: discrepancy {} px",
-                    r.verdicts.join(", "),
+                    crate::model::effects::join_effects(&r.verdicts, ", "),
                     fall.join(" → ")
                 )
             },

@@ -4,6 +4,7 @@
 
 mod fill_factor;
 mod fixed_pattern;
+mod id;
 mod illumination_change;
 mod lens_distortion;
 mod motion_blur;
@@ -30,47 +31,8 @@ pub use stage_error::StageError;
 pub use stage_misalignment::StageMisalignment;
 pub use vignetting::Vignetting;
 
+pub use id::{join as join_effects, verdict_name, verdict_serde, EffectId, Stage};
 use serde::{Deserialize, Serialize};
-
-/// Where in the imaging chain an effect acts.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Stage {
-    Geometry,
-    Optics,
-    Sensor,
-    Radiometry,
-}
-
-/// Every effect id, in the order of DESIGN.md's table.
-pub const EFFECT_IDS: [&str; 13] = [
-    "stage_misalignment",
-    "stage_error",
-    "rotation",
-    "scale",
-    "lens_distortion",
-    "psf_blur",
-    "fill_factor",
-    "sensor_noise",
-    "fixed_pattern",
-    "quantization",
-    "vignetting",
-    "illumination_change",
-    "motion_blur",
-];
-
-/// The chain position of an effect id.
-pub fn stage_of(id: &str) -> Option<Stage> {
-    Some(match id {
-        "stage_misalignment" | "stage_error" | "rotation" | "scale" | "lens_distortion" => {
-            Stage::Geometry
-        }
-        "psf_blur" | "motion_blur" => Stage::Optics,
-        "fill_factor" | "sensor_noise" | "fixed_pattern" | "quantization" => Stage::Sensor,
-        "vignetting" | "illumination_change" => Stage::Radiometry,
-        _ => return None,
-    })
-}
 
 /// The enabled effects of a model; an absent table is an absent effect.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -105,8 +67,8 @@ pub struct Effects {
 }
 
 impl Effects {
-    /// Ids of the enabled effects, in vocabulary order.
-    pub fn enabled(&self) -> Vec<&'static str> {
+    /// The enabled effects, in vocabulary order.
+    pub fn enabled(&self) -> Vec<EffectId> {
         let on = [
             self.stage_misalignment.is_some(),
             self.stage_error.is_some(),
@@ -122,10 +84,10 @@ impl Effects {
             self.illumination_change.is_some(),
             self.motion_blur.is_some(),
         ];
-        EFFECT_IDS
-            .iter()
+        EffectId::ALL
+            .into_iter()
             .zip(on)
-            .filter_map(|(id, on)| on.then_some(*id))
+            .filter_map(|(id, on)| on.then_some(id))
             .collect()
     }
 }
