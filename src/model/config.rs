@@ -59,6 +59,19 @@ impl ModelConfig {
             })
         };
         let e = &self.effects;
+        // Every parameter finite (TOML can write `nan` and `inf`): one walk over all of them, so
+        // an effect added later is covered too.
+        if let Some(path) = toml::Value::try_from(e)
+            .ok()
+            .and_then(|v| non_finite_at(&v, "effects"))
+        {
+            return bad(format!("{path} must be a finite number"));
+        }
+        if let Some(s) = e.stage_error {
+            if !(s.repeatability_um >= 0.0) {
+                return bad("stage_error repeatability_um must be >= 0".into());
+            }
+        }
         if let Some(f) = e.fill_factor {
             if !(f.fx > 0.0 && f.fx <= 1.0 && f.fy > 0.0 && f.fy <= 1.0) {
                 return bad(format!(
@@ -96,9 +109,54 @@ impl ModelConfig {
     }
 }
 
+/// The dotted path of the first non-finite float under `v`.
+fn non_finite_at(v: &toml::Value, path: &str) -> Option<String> {
+    match v {
+        toml::Value::Float(x) if !x.is_finite() => Some(path.to_string()),
+        toml::Value::Table(t) => t
+            .iter()
+            .find_map(|(k, v)| non_finite_at(v, &format!("{path}.{k}"))),
+        toml::Value::Array(a) => a
+            .iter()
+            .enumerate()
+            .find_map(|(i, v)| non_finite_at(v, &format!("{path}[{i}]"))),
+        _ => None,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn non_finite_parameters_are_refused_naming_them() {
+        for (table, key, value) in [
+            ("rotation", "angle_rad", "nan"),
+            ("psf_blur", "sigma_px", "inf"),
+            ("illumination_change", "gain", "-inf"),
+        ] {
+            let text = format!("name = \"m\"\n[effects.{table}]\n{key} = {value}\n");
+            let text = if table == "illumination_change" {
+                text + "offset = 0.0\n"
+            } else {
+                text
+            };
+            let err = ModelConfig::from_toml(&text, Path::new("m.toml"))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                err.contains(&format!("effects.{table}.{key}")) && err.contains("finite"),
+                "{err}"
+            );
+        }
+        let err = ModelConfig::from_toml(
+            "name = \"m\"\n[effects.stage_error]\nrepeatability_um = -1.0\n",
+            Path::new("m.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("repeatability_um"), "{err}");
+    }
 
     #[test]
     fn parses_effects_and_refuses_unknown_keys() {

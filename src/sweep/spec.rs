@@ -220,12 +220,6 @@ impl SweepSpec {
     /// Checks every field (also what the schema cannot say, e.g. the task count); the field to
     /// blame on failure.
     pub fn validate(&self) -> Result<(), FieldError> {
-        let bad = |field: &str, reason: String| {
-            Err(FieldError {
-                field: field.to_string(),
-                reason,
-            })
-        };
         if self.name.is_empty()
             || self.name.chars().count() > 128
             || self.name.chars().any(char::is_control)
@@ -235,69 +229,7 @@ impl SweepSpec {
         if !(1..=MAX_SEEDS).contains(&self.seeds) {
             return bad("seeds", format!("1 to {MAX_SEEDS}"));
         }
-        if self.prints().is_empty() {
-            return bad("axes", "give dot_diameter_px or patterns".into());
-        }
-        for d in &self.axes.dot_diameter_px {
-            if !(d.is_finite() && (0.5..=100.0).contains(d)) {
-                return bad(
-                    "axes.dot_diameter_px",
-                    format!("{d} is not in [0.5, 100] px"),
-                );
-            }
-        }
-        for p in &self.axes.patterns {
-            if SpecklePattern::preset(p).is_none() {
-                return bad("axes.patterns", format!("unknown preset '{p}' (a, b or c)"));
-            }
-        }
-        crate::experiment::check_schemes(&self.axes.schemes).map_err(|e| FieldError {
-            field: format!("axes.{}", e.field),
-            reason: e.reason,
-        })?;
-        for n in &self.axes.noise {
-            let sane = n.full_well_e > 0.0
-                && n.read_noise_e >= 0.0
-                && n.gain > 0.0
-                && [n.full_well_e, n.read_noise_e, n.gain]
-                    .iter()
-                    .all(|v| v.is_finite());
-            if !sane {
-                return bad(
-                    "axes.noise",
-                    "full_well_e and gain positive, read_noise_e ≥ 0".into(),
-                );
-            }
-        }
-        let within = |name: &str, xs: &[f64], lo: f64, hi: f64| -> Result<(), FieldError> {
-            if xs.is_empty() {
-                return bad(&format!("axes.{name}"), "at least one value".into());
-            }
-            match xs
-                .iter()
-                .find(|v| !(v.is_finite() && (lo..=hi).contains(*v)))
-            {
-                Some(v) => bad(
-                    &format!("axes.{name}"),
-                    format!("{v} is not in [{lo}, {hi}]"),
-                ),
-                None => Ok(()),
-            }
-        };
-        within("psf_sigma_px", &self.axes.psf_sigma_px, 0.0, 20.0)?;
-        if let Some(a) = self
-            .axes
-            .pixel_aperture
-            .iter()
-            .find(|a| !a.iter().all(|f| f.is_finite() && *f > 0.0 && *f <= 1.0))
-        {
-            return bad(
-                "axes.pixel_aperture",
-                format!("[{}, {}]: each linear fill factor in (0, 1]", a[0], a[1]),
-            );
-        }
-        within("subpixel_x", &self.axes.subpixel_x, -1.0, 1.0)?;
-        within("subpixel_y", &self.axes.subpixel_y, -1.0, 1.0)?;
+        self.validate_axes()?;
         if !self
             .move_mm
             .iter()
@@ -305,27 +237,7 @@ impl SweepSpec {
         {
             return bad("move_mm", format!("each within ±{MAX_MOVE_MM} mm"));
         }
-        let c = &self.camera;
-        let sides = MIN_SENSOR_SIDE_PX..=MAX_SENSOR_SIDE_PX;
-        if !sides.contains(&c.width) || !sides.contains(&c.height) {
-            return bad(
-                "camera",
-                format!("width and height {MIN_SENSOR_SIDE_PX} to {MAX_SENSOR_SIDE_PX} px"),
-            );
-        }
-        if !(c.scale_px_per_mm.is_finite() && (0.01..=10_000.0).contains(&c.scale_px_per_mm)) {
-            return bad("camera.scale_px_per_mm", "0.01 to 10,000 px/mm".into());
-        }
-        if !(c.exposure_level.is_finite() && c.exposure_level > 0.0 && c.exposure_level <= 1.0) {
-            return bad("camera.exposure_level", "in (0, 1]".into());
-        }
-        let half = c.width.max(c.height) as f64;
-        if ![c.principal_dx_px, c.principal_dy_px]
-            .iter()
-            .all(|v| v.is_finite() && v.abs() <= half)
-        {
-            return bad("camera", "principal point offsets within the sensor".into());
-        }
+        validate_camera(&self.camera)?;
         self.dic.validate().map_err(|e| FieldError {
             field: "dic".into(),
             reason: e.to_string(),
@@ -336,4 +248,107 @@ impl SweepSpec {
         }
         Ok(())
     }
+
+    fn validate_axes(&self) -> Result<(), FieldError> {
+        let axes = &self.axes;
+        if self.prints().is_empty() {
+            return bad("axes", "give dot_diameter_px or patterns".into());
+        }
+        if let Some(d) = axes
+            .dot_diameter_px
+            .iter()
+            .find(|d| !(d.is_finite() && (0.5..=100.0).contains(*d)))
+        {
+            return bad(
+                "axes.dot_diameter_px",
+                format!("{d} is not in [0.5, 100] px"),
+            );
+        }
+        if let Some(p) = axes
+            .patterns
+            .iter()
+            .find(|p| SpecklePattern::preset(p).is_none())
+        {
+            return bad("axes.patterns", format!("unknown preset '{p}' (a, b or c)"));
+        }
+        crate::experiment::check_schemes(&axes.schemes).map_err(|e| FieldError {
+            field: format!("axes.{}", e.field),
+            reason: e.reason,
+        })?;
+        let sane = |n: &NoiseLevel| {
+            n.full_well_e > 0.0
+                && n.read_noise_e >= 0.0
+                && n.gain > 0.0
+                && [n.full_well_e, n.read_noise_e, n.gain]
+                    .iter()
+                    .all(|v| v.is_finite())
+        };
+        if !axes.noise.iter().all(sane) {
+            return bad(
+                "axes.noise",
+                "full_well_e and gain positive, read_noise_e ≥ 0".into(),
+            );
+        }
+        within("psf_sigma_px", &axes.psf_sigma_px, 0.0, 20.0)?;
+        if let Some(a) = axes
+            .pixel_aperture
+            .iter()
+            .find(|a| !a.iter().all(|f| f.is_finite() && *f > 0.0 && *f <= 1.0))
+        {
+            return bad(
+                "axes.pixel_aperture",
+                format!("[{}, {}]: each linear fill factor in (0, 1]", a[0], a[1]),
+            );
+        }
+        within("subpixel_x", &axes.subpixel_x, -1.0, 1.0)?;
+        within("subpixel_y", &axes.subpixel_y, -1.0, 1.0)
+    }
+}
+
+fn bad(field: &str, reason: String) -> Result<(), FieldError> {
+    Err(FieldError {
+        field: field.to_string(),
+        reason,
+    })
+}
+
+/// Every value of axis `name` finite and in [lo, hi], and at least one.
+fn within(name: &str, xs: &[f64], lo: f64, hi: f64) -> Result<(), FieldError> {
+    if xs.is_empty() {
+        return bad(&format!("axes.{name}"), "at least one value".into());
+    }
+    match xs
+        .iter()
+        .find(|v| !(v.is_finite() && (lo..=hi).contains(*v)))
+    {
+        Some(v) => bad(
+            &format!("axes.{name}"),
+            format!("{v} is not in [{lo}, {hi}]"),
+        ),
+        None => Ok(()),
+    }
+}
+
+fn validate_camera(c: &Camera) -> Result<(), FieldError> {
+    let sides = MIN_SENSOR_SIDE_PX..=MAX_SENSOR_SIDE_PX;
+    if !sides.contains(&c.width) || !sides.contains(&c.height) {
+        return bad(
+            "camera",
+            format!("width and height {MIN_SENSOR_SIDE_PX} to {MAX_SENSOR_SIDE_PX} px"),
+        );
+    }
+    if !(c.scale_px_per_mm.is_finite() && (0.01..=10_000.0).contains(&c.scale_px_per_mm)) {
+        return bad("camera.scale_px_per_mm", "0.01 to 10,000 px/mm".into());
+    }
+    if !(c.exposure_level.is_finite() && c.exposure_level > 0.0 && c.exposure_level <= 1.0) {
+        return bad("camera.exposure_level", "in (0, 1]".into());
+    }
+    let half = c.width.max(c.height) as f64;
+    if ![c.principal_dx_px, c.principal_dy_px]
+        .iter()
+        .all(|v| v.is_finite() && v.abs() <= half)
+    {
+        return bad("camera", "principal point offsets within the sensor".into());
+    }
+    Ok(())
 }

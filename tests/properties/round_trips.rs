@@ -51,7 +51,7 @@ fn effects() -> impl Strategy<Value = Effects> {
     use prop::option::of;
     let geometry = (
         of(finite().prop_map(|angle_rad| StageMisalignment { angle_rad })),
-        of(finite().prop_map(|repeatability_um| StageError { repeatability_um })),
+        of((0.0f64..1e6).prop_map(|repeatability_um| StageError { repeatability_um })),
         of(finite().prop_map(|angle_rad| Rotation { angle_rad })),
         of(finite().prop_map(|ds| Scale { ds })),
         of(
