@@ -267,8 +267,10 @@ pub fn finish_document(spec: &utoipa::openapi::OpenApi) -> serde_json::Value {
                 .is_some_and(|ps| ps.iter().any(|p| p["name"] == "Idempotency-Key"));
             if let Some(params) = op.get_mut("parameters").and_then(|p| p.as_array_mut()) {
                 for p in params.iter_mut().filter(|p| p["name"] == "Last-Event-ID") {
-                    // A header is text: "null" is not an id (utoipa writes Option as nullable).
-                    p["schema"] = serde_json::json!({ "type": "integer", "minimum": 0 });
+                    // A header is text: "null" is not an id (utoipa writes Option as nullable);
+                    // ids are u64, and a larger number is refused (400).
+                    p["schema"] =
+                        serde_json::json!({ "type": "integer", "minimum": 0, "maximum": u64::MAX });
                     p["required"] = serde_json::Value::Bool(false);
                 }
             }

@@ -32,7 +32,9 @@ pub fn last_event_id(headers: &HeaderMap) -> Result<Option<u64>, crate::api::Api
         .and_then(|v| v.trim().parse().ok())
         .map(Some)
         .ok_or_else(|| {
-            crate::api::ApiError::bad_request("Last-Event-ID must be an event id (a whole number)")
+            crate::api::ApiError::bad_request(
+                "Last-Event-ID must be an event id (a whole number below 2^64)",
+            )
         })
 }
 
