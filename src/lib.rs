@@ -16,6 +16,7 @@ pub mod image;
 pub mod model;
 pub mod reduce;
 pub mod report;
+pub mod run_event;
 pub mod service;
 pub mod stats;
 pub mod store;

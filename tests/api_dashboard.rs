@@ -5,21 +5,17 @@
 #[path = "common/daemon.rs"]
 mod daemon;
 
-use daemon::{client, small_config, small_request, wait_terminal, TestServer, SCALE_PX_PER_MM};
+use daemon::{
+    client, get, post, small_config, small_request, wait_terminal, TestServer, SCALE_PX_PER_MM,
+};
 use serde_json::{json, Value};
 
 async fn post_json(server: &TestServer, path: &str, body: &Value) -> Value {
-    let r = client()
-        .post(server.url(path))
-        .json(body)
-        .send()
-        .await
-        .unwrap();
-    r.json().await.unwrap()
+    post(&server.url(path), body).await.json().await.unwrap()
 }
 
 async fn get_json(server: &TestServer, path: &str) -> (u16, Value) {
-    let r = client().get(server.url(path)).send().await.unwrap();
+    let r = get(&server.url(path)).await;
     let status = r.status().as_u16();
     (status, r.json().await.unwrap())
 }

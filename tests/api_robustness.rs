@@ -37,14 +37,39 @@ async fn problem(resp: reqwest::Response, status: u16) -> Value {
     p
 }
 
+/// A started daemon on a fresh data folder, and what its runs and datasets folders hold.
+struct Fixture {
+    tmp: tempfile::TempDir,
+    server: TestServer,
+    c: reqwest::Client,
+    runs: std::path::PathBuf,
+    datasets: std::path::PathBuf,
+}
+
+impl Fixture {
+    async fn start() -> Fixture {
+        let tmp = tempfile::tempdir().unwrap();
+        let server = TestServer::start(small_config(tmp.path())).await;
+        let (runs, datasets) = (tmp.path().join("runs"), tmp.path().join("datasets"));
+        Fixture {
+            tmp,
+            server,
+            c: client(),
+            runs,
+            datasets,
+        }
+    }
+
+    fn written(&self) -> (Vec<String>, Vec<String>) {
+        (tree(&self.runs), tree(&self.datasets))
+    }
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn bad_requests_are_problems_and_write_nothing() {
-    let tmp = tempfile::tempdir().unwrap();
-    let server = TestServer::start(small_config(tmp.path())).await;
-    let c = client();
-    let runs = tmp.path().join("runs");
-    let datasets = tmp.path().join("datasets");
-    let before = (tree(&runs), tree(&datasets));
+async fn bad_bodies_are_problems_naming_the_field_and_write_nothing() {
+    let f = Fixture::start().await;
+    let (server, c) = (&f.server, &f.c);
+    let before = f.written();
     let post = |body: &'static str| {
         c.post(server.url("/experiments"))
             .header("content-type", "application/json")
@@ -118,7 +143,14 @@ async fn bad_requests_are_problems_and_write_nothing() {
     )
     .await;
 
-    // Bad ids and names reach nothing outside the data folder.
+    assert_eq!(f.written(), before, "nothing written");
+    f.server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_ids_and_paths_reach_nothing() {
+    let f = Fixture::start().await;
+    let (server, c) = (&f.server, &f.c);
     for path in [
         "/experiments/..%2F..%2Fetc",
         "/experiments/NOT-AN-ID",
@@ -137,28 +169,43 @@ async fn bad_requests_are_problems_and_write_nothing() {
     )
     .await;
 
-    // Uploads: a path-traversal file name, a corrupt TIFF, a manifest naming a missing frame.
-    let manifest = json!({"format": "ffdic-dataset/1", "name": "up", "scale_px_per_mm": 13.0,
+    f.server.stop().await;
+}
+
+/// A 2-D random texture (a hash of the pixel position), shifted by `dx` px, as a 16-bit TIFF: a
+/// sawtooth in one direction would leave any motion along its ridges undetermined.
+fn texture_tiff(dx: i64) -> Vec<u8> {
+    let img = ffdic::image::Image::from_fn(96, 80, |c, r| {
+        let c = (c as i64 - dx) as u64;
+        let mut s = c.wrapping_mul(73_856_093) ^ (r as u64).wrapping_mul(19_349_663);
+        s ^= s >> 13;
+        s = s.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        (s >> 56) as f32
+    });
+    let data: Vec<u16> = img.data().iter().map(|&v| v as u16).collect();
+    ffdic::image::tiff_u16_bytes(96, 80, &data).unwrap()
+}
+
+/// A one-run manifest whose stage moved `dx_mm` in x.
+fn upload_manifest(dx_mm: f64) -> String {
+    json!({"format": "ffdic-dataset/1", "name": "up", "scale_px_per_mm": 13.0,
         "runs": [{"id": "r1", "reference": "ref.tif", "deformed": "def.tif",
-                  "stage": {"dx_mm": 0.5, "dy_mm": 0.0}}]})
-    .to_string();
-    // A 2-D random texture (a hash of the pixel position), shifted by `dx` px: a sawtooth in one
-    // direction would leave any motion along its ridges undetermined.
-    let texture_tiff = |dx: i64| {
-        let img = ffdic::image::Image::from_fn(96, 80, |c, r| {
-            let c = (c as i64 - dx) as u64;
-            let mut s = c.wrapping_mul(73_856_093) ^ (r as u64).wrapping_mul(19_349_663);
-            s ^= s >> 13;
-            s = s.wrapping_mul(0x9E37_79B9_7F4A_7C15);
-            (s >> 56) as f32
-        });
-        let data: Vec<u16> = img.data().iter().map(|&v| v as u16).collect();
-        ffdic::image::tiff_u16_bytes(96, 80, &data).unwrap()
-    };
+                  "stage": {"dx_mm": dx_mm, "dy_mm": 0.0}}]})
+    .to_string()
+}
+
+fn part(name: &str, bytes: Vec<u8>) -> reqwest::multipart::Part {
+    reqwest::multipart::Part::bytes(bytes).file_name(name.to_string())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_uploads_land_nothing_and_a_good_one_is_analysed() {
+    let f = Fixture::start().await;
+    let (server, c) = (&f.server, &f.c);
+    let before = f.written();
+    // A path-traversal file name, a corrupt TIFF, a manifest naming a missing frame.
+    let manifest = upload_manifest(0.5);
     let good_tiff = texture_tiff(0);
-    let part = |name: &str, bytes: Vec<u8>| {
-        reqwest::multipart::Part::bytes(bytes).file_name(name.to_string())
-    };
     let post_form =
         |form: reqwest::multipart::Form| c.post(server.url("/datasets")).multipart(form).send();
     let traversal = reqwest::multipart::Form::new()
@@ -190,10 +237,7 @@ async fn bad_requests_are_problems_and_write_nothing() {
     problem(post_form(missing).await.unwrap(), 422).await;
     // Issue 12: a manifest whose move contradicts its frames (they moved 20 px = 1.5 mm, it says
     // 0.001 mm) is refused with the measured figure; so is a file the manifest does not name.
-    let mislabelled = json!({"format": "ffdic-dataset/1", "name": "up", "scale_px_per_mm": 13.0,
-        "runs": [{"id": "r1", "reference": "ref.tif", "deformed": "def.tif",
-                  "stage": {"dx_mm": 0.001, "dy_mm": 0.0}}]})
-    .to_string();
+    let mislabelled = upload_manifest(0.001);
     let form = reqwest::multipart::Form::new()
         .part(
             "dataset.json",
@@ -214,8 +258,8 @@ async fn bad_requests_are_problems_and_write_nothing() {
         .part("notes.txt", part("notes.txt", b"hello".to_vec()));
     let p = problem(post_form(form).await.unwrap(), 422).await;
     assert!(p["detail"].as_str().unwrap().contains("notes.txt"), "{p}");
-    assert!(!tmp.path().join("evil.tif").exists());
-    assert_eq!((tree(&runs), tree(&datasets)), before, "nothing written");
+    assert!(!f.tmp.path().join("evil.tif").exists());
+    assert_eq!(f.written(), before, "nothing written");
 
     // …and the server keeps serving: a good upload lands, and its analysis runs as a job.
     let good = reqwest::multipart::Form::new()
@@ -268,7 +312,7 @@ async fn bad_requests_are_problems_and_write_nothing() {
         c.get(server.url("/health")).send().await.unwrap().status(),
         200
     );
-    server.stop().await;
+    f.server.stop().await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -5,7 +5,9 @@
 #[path = "common/daemon.rs"]
 mod daemon;
 
-use daemon::{client, read_events, small_config, wait_terminal, wait_until, TestServer};
+use daemon::{
+    client, get, get_json, post, read_events, small_config, wait_terminal, wait_until, TestServer,
+};
 use serde_json::{json, Value};
 use std::path::Path;
 use std::process::Command;
@@ -46,18 +48,6 @@ fn cli_map_csv(spec: &Value, dir: &Path) -> String {
         );
     }
     std::fs::read_to_string(sweep.join("map.csv")).unwrap()
-}
-
-async fn post(url: &str, body: &Value) -> reqwest::Response {
-    client().post(url).json(body).send().await.unwrap()
-}
-
-async fn get(url: &str) -> reqwest::Response {
-    client().get(url).send().await.unwrap()
-}
-
-async fn get_json<T: serde::de::DeserializeOwned>(url: &str) -> T {
-    get(url).await.json().await.unwrap()
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -114,7 +114,7 @@ fn a_run_whose_end_cannot_be_written_ends_once_space_returns_and_cancel_says_why
         "{ended:?}"
     );
     let events = store.events(&id, None).unwrap();
-    assert_eq!(events.last().unwrap().kind, "failed");
+    assert_eq!(events.last().unwrap().kind.as_str(), "failed");
 }
 
 #[test]

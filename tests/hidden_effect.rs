@@ -106,6 +106,8 @@ struct Outcome {
     diagnosis: Diagnosis,
     before_px: f64,
     after_px: f64,
+    /// The diagnosis in a few lines (verdict, each candidate's evidence), for failure messages.
+    report: String,
 }
 
 fn run(name: &str, truth: Effects, spec: ExperimentSpec, schemes: Vec<Scheme>) -> Outcome {
@@ -120,99 +122,76 @@ fn run_with(name: &str, truth: Effects, spec: ExperimentSpec, opts: CompareOptio
         effects: truth,
     };
     simulate_dataset(&spec, &bench, spec.seed, dir.path(), &|_, _| {}).unwrap();
-    let t = std::time::Instant::now();
     let meas = load_measurement(dir.path(), &opts, &|_, _| true).unwrap();
-    println!("   load {:.1} s", t.elapsed().as_secs_f64());
     let model = baseline();
     let before = compare_prepared(&meas, &model, &|_, _| true).unwrap();
-    println!(
-        "   compare {:.1} s; chi2 {:?}",
-        t.elapsed().as_secs_f64(),
-        before.chi2
-    );
     let diagnosis = diagnose_prepared(&meas, &model, Some(before.clone()), &|_, _| true).unwrap();
     let after_px = diagnosis
         .after
         .as_ref()
         .map_or(f64::NAN, |a| a.discrepancy_px);
-    println!("== {name}: {:.1} s", t.elapsed().as_secs_f64());
-    println!(
-        "   before {:.5} px (field {:.5}, std {:.5}); verdict {}; after {:.5} px",
-        before.discrepancy_px,
-        before.parts.field_px,
-        before.parts.std_px,
-        ffdic::model::effects::verdict_name(diagnosis.verdict),
-        after_px
-    );
-    for c in &diagnosis.candidates {
-        println!(
-            "   {:<20} dBIC {:>12.1} D {:.5} drop {:+.5} sig {} rec {} params {:?} se {:?}",
-            c.effect,
-            c.delta_bic,
-            c.discrepancy_px,
-            c.drop_px,
-            c.significant,
-            c.recomputed,
-            c.params,
-            c.stderr
-        );
-    }
-    for (label, cmp) in [
-        ("before", Some(&before)),
-        ("after", diagnosis.after.as_ref()),
-    ] {
-        if let Some(c) = cmp {
-            println!("   {label}: travel scale {:.6}, misalignment {:.6} rad, noise floor {:.1} DN, white {:.1}", c.model.nominal.travel_scale, c.model.nominal.misalignment_rad, c.model.nominal.noise_floor_dn, c.model.nominal.patterns[0].white_level_dn);
-        }
-        for r in cmp.into_iter().flat_map(|c| &c.runs) {
-            println!(
-                "   {label} {:<6} {:<7} D {:.5} field {:.5} std {:.5} mean diff {:+.5} {:+.5} random m {:.4} {:.4} o {:.4} {:.4}",
-                r.id, r.scheme, r.discrepancy_px, r.field_px, r.std_px, r.mean_diff_px[0], r.mean_diff_px[1],
-                r.measured.random_px[0], r.measured.random_px[1], r.model.random_px[0], r.model.random_px[1]
-            );
-        }
-    }
-    for n in &diagnosis.not_identifiable {
-        println!("   not identifiable: {} ({})", n.effect, n.runs_to_add);
-    }
-    for c in &diagnosis.confounded {
-        println!(
-            "   confounded: {:?} ({}): {}",
-            c.effects, c.evidence, c.separate_with
-        );
-    }
+    let report = report(name, before.discrepancy_px, after_px, &diagnosis);
     Outcome {
         before_px: before.discrepancy_px,
         after_px,
         diagnosis,
+        report,
     }
 }
 
+fn report(name: &str, before_px: f64, after_px: f64, d: &Diagnosis) -> String {
+    let mut out = format!(
+        "{name}: verdict {}, discrepancy {before_px:.5} -> {after_px:.5} px (se {:.5})",
+        ffdic::model::effects::verdict_name(d.verdict),
+        d.discrepancy_se_px
+    );
+    for c in &d.candidates {
+        out += &format!(
+            "\n  {:<20} ΔBIC {:>10.1}, drop {:+.5} px, significant {}, params {:?} ± {:?}",
+            c.effect, c.delta_bic, c.drop_px, c.significant, c.params, c.stderr
+        );
+    }
+    for n in &d.not_identifiable {
+        out += &format!("\n  not identifiable: {} ({})", n.effect, n.runs_to_add);
+    }
+    for c in &d.confounded {
+        out += &format!(
+            "\n  confounded: {:?} ({}): {}",
+            c.effects, c.evidence, c.separate_with
+        );
+    }
+    out
+}
+
 /// Within 25 % or two standard errors of the truth.
-fn close(d: &Diagnosis, effect: &str, param: &str, truth: f64) {
-    let c = d
+fn close(o: &Outcome, effect: &str, param: &str, truth: f64) {
+    let c = o
+        .diagnosis
         .candidates
         .iter()
         .find(|c| c.effect.as_str() == effect)
-        .unwrap();
+        .unwrap_or_else(|| panic!("no candidate {effect}\n{}", o.report));
     let (v, se) = (c.params[param], c.stderr[param]);
-    println!("   {effect}.{param}: fitted {v:.6} ± {se:.6}, truth {truth:.6}");
     assert!(
         (v - truth).abs() <= 0.25 * truth.abs() || (v - truth).abs() <= 2.0 * se,
-        "{effect}.{param}: fitted {v} ± {se}, truth {truth}"
+        "{effect}.{param}: fitted {v} ± {se}, truth {truth}\n{}",
+        o.report
     );
 }
 
 fn check(o: &Outcome, effect: &str, ratio: f64) {
     assert_eq!(
         ffdic::model::effects::verdict_name(o.diagnosis.verdict),
-        effect
+        effect,
+        "{}",
+        o.report
     );
     assert!(
         o.after_px <= ratio * o.before_px,
-        "{effect}: discrepancy {} px after vs {} px before (limit ratio {ratio})",
+        "{effect}: discrepancy {} px after vs {} px before (limit ratio {ratio})\n{}",
         o.after_px,
-        o.before_px
+        o.before_px,
+        o.report
     );
 }
 
@@ -251,7 +230,7 @@ fn hidden_lens_distortion() {
         vec![native()],
     );
     check(&o, "lens_distortion", 1.0 / 3.0);
-    close(&o.diagnosis, "lens_distortion", "k1", k1);
+    close(&o, "lens_distortion", "k1", k1);
 }
 
 #[test]
@@ -269,7 +248,7 @@ fn hidden_rotation() {
         vec![native()],
     );
     check(&o, "rotation", 1.0 / 3.0);
-    close(&o.diagnosis, "rotation", "angle_rad", angle);
+    close(&o, "rotation", "angle_rad", angle);
 }
 
 #[test]
@@ -287,7 +266,7 @@ fn hidden_scale() {
         vec![native()],
     );
     check(&o, "scale", 1.0 / 3.0);
-    close(&o.diagnosis, "scale", "ds", ds);
+    close(&o, "scale", "ds", ds);
 }
 
 /// Analysed without the engine's default Gaussian pre-filter (as the paper's MatchID analysis):
@@ -307,7 +286,7 @@ fn hidden_psf_blur() {
         options(vec![native()], 0.0),
     );
     check(&o, "psf_blur", 0.5);
-    close(&o.diagnosis, "psf_blur", "sigma_px", sigma);
+    close(&o, "psf_blur", "sigma_px", sigma);
 }
 
 /// Pattern b (3 px dots, where the paper sees the fill factor matter), no pre-filter, a step
@@ -331,10 +310,12 @@ fn hidden_fill_factor() {
     let o = fill_factor_outcome();
     assert_eq!(
         ffdic::model::effects::verdict_name(o.diagnosis.verdict),
-        "fill_factor"
+        "fill_factor",
+        "{}",
+        o.report
     );
-    close(&o.diagnosis, "fill_factor", "fx", 0.5);
-    close(&o.diagnosis, "fill_factor", "fy", 0.8);
+    close(&o, "fill_factor", "fx", 0.5);
+    close(&o, "fill_factor", "fy", 0.8);
 }
 
 /// A finer print (0.15 mm dots, 1.95 px at 13 px/mm), where a 50 % x 80 % aperture changes the
@@ -360,10 +341,12 @@ fn hidden_fill_factor_fine_speckle() {
     let o = run_with("fill_factor-fine", truth, sp, options(vec![native()], 0.0));
     assert_eq!(
         ffdic::model::effects::verdict_name(o.diagnosis.verdict),
-        "fill_factor"
+        "fill_factor",
+        "{}",
+        o.report
     );
-    close(&o.diagnosis, "fill_factor", "fx", 0.5);
-    close(&o.diagnosis, "fill_factor", "fy", 0.8);
+    close(&o, "fill_factor", "fx", 0.5);
+    close(&o, "fill_factor", "fy", 0.8);
 }
 
 /// The acceptance bound on the discrepancy for fill_factor. It does not hold: a 50 % x 80 %
@@ -403,20 +386,22 @@ fn hidden_sensor_noise() {
     // the fall asked for is that curve's χ².
     assert_eq!(
         ffdic::model::effects::verdict_name(o.diagnosis.verdict),
-        "sensor_noise"
+        "sensor_noise",
+        "{}",
+        o.report
     );
     let (before, after) = (
         o.diagnosis.before.as_ref().unwrap(),
         o.diagnosis.after.as_ref().unwrap(),
     );
     let (ptc_before, ptc_after) = (before.chi2.image_parts[1].0, after.chi2.image_parts[1].0);
-    println!(
-        "   photon-transfer χ² {ptc_before:.1} -> {ptc_after:.1}; discrepancy {:.5} ± {:.5} -> {:.5} ± {:.5} px",
-        before.discrepancy_px, o.diagnosis.discrepancy_se_px, after.discrepancy_px, after.discrepancy_se_px
+    assert!(
+        ptc_after * 2.0 <= ptc_before,
+        "photon-transfer χ² {ptc_before:.1} -> {ptc_after:.1}\n{}",
+        o.report
     );
-    assert!(ptc_after * 2.0 <= ptc_before);
-    close(&o.diagnosis, "sensor_noise", "gain", 0.5);
-    close(&o.diagnosis, "sensor_noise", "read_noise_e", 3.0);
+    close(&o, "sensor_noise", "gain", 0.5);
+    close(&o, "sensor_noise", "read_noise_e", 3.0);
 }
 
 #[test]
@@ -439,7 +424,9 @@ fn nothing_hidden() {
     );
     assert_eq!(
         ffdic::model::effects::verdict_name(o.diagnosis.verdict),
-        "none"
+        "none",
+        "{}",
+        o.report
     );
     for c in &o.diagnosis.candidates {
         assert!(!c.significant, "{} reported significant: {c:?}", c.effect);

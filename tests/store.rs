@@ -1,7 +1,9 @@
 //! The run store through its public API: folders are the truth, the index a cache.
 
+use ffdic::run_event::EventKind;
 use ffdic::store::{
-    rebuild_index, DatasetRecord, RunId, RunKind, RunRecord, RunStatus, RunStore, StoreError,
+    rebuild_index, DatasetRecord, DatasetSource, RunId, RunKind, RunRecord, RunStatus, RunStore,
+    StoreError,
 };
 use serde_json::json;
 use std::collections::BTreeMap;
@@ -84,11 +86,11 @@ fn a_run_moves_forward_only_and_its_end_is_final() {
             Err(StoreError::Finished(_))
         ));
     }
-    let kinds: Vec<String> = store
+    let kinds: Vec<&str> = store
         .events(&r.id, None)
         .unwrap()
         .into_iter()
-        .map(|e| e.kind)
+        .map(|e| e.kind.as_str())
         .collect();
     assert_eq!(kinds, ["queued", "started", "succeeded"]);
     assert_eq!(store.get(&r.id).unwrap().status, RunStatus::Succeeded);
@@ -134,7 +136,7 @@ fn an_ended_run_takes_no_more_writes() {
         Err(StoreError::Finished(_))
     ));
     assert!(matches!(
-        store.append_event(&r.id, "progress", 0.9, "late", json!({})),
+        store.append_event(&r.id, EventKind::Progress, 0.9, "late", json!({})),
         Err(StoreError::Finished(_))
     ));
     assert!(matches!(
@@ -146,16 +148,16 @@ fn an_ended_run_takes_no_more_writes() {
     assert_eq!(store.get(&r.id).unwrap().result_files, ["results/a.csv"]);
     assert_eq!(
         store.events(&r.id, None).unwrap().last().unwrap().kind,
-        "failed"
+        EventKind::Failed
     );
 }
 
 #[test]
-fn only_set_status_writes_terminal_events() {
+fn only_set_status_writes_status_events() {
     let dir = tempfile::tempdir().unwrap();
     let store = open(dir.path());
     let r = new_run(&store, RunKind::Experiment);
-    for kind in ["succeeded", "failed", "cancelled", "", "a b", "x\ny", "A"] {
+    for kind in RunStatus::ALL.map(RunStatus::event_kind) {
         assert!(
             matches!(
                 store.append_event(&r.id, kind, 0.0, "", json!(null)),
@@ -253,7 +255,13 @@ fn recovery_fails_unfinished_runs_and_leaves_ended_ones_untouched() {
         .set_status(&running.id, RunStatus::Running, "go")
         .unwrap();
     store
-        .append_event(&running.id, "frame_captured", 0.3, "a_ref.tif", json!({}))
+        .append_event(
+            &running.id,
+            EventKind::FrameCaptured,
+            0.3,
+            "a_ref.tif",
+            json!({}),
+        )
         .unwrap();
     let queued = new_run(&store, RunKind::Analysis);
     let done = new_run(&store, RunKind::Comparison);
@@ -286,7 +294,7 @@ fn recovery_fails_unfinished_runs_and_leaves_ended_ones_untouched() {
     assert!(r.finished_at.is_some());
     let ev = store.events(&running.id, None).unwrap();
     assert_eq!(ev.iter().map(|e| e.id).collect::<Vec<_>>(), [1, 2, 3, 4]);
-    assert_eq!(ev[3].kind, "failed");
+    assert_eq!(ev[3].kind, EventKind::Failed);
     assert_eq!(ev[3].message, r.message);
 
     let q = store.get(&queued.id).unwrap();
@@ -294,7 +302,7 @@ fn recovery_fails_unfinished_runs_and_leaves_ended_ones_untouched() {
     assert_eq!(q.message, "the server stopped while this run was queued");
     assert_eq!(
         store.events(&queued.id, None).unwrap().last().unwrap().kind,
-        "failed"
+        EventKind::Failed
     );
 
     assert_eq!(tree(&done_dir), done_before);
@@ -449,7 +457,7 @@ fn events_resume_after_an_id() {
         let e = store
             .append_event(
                 &r.id,
-                "progress",
+                EventKind::Progress,
                 i as f64 / 10.0,
                 &format!("step {i}"),
                 json!({ "i": i }),
@@ -494,7 +502,13 @@ fn events_from_many_threads_get_distinct_consecutive_ids() {
             std::thread::spawn(move || {
                 for i in 0..25 {
                     store
-                        .append_event(&id, "progress", 0.0, &format!("{t}/{i}"), json!(null))
+                        .append_event(
+                            &id,
+                            EventKind::Progress,
+                            0.0,
+                            &format!("{t}/{i}"),
+                            json!(null),
+                        )
                         .unwrap();
                 }
             })
@@ -618,7 +632,7 @@ fn stage_and_commit(
     for f in frames {
         staging.write_file(f, b"not decoded: the manifest gives the size")?;
     }
-    store.commit_dataset(staging, "", "upload")
+    store.commit_dataset(staging, "", DatasetSource::Upload)
 }
 
 fn datasets_folder(store: &RunStore) -> Vec<String> {
@@ -635,7 +649,7 @@ fn a_valid_dataset_is_committed_whole() {
     let rec = stage_and_commit(&store, &good_manifest(), &["a_ref.tif", "a_x5.tif"]).unwrap();
     assert!(rec.id.as_str().starts_with("ds-"));
     assert_eq!(
-        (rec.name.as_str(), rec.source.as_str()),
+        (rec.name.as_str(), rec.source.to_string().as_str()),
         ("bench-1", "upload")
     );
     assert_eq!((rec.runs, rec.width, rec.height), (1, 64, 48));
@@ -684,7 +698,7 @@ fn a_failed_dataset_commit_leaves_no_folder_behind() {
     let no_manifest = {
         let staging = store.stage_dataset().unwrap();
         staging.write_file("a_ref.tif", b"x").unwrap();
-        store.commit_dataset(staging, "x", "upload")
+        store.commit_dataset(staging, "x", DatasetSource::Upload)
     };
     assert!(matches!(no_manifest, Err(StoreError::Dataset(_))));
     // A staging folder dropped without a commit (an upload that broke off) goes too.
@@ -720,18 +734,19 @@ fn an_experiment_export_is_imported_as_a_dataset() {
     store.write_file(&r.id, "frames/a_x5.tif", &tif).unwrap();
     let frames = store.run_dir(&r.id).join("frames");
     let rec = store
-        .import_dataset_dir(&frames, "study", &format!("experiment:{}", r.id))
+        .import_dataset_dir(&frames, "study", DatasetSource::Experiment(r.id.clone()))
         .unwrap();
     assert_eq!((rec.width, rec.height, rec.runs), (5, 3, 1));
     assert_eq!(rec.name, "study");
-    assert_eq!(rec.source, format!("experiment:{}", r.id));
+    assert_eq!(rec.source, DatasetSource::Experiment(r.id.clone()));
+    assert_eq!(rec.source.to_string(), format!("experiment:{}", r.id));
     assert_eq!(
         std::fs::read(store.dataset_dir(&rec.id).join("a_x5.tif")).unwrap(),
         tif
     );
     // The run's own folder is untouched.
     assert!(frames.join("a_ref.tif").is_file());
-    let missing = store.import_dataset_dir(&dir.path().join("nowhere"), "x", "upload");
+    let missing = store.import_dataset_dir(&dir.path().join("nowhere"), "x", DatasetSource::Upload);
     assert!(matches!(missing, Err(StoreError::NotFound(_))));
     assert_eq!(store.list_datasets().unwrap().len(), 1);
 }

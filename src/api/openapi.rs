@@ -3,6 +3,7 @@
 
 use super::problem::Problem;
 use super::routes::{camera, datasets, experiments, jobs, models, stage, sweeps, system};
+use crate::run_event::EventKind;
 use crate::service::Service;
 use utoipa::OpenApi;
 use utoipa_axum::router::OpenApiRouter;
@@ -16,7 +17,7 @@ use utoipa_axum::routes;
                        Errors are RFC 9457 problem documents. Mutating requests need `Authorization: Bearer` \
                        when the server has a token.",
     ),
-    components(schemas(Problem)),
+    components(schemas(Problem, EventKind)),
     tags(
         (name = "system", description = "Health and status"),
         (name = "bench", description = "Camera and stage, directly"),
@@ -234,10 +235,6 @@ fn operation_id(method: &str, path: &str) -> String {
 /// middleware's statuses.
 pub fn finish_document(spec: &utoipa::openapi::OpenApi) -> serde_json::Value {
     let mut doc = serde_json::to_value(spec).expect("the OpenAPI document serialises");
-    let problem_ref = serde_json::json!({ "$ref": "#/components/schemas/Problem" });
-    let problem_content = serde_json::json!({
-        "application/problem+json": { "schema": problem_ref.clone() }
-    });
     // The request bodies' nested types are bare objects in the derive (they live in the
     // numerics and the experiment layer, which know no OpenAPI): spell them out.
     if let Some(schemas) = doc
@@ -255,81 +252,88 @@ pub fn finish_document(spec: &utoipa::openapi::OpenApi) -> serde_json::Value {
             continue;
         };
         for (method, op) in item.iter_mut() {
-            if !["get", "post", "patch", "put", "delete"].contains(&method.as_str()) {
-                continue;
-            }
-            // Unique (utoipa uses the handler's name: three `get`s).
-            op["operationId"] = serde_json::Value::String(operation_id(method, path));
-            let has_body = op.get("requestBody").is_some();
-            let idempotent = op
-                .get("parameters")
-                .and_then(|p| p.as_array())
-                .is_some_and(|ps| ps.iter().any(|p| p["name"] == "Idempotency-Key"));
-            if let Some(params) = op.get_mut("parameters").and_then(|p| p.as_array_mut()) {
-                for p in params.iter_mut().filter(|p| p["name"] == "Last-Event-ID") {
-                    // A header is text: "null" is not an id (utoipa writes Option as nullable);
-                    // ids are u64, and a larger number is refused (400).
-                    p["schema"] =
-                        serde_json::json!({ "type": "integer", "minimum": 0, "maximum": u64::MAX });
-                    p["required"] = serde_json::Value::Bool(false);
-                }
-            }
-            if let Some(body) = op.get_mut("requestBody").and_then(|b| b.as_object_mut()) {
-                // JSON bodies may be empty: every field then takes its default (`api::json`).
-                // Other bodies (the multipart upload) are required.
-                let json = body
-                    .get("content")
-                    .and_then(|c| c.as_object())
-                    .is_some_and(|c| c.contains_key("application/json"));
-                body.insert("required".into(), serde_json::Value::Bool(!json));
-                if let Some(multipart) = body
-                    .get_mut("content")
-                    .and_then(|c| c.get_mut("multipart/form-data"))
-                {
-                    multipart["schema"] = upload_schema();
-                }
-            }
-            let Some(responses) = op.get_mut("responses").and_then(|r| r.as_object_mut()) else {
-                continue;
-            };
-            for response in responses.values_mut() {
-                let Some(content) = response.get_mut("content").and_then(|c| c.as_object_mut())
-                else {
-                    continue;
-                };
-                let is_problem = content
-                    .get("application/json")
-                    .and_then(|j| j.get("schema"))
-                    .is_some_and(|s| *s == problem_ref);
-                if is_problem {
-                    let body = content.remove("application/json").expect("just seen");
-                    content.insert("application/problem+json".into(), body);
-                }
-            }
-            // A replayed submission answers what the first one did.
-            if idempotent && !responses.contains_key("200") {
-                if let Some(content) = responses.get("202").and_then(|r| r.get("content")).cloned()
-                {
-                    responses.insert(
-                        "200".into(),
-                        serde_json::json!({ "description": IDEMPOTENT_REPLAY, "content": content }),
-                    );
-                }
-            }
-            let extra = MIDDLEWARE_STATUSES
-                .iter()
-                .chain(if has_body { &BODY_STATUSES[..] } else { &[] })
-                .chain(if idempotent {
-                    &IDEMPOTENT_STATUSES[..]
-                } else {
-                    &[]
-                });
-            for (status, description) in extra {
-                responses.entry(status.to_string()).or_insert_with(|| {
-                    serde_json::json!({ "description": description, "content": problem_content })
-                });
+            if ["get", "post", "patch", "put", "delete"].contains(&method.as_str()) {
+                finish_operation(path, method, op);
             }
         }
     }
     doc
+}
+
+/// One operation: a unique id, the header parameters as the daemon reads them, which bodies are
+/// required, problem+json for every error and the statuses the layers answer before the handler.
+fn finish_operation(path: &str, method: &str, op: &mut serde_json::Value) {
+    let problem_ref = serde_json::json!({ "$ref": "#/components/schemas/Problem" });
+    let problem_content = serde_json::json!({
+        "application/problem+json": { "schema": problem_ref.clone() }
+    });
+    // Unique (utoipa uses the handler's name: three `get`s).
+    op["operationId"] = serde_json::Value::String(operation_id(method, path));
+    let has_body = op.get("requestBody").is_some();
+    let idempotent = op
+        .get("parameters")
+        .and_then(|p| p.as_array())
+        .is_some_and(|ps| ps.iter().any(|p| p["name"] == "Idempotency-Key"));
+    if let Some(params) = op.get_mut("parameters").and_then(|p| p.as_array_mut()) {
+        for p in params.iter_mut().filter(|p| p["name"] == "Last-Event-ID") {
+            // A header is text: "null" is not an id (utoipa writes Option as nullable);
+            // ids are u64, and a larger number is refused (400).
+            p["schema"] =
+                serde_json::json!({ "type": "integer", "minimum": 0, "maximum": u64::MAX });
+            p["required"] = serde_json::Value::Bool(false);
+        }
+    }
+    if let Some(body) = op.get_mut("requestBody").and_then(|b| b.as_object_mut()) {
+        // JSON bodies may be empty: every field then takes its default (`api::json`).
+        // Other bodies (the multipart upload) are required.
+        let json = body
+            .get("content")
+            .and_then(|c| c.as_object())
+            .is_some_and(|c| c.contains_key("application/json"));
+        body.insert("required".into(), serde_json::Value::Bool(!json));
+        if let Some(multipart) = body
+            .get_mut("content")
+            .and_then(|c| c.get_mut("multipart/form-data"))
+        {
+            multipart["schema"] = upload_schema();
+        }
+    }
+    let Some(responses) = op.get_mut("responses").and_then(|r| r.as_object_mut()) else {
+        return;
+    };
+    for response in responses.values_mut() {
+        let Some(content) = response.get_mut("content").and_then(|c| c.as_object_mut()) else {
+            continue;
+        };
+        let is_problem = content
+            .get("application/json")
+            .and_then(|j| j.get("schema"))
+            .is_some_and(|s| *s == problem_ref);
+        if is_problem {
+            let body = content.remove("application/json").expect("just seen");
+            content.insert("application/problem+json".into(), body);
+        }
+    }
+    // A replayed submission answers what the first one did.
+    if idempotent && !responses.contains_key("200") {
+        if let Some(content) = responses.get("202").and_then(|r| r.get("content")).cloned() {
+            responses.insert(
+                "200".into(),
+                serde_json::json!({ "description": IDEMPOTENT_REPLAY, "content": content }),
+            );
+        }
+    }
+    let extra = MIDDLEWARE_STATUSES
+        .iter()
+        .chain(if has_body { &BODY_STATUSES[..] } else { &[] })
+        .chain(if idempotent {
+            &IDEMPOTENT_STATUSES[..]
+        } else {
+            &[]
+        });
+    for (status, description) in extra {
+        responses.entry(status.to_string()).or_insert_with(
+            || serde_json::json!({ "description": description, "content": problem_content }),
+        );
+    }
 }

@@ -56,11 +56,7 @@ pub fn refinements() -> Vec<(&'static str, &'static str, Value)> {
     }
     out.extend(sweep_refinements());
     out.extend([
-        (
-            "ExperimentRequest",
-            "name",
-            json!({ "minLength": 1, "maxLength": 128, "pattern": "^[^\\u0000-\\u001F\\u007F-\\u009F]*$" }),
-        ),
+        ("ExperimentRequest", "name", run_name_schema()),
         (
             "ExperimentRequest",
             "patterns",
@@ -147,15 +143,22 @@ pub fn apply(schemas: &mut Map<String, Value>) {
 }
 
 /// `POST /sweeps`: `crate::sweep::SweepSpec`, checked by `SweepSpec::validate` and the daemon's
+/// A run's name as `check_run_name` takes it: no control character (Unicode Cc, as
+/// `char::is_control`), 1 to `MAX_RUN_NAME_CHARS` characters. "Not only white space" is said by
+/// the 422, not by the schema.
+fn run_name_schema() -> Value {
+    json!({
+        "minLength": 1,
+        "maxLength": crate::experiment::MAX_RUN_NAME_CHARS,
+        "pattern": "^[^\\u0000-\\u001F\\u007F-\\u009F]*$",
+    })
+}
+
 /// `[sweeps]` limits (the task count, a product of the axes' lengths, is said in words).
 fn sweep_refinements() -> Vec<(&'static str, &'static str, Value)> {
     let numbers = |lo: f64, hi: f64| json!({ "items": { "type": "number", "minimum": lo, "maximum": hi }, "minItems": 1 });
     vec![
-        (
-            "SweepSpec",
-            "name",
-            json!({ "minLength": 1, "maxLength": 128, "pattern": "^[^\\u0000-\\u001F\\u007F-\\u009F]*$" }),
-        ),
+        ("SweepSpec", "name", run_name_schema()),
         (
             "SweepSpec",
             "seed",

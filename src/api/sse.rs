@@ -15,8 +15,8 @@ use tokio_stream::wrappers::ReceiverStream;
 /// An SSE response (the stream with its keep-alives).
 pub type SseResponse = axum::response::Response;
 
-const TERMINAL: [&str; 3] = ["succeeded", "failed", "cancelled"];
-/// The last event of a stream the server closes before its run has ended.
+/// The last event of a stream the server closes before its run has ended: a word of the stream,
+/// not a run event (never stored).
 const SHUTDOWN_EVENT: &str = "server_shutdown";
 /// How long a stream waits, at shutdown, for its run's terminal event.
 const SHUTDOWN_WAIT: Duration = Duration::from_secs(2);
@@ -41,7 +41,7 @@ pub fn last_event_id(headers: &HeaderMap) -> Result<Option<u64>, crate::api::Api
 fn to_sse(e: &RunEvent) -> Event {
     Event::default()
         .id(e.id.to_string())
-        .event(e.kind.clone())
+        .event(e.kind.as_str())
         .data(serde_json::to_string(e).expect("an event serialises"))
 }
 
@@ -152,6 +152,6 @@ async fn forward(
     tx: &mpsc::Sender<Result<Event, Infallible>>,
 ) -> bool {
     *last = e.id;
-    *ended = TERMINAL.contains(&e.kind.as_str());
+    *ended = e.kind.is_terminal();
     tx.send(Ok(to_sse(e))).await.is_ok()
 }

@@ -26,16 +26,16 @@ pub struct AnalyzeArgs {
     #[arg(required = true)]
     pub deformed: Vec<PathBuf>,
     /// Subset side in px (odd).
-    #[arg(long, default_value_t = 41)]
+    #[arg(long, default_value_t = DicSettings::default().subset_px)]
     pub subset: usize,
     /// Distance between points in px.
-    #[arg(long, default_value_t = 20)]
+    #[arg(long, default_value_t = DicSettings::default().step_px)]
     pub step: usize,
     /// Rectangle of point centres X,Y,W,H in px (default: centred 800x800, clipped).
     #[arg(long)]
     pub roi: Option<Roi>,
     /// Strain window side in points (odd).
-    #[arg(long, default_value_t = 7)]
+    #[arg(long, default_value_t = DicSettings::default().strain_window)]
     pub strain_window: usize,
     /// Interpolation: bspline3 or bspline5.
     #[arg(long, default_value = "bspline3")]
@@ -44,7 +44,7 @@ pub struct AnalyzeArgs {
     #[arg(long, default_value = "affine")]
     pub shape: ShapeFunction,
     /// Gaussian pre-filter σ in px applied to both images (0: off).
-    #[arg(long, default_value_t = 0.7)]
+    #[arg(long, default_value_t = DicSettings::default().prefilter_sigma_px)]
     pub prefilter_sigma: f64,
     /// Points whose ZNCC is below this are not valid (low_correlation).
     #[arg(long, default_value_t = DicSettings::default().min_zncc)]
@@ -57,7 +57,11 @@ pub struct AnalyzeArgs {
     #[arg(long, default_value_t = DicSettings::default().max_displacement_std_px)]
     pub max_displacement_std: f64,
     /// Normalised median test threshold (Westerweel & Scarano 2005: 2).
-    #[arg(long, default_value_t = 2.0, conflicts_with = "no_outlier_test")]
+    #[arg(
+        long,
+        default_value_t = DicSettings::default().outlier_threshold.expect("on by default"),
+        conflicts_with = "no_outlier_test"
+    )]
     pub outlier_threshold: f64,
     /// Turn the neighbour (median) test off.
     #[arg(long)]

@@ -20,16 +20,16 @@ pub struct AnalysisArgs {
     #[arg(long, default_value = "ff100,ff50,ff25", value_delimiter = ',')]
     pub schemes: Vec<String>,
     /// DIC subset size, px (odd).
-    #[arg(long, default_value_t = 41)]
+    #[arg(long, default_value_t = DicSettings::default().subset_px)]
     pub subset: usize,
     /// DIC step, px.
-    #[arg(long, default_value_t = 20)]
+    #[arg(long, default_value_t = DicSettings::default().step_px)]
     pub step: usize,
     /// Gaussian pre-filter σ, px (0 = off).
-    #[arg(long, default_value_t = 0.7)]
+    #[arg(long, default_value_t = DicSettings::default().prefilter_sigma_px)]
     pub prefilter_sigma: f64,
     /// Seed of the model's speckle layouts and noise.
-    #[arg(long, default_value_t = 0x0FFD_1C5E)]
+    #[arg(long, default_value_t = CompareOptions::default().seed)]
     pub seed: u64,
     /// Data folder of the daemon, whose models/ holds the model versions `--model NAME` finds.
     #[arg(long, default_value = "data")]

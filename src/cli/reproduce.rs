@@ -193,13 +193,12 @@ fn model_story(
     spec: &ffdic::experiment::ExperimentSpec,
     show: bool,
 ) -> Result<ModelStory> {
-    let source = format!("experiment:{experiment}");
-    let dataset = service
+    let dataset_id = service
         .store
-        .list_datasets()?
-        .into_iter()
-        .find(|d| d.source == source)
+        .get(experiment)?
+        .dataset_id
         .with_context(|| format!("experiment {experiment} registered no dataset"))?;
+    let dataset = service.store.get_dataset(&dataset_id)?;
     let request = CompareRequest {
         schemes: spec
             .schemes

@@ -17,7 +17,7 @@ use super::residuals::{residual_map, ResidualMap};
 use super::stage::{fit_stage, StageObservation};
 use super::{CompareOptions, DiagnoseError, Progress};
 use crate::dataset::check_stated_move;
-use crate::dataset::Manifest;
+use crate::dataset::{Manifest, Run};
 use crate::dic::{DicResult, PreparedReference, Summary};
 use crate::image::{read_tiff, Image};
 use crate::model::{Effects, ModelConfig};
@@ -182,10 +182,7 @@ pub fn load_measurement(
     let mut dic = Vec::with_capacity(manifest.runs.len());
     let mut moved_crops = Vec::new();
     let mut moved_stats = Vec::new();
-    let mut reference_crops: Vec<Option<Image>> = vec![None; labels.len()];
-    let mut repeat_crops: Vec<Option<Image>> = vec![None; labels.len()];
-    let mut reference_stats: Vec<Option<FrameStats>> = vec![None; labels.len()];
-    let mut ref_info: Vec<(f64, f64)> = vec![(0.0, 0.0); labels.len()];
+    let mut references = ReferenceStats::new(labels.len());
     let mut size = None;
     let mut bit_depth = 16u8;
     // The prepared references of the last reference file (runs sharing it reuse them).
@@ -219,41 +216,8 @@ pub fn load_measurement(
             run: run.id.clone(),
             message: e.to_string(),
         })?;
-        match size {
-            None => size = Some((reference.width(), reference.height())),
-            Some(s) if s != (reference.width(), reference.height()) => {
-                return Err(DiagnoseError::Frames {
-                    run: run.id.clone(),
-                    message: format!(
-                        "frames are {}x{}, the dataset's first run has {}x{}",
-                        reference.width(),
-                        reference.height(),
-                        s.0,
-                        s.1
-                    ),
-                })
-            }
-            Some(_) => {}
-        }
-        let pi = pattern_of_run[ri];
-        if reference_stats[pi].is_none() {
-            let crop = centre_crop(reference, STATS_CROP_PX);
-            let repeat = match run.repeat.first() {
-                Some(name) => {
-                    let (r, _) = read_tiff(&dir.join(name))?;
-                    check_sizes(run, reference, &r)?;
-                    Some(centre_crop(&r, STATS_CROP_PX))
-                }
-                None => None,
-            };
-            reference_stats[pi] = Some(frame_stats(Some(reference), &crop, repeat.as_ref()));
-            ref_info[pi] = (
-                white_level_guess(&crop),
-                pooled_noise_variance(&crop, repeat.as_ref()),
-            );
-            reference_crops[pi] = Some(crop);
-            repeat_crops[pi] = repeat;
-        }
+        same_size_as_first(run, reference, &mut size)?;
+        references.observe(pattern_of_run[ri], dir, run, reference)?;
         let crop = centre_crop(&deformed, STATS_CROP_PX);
         moved_stats.push(frame_stats(Some(&deformed), &crop, None));
         moved_crops.push(crop);
@@ -272,36 +236,7 @@ pub fn load_measurement(
         dic.push(per_scheme);
     }
     let (width, height) = size.expect("a manifest has runs");
-    let reference_crops: Vec<Image> = reference_crops
-        .into_iter()
-        .map(|c| c.expect("every pattern has a run"))
-        .collect();
-    let noise_var = ref_info.iter().map(|r| r.1).sum::<f64>() / ref_info.len() as f64;
-    let patterns = labels
-        .iter()
-        .enumerate()
-        .map(|(pi, _)| {
-            let run = &manifest.runs[pattern_of_run.iter().position(|&p| p == pi).expect("used")];
-            pattern_for(
-                run,
-                &reference_crops[pi],
-                ref_info[pi].0,
-                ref_info[pi].1,
-                manifest.scale_px_per_mm,
-            )
-        })
-        .collect();
-    let nominal = Nominal {
-        width,
-        height,
-        bit_depth,
-        scale_px_per_mm: manifest.scale_px_per_mm,
-        noise_floor_dn: noise_var.max(0.0).sqrt(),
-        misalignment_rad: 0.0,
-        travel_scale: 1.0,
-        stage: Default::default(),
-        patterns,
-    };
+    let nominal = references.nominal(&manifest, &pattern_of_run, (width, height), bit_depth);
     Ok(Measurement {
         dir: dir.to_owned(),
         manifest,
@@ -311,10 +246,15 @@ pub fn load_measurement(
         width,
         height,
         bit_depth,
-        reference_crops,
-        repeat_crops,
+        reference_crops: references
+            .crops
+            .into_iter()
+            .map(|c| c.expect("every pattern has a run"))
+            .collect(),
+        repeat_crops: references.repeats,
         moved_crops,
-        reference_stats: reference_stats
+        reference_stats: references
+            .stats
             .into_iter()
             .map(|s| s.expect("filled"))
             .collect(),
@@ -324,13 +264,119 @@ pub fn load_measurement(
     })
 }
 
-/// The nominal experiment of `model` for this measurement: the stage fitted, the white levels
-/// matched (one centred crop render per pattern).
-pub fn calibrate(meas: &Measurement, model: &ModelConfig) -> Result<Nominal, DiagnoseError> {
-    calibrate_seeded(meas, model, meas.options.seed, None)
+/// Every run's frames have the size of the dataset's first run.
+fn same_size_as_first(
+    run: &Run,
+    reference: &Image,
+    first: &mut Option<(usize, usize)>,
+) -> Result<(), DiagnoseError> {
+    let here = (reference.width(), reference.height());
+    match *first {
+        None => *first = Some(here),
+        Some(s) if s != here => {
+            return Err(DiagnoseError::Frames {
+                run: run.id.clone(),
+                message: format!(
+                    "frames are {}x{}, the dataset's first run has {}x{}",
+                    here.0, here.1, s.0, s.1
+                ),
+            })
+        }
+        Some(_) => {}
+    }
+    Ok(())
 }
 
-/// [`calibrate`] with the model's speckle and noise drawn from `seed`; `scene_from` hands over
+/// Per pattern, from the reference (and its first repeat) of the pattern's first run: the centre
+/// crops, their statistics, and the white level and noise variance guessed from them.
+struct ReferenceStats {
+    crops: Vec<Option<Image>>,
+    repeats: Vec<Option<Image>>,
+    stats: Vec<Option<FrameStats>>,
+    /// (white level guess [DN], pooled noise variance [DN²])
+    levels: Vec<(f64, f64)>,
+}
+
+impl ReferenceStats {
+    fn new(patterns: usize) -> ReferenceStats {
+        ReferenceStats {
+            crops: vec![None; patterns],
+            repeats: vec![None; patterns],
+            stats: vec![None; patterns],
+            levels: vec![(0.0, 0.0); patterns],
+        }
+    }
+
+    /// Takes pattern `pi`'s figures from `run` unless an earlier run gave them.
+    fn observe(
+        &mut self,
+        pi: usize,
+        dir: &Path,
+        run: &Run,
+        reference: &Image,
+    ) -> Result<(), DiagnoseError> {
+        if self.stats[pi].is_some() {
+            return Ok(());
+        }
+        let crop = centre_crop(reference, STATS_CROP_PX);
+        let repeat = match run.repeat.first() {
+            Some(name) => {
+                let (r, _) = read_tiff(&dir.join(name))?;
+                check_sizes(run, reference, &r)?;
+                Some(centre_crop(&r, STATS_CROP_PX))
+            }
+            None => None,
+        };
+        self.stats[pi] = Some(frame_stats(Some(reference), &crop, repeat.as_ref()));
+        self.levels[pi] = (
+            white_level_guess(&crop),
+            pooled_noise_variance(&crop, repeat.as_ref()),
+        );
+        self.crops[pi] = Some(crop);
+        self.repeats[pi] = repeat;
+        Ok(())
+    }
+
+    /// The measurement's nominal experiment: the frames as read, a noise floor from the pooled
+    /// variance, each pattern's print from its crop, the stage as commanded.
+    fn nominal(
+        &self,
+        manifest: &Manifest,
+        pattern_of_run: &[usize],
+        (width, height): (usize, usize),
+        bit_depth: u8,
+    ) -> Nominal {
+        let noise_var = self.levels.iter().map(|r| r.1).sum::<f64>() / self.levels.len() as f64;
+        let patterns = (0..self.crops.len())
+            .map(|pi| {
+                let run =
+                    &manifest.runs[pattern_of_run.iter().position(|&p| p == pi).expect("used")];
+                pattern_for(
+                    run,
+                    self.crops[pi].as_ref().expect("every pattern has a run"),
+                    self.levels[pi].0,
+                    self.levels[pi].1,
+                    manifest.scale_px_per_mm,
+                )
+            })
+            .collect();
+        Nominal {
+            width,
+            height,
+            bit_depth,
+            scale_px_per_mm: manifest.scale_px_per_mm,
+            noise_floor_dn: noise_var.max(0.0).sqrt(),
+            misalignment_rad: 0.0,
+            travel_scale: 1.0,
+            stage: Default::default(),
+            patterns,
+        }
+    }
+}
+
+/// The nominal experiment of `model` for this measurement: the stage fitted, the white levels
+/// matched (one centred crop render per pattern), the model's speckle and noise drawn from
+/// `seed`; `scene_from` hands over
 /// the white levels and prints of another comparison of the same image chain (they depend on
 /// the optics and the sensor, not on the geometry or the seed's realisation).
 fn calibrate_seeded(

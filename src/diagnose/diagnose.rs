@@ -24,7 +24,7 @@ use super::fit_image::{
     fit_fill_factor, fit_illumination_change, fit_motion_blur, fit_psf_blur, fit_sensor_noise,
     fit_vignetting, ImageFit,
 };
-use super::identifiability::{design_of, separating_run};
+use super::identifiability::{design_of, separating_run, DatasetDesign};
 pub use super::identifiability::{Confounded, NotIdentifiable};
 use super::print::PrintKnowledge;
 use super::{CompareOptions, DiagnoseError, Progress};
@@ -457,23 +457,7 @@ pub fn diagnose_prepared(
         None => compare_prepared(meas, model, &|_, _| true)?,
     };
     let design = design_of(&meas.manifest, meas.width);
-    let present = model.effects.enabled();
-    // Always part of the nominal experiment: the stage is fitted, the ADC is the TIFFs'.
-    let absent: Vec<EffectId> = EffectId::ALL
-        .into_iter()
-        .filter(|id| {
-            !present.contains(id)
-                && !matches!(id, EffectId::StageMisalignment | EffectId::Quantization)
-        })
-        .collect();
-    let mut not_identifiable = Vec::new();
-    let mut fit_ids = Vec::new();
-    for id in absent {
-        match design.not_identifiable(id) {
-            Some(n) => not_identifiable.push(n),
-            None => fit_ids.push(id),
-        }
-    }
+    let (fit_ids, not_identifiable) = candidates_to_fit(model, &design);
     let total = fit_ids.len() + MODEL_SEEDS as usize - 1;
     let done = AtomicUsize::new(0);
     let tick = || {
@@ -484,19 +468,7 @@ pub fn diagnose_prepared(
             Err(DiagnoseError::Cancelled)
         }
     };
-    // The discrepancy's standard error: analysis noise, and the scatter over model seeds.
-    let mut by_seed = vec![before.discrepancy_px];
-    for k in 1..MODEL_SEEDS {
-        let c = compare_with_scene(
-            meas,
-            model,
-            meas.options.seed.wrapping_add(k),
-            Some(&before.model.nominal),
-            &|_, _| true,
-        )?;
-        by_seed.push(c.discrepancy_px);
-        tick()?;
-    }
+    let by_seed = discrepancy_by_seed(meas, model, &before, &tick)?;
     let seed_sd = {
         let n = by_seed.len() as f64;
         let m = by_seed.iter().sum::<f64>() / n;
@@ -517,12 +489,99 @@ pub fn diagnose_prepared(
         small_moves: design.largest_move_fraction < VIGNETTING_MOVE_FRACTION,
         dic: &meas.options.dic,
     };
+    let (mut candidates, mut models) = fit_candidates(meas, model, &judge, &fit_ids, &tick)?;
+    candidates.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
+    let winner = render_winner(meas, &judge, &mut candidates, &mut models)?;
+    candidates.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
+    let mut by_drop: Vec<&Candidate> = candidates.iter().collect();
+    by_drop.sort_by(|a, b| b.drop_px.total_cmp(&a.drop_px));
+    let ranking_by_drop = by_drop.iter().map(|c| c.effect).collect();
+    let confounded = confounded_pairs(&design, &candidates, winner, print_calibrated);
+    let (winner_model, after) = match winner {
+        Some(w) => {
+            let (_, m, a) = models.remove(&w).expect("fitted");
+            (Some(m), a)
+        }
+        None => (None, None),
+    };
+    Ok(Diagnosis {
+        model: before.model.clone(),
+        discrepancy_px: before.discrepancy_px,
+        discrepancy_se_px: se_before,
+        discrepancy_by_seed_px: by_seed,
+        candidates,
+        ranking_by_drop,
+        verdict: winner,
+        confounded,
+        not_identifiable,
+        winner_model,
+        before: Some(before),
+        after,
+    })
+}
+
+/// Per fitted candidate: its fit, the model with it, and that model's comparison (none when the
+/// fit stayed within the null).
+type FittedModels = BTreeMap<EffectId, (ImageFit, ModelConfig, Option<Comparison>)>;
+
+/// The effects the model lacks, split into those this dataset can reveal (to be fitted) and
+/// those it cannot (with the runs that would). The stage is always part of the nominal fit and
+/// the ADC is the TIFFs'.
+fn candidates_to_fit(
+    model: &ModelConfig,
+    design: &DatasetDesign,
+) -> (Vec<EffectId>, Vec<NotIdentifiable>) {
+    let present = model.effects.enabled();
+    let mut not_identifiable = Vec::new();
+    let mut fit_ids = Vec::new();
+    for id in EffectId::ALL.into_iter().filter(|id| {
+        !present.contains(id) && !matches!(id, EffectId::StageMisalignment | EffectId::Quantization)
+    }) {
+        match design.not_identifiable(id) {
+            Some(n) => not_identifiable.push(n),
+            None => fit_ids.push(id),
+        }
+    }
+    (fit_ids, not_identifiable)
+}
+
+/// The discrepancy with each of the `MODEL_SEEDS` model seeds (the first is `before`'s): its
+/// scatter is part of the discrepancy's standard error.
+fn discrepancy_by_seed(
+    meas: &Measurement,
+    model: &ModelConfig,
+    before: &Comparison,
+    tick: &dyn Fn() -> Result<(), DiagnoseError>,
+) -> Result<Vec<f64>, DiagnoseError> {
+    let mut by_seed = vec![before.discrepancy_px];
+    for k in 1..MODEL_SEEDS {
+        let c = compare_with_scene(
+            meas,
+            model,
+            meas.options.seed.wrapping_add(k),
+            Some(&before.model.nominal),
+            &|_, _| true,
+        )?;
+        by_seed.push(c.discrepancy_px);
+        tick()?;
+    }
+    Ok(by_seed)
+}
+
+/// Fits each candidate, predicts (or, failing that, renders) the comparison of the model with
+/// it, and judges it.
+fn fit_candidates(
+    meas: &Measurement,
+    model: &ModelConfig,
+    judge: &Judge<'_>,
+    fit_ids: &[EffectId],
+    tick: &dyn Fn() -> Result<(), DiagnoseError>,
+) -> Result<(Vec<Candidate>, FittedModels), DiagnoseError> {
+    let before = judge.before;
     let mut candidates = Vec::new();
-    // Per candidate: its fit, the model with it, and that model's comparison.
-    let mut models: BTreeMap<EffectId, (ImageFit, ModelConfig, Option<Comparison>)> =
-        BTreeMap::new();
-    for &id in &fit_ids {
-        let Some(fit) = fit_candidate(meas, &before, &model.effects, id) else {
+    let mut models = FittedModels::new();
+    for &id in fit_ids {
+        let Some(fit) = fit_candidate(meas, before, &model.effects, id) else {
             tick()?;
             continue;
         };
@@ -536,7 +595,7 @@ pub fn diagnose_prepared(
         };
         let after = if !fit.beyond_null {
             None
-        } else if let Some(predicted) = predict(meas, &before, &with, &fit) {
+        } else if let Some(predicted) = predict(meas, before, &with, &fit) {
             Some((predicted, Method::Predicted))
         } else {
             let rendered = compare_with_scene(meas, &with, meas.options.seed, None, &|_, _| true)?;
@@ -546,15 +605,22 @@ pub fn diagnose_prepared(
         models.insert(fit.effect, (fit, with, after.map(|a| a.0)));
         tick()?;
     }
-    candidates.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
-    // The winner is rendered: a predicted comparison is first order in the effect. When the
-    // rendering no longer meets the criteria, the next significant candidate is tried.
-    let mut winner = None;
+    Ok((candidates, models))
+}
+
+/// The winner is rendered: a predicted comparison is first order in the effect. When the
+/// rendering no longer meets the criteria, the next significant candidate (in `candidates`'
+/// order) is tried. The winner, if any.
+fn render_winner(
+    meas: &Measurement,
+    judge: &Judge<'_>,
+    candidates: &mut [Candidate],
+    models: &mut FittedModels,
+) -> Result<Option<EffectId>, DiagnoseError> {
     while let Some(pos) = candidates.iter().position(|c| c.significant) {
         let effect = candidates[pos].effect;
         if candidates[pos].method == Method::Rendered {
-            winner = Some(effect);
-            break;
+            return Ok(Some(effect));
         }
         let (fit, with, after) = models.get_mut(&effect).expect("fitted");
         let rendered = (
@@ -562,7 +628,7 @@ pub fn diagnose_prepared(
                 meas,
                 with,
                 meas.options.seed,
-                Some(&before.model.nominal),
+                Some(&judge.before.model.nominal),
                 &|_, _| true,
             )?,
             Method::Rendered,
@@ -572,15 +638,21 @@ pub fn diagnose_prepared(
         candidates[pos] = judged;
         *after = Some(rendered.0);
         if ok {
-            winner = Some(effect);
-            break;
+            return Ok(Some(effect));
         }
     }
-    candidates.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
-    let mut by_drop: Vec<&Candidate> = candidates.iter().collect();
-    by_drop.sort_by(|a, b| b.drop_px.total_cmp(&a.drop_px));
-    let ranking_by_drop = by_drop.iter().map(|c| c.effect).collect();
-    let significant: Vec<&Candidate> = candidates.iter().filter(|c| c.significant).collect();
+    Ok(None)
+}
+
+/// Effects the fits cannot tell apart: by the dataset's design (vignetting against
+/// illumination on small moves, blur and aperture against a calibrated print), and by the data
+/// (a second significant candidate explaining nearly as much as the winner).
+fn confounded_pairs(
+    design: &DatasetDesign,
+    candidates: &[Candidate],
+    winner: Option<EffectId>,
+    print_calibrated: bool,
+) -> Vec<Confounded> {
     let fitted: Vec<EffectId> = candidates.iter().map(|c| c.effect).collect();
     let mut confounded = design.confounded(&fitted);
     if fitted.contains(&EffectId::Vignetting)
@@ -603,47 +675,27 @@ pub fn diagnose_prepared(
             }
         }
     }
-    // Data: a second significant candidate explaining nearly as much as the winner.
-    if let Some(w) = winner {
-        let top = candidates
+    let Some(w) = winner else {
+        return confounded;
+    };
+    let top = candidates
+        .iter()
+        .find(|c| c.effect == w)
+        .expect("winner is a candidate");
+    for c in candidates.iter().filter(|c| c.significant && c.effect != w) {
+        let names = super::identifiability::pair(w, c.effect);
+        let already = confounded
             .iter()
-            .find(|c| c.effect == w)
-            .expect("winner is a candidate");
-        for c in significant.iter().filter(|c| c.effect != w) {
-            let names = super::identifiability::pair(w, c.effect);
-            let already = confounded
-                .iter()
-                .any(|p| p.effects.contains(&names[0]) && p.effects.contains(&names[1]));
-            if !already && top.drop_px > 0.0 && c.drop_px >= 0.8 * top.drop_px {
-                confounded.push(Confounded {
-                    effects: names,
-                    separate_with: separating_run(w, c.effect),
-                    evidence: "data".into(),
-                });
-            }
+            .any(|p| p.effects.contains(&names[0]) && p.effects.contains(&names[1]));
+        if !already && top.drop_px > 0.0 && c.drop_px >= 0.8 * top.drop_px {
+            confounded.push(Confounded {
+                effects: names,
+                separate_with: separating_run(w, c.effect),
+                evidence: "data".into(),
+            });
         }
     }
-    let (winner_model, after) = match winner {
-        Some(w) => {
-            let (_, m, a) = models.remove(&w).expect("fitted");
-            (Some(m), a)
-        }
-        None => (None, None),
-    };
-    Ok(Diagnosis {
-        model: before.model.clone(),
-        discrepancy_px: before.discrepancy_px,
-        discrepancy_se_px: se_before,
-        discrepancy_by_seed_px: by_seed,
-        candidates,
-        ranking_by_drop,
-        verdict: winner,
-        confounded,
-        not_identifiable,
-        winner_model,
-        before: Some(before),
-        after,
-    })
+    confounded
 }
 
 /// What separates lens blur and pixel aperture from the print's own profile.

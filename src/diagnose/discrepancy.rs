@@ -182,6 +182,26 @@ fn random_error(xy: &[(f64, f64)], v: &[f64]) -> f64 {
     quadratic_fit(xy, v).map_or(f64::NAN, |f| f.residual_var.sqrt())
 }
 
+impl RunDiscrepancy {
+    /// Too few points valid in both analyses to fit the difference: every figure NaN.
+    fn unmeasurable(points: usize) -> RunDiscrepancy {
+        let nan2 = (f64::NAN, f64::NAN);
+        RunDiscrepancy {
+            points,
+            discrepancy_px: f64::NAN,
+            discrepancy_sq_var: f64::NAN,
+            rigid_px: f64::NAN,
+            field_px: f64::NAN,
+            std_px: f64::NAN,
+            mean_diff_px: nan2,
+            measured_random_px: nan2,
+            model_random_px: nan2,
+            residual_var_px2: nan2,
+            common: Vec::new(),
+        }
+    }
+}
+
 /// Compares two analyses of the same grid (same image size and settings). `inflation` is the
 /// variance inflation of averages over correlated neighbouring points ((subset/step)², ≥ 1).
 pub fn run_discrepancy(measured: &DicResult, model: &DicResult, inflation: f64) -> RunDiscrepancy {
@@ -201,21 +221,8 @@ pub fn run_discrepancy(measured: &DicResult, model: &DicResult, inflation: f64) 
     let du: Vec<f64> = mu.iter().zip(&ou).map(|(a, b)| a - b).collect();
     let dv: Vec<f64> = mv.iter().zip(&ov).map(|(a, b)| a - b).collect();
     let n = common.len();
-    let nan2 = (f64::NAN, f64::NAN);
     let (Some(fu), Some(fv)) = (quadratic_fit(&xy, &du), quadratic_fit(&xy, &dv)) else {
-        return RunDiscrepancy {
-            points: n,
-            discrepancy_px: f64::NAN,
-            discrepancy_sq_var: f64::NAN,
-            rigid_px: f64::NAN,
-            field_px: f64::NAN,
-            std_px: f64::NAN,
-            mean_diff_px: nan2,
-            measured_random_px: nan2,
-            model_random_px: nan2,
-            residual_var_px2: nan2,
-            common: Vec::new(),
-        };
+        return RunDiscrepancy::unmeasurable(n);
     };
     let nf = n as f64;
     let p = QUADRATIC_TERMS as f64;

@@ -101,8 +101,8 @@ pub mod stage;
 pub use basis::{geometric_basis, GeometricParam};
 pub use bic::{delta_bic, Chi2, SIGNIFICANT_DELTA_BIC};
 pub use compare::{
-    calibrate, compare, compare_prepared, compare_with_scene, load_measurement, model_version,
-    Comparison, DiscrepancyParts, ImageComparison, Measurement, ModelInfo, RunComparison, Side,
+    compare, compare_prepared, compare_with_scene, load_measurement, model_version, Comparison,
+    DiscrepancyParts, ImageComparison, Measurement, ModelInfo, RunComparison, Side,
 };
 pub use diagnose::{
     diagnose, diagnose_prepared, Candidate, Criteria, Diagnosis, Evidence, MODEL_SEEDS,

@@ -552,7 +552,7 @@ pub fn check_sizes(run: &Run, a: &Image, b: &Image) -> Result<(), DiagnoseError>
             ),
         });
     }
-    if a.width() < 64 || a.height() < 64 {
+    if a.width() < crate::dic::MIN_FRAME_SIDE_PX || a.height() < crate::dic::MIN_FRAME_SIDE_PX {
         return Err(DiagnoseError::Frames {
             run: run.id.clone(),
             message: format!(

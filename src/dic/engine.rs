@@ -169,133 +169,11 @@ impl PreparedReference {
             }
         };
         let mut field = Field::new(nx, ny, &self.analysed);
-
-        // 1. Seeds.
-        let seeds: Vec<usize> = seed_indices(nx, ny, SEED_SPACING_POINTS)
-            .into_iter()
-            .filter(|&k| !field.is_masked(k))
-            .collect();
-        // The global guess: the rigid offset, or the similarity once it has been estimated (it
-        // also serves the search for points with no valid point anywhere).
-        let mut guess = Guess::Translation(offset);
-        let mut seed_results =
-            pair.solve_all(&seeds, |k, scratch| pair.solve_seed(k, &guess, scratch));
-        let held = |results: &[PoiResult]| results.iter().filter(|r| r.status.is_valid()).count();
-        if 2 * held(&seed_results) < seeds.len() {
-            if let Some(sim) = estimate_similarity(
-                &self.image,
-                deformed,
-                self.grid.roi,
-                offset,
-                s.max_motion_px,
-            ) {
-                guess = Guess::Similarity(sim);
-                let again: Vec<usize> = (0..seeds.len())
-                    .filter(|&i| !seed_results[i].status.is_valid())
-                    .collect();
-                let ks: Vec<usize> = again.iter().map(|&i| seeds[i]).collect();
-                let retried = pair.solve_all(&ks, |k, scratch| pair.solve_seed(k, &guess, scratch));
-                for (i, r) in again.into_iter().zip(retried) {
-                    seed_results[i] = r;
-                }
-            }
-        }
-        let best_seed = seed_results
-            .iter()
-            .filter(|r| r.status.is_valid())
-            .map(|r| r.zncc)
-            .fold(f64::NEG_INFINITY, f64::max);
-        for (&k, r) in seeds.iter().zip(seed_results) {
-            let guides = r.status.is_valid() && r.zncc >= best_seed - SEED_ZNCC_MARGIN;
-            field.record(k, r, guides);
-        }
+        let guess = pair.seed(&mut field, offset);
         report(&field);
-
-        // 2 and 3. Propagation, then a search where it did not reach.
-        for _ in 0..SEARCH_ROUNDS {
-            loop {
-                let tasks = field.frontier(&self.grid.xs, &self.grid.ys);
-                if tasks.is_empty() {
-                    break;
-                }
-                let results = pair.solve_tasks(&tasks, |t, scratch| {
-                    pair.solve_from(t.index, t.start, scratch)
-                });
-                for (t, r) in tasks.iter().zip(results) {
-                    let valid = r.status.is_valid();
-                    field.record_task(t, r, valid);
-                }
-                report(&field);
-            }
-            let unresolved = field.unresolved();
-            if unresolved.is_empty() {
-                break;
-            }
-            let nearest = field.nearest_valid();
-            let predictions: Vec<Warp> = unresolved
-                .iter()
-                .map(|&k| match nearest[k] {
-                    Some(n) => {
-                        let from = field.result(n).expect("a valid point has a result");
-                        let (x, y) = self.position(k);
-                        warp_of(from).moved_by(x - from.x, y - from.y)
-                    }
-                    None => {
-                        let (x, y) = self.position(k);
-                        guess.warp_at(x, y)
-                    }
-                })
-                .collect();
-            let jobs: Vec<(usize, Warp)> = unresolved.into_iter().zip(predictions).collect();
-            let results = pair.solve_tasks(&jobs, |&(k, p), scratch| {
-                pair.solve_searching(k, p, scratch)
-            });
-            let mut gained = 0;
-            for (&(k, _), r) in jobs.iter().zip(results) {
-                let valid = r.status.is_valid();
-                gained += valid as usize;
-                field.record(k, r, valid);
-            }
-            report(&field);
-            if gained == 0 {
-                break;
-            }
-        }
-
-        // 4. The field's verdict.
+        pair.propagate_and_search(&mut field, &guess, &report);
         let mut points = field.into_points(&self.grid.xs, &self.grid.ys);
-        let side = s.subset_px;
-        if let Some(noise) = noise_std(&points, &self.subset_std, side * side) {
-            for (p, &sd) in points.iter_mut().zip(&self.subset_std) {
-                let judged = !matches!(
-                    p.status,
-                    PoiStatus::Masked | PoiStatus::LeftImage | PoiStatus::NoContrast
-                );
-                if judged && sd < MIN_TEXTURE_TO_NOISE * noise {
-                    *p = p.rejected(PoiStatus::NoTexture);
-                }
-            }
-        }
-        if let Some(ratio) = s.max_znssd_ratio {
-            for k in relative_correlation_failures(&points, ratio) {
-                points[k] = points[k].rejected(PoiStatus::LowCorrelation);
-            }
-        }
-        if let Some(threshold) = s.outlier_threshold {
-            let failures = median_test_failures(&points, nx, ny, threshold);
-            let starts: Vec<(usize, Warp)> = failures
-                .iter()
-                .filter_map(|&k| self.agreeing_neighbour_start(&points, k).map(|w| (k, w)))
-                .collect();
-            let retried =
-                pair.solve_tasks(&starts, |&(k, w), scratch| pair.solve_from(k, w, scratch));
-            for (&(k, _), r) in starts.iter().zip(retried) {
-                points[k] = r;
-            }
-            for k in median_test_failures(&points, nx, ny, threshold) {
-                points[k] = points[k].rejected(PoiStatus::Outlier);
-            }
-        }
+        pair.judge(&mut points);
         compute_strains(&self.grid, &mut points, s.strain_window);
         let summary = Summary::with_intervals(
             &points,
@@ -358,6 +236,146 @@ struct Pair<'a> {
 }
 
 impl Pair<'_> {
+    /// Step 1, the seeds: points on a coarse lattice solved from the global guess — the rigid
+    /// offset, or the similarity once it has been estimated when fewer than half of the seeds
+    /// hold (it also serves the search for points with no valid point anywhere). Seeds within
+    /// `SEED_ZNCC_MARGIN` of the best guide the propagation.
+    fn seed(&self, field: &mut Field, offset: (i64, i64)) -> Guess {
+        let r = self.reference;
+        let seeds: Vec<usize> = seed_indices(r.grid.nx(), r.grid.ny(), SEED_SPACING_POINTS)
+            .into_iter()
+            .filter(|&k| !field.is_masked(k))
+            .collect();
+        let mut guess = Guess::Translation(offset);
+        let mut seed_results =
+            self.solve_all(&seeds, |k, scratch| self.solve_seed(k, &guess, scratch));
+        let held = |results: &[PoiResult]| results.iter().filter(|r| r.status.is_valid()).count();
+        if 2 * held(&seed_results) < seeds.len() {
+            if let Some(sim) = estimate_similarity(
+                &r.image,
+                self.deformed,
+                r.grid.roi,
+                offset,
+                r.settings.max_motion_px,
+            ) {
+                guess = Guess::Similarity(sim);
+                let again: Vec<usize> = (0..seeds.len())
+                    .filter(|&i| !seed_results[i].status.is_valid())
+                    .collect();
+                let ks: Vec<usize> = again.iter().map(|&i| seeds[i]).collect();
+                let retried = self.solve_all(&ks, |k, scratch| self.solve_seed(k, &guess, scratch));
+                for (i, r) in again.into_iter().zip(retried) {
+                    seed_results[i] = r;
+                }
+            }
+        }
+        let best_seed = seed_results
+            .iter()
+            .filter(|r| r.status.is_valid())
+            .map(|r| r.zncc)
+            .fold(f64::NEG_INFINITY, f64::max);
+        for (&k, r) in seeds.iter().zip(seed_results) {
+            let guides = r.status.is_valid() && r.zncc >= best_seed - SEED_ZNCC_MARGIN;
+            field.record(k, r, guides);
+        }
+        guess
+    }
+
+    /// Steps 2 and 3: propagation from the guides, then a search where it did not reach, for at
+    /// most `SEARCH_ROUNDS` rounds or until a round gains nothing.
+    fn propagate_and_search(&self, field: &mut Field, guess: &Guess, report: &dyn Fn(&Field)) {
+        let r = self.reference;
+        for _ in 0..SEARCH_ROUNDS {
+            loop {
+                let tasks = field.frontier(&r.grid.xs, &r.grid.ys);
+                if tasks.is_empty() {
+                    break;
+                }
+                let results = self.solve_tasks(&tasks, |t, scratch| {
+                    self.solve_from(t.index, t.start, scratch)
+                });
+                for (t, r) in tasks.iter().zip(results) {
+                    let valid = r.status.is_valid();
+                    field.record_task(t, r, valid);
+                }
+                report(field);
+            }
+            let unresolved = field.unresolved();
+            if unresolved.is_empty() {
+                break;
+            }
+            let nearest = field.nearest_valid();
+            let predictions: Vec<Warp> = unresolved
+                .iter()
+                .map(|&k| match nearest[k] {
+                    Some(n) => {
+                        let from = field.result(n).expect("a valid point has a result");
+                        let (x, y) = r.position(k);
+                        warp_of(from).moved_by(x - from.x, y - from.y)
+                    }
+                    None => {
+                        let (x, y) = r.position(k);
+                        guess.warp_at(x, y)
+                    }
+                })
+                .collect();
+            let jobs: Vec<(usize, Warp)> = unresolved.into_iter().zip(predictions).collect();
+            let results = self.solve_tasks(&jobs, |&(k, p), scratch| {
+                self.solve_searching(k, p, scratch)
+            });
+            let mut gained = 0;
+            for (&(k, _), r) in jobs.iter().zip(results) {
+                let valid = r.status.is_valid();
+                gained += valid as usize;
+                field.record(k, r, valid);
+            }
+            report(field);
+            if gained == 0 {
+                break;
+            }
+        }
+    }
+
+    /// Step 4, the field's verdict: points with too little texture for the noise, a correlation
+    /// far below the field's, or failing the neighbour (median) test after one retry from an
+    /// agreeing neighbour are rejected.
+    fn judge(&self, points: &mut [PoiResult]) {
+        let (s, r) = (&self.reference.settings, self.reference);
+        let (nx, ny) = (r.grid.nx(), r.grid.ny());
+        let side = s.subset_px;
+        if let Some(noise) = noise_std(points, &r.subset_std, side * side) {
+            for (p, &sd) in points.iter_mut().zip(&r.subset_std) {
+                let judged = !matches!(
+                    p.status,
+                    PoiStatus::Masked | PoiStatus::LeftImage | PoiStatus::NoContrast
+                );
+                if judged && sd < MIN_TEXTURE_TO_NOISE * noise {
+                    *p = p.rejected(PoiStatus::NoTexture);
+                }
+            }
+        }
+        if let Some(ratio) = s.max_znssd_ratio {
+            for k in relative_correlation_failures(points, ratio) {
+                points[k] = points[k].rejected(PoiStatus::LowCorrelation);
+            }
+        }
+        if let Some(threshold) = s.outlier_threshold {
+            let failures = median_test_failures(points, nx, ny, threshold);
+            let starts: Vec<(usize, Warp)> = failures
+                .iter()
+                .filter_map(|&k| r.agreeing_neighbour_start(points, k).map(|w| (k, w)))
+                .collect();
+            let retried =
+                self.solve_tasks(&starts, |&(k, w), scratch| self.solve_from(k, w, scratch));
+            for (&(k, _), r) in starts.iter().zip(retried) {
+                points[k] = r;
+            }
+            for k in median_test_failures(points, nx, ny, threshold) {
+                points[k] = points[k].rejected(PoiStatus::Outlier);
+            }
+        }
+    }
+
     /// Solves every item in parallel, in order, with one scratch buffer per worker.
     fn solve_tasks<T: Sync>(
         &self,

@@ -44,6 +44,7 @@ pub use sequence::{analyze_sequence, SequenceFrame, REFERENCE_UPDATE_FRACTION};
 pub use settings::{
     DicSettings, ShapeFunction, DEFAULT_ROI_SIDE_PX, MAX_ITERATIONS, MAX_MOTION_PX,
     MAX_ROI_COORDINATE_PX, MAX_SEARCH_RADIUS_PX, MAX_STEP_PX, MAX_STRAIN_WINDOW, MAX_SUBSET_PX,
+    MIN_FRAME_SIDE_PX,
 };
 pub use similarity::{estimate_similarity, Similarity};
 pub use stats::{f64_or_nan, interval_or_nan, valid_fields, CorrelationLengths, Stats, Summary};

@@ -189,20 +189,14 @@ impl QuadraticSolve<'_> {
         j
     }
 
-    pub fn run(
-        &self,
-        start: QuadraticWarp,
-        convergence_px: f64,
-        max_iterations: u32,
-        scratch: &mut Scratch,
-    ) -> QuadraticOutcome {
+    /// The Gauss–Newton Hessian of the reference subset, Σ Jᵀ J over its pixels (constant in
+    /// the inverse-compositional scheme).
+    fn hessian(&self, scratch: &Scratch) -> [[f64; 12]; 12] {
         let side = 2 * self.half + 1;
-        let n = side * side;
         let h = self.half as f64;
-        let offsets = |i: usize| ((i % side) as f64 - h, (i / side) as f64 - h);
         let mut hess = [[0.0f64; 12]; 12];
-        for i in 0..n {
-            let (dx, dy) = offsets(i);
+        for i in 0..side * side {
+            let (dx, dy) = ((i % side) as f64 - h, (i / side) as f64 - h);
             let j = Self::jacobian(scratch.gx[i] as f64, scratch.gy[i] as f64, dx, dy);
             for a in 0..12 {
                 for b in 0..=a {
@@ -215,6 +209,21 @@ impl QuadraticSolve<'_> {
                 hess[a][b] = hess[b][a];
             }
         }
+        hess
+    }
+
+    pub fn run(
+        &self,
+        start: QuadraticWarp,
+        convergence_px: f64,
+        max_iterations: u32,
+        scratch: &mut Scratch,
+    ) -> QuadraticOutcome {
+        let side = 2 * self.half + 1;
+        let n = side * side;
+        let h = self.half as f64;
+        let offsets = |i: usize| ((i % side) as f64 - h, (i / side) as f64 - h);
+        let hess = self.hessian(scratch);
         let mut outcome = QuadraticOutcome {
             warp: start,
             zncc: f64::NAN,

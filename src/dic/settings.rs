@@ -84,6 +84,10 @@ impl std::str::FromStr for ShapeFunction {
 /// Side of the default ROI (the paper's 800x800 centred region).
 pub const DEFAULT_ROI_SIDE_PX: usize = 800;
 
+/// The smallest frame side an experiment captures or a comparison takes: room for one subset of
+/// the default 41 px with its margins and a few points beside it.
+pub const MIN_FRAME_SIDE_PX: usize = 64;
+
 /// Upper bounds of the settings that size memory or work. Each is far beyond any useful analysis
 /// and far below what would exhaust a lab PC: a request cannot ask for a 16k x 16k FFT
 /// (`max_motion_px`), a subset larger than a camera, or millions of iterations per point.

@@ -89,45 +89,56 @@ pub enum Owner {
     Run(String),
 }
 
+/// The channel one command is answered on: each command carries its own, typed by what it
+/// answers, so a reply cannot be of the wrong kind.
+type Reply<T> = mpsc::SyncSender<Result<T, BenchError>>;
+
 enum Command {
-    Status,
-    ApplyCamera(CameraSettings),
+    Status(Reply<BenchStatus>),
+    ApplyCamera(CameraSettings, Reply<CameraSettings>),
     Capture {
         count: usize,
         timeout: Duration,
+        reply: Reply<Vec<Frame>>,
     },
     Home {
         timeout: Duration,
+        reply: Reply<()>,
     },
     MoveTo {
         target: StagePosition,
         settle_timeout: Duration,
+        reply: Reply<StagePosition>,
     },
     MoveBy {
         dx_mm: f64,
         dy_mm: f64,
         settle_timeout: Duration,
+        reply: Reply<StagePosition>,
     },
-    StopStage,
+    StopStage(Reply<()>),
     Mount {
         label: String,
         pattern: Box<SpecklePattern>,
         seed: u64,
+        reply: Reply<()>,
     },
 }
 
-enum Reply {
-    Status(Box<BenchStatus>),
-    Settings(CameraSettings),
-    Frames(Vec<Frame>),
-    Position(StagePosition),
-    Done,
+/// What a command may do while a run holds the bench.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Access {
+    /// Reads: always allowed.
+    Read,
+    /// Changes the bench: the holder only.
+    Change,
+    /// A stop is a safety action: anyone may stop the stage.
+    Stop,
 }
 
 struct Request {
     owner: Owner,
     command: Command,
-    reply: mpsc::SyncSender<Result<Reply, BenchError>>,
 }
 
 /// A cloneable handle to the bench actor. Every call blocks until the actor answers; async
@@ -204,13 +215,19 @@ impl BenchHandle {
         self.holder.lock().expect("holder lock").clone()
     }
 
-    fn call(&self, owner: Owner, command: Command, wait: Duration) -> Result<Reply, BenchError> {
+    /// Sends the command `make` builds around a reply channel and waits up to `wait` for the
+    /// answer.
+    fn call<T>(
+        &self,
+        owner: Owner,
+        make: impl FnOnce(Reply<T>) -> Command,
+        wait: Duration,
+    ) -> Result<T, BenchError> {
         let (reply, rx) = mpsc::sync_channel(1);
         self.tx
             .send(Request {
                 owner,
-                command,
-                reply,
+                command: make(reply),
             })
             .map_err(|_| BenchError::Stopped)?;
         match rx.recv_timeout(wait) {
@@ -223,10 +240,7 @@ impl BenchHandle {
     }
 
     pub fn status(&self) -> Result<BenchStatus, BenchError> {
-        match self.call(Owner::Direct, Command::Status, self.reply_timeout)? {
-            Reply::Status(s) => Ok(*s),
-            _ => unreachable!("status answers with a status"),
-        }
+        self.call(Owner::Direct, Command::Status, self.reply_timeout)
     }
 
     pub fn apply_camera(
@@ -234,10 +248,11 @@ impl BenchHandle {
         owner: Owner,
         settings: CameraSettings,
     ) -> Result<CameraSettings, BenchError> {
-        match self.call(owner, Command::ApplyCamera(settings), self.reply_timeout)? {
-            Reply::Settings(s) => Ok(s),
-            _ => unreachable!("apply answers with settings"),
-        }
+        self.call(
+            owner,
+            |reply| Command::ApplyCamera(settings, reply),
+            self.reply_timeout,
+        )
     }
 
     /// `count` frames, each within `timeout`.
@@ -248,19 +263,23 @@ impl BenchHandle {
         timeout: Duration,
     ) -> Result<Vec<Frame>, BenchError> {
         let wait = self.reply_timeout + timeout * count as u32;
-        match self.call(owner, Command::Capture { count, timeout }, wait)? {
-            Reply::Frames(f) => Ok(f),
-            _ => unreachable!("capture answers with frames"),
-        }
+        self.call(
+            owner,
+            |reply| Command::Capture {
+                count,
+                timeout,
+                reply,
+            },
+            wait,
+        )
     }
 
     pub fn home(&self, owner: Owner, timeout: Duration) -> Result<(), BenchError> {
         self.call(
             owner,
-            Command::Home { timeout },
+            |reply| Command::Home { timeout, reply },
             self.reply_timeout + timeout,
         )
-        .map(|_| ())
     }
 
     /// Moves to `target` and waits until the stage has settled there.
@@ -270,14 +289,12 @@ impl BenchHandle {
         target: StagePosition,
         settle_timeout: Duration,
     ) -> Result<StagePosition, BenchError> {
-        let cmd = Command::MoveTo {
+        let cmd = |reply| Command::MoveTo {
             target,
             settle_timeout,
+            reply,
         };
-        match self.call(owner, cmd, self.reply_timeout + settle_timeout)? {
-            Reply::Position(p) => Ok(p),
-            _ => unreachable!("a move answers with a position"),
-        }
+        self.call(owner, cmd, self.reply_timeout + settle_timeout)
     }
 
     pub fn move_by(
@@ -287,20 +304,17 @@ impl BenchHandle {
         dy_mm: f64,
         settle_timeout: Duration,
     ) -> Result<StagePosition, BenchError> {
-        let cmd = Command::MoveBy {
+        let cmd = |reply| Command::MoveBy {
             dx_mm,
             dy_mm,
             settle_timeout,
+            reply,
         };
-        match self.call(owner, cmd, self.reply_timeout + settle_timeout)? {
-            Reply::Position(p) => Ok(p),
-            _ => unreachable!("a move answers with a position"),
-        }
+        self.call(owner, cmd, self.reply_timeout + settle_timeout)
     }
 
     pub fn stop_stage(&self, owner: Owner) -> Result<(), BenchError> {
         self.call(owner, Command::StopStage, self.reply_timeout)
-            .map(|_| ())
     }
 
     pub fn mount(
@@ -310,12 +324,13 @@ impl BenchHandle {
         pattern: &SpecklePattern,
         seed: u64,
     ) -> Result<(), BenchError> {
-        let cmd = Command::Mount {
+        let cmd = |reply| Command::Mount {
             label: label.to_string(),
             pattern: Box::new(pattern.clone()),
             seed,
+            reply,
         };
-        self.call(owner, cmd, self.reply_timeout).map(|_| ())
+        self.call(owner, cmd, self.reply_timeout)
     }
 }
 
@@ -357,23 +372,7 @@ impl Actor {
     fn serve(mut self, rx: mpsc::Receiver<Request>) {
         // Ends when every handle is gone: the stage is left stopped.
         while let Ok(req) = rx.recv() {
-            let result = self.admit(&req.owner, &req.command).and_then(|()| {
-                // A panic in a driver or the mock scene fails this command only; the actor,
-                // and with it the bench, stays up for the next one.
-                let command = req.command;
-                std::panic::catch_unwind(AssertUnwindSafe(|| self.run(command))).unwrap_or_else(
-                    |panic| {
-                        let what = panic_message(&panic);
-                        tracing::error!("bench command panicked: {what}");
-                        if let Some(stage) = self.hw.stage.as_mut() {
-                            let _ = stage.stop();
-                        }
-                        Err(BenchError::Panicked(what))
-                    },
-                )
-            });
-            // The caller may have given up waiting; that is its business.
-            let _ = req.reply.send(result);
+            self.run(&req.owner, req.command);
         }
         if let Some(stage) = self.hw.stage.as_mut() {
             let _ = stage.stop();
@@ -381,68 +380,103 @@ impl Actor {
     }
 
     /// Reads are always allowed; anything that changes the bench needs the holder's lease.
-    fn admit(&self, owner: &Owner, command: &Command) -> Result<(), BenchError> {
-        if matches!(command, Command::Status) {
+    fn admit(&self, owner: &Owner, access: Access) -> Result<(), BenchError> {
+        if access == Access::Read {
             return Ok(());
         }
         let holder = self.holder.lock().expect("holder lock").clone();
         match (holder, owner) {
             (None, _) => Ok(()),
             (Some(h), Owner::Run(r)) if &h == r => Ok(()),
-            // A stop is a safety action: anyone may stop the stage.
-            (Some(_), Owner::Direct) if matches!(command, Command::StopStage) => Ok(()),
+            (Some(_), Owner::Direct) if access == Access::Stop => Ok(()),
             (Some(h), _) => Err(BenchError::Busy { holder: h }),
         }
+    }
+
+    /// Answers on `reply` what `work` returns, once `owner` is admitted. A panic in a driver or
+    /// the mock scene fails this command only; the actor, and with it the bench, stays up for
+    /// the next one. The caller may have given up waiting; that is its business.
+    fn answer<T>(
+        &mut self,
+        owner: &Owner,
+        access: Access,
+        reply: Reply<T>,
+        work: impl FnOnce(&mut Self) -> Result<T, BenchError>,
+    ) {
+        let result = match self.admit(owner, access) {
+            Err(e) => Err(e),
+            Ok(()) => match std::panic::catch_unwind(AssertUnwindSafe(|| work(self))) {
+                Ok(result) => result,
+                Err(panic) => {
+                    let what = panic_message(&panic);
+                    tracing::error!("bench command panicked: {what}");
+                    if let Some(stage) = self.hw.stage.as_mut() {
+                        let _ = stage.stop();
+                    }
+                    Err(BenchError::Panicked(what))
+                }
+            },
+        };
+        let _ = reply.send(result);
     }
 
     fn stage(&mut self) -> Result<&mut Box<dyn Stage>, BenchError> {
         self.hw.stage.as_mut().ok_or(BenchError::NoStage)
     }
 
-    fn run(&mut self, command: Command) -> Result<Reply, BenchError> {
-        Ok(match command {
-            Command::Status => Reply::Status(Box::new(self.status())),
-            Command::ApplyCamera(s) => Reply::Settings(self.hw.camera.apply(&s)?),
-            Command::Capture { count, timeout } => {
-                Reply::Frames(self.hw.camera.acquire(count, timeout)?)
+    fn run(&mut self, owner: &Owner, command: Command) {
+        use Access::{Change, Read, Stop};
+        match command {
+            Command::Status(reply) => self.answer(owner, Read, reply, |a| Ok(a.status())),
+            Command::ApplyCamera(s, reply) => {
+                self.answer(owner, Change, reply, |a| Ok(a.hw.camera.apply(&s)?))
             }
-            Command::Home { timeout } => {
-                self.stage()?.home(timeout)?;
-                self.homed = true;
-                Reply::Done
-            }
+            Command::Capture {
+                count,
+                timeout,
+                reply,
+            } => self.answer(owner, Change, reply, |a| {
+                Ok(a.hw.camera.acquire(count, timeout)?)
+            }),
+            Command::Home { timeout, reply } => self.answer(owner, Change, reply, |a| {
+                a.stage()?.home(timeout)?;
+                a.homed = true;
+                Ok(())
+            }),
             Command::MoveTo {
                 target,
                 settle_timeout,
-            } => {
-                let stage = self.stage()?;
+                reply,
+            } => self.answer(owner, Change, reply, |a| {
+                let stage = a.stage()?;
                 stage.move_absolute(target)?;
-                Reply::Position(stage.wait_settled(settle_timeout)?)
-            }
+                Ok(stage.wait_settled(settle_timeout)?)
+            }),
             Command::MoveBy {
                 dx_mm,
                 dy_mm,
                 settle_timeout,
-            } => {
-                let stage = self.stage()?;
+                reply,
+            } => self.answer(owner, Change, reply, |a| {
+                let stage = a.stage()?;
                 stage.move_relative(dx_mm, dy_mm)?;
-                Reply::Position(stage.wait_settled(settle_timeout)?)
-            }
-            Command::StopStage => {
-                self.stage()?.stop()?;
-                Reply::Done
+                Ok(stage.wait_settled(settle_timeout)?)
+            }),
+            Command::StopStage(reply) => {
+                self.answer(owner, Stop, reply, |a| Ok(a.stage()?.stop()?))
             }
             Command::Mount {
                 label,
                 pattern,
                 seed,
-            } => {
-                let mount = self.hw.targets.as_mut().ok_or(BenchError::NoTargetMount)?;
+                reply,
+            } => self.answer(owner, Change, reply, |a| {
+                let mount = a.hw.targets.as_mut().ok_or(BenchError::NoTargetMount)?;
                 mount.mount(&label, &pattern, seed)?;
-                self.target = Some(label);
-                Reply::Done
-            }
-        })
+                a.target = Some(label);
+                Ok(())
+            }),
+        }
     }
 
     fn status(&mut self) -> BenchStatus {

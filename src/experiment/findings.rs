@@ -35,68 +35,15 @@ pub struct Finding {
 /// The paper's findings on `captures` (every capture's own rows, `results/captures.json`):
 /// those whose patterns and schemes the study holds, with at least two captures each.
 pub fn paper_findings(captures: &[StudyRow]) -> Vec<Finding> {
-    let inc = |pattern: &str, scheme: &str, f: fn(&Increase) -> f64| -> Vec<f64> {
-        captures
-            .iter()
-            .filter(|r| r.pattern == pattern && r.scheme == scheme)
-            .filter_map(|r| r.increase_pct.as_ref().map(f))
-            .collect()
-    };
-    let std = |pattern: &str, scheme: &str, f: fn(&StudyRow) -> f64| -> Vec<f64> {
-        captures
-            .iter()
-            .filter(|r| r.pattern == pattern && r.scheme == scheme)
-            .map(f)
-            .collect()
-    };
-    let u: fn(&Increase) -> f64 = |i| i.u;
-    let v: fn(&Increase) -> f64 = |i| i.v;
-    let exx: fn(&Increase) -> f64 = |i| i.exx;
-    let eyy: fn(&Increase) -> f64 = |i| i.eyy;
-    let mut out = Vec::new();
-    let mut push = |claim: &str, measure: String, xs: (f64, [f64; 2], usize), verdict: Verdict| {
-        let (mean, ci95, n) = xs;
-        if n >= 2 && ci95.iter().all(|x| x.is_finite()) {
-            out.push(Finding {
-                claim: claim.to_string(),
-                measure,
-                mean,
-                ci95,
-                captures: n,
-                verdict,
-            });
-        }
-    };
-    for scheme in ["ff50", "ff25"] {
-        // § 4: "for speckle (a) the fill factor has no effect on the error"; read as within ±5 %.
-        for (name, f) in [("u", u), ("exx", exx)] {
-            let x = summary(&inc("a", scheme, f));
-            push(
-                "pattern a: the fill factor has no effect (within ±5 %)",
-                format!("a {scheme} increase of std {name} [%]"),
-                x,
-                within(x.1, 5.0),
-            );
-        }
-        // "for speckles (b) and (c), the fill factor has some effect".
-        for p in ["b", "c"] {
-            for (name, f) in [("u", u), ("v", v), ("exx", exx), ("eyy", eyy)] {
-                let x = summary(&inc(p, scheme, f));
-                push(
-                    "patterns b and c: the error grows at a lower fill factor",
-                    format!("{p} {scheme} increase of std {name} [%]"),
-                    x,
-                    above(x.1, 0.0),
-                );
-            }
-        }
-    }
+    let c = Captures(captures);
+    let mut out = Findings(Vec::new());
+    fill_factor_effects(&c, &mut out);
     // "speckle (b) shows the largest fill factor dependence" (x: +13.2 % displacement,
     // +19.8 % strain).
     for other in ["a", "c"] {
-        for (name, f) in [("u", u), ("exx", exx)] {
-            let x = welch(&inc("b", "ff25", f), &inc(other, "ff25", f));
-            push(
+        for (name, f) in [("u", U), ("exx", EXX)] {
+            let x = welch(&c.increase("b", "ff25", f), &c.increase(other, "ff25", f));
+            out.push(
                 "pattern b shows the largest fill-factor dependence",
                 format!("b minus {other}, ff25 increase of std {name} [points]"),
                 x,
@@ -106,9 +53,9 @@ pub fn paper_findings(captures: &[StudyRow]) -> Vec<Finding> {
     }
     // Figure 6: the sub-pixel y component is affected more than the x translation.
     for p in ["b", "c"] {
-        for ((nx, fx), (ny, fy)) in [(("u", u), ("v", v)), (("exx", exx), ("eyy", eyy))] {
-            let x = paired(&inc(p, "ff25", fy), &inc(p, "ff25", fx));
-            push(
+        for ((nx, fx), (ny, fy)) in [(("u", U), ("v", V)), (("exx", EXX), ("eyy", EYY))] {
+            let x = paired(&c.increase(p, "ff25", fy), &c.increase(p, "ff25", fx));
+            out.push(
                 "the sub-pixel y component is affected more than the x move",
                 format!("{p} ff25: increase of std {ny} minus that of std {nx} [points]"),
                 x,
@@ -118,9 +65,9 @@ pub fn paper_findings(captures: &[StudyRow]) -> Vec<Finding> {
     }
     // "the most significant increase in error occurs with the 25 % fill factor images".
     for p in ["b", "c"] {
-        for (name, f) in [("u", u), ("v", v)] {
-            let x = paired(&inc(p, "ff25", f), &inc(p, "ff50", f));
-            push(
+        for (name, f) in [("u", U), ("v", V)] {
+            let x = paired(&c.increase(p, "ff25", f), &c.increase(p, "ff50", f));
+            out.push(
                 "the largest increase is at 25 %",
                 format!("{p}: ff25 minus ff50 increase of std {name} [points]"),
                 x,
@@ -132,8 +79,8 @@ pub fn paper_findings(captures: &[StudyRow]) -> Vec<Finding> {
     for other in ["b", "c"] {
         for scheme in ["ff100", "ff50", "ff25"] {
             let exx_std: fn(&StudyRow) -> f64 = |r| 1e6 * r.summary.exx.std;
-            let x = welch(&std(other, scheme, exx_std), &std("a", scheme, exx_std));
-            push(
+            let x = welch(&c.std(other, scheme, exx_std), &c.std("a", scheme, exx_std));
+            out.push(
                 "pattern a has the lowest strain error",
                 format!("{other} minus a, {scheme} std exx [µε]"),
                 x,
@@ -141,7 +88,83 @@ pub fn paper_findings(captures: &[StudyRow]) -> Vec<Finding> {
             );
         }
     }
-    out
+    out.0
+}
+
+/// § 4: "for speckle (a) the fill factor has no effect on the error" (read as within ±5 %); "for
+/// speckles (b) and (c), the fill factor has some effect".
+fn fill_factor_effects(c: &Captures<'_>, out: &mut Findings) {
+    for scheme in ["ff50", "ff25"] {
+        for (name, f) in [("u", U), ("exx", EXX)] {
+            let x = summary(&c.increase("a", scheme, f));
+            out.push(
+                "pattern a: the fill factor has no effect (within ±5 %)",
+                format!("a {scheme} increase of std {name} [%]"),
+                x,
+                within(x.1, 5.0),
+            );
+        }
+        for p in ["b", "c"] {
+            for (name, f) in [("u", U), ("v", V), ("exx", EXX), ("eyy", EYY)] {
+                let x = summary(&c.increase(p, scheme, f));
+                out.push(
+                    "patterns b and c: the error grows at a lower fill factor",
+                    format!("{p} {scheme} increase of std {name} [%]"),
+                    x,
+                    above(x.1, 0.0),
+                );
+            }
+        }
+    }
+}
+
+/// Which part of a row's increase over ff100 a finding reads.
+const U: fn(&Increase) -> f64 = |i| i.u;
+const V: fn(&Increase) -> f64 = |i| i.v;
+const EXX: fn(&Increase) -> f64 = |i| i.exx;
+const EYY: fn(&Increase) -> f64 = |i| i.eyy;
+
+/// Every capture's rows.
+struct Captures<'a>(&'a [StudyRow]);
+
+impl Captures<'_> {
+    fn rows<'r>(&'r self, pattern: &'r str, scheme: &'r str) -> impl Iterator<Item = &'r StudyRow> {
+        self.0
+            .iter()
+            .filter(move |r| r.pattern == pattern && r.scheme == scheme)
+    }
+
+    /// One capture's increase (`f` of it) per capture of `pattern` with `scheme`.
+    fn increase(&self, pattern: &str, scheme: &str, f: fn(&Increase) -> f64) -> Vec<f64> {
+        self.rows(pattern, scheme)
+            .filter_map(|r| r.increase_pct.as_ref().map(f))
+            .collect()
+    }
+
+    /// `f` of each capture's row of `pattern` with `scheme`.
+    fn std(&self, pattern: &str, scheme: &str, f: fn(&StudyRow) -> f64) -> Vec<f64> {
+        self.rows(pattern, scheme).map(f).collect()
+    }
+}
+
+/// The findings made so far: one is kept when at least two captures stand behind it and its
+/// interval is finite.
+struct Findings(Vec<Finding>);
+
+impl Findings {
+    fn push(&mut self, claim: &str, measure: String, xs: (f64, [f64; 2], usize), verdict: Verdict) {
+        let (mean, ci95, n) = xs;
+        if n >= 2 && ci95.iter().all(|x| x.is_finite()) {
+            self.0.push(Finding {
+                claim: claim.to_string(),
+                measure,
+                mean,
+                ci95,
+                captures: n,
+                verdict,
+            });
+        }
+    }
 }
 
 fn summary(xs: &[f64]) -> (f64, [f64; 2], usize) {

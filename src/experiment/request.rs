@@ -127,7 +127,7 @@ pub const MAX_SETTLE_MS: u64 = 60_000;
 impl ExperimentRequest {
     /// Checks everything that does not need the hardware, against what the bench can do.
     pub fn plan(&self, limits: &BenchLimits) -> Result<ExperimentPlan, FieldError> {
-        check_name(&self.name)?;
+        check_run_name(&self.name)?;
         let patterns = self.check_patterns(limits)?;
         let moves = self.check_moves(limits)?;
         if !(1..=MAX_FRAMES_AVERAGED).contains(&self.frames_averaged) {
@@ -274,10 +274,20 @@ impl ExperimentRequest {
     }
 }
 
-/// A run's name: shown in lists and written into manifests; printable, 1 to 128 characters.
-fn check_name(name: &str) -> Result<(), FieldError> {
-    if name.trim().is_empty() || name.chars().count() > 128 || name.chars().any(char::is_control) {
-        return Err(field_error("name", "must be 1 to 128 printable characters"));
+/// The longest name a run (experiment, sweep) may have, in characters.
+pub const MAX_RUN_NAME_CHARS: usize = 128;
+
+/// A run's name: shown in lists and written into manifests; printable (no control character),
+/// 1 to [`MAX_RUN_NAME_CHARS`] characters, not only white space. The field is `name`.
+pub fn check_run_name(name: &str) -> Result<(), FieldError> {
+    if name.trim().is_empty()
+        || name.chars().count() > MAX_RUN_NAME_CHARS
+        || name.chars().any(char::is_control)
+    {
+        return Err(field_error(
+            "name",
+            format!("must be 1 to {MAX_RUN_NAME_CHARS} printable characters, not only white space"),
+        ));
     }
     Ok(())
 }

@@ -109,11 +109,14 @@ impl ExperimentSpec {
                 spec.repeats
             )));
         }
-        if spec.camera.width < 64 || spec.camera.height < 64 || !(spec.camera.scale_px_per_mm > 0.0)
+        let min = crate::dic::MIN_FRAME_SIDE_PX;
+        if spec.camera.width < min
+            || spec.camera.height < min
+            || !(spec.camera.scale_px_per_mm > 0.0)
         {
-            return Err(parse(
-                "camera must be at least 64x64 px with a positive scale".into(),
-            ));
+            return Err(parse(format!(
+                "camera must be at least {min}x{min} px with a positive scale"
+            )));
         }
         Ok(spec)
     }

@@ -184,17 +184,8 @@ pub fn analyze_dataset_with(
     Ok(rows)
 }
 
-/// DIC of one full-resolution pair after reduction with `scheme`.
-pub fn study_pair(
-    reference: &Image,
-    deformed: &Image,
-    scheme: &Scheme,
-    dic: &DicSettings,
-) -> Result<Summary, DicError> {
-    Ok(study_pair_result(reference, deformed, scheme, dic)?.summary)
-}
-
-/// [`study_pair`] with the whole result: every point's displacement and strain.
+/// DIC of one full-resolution pair after reduction with `scheme`: every point's displacement
+/// and strain, and their summary.
 pub fn study_pair_result(
     reference: &Image,
     deformed: &Image,

@@ -41,11 +41,6 @@ impl Roi {
             self.height.min(image_height - self.y),
         ))
     }
-
-    /// Whether the rectangle lies wholly inside an image of the given size.
-    pub fn fits_in(&self, image_width: usize, image_height: usize) -> bool {
-        self.x + self.width <= image_width && self.y + self.height <= image_height
-    }
 }
 
 impl fmt::Display for Roi {

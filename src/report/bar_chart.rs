@@ -1,7 +1,7 @@
 //! Grouped bar charts, as in the paper's Figures 5 and 6: groups are speckle patterns, series are
 //! fill factors, and a label over each bar gives its change against the first series.
 
-use super::svg::{escape, format_tick, nice_ticks, text_width, PALETTE};
+use super::svg::{escape, format_tick, nice_ticks, start_document, text_width, PALETTE};
 use std::fmt::Write;
 
 #[derive(Clone, Debug, PartialEq)]
@@ -42,44 +42,21 @@ impl BarChart {
         let (w, h) = (width_px as f64, height_px as f64);
         let legend_h = 18.0 * self.series.len() as f64 + 8.0;
         let (left, right, top, bottom) = (78.0, 16.0, 40.0, 40.0 + legend_h);
-        let (pw, ph) = (w - left - right, h - top - bottom);
-        let max = self
-            .series
-            .iter()
-            .flat_map(|s| {
-                let tops = (0..s.values.len()).filter_map(|gi| s.error(gi).map(|e| e[1]));
-                s.values.iter().copied().chain(tops)
-            })
-            .filter(|v| v.is_finite())
-            .fold(0.0f64, f64::max);
-        let min = self
-            .series
-            .iter()
-            .flat_map(|s| s.values.iter().copied())
-            .filter(|v| v.is_finite())
-            .fold(0.0f64, f64::min);
+        let (min, max) = self.value_range();
         // Headroom for the labels over the bars.
         let ticks = nice_ticks(min, if max > 0.0 { max * 1.12 } else { 1.0 }, 5);
-        let (y0, y1) = (ticks[0], *ticks.last().expect("ticks"));
-        let y_of = |v: f64| top + ph * (1.0 - (v - y0) / (y1 - y0));
+        let plot = Plot {
+            top,
+            pw: w - left - right,
+            ph: h - top - bottom,
+            y0: ticks[0],
+            y1: *ticks.last().expect("ticks"),
+        };
+        let (pw, ph) = (plot.pw, plot.ph);
 
-        let mut s = String::new();
-        let _ = write!(
-            s,
-            r#"<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {w} {h}" width="{w}" height="{h}" font-family="sans-serif" font-size="12">"#
-        );
-        let _ = write!(
-            s,
-            r#"<rect x="0" y="0" width="{w}" height="{h}" fill="white"/>"#
-        );
-        let _ = write!(
-            s,
-            r#"<text x="{}" y="22" text-anchor="middle" font-size="15" font-weight="bold">{}</text>"#,
-            w / 2.0,
-            escape(&self.title)
-        );
+        let mut s = start_document(w, h, &self.title);
         for t in &ticks {
-            let y = y_of(*t);
+            let y = plot.y_of(*t);
             let _ = write!(
                 s,
                 r##"<line x1="{left}" x2="{}" y1="{y:.1}" y2="{y:.1}" stroke="#ddd"/><text x="{}" y="{:.1}" text-anchor="end">{}</text>"##,
@@ -95,10 +72,8 @@ impl BarChart {
             top + ph / 2.0,
             escape(&self.y_label)
         );
-        let ng = self.groups.len().max(1) as f64;
-        let ns = self.series.len().max(1) as f64;
-        let group_w = pw / ng;
-        let bar_w = group_w * 0.8 / ns;
+        let group_w = pw / self.groups.len().max(1) as f64;
+        let bar_w = group_w * 0.8 / self.series.len().max(1) as f64;
         for (gi, g) in self.groups.iter().enumerate() {
             let gx = left + gi as f64 * group_w;
             let _ = write!(
@@ -108,62 +83,17 @@ impl BarChart {
                 top + ph + 18.0,
                 escape(g)
             );
-            for (si, series) in self.series.iter().enumerate() {
-                let v = series.values.get(gi).copied().unwrap_or(f64::NAN);
-                if !v.is_finite() {
-                    continue;
-                }
+            for si in 0..self.series.len() {
                 let x = gx + group_w * 0.1 + si as f64 * bar_w;
-                let (ya, yb) = (y_of(v.max(0.0)), y_of(v.min(0.0)));
-                let _ = write!(
-                    s,
-                    r#"<rect class="bar" data-group="{}" data-series="{}" data-value="{v}" x="{x:.2}" y="{ya:.2}" width="{:.2}" height="{:.2}" fill="{}"><title>{}: {}</title></rect>"#,
-                    escape(g),
-                    escape(&series.name),
-                    bar_w * 0.92,
-                    yb - ya,
-                    PALETTE[si % PALETTE.len()],
-                    escape(&series.name),
-                    format_tick(v)
-                );
-                let mut label_y = ya - 4.0;
-                if let Some([lo, hi]) = series.error(gi) {
-                    let (yl, yh) = (y_of(lo), y_of(hi));
-                    let xc = x + bar_w * 0.46;
-                    let cap = (bar_w * 0.2).min(6.0);
-                    let _ = write!(
-                        s,
-                        r##"<path class="error-bar" data-lo="{lo}" data-hi="{hi}" d="M{xc:.2},{yl:.2}V{yh:.2}M{:.2},{yl:.2}H{:.2}M{:.2},{yh:.2}H{:.2}" stroke="#222" fill="none"/>"##,
-                        xc - cap,
-                        xc + cap,
-                        xc - cap,
-                        xc + cap
-                    );
-                    label_y = label_y.min(yh - 4.0);
-                }
-                if let Some(Some(label)) = series.labels.get(gi) {
-                    let fs = if text_width(label, 11.0) > bar_w {
-                        9
-                    } else {
-                        11
-                    };
-                    let _ = write!(
-                        s,
-                        r#"<text class="bar-label" x="{:.1}" y="{:.1}" text-anchor="middle" font-size="{fs}">{}</text>"#,
-                        x + bar_w * 0.46,
-                        label_y,
-                        escape(label)
-                    );
-                }
+                self.write_bar(&mut s, &plot, gi, si, x, bar_w);
             }
         }
+        let zero = plot.y_of(0.0f64.clamp(plot.y0, plot.y1));
         let _ = write!(
             s,
-            r##"<line x1="{left}" x2="{left}" y1="{top}" y2="{:.1}" stroke="#333"/><line x1="{left}" x2="{:.1}" y1="{:.1}" y2="{:.1}" stroke="#333"/>"##,
+            r##"<line x1="{left}" x2="{left}" y1="{top}" y2="{:.1}" stroke="#333"/><line x1="{left}" x2="{:.1}" y1="{zero:.1}" y2="{zero:.1}" stroke="#333"/>"##,
             top + ph,
             left + pw,
-            y_of(0.0f64.clamp(y0, y1)),
-            y_of(0.0f64.clamp(y0, y1))
         );
         for (si, series) in self.series.iter().enumerate() {
             let y = h - legend_h + 4.0 + 18.0 * si as f64;
@@ -178,6 +108,91 @@ impl BarChart {
         }
         s.push_str("</svg>\n");
         s
+    }
+
+    /// The lowest value (at most 0) and the highest value or error-bar top (at least 0).
+    fn value_range(&self) -> (f64, f64) {
+        let max = self
+            .series
+            .iter()
+            .flat_map(|s| {
+                let tops = (0..s.values.len()).filter_map(|gi| s.error(gi).map(|e| e[1]));
+                s.values.iter().copied().chain(tops)
+            })
+            .filter(|v| v.is_finite())
+            .fold(0.0f64, f64::max);
+        let min = self
+            .series
+            .iter()
+            .flat_map(|s| s.values.iter().copied())
+            .filter(|v| v.is_finite())
+            .fold(0.0f64, f64::min);
+        (min, max)
+    }
+
+    /// The bar of series `si` in group `gi` at `x`, `bar_w` wide, with its error bar and label.
+    fn write_bar(&self, s: &mut String, plot: &Plot, gi: usize, si: usize, x: f64, bar_w: f64) {
+        let series = &self.series[si];
+        let v = series.values.get(gi).copied().unwrap_or(f64::NAN);
+        if !v.is_finite() {
+            return;
+        }
+        let (ya, yb) = (plot.y_of(v.max(0.0)), plot.y_of(v.min(0.0)));
+        let _ = write!(
+            s,
+            r#"<rect class="bar" data-group="{}" data-series="{}" data-value="{v}" x="{x:.2}" y="{ya:.2}" width="{:.2}" height="{:.2}" fill="{}"><title>{}: {}</title></rect>"#,
+            escape(&self.groups[gi]),
+            escape(&series.name),
+            bar_w * 0.92,
+            yb - ya,
+            PALETTE[si % PALETTE.len()],
+            escape(&series.name),
+            format_tick(v)
+        );
+        let mut label_y = ya - 4.0;
+        if let Some([lo, hi]) = series.error(gi) {
+            let (yl, yh) = (plot.y_of(lo), plot.y_of(hi));
+            let xc = x + bar_w * 0.46;
+            let cap = (bar_w * 0.2).min(6.0);
+            let _ = write!(
+                s,
+                r##"<path class="error-bar" data-lo="{lo}" data-hi="{hi}" d="M{xc:.2},{yl:.2}V{yh:.2}M{:.2},{yl:.2}H{:.2}M{:.2},{yh:.2}H{:.2}" stroke="#222" fill="none"/>"##,
+                xc - cap,
+                xc + cap,
+                xc - cap,
+                xc + cap
+            );
+            label_y = label_y.min(yh - 4.0);
+        }
+        if let Some(Some(label)) = series.labels.get(gi) {
+            let fs = if text_width(label, 11.0) > bar_w {
+                9
+            } else {
+                11
+            };
+            let _ = write!(
+                s,
+                r#"<text class="bar-label" x="{:.1}" y="{:.1}" text-anchor="middle" font-size="{fs}">{}</text>"#,
+                x + bar_w * 0.46,
+                label_y,
+                escape(label)
+            );
+        }
+    }
+}
+
+/// The plot area (from `top`, `pw` x `ph` px) and the value range it spans.
+struct Plot {
+    top: f64,
+    pw: f64,
+    ph: f64,
+    y0: f64,
+    y1: f64,
+}
+
+impl Plot {
+    fn y_of(&self, v: f64) -> f64 {
+        self.top + self.ph * (1.0 - (v - self.y0) / (self.y1 - self.y0))
     }
 }
 

@@ -2,7 +2,7 @@
 //! grid point, a diverging colour scale symmetric about zero (or a sequential one), a colour-scale
 //! legend with its unit, and axis labels with units.
 
-use super::svg::{escape, format_tick, nice_ticks};
+use super::svg::{escape, format_tick, nice_ticks, start_document};
 use std::fmt::Write;
 
 #[derive(Clone, Debug, PartialEq)]
@@ -124,17 +124,7 @@ impl Heatmap {
         let sx = |x: f64| left + pw * (x - x0) / (x1 - x0);
         let sy = |y: f64| top + ph * (y - y0) / (y1 - y0);
         let (cw, ch) = (pw / nx as f64, ph / ny as f64);
-        let mut s = String::new();
-        let _ = write!(
-            s,
-            r#"<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {w} {h}" width="{w}" height="{h}" font-family="sans-serif" font-size="12"><rect x="0" y="0" width="{w}" height="{h}" fill="white"/>"#
-        );
-        let _ = write!(
-            s,
-            r#"<text x="{}" y="22" text-anchor="middle" font-size="15" font-weight="bold">{}</text>"#,
-            w / 2.0,
-            escape(&self.title)
-        );
+        let mut s = start_document(w, h, &self.title);
         for (j, &y) in self.ys.iter().enumerate() {
             for (i, &x) in self.xs.iter().enumerate() {
                 let v = self.values.get(j * nx + i).copied().unwrap_or(f64::NAN);
@@ -178,15 +168,7 @@ impl Heatmap {
             );
         }
         for m in &self.markers {
-            let _ = write!(
-                s,
-                r##"<g class="marker"><circle cx="{0:.1}" cy="{1:.1}" r="5" fill="none" stroke="#D55E00" stroke-width="2"/><text x="{2:.1}" y="{3:.1}" fill="#D55E00" font-weight="bold">{4}</text></g>"##,
-                sx(m.x),
-                sy(m.y),
-                sx(m.x) + 7.0,
-                sy(m.y) - 6.0,
-                escape(&m.label)
-            );
+            write_marker(&mut s, m, sx(m.x), sy(m.y));
         }
         let _ = write!(
             s,
@@ -197,8 +179,23 @@ impl Heatmap {
             top + ph / 2.0,
             escape(&self.y_label)
         );
-        // Colour-scale legend: a vertical bar of 40 steps with ticks.
-        let (lx, lw) = (left + pw + 24.0, 16.0);
+        // Colour-scale legend right of the map.
+        self.write_colour_scale(&mut s, range, left + pw + 24.0, (top, ph), w);
+        s.push_str("</svg>\n");
+        s
+    }
+
+    /// The colour scale at `lx`: a vertical bar of 40 steps over the plot's height (`top`, `ph`)
+    /// with ticks, and the value's label at the right edge of a `w` px wide document.
+    fn write_colour_scale(
+        &self,
+        s: &mut String,
+        range: (f64, f64),
+        lx: f64,
+        (top, ph): (f64, f64),
+        w: f64,
+    ) {
+        let lw = 16.0;
         let steps = 40;
         for k in 0..steps {
             let t = 1.0 - (k as f64 + 0.5) / steps as f64;
@@ -237,9 +234,18 @@ impl Heatmap {
             top + ph / 2.0,
             escape(&self.value_label)
         );
-        s.push_str("</svg>\n");
-        s
     }
+}
+
+/// A marker (a ring and its label) at (`x`, `y`) px.
+fn write_marker(s: &mut String, m: &HeatmapMarker, x: f64, y: f64) {
+    let _ = write!(
+        s,
+        r##"<g class="marker"><circle cx="{x:.1}" cy="{y:.1}" r="5" fill="none" stroke="#D55E00" stroke-width="2"/><text x="{:.1}" y="{:.1}" fill="#D55E00" font-weight="bold">{}</text></g>"##,
+        x + 7.0,
+        y - 6.0,
+        escape(&m.label)
+    );
 }
 
 /// The given labels inside [lo, hi], or numeric ticks when there are none.

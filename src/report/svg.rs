@@ -1,5 +1,14 @@
 //! Shared SVG pieces: escaping, axis ticks, number formatting, the series palette.
 
+/// The opening of a standalone SVG document `w` x `h` px on white, with `title` centred on top.
+pub fn start_document(w: f64, h: f64, title: &str) -> String {
+    format!(
+        r#"<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {w} {h}" width="{w}" height="{h}" font-family="sans-serif" font-size="12"><rect x="0" y="0" width="{w}" height="{h}" fill="white"/><text x="{}" y="22" text-anchor="middle" font-size="15" font-weight="bold">{}</text>"#,
+        w / 2.0,
+        escape(title)
+    )
+}
+
 /// Escapes text for SVG content and attributes.
 pub fn escape(s: &str) -> String {
     s.replace('&', "&amp;")

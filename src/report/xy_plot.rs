@@ -2,7 +2,7 @@
 //! fraction, power spectra, noise against mean, the history of a discrepancy. Linear or
 //! logarithmic axes, a legend, axis labels with units.
 
-use super::svg::{escape, format_tick, nice_ticks, PALETTE};
+use super::svg::{escape, format_tick, nice_ticks, start_document, PALETTE};
 use std::fmt::Write;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -58,16 +58,24 @@ impl XyPlot {
     pub fn to_svg(&self, width_px: u32, height_px: u32) -> String {
         let (w, h) = (width_px as f64, height_px as f64);
         let legend_h = 16.0 * self.series.len() as f64 + 6.0;
+        let axes = self.axes(w, h, legend_h);
+        let mut s = start_document(w, h, &self.title);
+        self.write_grid(&mut s, &axes);
+        self.write_series(&mut s, &axes, h - legend_h);
+        s.push_str("</svg>\n");
+        s
+    }
+
+    /// The data range (on the axes' scales, log10 where logarithmic) widened to whole ticks.
+    fn axes(&self, w: f64, h: f64, legend_h: f64) -> Axes {
         let (left, right, top, bottom) = (78.0, 20.0, 40.0, 48.0 + legend_h);
-        let (pw, ph) = (w - left - right, h - top - bottom);
-        let tx = |v: f64| if self.log_x { v.log10() } else { v };
-        let ty = |v: f64| if self.log_y { v.log10() } else { v };
+        let (log_x, log_y) = (self.log_x, self.log_y);
         let pts: Vec<(f64, f64)> = self
             .series
             .iter()
             .flat_map(|s| s.points.iter().copied())
             .filter(|p| self.usable(*p))
-            .map(|(x, y)| (tx(x), ty(y)))
+            .map(|(x, y)| (scale(x, log_x), scale(y, log_y)))
             .collect();
         let bounds = |it: &mut dyn Iterator<Item = f64>| {
             it.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
@@ -75,79 +83,61 @@ impl XyPlot {
             })
         };
         let (mut x0, mut x1) = bounds(&mut pts.iter().map(|p| p.0));
-        let (mut y0, mut y1) = bounds(&mut pts.iter().map(|p| p.1).chain(
-            if self.zero_line && !self.log_y {
-                Some(0.0)
-            } else {
-                None
-            },
-        ));
+        let zero = (self.zero_line && !log_y).then_some(0.0);
+        let (mut y0, mut y1) = bounds(&mut pts.iter().map(|p| p.1).chain(zero));
         if !x0.is_finite() {
             (x0, x1) = (0.0, 1.0);
         }
         if !y0.is_finite() {
             (y0, y1) = (0.0, 1.0);
         }
-        let xt = if self.log_x {
-            (x0.floor() as i64..=x1.ceil() as i64)
-                .map(|k| k as f64)
-                .collect()
-        } else {
-            nice_ticks(x0, x1, 6)
-        };
-        let yt = if self.log_y {
-            (y0.floor() as i64..=y1.ceil() as i64)
-                .map(|k| k as f64)
-                .collect()
-        } else {
-            nice_ticks(y0, y1, 5)
-        };
-        let (x0, x1) = (xt[0].min(x0), xt[xt.len() - 1].max(x1));
-        let (y0, y1) = (yt[0].min(y0), yt[yt.len() - 1].max(y1));
-        let (x1, y1) = (
-            if x1 > x0 { x1 } else { x0 + 1.0 },
-            if y1 > y0 { y1 } else { y0 + 1.0 },
-        );
-        let sx = |x: f64| left + pw * (x - x0) / (x1 - x0);
-        let sy = |y: f64| top + ph * (1.0 - (y - y0) / (y1 - y0));
-        let label = |v: f64, log: bool| {
+        let ticks = |lo: f64, hi: f64, log: bool, n: usize| -> Vec<f64> {
             if log {
-                format_tick(10f64.powf(v))
+                (lo.floor() as i64..=hi.ceil() as i64)
+                    .map(|k| k as f64)
+                    .collect()
             } else {
-                format_tick(v)
+                nice_ticks(lo, hi, n)
             }
         };
-        let mut s = String::new();
-        let _ = write!(
-            s,
-            r#"<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {w} {h}" width="{w}" height="{h}" font-family="sans-serif" font-size="12"><rect x="0" y="0" width="{w}" height="{h}" fill="white"/>"#
-        );
-        let _ = write!(
-            s,
-            r#"<text x="{}" y="22" text-anchor="middle" font-size="15" font-weight="bold">{}</text>"#,
-            w / 2.0,
-            escape(&self.title)
-        );
-        for &t in &yt {
-            let y = sy(t);
+        let (xt, yt) = (ticks(x0, x1, log_x, 6), ticks(y0, y1, log_y, 5));
+        let (x0, x1) = (xt[0].min(x0), xt[xt.len() - 1].max(x1));
+        let (y0, y1) = (yt[0].min(y0), yt[yt.len() - 1].max(y1));
+        Axes {
+            left,
+            top,
+            pw: w - left - right,
+            ph: h - top - bottom,
+            x: (x0, if x1 > x0 { x1 } else { x0 + 1.0 }),
+            y: (y0, if y1 > y0 { y1 } else { y0 + 1.0 }),
+            xt,
+            yt,
+        }
+    }
+
+    /// Grid lines with their tick labels, the zero line, the frame and the axis labels.
+    fn write_grid(&self, s: &mut String, a: &Axes) {
+        let (left, top, pw, ph) = (a.left, a.top, a.pw, a.ph);
+        for &t in &a.yt {
+            let y = a.sy(t);
             let _ = write!(
                 s,
                 r##"<line x1="{left}" x2="{:.1}" y1="{y:.1}" y2="{y:.1}" stroke="#e4e4e4"/><text x="{:.1}" y="{:.1}" text-anchor="end">{}</text>"##,
                 left + pw,
                 left - 6.0,
                 y + 4.0,
-                label(t, self.log_y)
+                tick_label(t, self.log_y)
             );
         }
         if self.x_tick_labels.is_empty() {
-            for &t in &xt {
-                let x = sx(t);
+            for &t in &a.xt {
+                let x = a.sx(t);
                 let _ = write!(
                     s,
                     r##"<line x1="{x:.1}" x2="{x:.1}" y1="{top}" y2="{:.1}" stroke="#e4e4e4"/><text x="{x:.1}" y="{:.1}" text-anchor="middle">{}</text>"##,
                     top + ph,
                     top + ph + 16.0,
-                    label(t, self.log_x)
+                    tick_label(t, self.log_x)
                 );
             }
         } else {
@@ -155,18 +145,18 @@ impl XyPlot {
                 let _ = write!(
                     s,
                     r#"<text x="{:.1}" y="{:.1}" text-anchor="middle" font-size="10">{}</text>"#,
-                    sx(tx(*t)),
+                    a.sx(scale(*t, self.log_x)),
                     top + ph + 16.0,
                     escape(text)
                 );
             }
         }
-        if self.zero_line && !self.log_y && y0 < 0.0 && y1 > 0.0 {
+        if self.zero_line && !self.log_y && a.y.0 < 0.0 && a.y.1 > 0.0 {
             let _ = write!(
                 s,
                 r##"<line x1="{left}" x2="{:.1}" y1="{1:.1}" y2="{1:.1}" stroke="#888" stroke-dasharray="4 3"/>"##,
                 left + pw,
-                sy(0.0)
+                a.sy(0.0)
             );
         }
         let _ = write!(
@@ -182,6 +172,11 @@ impl XyPlot {
             top + ph / 2.0,
             escape(&self.y_label)
         );
+    }
+
+    /// Each series' line and points, and its legend entry from `legend_top` down.
+    fn write_series(&self, s: &mut String, a: &Axes, legend_top: f64) {
+        let left = a.left;
         for (k, series) in self.series.iter().enumerate() {
             let colour = PALETTE[k % PALETTE.len()];
             let p: Vec<(f64, f64)> = series
@@ -189,7 +184,7 @@ impl XyPlot {
                 .iter()
                 .copied()
                 .filter(|p| self.usable(*p))
-                .map(|(x, y)| (sx(tx(x)), sy(ty(y))))
+                .map(|(x, y)| (a.sx(scale(x, self.log_x)), a.sy(scale(y, self.log_y))))
                 .collect();
             if matches!(series.mark, Mark::Line | Mark::LinePoints) && p.len() > 1 {
                 let path: Vec<String> = p.iter().map(|(x, y)| format!("{x:.1},{y:.1}")).collect();
@@ -207,7 +202,7 @@ impl XyPlot {
                     );
                 }
             }
-            let ly = h - legend_h + 2.0 + 16.0 * k as f64;
+            let ly = legend_top + 2.0 + 16.0 * k as f64;
             let _ = write!(
                 s,
                 r#"<rect x="{left}" y="{ly:.1}" width="12" height="10" fill="{colour}"/><text x="{:.1}" y="{:.1}">{}</text>"#,
@@ -216,8 +211,47 @@ impl XyPlot {
                 escape(&series.name)
             );
         }
-        s.push_str("</svg>\n");
-        s
+    }
+}
+
+/// A value on its axis' scale: log10 on a logarithmic axis.
+fn scale(v: f64, log: bool) -> f64 {
+    if log {
+        v.log10()
+    } else {
+        v
+    }
+}
+
+/// A tick's text: the value itself, not its logarithm, on a logarithmic axis.
+fn tick_label(v: f64, log: bool) -> String {
+    if log {
+        format_tick(10f64.powf(v))
+    } else {
+        format_tick(v)
+    }
+}
+
+/// The plot area (from `left`, `top`, `pw` x `ph` px) and the ranges and ticks it spans, on the
+/// axes' scales.
+struct Axes {
+    left: f64,
+    top: f64,
+    pw: f64,
+    ph: f64,
+    x: (f64, f64),
+    y: (f64, f64),
+    xt: Vec<f64>,
+    yt: Vec<f64>,
+}
+
+impl Axes {
+    fn sx(&self, x: f64) -> f64 {
+        self.left + self.pw * (x - self.x.0) / (self.x.1 - self.x.0)
+    }
+
+    fn sy(&self, y: f64) -> f64 {
+        self.top + self.ph * (1.0 - (y - self.y.0) / (self.y.1 - self.y.0))
     }
 }
 

@@ -2,6 +2,7 @@
 //! stage, where the data lives, where to listen, and the safety settings. Unknown keys are
 //! refused with the key named, so a typo never silently falls back to a default.
 
+use crate::experiment::BenchTimeouts;
 use crate::model::{Camera as ModelCamera, ModelConfig};
 use serde::{Deserialize, Serialize};
 use std::net::SocketAddr;
@@ -124,14 +125,18 @@ pub struct BenchConfig {
     pub home_timeout_ms: u64,
 }
 
+// The runner's defaults (`BenchTimeouts::default`) are the config's.
 fn default_frame_timeout_ms() -> u64 {
-    20_000
+    millis(BenchTimeouts::default().frame)
 }
 fn default_settle_timeout_ms() -> u64 {
-    60_000
+    millis(BenchTimeouts::default().settle)
 }
 fn default_home_timeout_ms() -> u64 {
-    120_000
+    millis(BenchTimeouts::default().home)
+}
+fn millis(d: std::time::Duration) -> u64 {
+    u64::try_from(d.as_millis()).unwrap_or(u64::MAX)
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -4,6 +4,7 @@
 //! live subscribers (SSE). Cancellation is cooperative: the work checks its token between steps.
 
 use crate::experiment::RunSink;
+use crate::run_event::EventKind;
 use crate::store::{DatasetId, Event, RunId, RunKind, RunRecord, RunStatus, RunStore, StoreError};
 use serde_json::Value;
 use std::collections::HashMap;
@@ -34,6 +35,13 @@ pub enum JobError {
     Cancelled,
     #[error("{0}")]
     Failed(String),
+}
+
+impl JobError {
+    /// A failure carrying the error's message (the run's `error` field): for `map_err`.
+    pub fn failed(e: impl std::fmt::Display) -> JobError {
+        JobError::Failed(e.to_string())
+    }
 }
 
 pub type Work = Box<dyn FnOnce(&JobContext) -> Result<JobOutput, JobError> + Send>;
@@ -70,7 +78,7 @@ impl JobContext {
 }
 
 impl RunSink for JobContext {
-    fn event(&self, kind: &str, progress: f64, message: &str, data: Value) {
+    fn event(&self, kind: EventKind, progress: f64, message: &str, data: Value) {
         let _ = self.store.set_progress(&self.run_id, progress, message);
         match self
             .store

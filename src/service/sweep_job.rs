@@ -8,6 +8,7 @@ use super::jobs::{JobContext, JobError, JobOutput, Work};
 use super::{Service, SweepLimits};
 use crate::experiment::{FieldError, RunSink};
 use crate::model::ModelConfig;
+use crate::run_event::EventKind;
 use crate::sweep::{
     map_files, merge, plan, read_results, run_shards, write_plan, Plan, SweepError, SweepSpec,
 };
@@ -54,17 +55,13 @@ pub fn plan_sweep(
     })
 }
 
-fn fail(e: impl std::fmt::Display) -> JobError {
-    JobError::Failed(e.to_string())
-}
-
 pub fn sweep(plan: Plan) -> Work {
     Box::new(move |ctx: &JobContext| {
         let dir = ctx.store().run_dir(&ctx.run_id).join("sweep");
-        write_plan(&dir, &plan).map_err(fail)?;
+        write_plan(&dir, &plan).map_err(JobError::failed)?;
         let (tasks, shards) = (plan.task_count(), plan.shards.len());
         ctx.event(
-            "planned",
+            EventKind::Planned,
             0.0,
             &format!("{tasks} tasks in {shards} shards"),
             json!({ "tasks": tasks, "shards": shards }),
@@ -73,7 +70,7 @@ pub fn sweep(plan: Plan) -> Work {
         let counts = run_shards(&dir, &plan, &|_| true, &|done, total| {
             if done > 0 && (done % every == 0 || done == total) {
                 ctx.event(
-                    "shards_run",
+                    EventKind::ShardsRun,
                     0.95 * done as f64 / total.max(1) as f64,
                     &format!("{done} of {total} shards run"),
                     json!({ "done": done, "total": total }),
@@ -83,7 +80,7 @@ pub fn sweep(plan: Plan) -> Work {
         })
         .map_err(|e| match e {
             SweepError::Cancelled => JobError::Cancelled,
-            other => fail(other),
+            other => JobError::failed(other),
         })?;
         let merged = merge(&plan, &read_results(&dir, &plan));
         for file in map_files(&plan, &merged) {
@@ -92,7 +89,7 @@ pub fn sweep(plan: Plan) -> Work {
                 .map_err(JobError::Failed)?;
         }
         ctx.event(
-            "merged",
+            EventKind::Merged,
             1.0,
             &format!("{} cells merged", merged.cells.len()),
             json!({ "cells": merged.cells.len(), "missing_tasks": merged.missing.len() }),

@@ -14,7 +14,8 @@ use crate::experiment::{
 };
 use crate::model::ModelConfig;
 use crate::reduce::Scheme;
-use crate::store::DatasetId;
+use crate::run_event::EventKind;
+use crate::store::{DatasetId, DatasetSource};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
@@ -53,13 +54,12 @@ impl AnalysisRequest {
     }
 }
 
-fn fail(e: impl std::fmt::Display) -> JobError {
-    JobError::Failed(e.to_string())
-}
-
 pub fn experiment(service: Service, plan: ExperimentPlan) -> Work {
     Box::new(move |ctx: &JobContext| {
-        let lease = service.bench.hold(ctx.run_id.as_str()).map_err(fail)?;
+        let lease = service
+            .bench
+            .hold(ctx.run_id.as_str())
+            .map_err(JobError::failed)?;
         let outcome = run_experiment(
             &plan,
             &service.bench,
@@ -70,7 +70,7 @@ pub fn experiment(service: Service, plan: ExperimentPlan) -> Work {
         )
         .map_err(|e| match e {
             RunnerError::Cancelled => JobError::Cancelled,
-            other => fail(other),
+            other => JobError::failed(other),
         })?;
         drop(lease);
         // The frames are also a dataset of their own, so compare and diagnose read captured and
@@ -80,14 +80,14 @@ pub fn experiment(service: Service, plan: ExperimentPlan) -> Work {
             .import_dataset_dir(
                 &outcome.frames_dir,
                 &plan.name,
-                &format!("experiment:{}", ctx.run_id),
+                DatasetSource::Experiment(ctx.run_id.clone()),
             )
-            .map_err(fail)?;
+            .map_err(JobError::failed)?;
         ctx.store()
             .set_dataset(&ctx.run_id, &dataset.id)
-            .map_err(fail)?;
+            .map_err(JobError::failed)?;
         ctx.event(
-            "dataset_registered",
+            EventKind::DatasetRegistered,
             1.0,
             &format!("frames registered as dataset {}", dataset.id),
             json!({ "dataset_id": dataset.id }),
@@ -106,10 +106,10 @@ pub fn experiment(service: Service, plan: ExperimentPlan) -> Work {
 pub fn analysis(service: Service, dataset: DatasetId, plan: AnalysisPlan) -> Work {
     Box::new(move |ctx: &JobContext| {
         let dir = service.store.dataset_dir(&dataset);
-        let manifest = Manifest::read(&dir).map_err(fail)?;
+        let manifest = Manifest::read(&dir).map_err(JobError::failed)?;
         let rows = analyze_dataset(&dir, &manifest, &plan.schemes, &plan.dic, &|done, total| {
             ctx.event(
-                "pair_analyzed",
+                EventKind::PairAnalyzed,
                 done as f64 / total.max(1) as f64,
                 &format!("{done} of {total} reduced pairs correlated"),
                 json!({ "done": done, "total": total }),
@@ -118,11 +118,11 @@ pub fn analysis(service: Service, dataset: DatasetId, plan: AnalysisPlan) -> Wor
         })
         .map_err(|e| match e {
             StudyError::Cancelled => JobError::Cancelled,
-            other => fail(other),
+            other => JobError::failed(other),
         })?;
         let (rows, files) = study_files(&manifest, &rows);
         for (rel, bytes) in files {
-            ctx.write(&rel, &bytes).map_err(fail)?;
+            ctx.write(&rel, &bytes).map_err(JobError::failed)?;
         }
         Ok(JobOutput {
             message: format!("{} rows from dataset {dataset}", rows.len()),
@@ -190,7 +190,7 @@ fn progress_reporter<'a>(
         if p - *last >= 0.01 || done == total {
             *last = p;
             ctx.event(
-                "progress",
+                EventKind::Progress,
                 p.min(1.0),
                 &format!("{what}: {done} of {total}"),
                 json!({ "done": done, "total": total }),
@@ -203,7 +203,7 @@ fn progress_reporter<'a>(
 fn diagnose_failure(e: DiagnoseError) -> JobError {
     match e {
         DiagnoseError::Cancelled => JobError::Cancelled,
-        other => fail(other),
+        other => JobError::failed(other),
     }
 }
 
@@ -214,13 +214,14 @@ fn keep_comparison(
     dataset_dir: &std::path::Path,
     cmp: &Comparison,
 ) -> Result<(), JobError> {
-    let text = serde_json::to_vec_pretty(cmp).map_err(fail)?;
-    ctx.write("results/comparison.json", &text).map_err(fail)?;
+    let text = serde_json::to_vec_pretty(cmp).map_err(JobError::failed)?;
+    ctx.write("results/comparison.json", &text)
+        .map_err(JobError::failed)?;
     for (name, svg) in comparison_svgs(cmp) {
         ctx.write(&format!("plots/{name}"), svg.as_bytes())
-            .map_err(fail)?;
+            .map_err(JobError::failed)?;
     }
-    append_history(dataset_dir, &HistoryEntry::of(cmp)).map_err(fail)
+    append_history(dataset_dir, &HistoryEntry::of(cmp)).map_err(JobError::failed)
 }
 
 pub fn comparison(
@@ -255,20 +256,24 @@ pub fn diagnosis(
         let report = progress_reporter(ctx, "candidate fits");
         let r =
             diagnose_rounds(&dir, &model, &options, rounds, &report).map_err(diagnose_failure)?;
-        let text = serde_json::to_vec_pretty(&r.to_json()).map_err(fail)?;
-        ctx.write("results/diagnosis.json", &text).map_err(fail)?;
+        let text = serde_json::to_vec_pretty(&r.to_json()).map_err(JobError::failed)?;
+        ctx.write("results/diagnosis.json", &text)
+            .map_err(JobError::failed)?;
         if !r.verdicts.is_empty() {
             ctx.write(
                 "results/winner-model.toml",
                 r.final_model.to_toml().as_bytes(),
             )
-            .map_err(fail)?;
+            .map_err(JobError::failed)?;
         }
-        let first = r.diagnoses.first().ok_or_else(|| fail("no round ran"))?;
+        let first = r
+            .diagnoses
+            .first()
+            .ok_or_else(|| JobError::failed("no round ran"))?;
         if let Some(before) = &first.before {
             for (name, svg) in comparison_svgs(before) {
                 ctx.write(&format!("plots/{name}"), svg.as_bytes())
-                    .map_err(fail)?;
+                    .map_err(JobError::failed)?;
             }
         }
         // Several rounds: every step of the fall joins the history.
@@ -279,7 +284,7 @@ pub fn diagnosis(
                 .filter_map(|d| d.before.as_ref())
                 .chain(r.diagnoses.last().and_then(|d| d.after.as_ref()));
             for cmp in steps {
-                append_history(&dir, &HistoryEntry::of(cmp)).map_err(fail)?;
+                append_history(&dir, &HistoryEntry::of(cmp)).map_err(JobError::failed)?;
             }
         }
         let fall: Vec<String> = r

@@ -8,7 +8,7 @@ use super::files::{list_files, read_json, remove_dir, sync_dir, write_json};
 use super::ids::{random_suffix, DatasetId};
 use super::index;
 use super::paths::safe_relative_path;
-use super::record::{now_rfc3339, DatasetRecord};
+use super::record::{now_rfc3339, DatasetRecord, DatasetSource};
 use super::run_store::{RunStore, DATASETS, DATASET_RECORD, STAGING_PREFIX};
 use crate::dataset::{DatasetError, Manifest};
 use std::path::{Path, PathBuf};
@@ -107,13 +107,13 @@ impl RunStore {
 
     /// Checks the staged dataset — `dataset.json` reads and validates, every file it names is a
     /// regular file, every name is safe, `record.json` is not taken — then writes its record and
-    /// renames the folder into `datasets/{id}`. `name` empty means the manifest's name; `source`
-    /// is `upload` or `experiment:{run id}`. On any error the staging folder is removed.
+    /// renames the folder into `datasets/{id}`. `name` empty means the manifest's name. On any
+    /// error the staging folder is removed.
     pub fn commit_dataset(
         &self,
         mut staging: StagingDir,
         name: &str,
-        source: &str,
+        source: DatasetSource,
     ) -> Result<DatasetRecord> {
         let dir = staging.path.clone();
         let manifest = Manifest::read(&dir)?;
@@ -164,7 +164,7 @@ impl RunStore {
             id: id.clone(),
             name,
             created_at: now_rfc3339(),
-            source: source.to_string(),
+            source,
             runs: manifest.runs.len(),
             width,
             height,
@@ -192,7 +192,7 @@ impl RunStore {
         &self,
         src: &Path,
         name: &str,
-        source: &str,
+        source: DatasetSource,
     ) -> Result<DatasetRecord> {
         if !src.is_dir() {
             return Err(StoreError::NotFound(format!("folder {}", src.display())));

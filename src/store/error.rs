@@ -32,8 +32,8 @@ pub enum StoreError {
     Dataset(#[from] DatasetError),
     #[error("conflict: {0}")]
     Conflict(String),
-    /// An event a caller may not write: a malformed kind, or a terminal kind, which only
-    /// `set_status` writes (it seals the run).
+    /// An event a caller may not write: a status change (`queued`, `started`, a terminal kind),
+    /// which only `set_status` writes (the terminal one seals the run).
     #[error("bad event: {0}")]
     BadEvent(String),
     /// Another process holds the data folder (a second daemon on the same data would mark the

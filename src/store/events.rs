@@ -75,7 +75,7 @@ mod tests {
         Event {
             id,
             run_id: "exp-1".parse().unwrap(),
-            kind: "progress".into(),
+            kind: crate::run_event::EventKind::Progress,
             progress: 0.5,
             message: format!("step {id}"),
             at: crate::store::record::now_rfc3339(),

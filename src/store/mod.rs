@@ -31,7 +31,7 @@ pub use error::{Result, StoreError};
 pub use ids::{DatasetId, RunId, MAX_ID_LEN};
 pub use models::{is_model_name, ModelFolder, ModelSaved, MAX_MODEL_NAME_LEN};
 pub use paths::{safe_relative_path, MAX_COMPONENT_LEN, MAX_DEPTH};
-pub use record::{now_rfc3339, DatasetRecord, Event, RunKind, RunRecord, RunStatus};
+pub use record::{now_rfc3339, DatasetRecord, DatasetSource, Event, RunKind, RunRecord, RunStatus};
 pub use run_store::{
     rebuild_index, RebuildReport, RecoveryReport, RunStore, MAX_IDEMPOTENCY_KEY_LEN,
 };

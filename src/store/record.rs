@@ -2,6 +2,7 @@
 //! records (`record.json`). Times are RFC 3339 UTC strings with milliseconds, so they sort as text.
 
 use super::ids::{DatasetId, RunId};
+use crate::run_event::EventKind;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use std::fmt;
@@ -90,6 +91,31 @@ impl RunStatus {
         )
     }
 
+    /// The event a move to this status writes (a run's first, `queued`, is written on creation;
+    /// `Running` is announced as `started`).
+    pub fn event_kind(self) -> EventKind {
+        match self {
+            RunStatus::Queued => EventKind::Queued,
+            RunStatus::Running => EventKind::Started,
+            RunStatus::Succeeded => EventKind::Succeeded,
+            RunStatus::Failed => EventKind::Failed,
+            RunStatus::Cancelled => EventKind::Cancelled,
+        }
+    }
+
+    /// The status a terminal event seals its run with (the recovery of a run whose process died
+    /// between the event and `run.json`).
+    pub fn sealed_by(kind: EventKind) -> Option<RunStatus> {
+        RunStatus::ALL
+            .into_iter()
+            .find(|s| s.is_terminal() && s.event_kind() == kind)
+    }
+
+    /// Whether events of `kind` are written only by status changes (never appended).
+    pub fn writes(kind: EventKind) -> bool {
+        RunStatus::ALL.into_iter().any(|s| s.event_kind() == kind)
+    }
+
     /// The only moves: queued → running | cancelled | failed, running → succeeded | failed |
     /// cancelled. Never backwards, never to itself, and a terminal status is final.
     pub fn can_become(self, next: RunStatus) -> bool {
@@ -156,9 +182,7 @@ pub struct RunRecord {
 pub struct Event {
     pub id: u64,
     pub run_id: RunId,
-    /// `queued`, `started`, `progress`, `stage_moved`, `frame_captured`, `pair_analyzed`,
-    /// `succeeded`, `failed`, `cancelled`, or any other `[a-z0-9_.-]` word.
-    pub kind: String,
+    pub kind: EventKind,
     pub progress: f64,
     #[serde(default)]
     pub message: String,
@@ -167,14 +191,62 @@ pub struct Event {
     pub data: Value,
 }
 
+/// Where a stored dataset came from. Written as `upload` or `experiment:{run id}` (the wire
+/// form of `record.json` and the API); a word this version does not know reads as `Other`, kept
+/// as it was.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum DatasetSource {
+    /// `POST /datasets` (or `ffdic store import`).
+    Upload,
+    /// The frames of an experiment run.
+    Experiment(RunId),
+    Other(String),
+}
+
+impl fmt::Display for DatasetSource {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            DatasetSource::Upload => f.write_str("upload"),
+            DatasetSource::Experiment(id) => write!(f, "experiment:{id}"),
+            DatasetSource::Other(text) => f.write_str(text),
+        }
+    }
+}
+
+impl From<&str> for DatasetSource {
+    fn from(text: &str) -> Self {
+        if text == "upload" {
+            return DatasetSource::Upload;
+        }
+        text.strip_prefix("experiment:")
+            .and_then(|id| id.parse().ok())
+            .map_or_else(
+                || DatasetSource::Other(text.to_string()),
+                DatasetSource::Experiment,
+            )
+    }
+}
+
+impl Serialize for DatasetSource {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
+impl<'de> Deserialize<'de> for DatasetSource {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        Ok(DatasetSource::from(String::deserialize(d)?.as_str()))
+    }
+}
+
 /// A stored dataset: `datasets/{id}/record.json` beside its `dataset.json` and frames.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DatasetRecord {
     pub id: DatasetId,
     pub name: String,
     pub created_at: String,
-    /// `upload` or `experiment:{run id}`.
-    pub source: String,
+    /// Where the frames came from; `upload` or `experiment:{run id}` on the wire.
+    pub source: DatasetSource,
     /// Runs in the manifest.
     pub runs: usize,
     /// Frame size in pixels.
@@ -225,6 +297,44 @@ mod tests {
             assert_eq!(k.as_str().parse::<RunKind>().unwrap(), k);
         }
         assert!("done".parse::<RunStatus>().is_err());
+    }
+
+    #[test]
+    fn status_changes_and_their_events_agree() {
+        use crate::run_event::EventKind;
+        for k in EventKind::ALL {
+            // A terminal event seals a run with the status of the same word, and only those do.
+            let sealed = RunStatus::sealed_by(k);
+            assert_eq!(sealed.is_some(), k.is_terminal(), "{k}");
+            if let Some(s) = sealed {
+                assert_eq!((s.as_str(), s.event_kind()), (k.as_str(), k));
+            }
+        }
+        let by_status: Vec<EventKind> = RunStatus::ALL.map(RunStatus::event_kind).to_vec();
+        assert_eq!(by_status.len(), 5);
+        assert!(RunStatus::writes(EventKind::Started) && !RunStatus::writes(EventKind::Progress));
+    }
+
+    #[test]
+    fn dataset_sources_keep_their_wire_form() {
+        let id: RunId = "exp-20260101t000000-aaaaaa".parse().unwrap();
+        for (text, source) in [
+            ("upload", DatasetSource::Upload),
+            (
+                "experiment:exp-20260101t000000-aaaaaa",
+                DatasetSource::Experiment(id),
+            ),
+            (
+                "import:elsewhere",
+                DatasetSource::Other("import:elsewhere".into()),
+            ),
+        ] {
+            assert_eq!(serde_json::to_value(&source).unwrap(), text);
+            assert_eq!(
+                serde_json::from_value::<DatasetSource>(text.into()).unwrap(),
+                source
+            );
+        }
     }
 
     #[test]

@@ -12,6 +12,7 @@ use super::ids::{DatasetId, RunId};
 use super::index;
 use super::paths::safe_relative_path;
 use super::record::{now_rfc3339, DatasetRecord, Event, RunKind, RunRecord, RunStatus};
+use crate::run_event::EventKind;
 use rusqlite::Connection;
 use serde_json::{json, Value};
 use std::collections::HashMap;
@@ -27,8 +28,9 @@ const NEW_RUN_PREFIX: &str = ".new-";
 /// The data folder's lock file (see `lock_data_dir`).
 const LOCK_FILE: &str = ".lock";
 pub(crate) const STAGING_PREFIX: &str = ".staging-";
-/// Longest idempotency key kept, in bytes.
-pub const MAX_IDEMPOTENCY_KEY_LEN: usize = 256;
+/// Longest idempotency key kept, in bytes (the API takes the same: 1 to this many visible ASCII
+/// characters in `Idempotency-Key`).
+pub const MAX_IDEMPOTENCY_KEY_LEN: usize = 200;
 
 /// What `open` found and repaired.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -73,19 +75,6 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     // Every change is a whole-file replacement or one appended line, so a panic elsewhere leaves
     // nothing half-done behind the lock.
     m.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
-}
-
-/// The kinds only [`RunStore::set_status`] writes: the terminal event seals the run.
-fn is_terminal_event(kind: &str) -> Option<RunStatus> {
-    kind.parse::<RunStatus>().ok().filter(|s| s.is_terminal())
-}
-
-fn event_kind_is_valid(kind: &str) -> bool {
-    !kind.is_empty()
-        && kind.len() <= 64
-        && kind.bytes().all(|b| {
-            b.is_ascii_lowercase() || b.is_ascii_digit() || matches!(b, b'_' | b'-' | b'.')
-        })
 }
 
 fn clamp_progress(p: f64) -> Option<f64> {
@@ -211,7 +200,7 @@ impl RunStore {
         let event = Event {
             id: 1,
             run_id: id.clone(),
-            kind: "queued".into(),
+            kind: EventKind::Queued,
             progress: 0.0,
             message: "queued".into(),
             at: now,
@@ -296,11 +285,7 @@ impl RunStore {
         if next.is_terminal() {
             rec.finished_at = Some(now.clone());
         }
-        let kind = if next == RunStatus::Running {
-            "started"
-        } else {
-            next.as_str()
-        };
+        let kind = next.event_kind();
         // The event first: should the process die before run.json is rewritten, the next open
         // finds the terminal event and completes the transition it records.
         self.push_event(
@@ -351,23 +336,18 @@ impl RunStore {
         Ok(rec)
     }
 
-    /// Appends an event of `kind` (a word of `a-z 0-9 _ - .`, not a terminal status: those are
-    /// `set_status`'s) with the next id. `Finished` once the run has ended.
+    /// Appends an event of `kind` with the next id; not a status change (`queued`, `started` and
+    /// the terminal kinds are `set_status`'s: the terminal event seals the run). `Finished` once
+    /// the run has ended.
     pub fn append_event(
         &self,
         id: &RunId,
-        kind: &str,
+        kind: EventKind,
         progress: f64,
         message: &str,
         data: Value,
     ) -> Result<Event> {
-        if !event_kind_is_valid(kind) {
-            return Err(StoreError::BadEvent(format!(
-                "'{}' is not an event kind (1 to 64 of a-z, 0-9, '_', '-', '.')",
-                kind.chars().take(64).collect::<String>()
-            )));
-        }
-        if is_terminal_event(kind).is_some() {
+        if RunStatus::writes(kind) {
             return Err(StoreError::BadEvent(format!(
                 "'{kind}' events are written by set_status only"
             )));
@@ -443,7 +423,7 @@ impl RunStore {
         &self,
         slot: &mut RunSlot,
         rec: &RunRecord,
-        kind: &str,
+        kind: EventKind,
         progress: f64,
         message: &str,
         data: Value,
@@ -457,7 +437,7 @@ impl RunStore {
         let event = Event {
             id: last + 1,
             run_id: rec.id.clone(),
-            kind: kind.to_string(),
+            kind,
             progress,
             message: message.to_string(),
             at: at.to_string(),
@@ -642,7 +622,7 @@ fn recover(root: &Path, rec: &mut RunRecord, report: &mut RecoveryReport) -> Res
     let last = events::last(&log)?;
     let sealed = last
         .as_ref()
-        .and_then(|e| is_terminal_event(&e.kind).map(|s| (s, e)))
+        .and_then(|e| RunStatus::sealed_by(e.kind).map(|s| (s, e)))
         .filter(|(s, _)| rec.status.can_become(*s));
     if let Some((status, event)) = sealed {
         rec.status = status;
@@ -660,7 +640,7 @@ fn recover(root: &Path, rec: &mut RunRecord, report: &mut RecoveryReport) -> Res
     let event = Event {
         id: last.map_or(0, |e| e.id) + 1,
         run_id: rec.id.clone(),
-        kind: RunStatus::Failed.as_str().into(),
+        kind: RunStatus::Failed.event_kind(),
         progress: rec.progress,
         message: message.clone(),
         at: now.clone(),
@@ -704,21 +684,6 @@ mod tests {
         assert!(store.list(None, None, 10).unwrap().is_empty());
         let id: RunId = "exp-2".parse().unwrap();
         assert!(matches!(store.get(&id), Err(StoreError::Corrupt { .. })));
-    }
-
-    #[test]
-    fn event_kinds() {
-        for ok in ["progress", "stage_moved", "frame.captured", "x-1"] {
-            assert!(
-                event_kind_is_valid(ok) && is_terminal_event(ok).is_none(),
-                "{ok}"
-            );
-        }
-        for bad in ["", "Progress", "a b", "a\nb", "data:", &"a".repeat(65)] {
-            assert!(!event_kind_is_valid(bad), "{bad:?}");
-        }
-        assert_eq!(is_terminal_event("cancelled"), Some(RunStatus::Cancelled));
-        assert_eq!(is_terminal_event("running"), None);
     }
 
     #[test]

@@ -151,16 +151,26 @@ pub fn recommendations(merged: &Merged, tolerance: f64) -> Vec<Recommendation> {
 
 /// A cell's axes other than the print and the scheme, for people.
 pub fn conditions(t: &TaskInput) -> String {
-    format!(
-        "noise {}, PSF σ {} px{}, sub-pixel ({}, {}) px",
-        t.noise.map_or("of the model".to_string(), |n| format!(
+    conditions_but(t, None)
+}
+
+/// The conditions of a task in words, leaving out the sub-pixel position along `free_axis`
+/// (0 = x, 1 = y) when a figure has it on its abscissa.
+pub fn conditions_but(t: &TaskInput, free_axis: Option<usize>) -> String {
+    let noise = t.noise.map_or("of the model".to_string(), |n| {
+        format!(
             "{} e⁻ full well / {} e⁻ read",
             n.full_well_e, n.read_noise_e
-        )),
+        )
+    });
+    let subpixel = match free_axis {
+        None => format!("({}, {})", t.subpixel_px[0], t.subpixel_px[1]),
+        Some(axis) => format!("{} {}", ["x", "y"][1 - axis], t.subpixel_px[1 - axis]),
+    };
+    format!(
+        "noise {noise}, PSF σ {} px{}, sub-pixel {subpixel} px",
         t.psf_sigma_px,
         aperture_text(t),
-        t.subpixel_px[0],
-        t.subpixel_px[1]
     )
 }
 

@@ -99,6 +99,7 @@ pub fn plan(spec: &SweepSpec, model: Option<&ModelConfig>) -> Result<Plan, Sweep
     let base_effects = model.map(|m| m.effects.clone()).unwrap_or_default();
     let schemes = crate::experiment::check_schemes(&spec.axes.schemes)
         .map_err(|e| SweepError::Task(e.to_string()))?;
+    let apertures = spec.apertures();
     let mut shards = Vec::new();
     for print in spec.prints() {
         let pattern = print.pattern(spec.camera.scale_px_per_mm, super::task::REFERENCE_BLOCK_PX);
@@ -107,7 +108,7 @@ pub fn plan(spec: &SweepSpec, model: Option<&ModelConfig>) -> Result<Plan, Sweep
                 .axes
                 .psf_sigma_px
                 .iter()
-                .flat_map(|p| spec.apertures().into_iter().map(move |a| (p, a)))
+                .flat_map(|p| apertures.iter().map(move |&a| (p, a)))
             {
                 let effects = task_effects(&base_effects, noise, psf, aperture);
                 for &sx in &spec.axes.subpixel_x {

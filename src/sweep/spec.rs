@@ -220,12 +220,7 @@ impl SweepSpec {
     /// Checks every field (also what the schema cannot say, e.g. the task count); the field to
     /// blame on failure.
     pub fn validate(&self) -> Result<(), FieldError> {
-        if self.name.is_empty()
-            || self.name.chars().count() > 128
-            || self.name.chars().any(char::is_control)
-        {
-            return bad("name", "1 to 128 printable characters".into());
-        }
+        crate::experiment::check_run_name(&self.name)?;
         if !(1..=MAX_SEEDS).contains(&self.seeds) {
             return bad("seeds", format!("1 to {MAX_SEEDS}"));
         }

@@ -2,8 +2,8 @@
 //! dashboard), the recommendations for people, heat maps of the error over print × scheme with
 //! the paper's patterns marked, and the bias against the sub-pixel part of the move.
 
-use super::merge::{conditions, recommendations, CellStats, Merged, STAT_NAMES};
-use super::plan::{Plan, TaskInput};
+use super::merge::{conditions, conditions_but, recommendations, CellStats, Merged, STAT_NAMES};
+use super::plan::Plan;
 use super::spec::{NoiseLevel, PrintAxis};
 use crate::model::SpecklePattern;
 use crate::reduce::Scheme;
@@ -365,20 +365,6 @@ pub fn map_svgs(merged: &Merged) -> Vec<(String, String)> {
     out
 }
 
-/// A cell's axes other than the print, the scheme and one sub-pixel axis, for people.
-fn bias_panel(t: &TaskInput, axis: usize) -> String {
-    let noise = t.noise.map_or("noise of the model".to_string(), |n| {
-        format!("{} e⁻ / {} e⁻", n.full_well_e, n.read_noise_e)
-    });
-    let other = if axis == 0 { "y" } else { "x" };
-    format!(
-        "{noise}, PSF σ {} px{}, sub-pixel {other} {} px",
-        t.psf_sigma_px,
-        super::merge::aperture_text(t),
-        t.subpixel_px[1 - axis]
-    )
-}
-
 /// The bias of u against the sub-pixel part of the move in x (and of v against y), one line per
 /// print, one figure per scheme and panel: the systematic error interpolation and the pixel
 /// aperture leave, which a sweep's mean over positions would hide.
@@ -389,7 +375,12 @@ pub fn bias_svgs(merged: &Merged) -> Vec<(String, String)> {
         if positions.len() < 2 {
             continue;
         }
-        let panels = distinct(merged.cells.iter().map(|c| bias_panel(&c.task, axis)));
+        let panels = distinct(
+            merged
+                .cells
+                .iter()
+                .map(|c| conditions_but(&c.task, Some(axis))),
+        );
         let schemes = distinct(merged.cells.iter().map(|c| c.task.scheme.name.clone()));
         for (k, panel) in panels.iter().enumerate() {
             for scheme in &schemes {
@@ -397,7 +388,8 @@ pub fn bias_svgs(merged: &Merged) -> Vec<(String, String)> {
                     .cells
                     .iter()
                     .filter(|c| {
-                        c.task.scheme.name == *scheme && bias_panel(&c.task, axis) == *panel
+                        c.task.scheme.name == *scheme
+                            && conditions_but(&c.task, Some(axis)) == *panel
                     })
                     .collect();
                 let prints = distinct(cells.iter().map(|c| c.task.print.label()));

@@ -109,6 +109,20 @@ pub fn client() -> reqwest::Client {
         .unwrap()
 }
 
+/// POSTs `body` as JSON to `url`.
+pub async fn post(url: &str, body: &Value) -> reqwest::Response {
+    client().post(url).json(body).send().await.unwrap()
+}
+
+pub async fn get(url: &str) -> reqwest::Response {
+    client().get(url).send().await.unwrap()
+}
+
+/// GETs `url` and reads its body as JSON into `T` (whatever the status).
+pub async fn get_json<T: serde::de::DeserializeOwned>(url: &str) -> T {
+    get(url).await.json().await.unwrap()
+}
+
 /// One server-sent event.
 #[derive(Debug, Clone)]
 pub struct Sse {

@@ -11,9 +11,10 @@ use crate::api::json::ApiJson;
 use crate::api::problem::{ApiError, ApiResult, Problem};
 use crate::dataset::{is_plain_file_name, Manifest};
 use crate::diagnose::{history_chart, read_history, HistoryEntry};
+use crate::dic::MIN_FRAME_SIDE_PX;
 use crate::image::read_tiff;
 use crate::service::{AnalysisRequest, CompareRequest, Service};
-use crate::store::{DatasetId, DatasetRecord, RunKind};
+use crate::store::{DatasetId, DatasetRecord, DatasetSource, RunKind};
 use axum::extract::{Multipart, Path, State};
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
@@ -127,7 +128,7 @@ pub async fn upload(State(svc): State<Service>, mut form: Multipart) -> ApiResul
         }
         check_frames(staging.path(), &manifest)?;
         let name = manifest.name.clone();
-        Ok(store.commit_dataset(staging, &name, "upload")?)
+        Ok(store.commit_dataset(staging, &name, DatasetSource::Upload)?)
     })
     .await??;
     let location = format!("/api/v1/datasets/{}", record.id);
@@ -150,7 +151,7 @@ fn over_quota(used_bytes: u64, received_bytes: u64, quota_bytes: u64) -> ApiErro
     )
 }
 
-/// Every frame the manifest names decodes and is at least 64x64 px, each run's frames have one
+/// Every frame the manifest names decodes and is at least `MIN_FRAME_SIDE_PX` square, each run's frames have one
 /// size, and no run's stated move contradicts its frames by an order of magnitude
 /// (`dataset::check_stated_move`, the measured figure in the refusal).
 fn check_frames(dir: &std::path::Path, m: &Manifest) -> ApiResult<()> {
@@ -168,11 +169,11 @@ fn check_frames(dir: &std::path::Path, m: &Manifest) -> ApiResult<()> {
                 format!("run {run}: '{name}': {e}").replace(&dir.display().to_string(), ""),
             )
         })?;
-        if img.width() < 64 || img.height() < 64 {
+        if img.width() < MIN_FRAME_SIDE_PX || img.height() < MIN_FRAME_SIDE_PX {
             return Err(ApiError::invalid(
                 "file",
                 format!(
-                    "'{name}' is {}x{} px; at least 64x64",
+                    "'{name}' is {}x{} px; at least {MIN_FRAME_SIDE_PX}x{MIN_FRAME_SIDE_PX}",
                     img.width(),
                     img.height()
                 ),

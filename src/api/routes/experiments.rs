@@ -6,7 +6,7 @@ use crate::api::problem::{ApiError, ApiResult, Problem};
 use crate::api::sse::{self, SseResponse};
 use crate::experiment::ExperimentRequest;
 use crate::service::{Service, SubmitError};
-use crate::store::{RunKind, RunRecord, RunStatus};
+use crate::store::{RunKind, RunRecord, RunStatus, MAX_IDEMPOTENCY_KEY_LEN};
 use axum::extract::{Path, Query, State};
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
@@ -20,9 +20,12 @@ pub fn idempotency_key(headers: &HeaderMap) -> ApiResult<Option<String>> {
             let key = v
                 .to_str()
                 .ok()
-                .filter(|k| !k.is_empty() && k.len() <= 200)
+                .filter(|k| !k.is_empty() && k.len() <= MAX_IDEMPOTENCY_KEY_LEN)
                 .ok_or_else(|| {
-                    ApiError::invalid("Idempotency-Key", "1 to 200 visible ASCII characters")
+                    ApiError::invalid(
+                        "Idempotency-Key",
+                        format!("1 to {MAX_IDEMPOTENCY_KEY_LEN} visible ASCII characters"),
+                    )
                 })?;
             Ok(Some(key.to_string()))
         }
@@ -135,7 +138,7 @@ pub async fn cancel_experiment(
 #[utoipa::path(get, path = "/experiments/{id}/events", tag = "experiments",
     params(("id" = String, Path, description = "Experiment id"),
            ("Last-Event-ID" = Option<u64>, Header, description = "Resume after this event")),
-    responses((status = 200, description = "Server-sent events: queued, started, stage_moved, frame_captured, pair_analyzed, succeeded | failed | cancelled",
+    responses((status = 200, description = "Server-sent events: each named by its kind (the `EventKind` schema), its data the stored event as JSON (id, run_id, kind, progress, message, at, data); the stream ends after succeeded, failed or cancelled",
                content_type = "text/event-stream"),
               (status = 404, body = Problem)))]
 pub async fn events(

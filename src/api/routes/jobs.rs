@@ -108,7 +108,7 @@ pub async fn cancel_job(
 #[utoipa::path(get, path = "/jobs/{id}/events", tag = "jobs",
     params(("id" = String, Path, description = "Run id"),
            ("Last-Event-ID" = Option<u64>, Header, description = "Resume after this event")),
-    responses((status = 200, description = "Server-sent events", content_type = "text/event-stream"),
+    responses((status = 200, description = "Server-sent events: each named by its kind (the `EventKind` schema), its data the stored event as JSON (id, run_id, kind, progress, message, at, data); the stream ends after succeeded, failed or cancelled", content_type = "text/event-stream"),
               (status = 404, body = Problem)))]
 pub async fn job_events(
     State(svc): State<Service>,

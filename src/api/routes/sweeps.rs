@@ -54,14 +54,7 @@ pub async fn get(State(svc): State<Service>, Path(id): Path<String>) -> ApiResul
     responses((status = 200, description = "The merged map: one cell per combination of the axes but the seed, each statistic's mean and 95 % interval, the recommendations and the figures' names", body = Object),
               (status = 404, description = "No such sweep, or not merged yet", body = Problem)))]
 pub async fn map(State(svc): State<Service>, Path(id): Path<String>) -> ApiResult<Response> {
-    file(
-        &svc,
-        &run_id(&id)?,
-        Some(RunKind::Sweep),
-        "results",
-        "map.json",
-    )
-    .await
+    result_file(&svc, &id, "map.json").await
 }
 
 #[utoipa::path(get, path = "/sweeps/{id}/map.csv", tag = "sweeps",
@@ -69,14 +62,7 @@ pub async fn map(State(svc): State<Service>, Path(id): Path<String>) -> ApiResul
     responses((status = 200, description = "The map as CSV, one row per cell", content_type = "text/csv"),
               (status = 404, body = Problem)))]
 pub async fn map_csv(State(svc): State<Service>, Path(id): Path<String>) -> ApiResult<Response> {
-    file(
-        &svc,
-        &run_id(&id)?,
-        Some(RunKind::Sweep),
-        "results",
-        "map.csv",
-    )
-    .await
+    result_file(&svc, &id, "map.csv").await
 }
 
 #[utoipa::path(get, path = "/sweeps/{id}/map.arrow", tag = "sweeps",
@@ -84,14 +70,12 @@ pub async fn map_csv(State(svc): State<Service>, Path(id): Path<String>) -> ApiR
     responses((status = 200, description = "The map as an Arrow IPC file: the CSV's columns, typed, nulls for NaN", content_type = "application/vnd.apache.arrow.file"),
               (status = 404, body = Problem)))]
 pub async fn map_arrow(State(svc): State<Service>, Path(id): Path<String>) -> ApiResult<Response> {
-    file(
-        &svc,
-        &run_id(&id)?,
-        Some(RunKind::Sweep),
-        "results",
-        "map.arrow",
-    )
-    .await
+    result_file(&svc, &id, "map.arrow").await
+}
+
+/// One of a sweep's merged files in `results/`.
+async fn result_file(svc: &Service, id: &str, name: &str) -> ApiResult<Response> {
+    file(svc, &run_id(id)?, Some(RunKind::Sweep), "results", name).await
 }
 
 #[utoipa::path(get, path = "/sweeps/{id}/plots/{name}", tag = "sweeps",

@@ -111,13 +111,15 @@ export function pxUm(px, scalePxPerMm, digits = 4) {
   return u === null ? `${num(px, digits)} px` : `${num(px, digits)} px (${num(u, 3)} µm)`;
 }
 
-/** Known event kinds of runs and jobs (EventSource only delivers named events one listens to). */
-const EVENT_KINDS = [
-  "message", "queued", "started", "progress", "homing", "camera_set", "target_mounted",
-  "stage_moved", "frame_captured", "dataset_written", "pair_analyzed", "dataset_registered",
-  "measurement_loaded", "compared", "fitted", "candidate_fitted", "diagnosed", "written",
-  "planned", "shards_run", "merged", "succeeded", "failed", "cancelled",
-];
+/**
+ * The event kinds runs and jobs emit, as the server states them (the `EventKind` schema of its
+ * OpenAPI document): EventSource only delivers named events one listens to. Fetched once.
+ */
+let eventKinds = null;
+function loadEventKinds() {
+  eventKinds ??= api("/openapi.json").then((doc) => doc.components.schemas.EventKind.enum);
+  return eventKinds;
+}
 
 /**
  * Follows a run or job: its events over SSE (`eventsUrl`), with a poll of `recordUrl` as a
@@ -154,21 +156,26 @@ export function follow(recordUrl, eventsUrl, onEvent, onRecord) {
         }
       } catch (_) { /* keep trying */ }
     };
-    try {
+    const listen = (kinds) => {
       source = new EventSource(API + eventsUrl);
-      streamOpen = true;
       const handler = (msg) => {
         let data = null;
         try { data = JSON.parse(msg.data); } catch (_) { return; }
         if (onEvent) onEvent(data);
         if (TERMINAL.includes(data.kind || msg.type)) finish();
       };
-      for (const kind of EVENT_KINDS) source.addEventListener(kind, handler);
+      for (const kind of kinds) source.addEventListener(kind, handler);
       source.onerror = () => {
         if (source.readyState === EventSource.CLOSED) streamOpen = false;
         if (!done) poll();
       };
-    } catch (_) { /* polling only */ }
+    };
+    // Counted as open from the start, so a first poll that finds the run ended waits for the
+    // replay; without the kinds (or without EventSource) the poll alone follows the run.
+    streamOpen = typeof EventSource !== "undefined";
+    loadEventKinds()
+      .then((kinds) => { if (!done) listen(kinds); })
+      .catch(() => { streamOpen = false; });
     timer = setInterval(poll, 2000);
     poll();
   });
@@ -180,7 +187,8 @@ export function follow(recordUrl, eventsUrl, onEvent, onRecord) {
  */
 export function eventLog(bar, messageNode, list) {
   return (e) => {
-    bar.set(e.progress, e.kind === "succeeded" ? "succeeded" : undefined);
+    // A status change says its status in `data` (the server's word, not a list kept here).
+    bar.set(e.progress, e.data ? e.data.status : undefined);
     if (e.message) messageNode.textContent = e.message;
     list.append(el("li", { "data-kind": e.kind }, el("span", { class: "mono" }, e.kind), " — ", e.message || ""));
     while (list.children.length > 200) list.firstElementChild.remove();
@@ -270,4 +278,29 @@ export function setupToken() {
 export function pageId() {
   const parts = location.pathname.split("/").filter(Boolean);
   return decodeURIComponent(parts[parts.length - 1] || "");
+}
+
+/**
+ * The life of one run's page: show its record, wire the cancel button (`#cancel-btn`), follow
+ * its events until it ends, then show its results, or why it did not succeed in `#run-error`.
+ * `what` names the run in that message ("the sweep cancelled: …").
+ */
+export async function runPage({ recordUrl, eventsUrl, cancelUrl, what, showRecord, onEvent, showResults }) {
+  $("#cancel-btn").addEventListener("click", async () => {
+    try {
+      showRecord(await api(cancelUrl, { method: "POST" }));
+    } catch (e) {
+      showError($("#run-error"), e);
+    }
+  });
+  try {
+    showRecord(await api(recordUrl));
+  } catch (e) {
+    showError($("#run-error"), e);
+    return;
+  }
+  const final = await follow(recordUrl, eventsUrl, onEvent, showRecord);
+  showRecord(final);
+  if (final.status === "succeeded") await showResults(final);
+  else showError($("#run-error"), `${what} ${final.status}: ${final.message || ""}`);
 }

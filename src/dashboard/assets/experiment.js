@@ -1,5 +1,5 @@
 // One experiment: live progress over SSE, then Figures 5 and 6, the study, maps and downloads.
-import { api, el, $, clear, num, when, badge, showError, setupToken, follow, progressBar, inlineSvg, pageId, um, TERMINAL, API, eventLog } from "./common.js";
+import { api, el, $, clear, num, when, badge, setupToken, runPage, progressBar, inlineSvg, pageId, um, TERMINAL, API, eventLog } from "./common.js";
 
 setupToken();
 const id = pageId();
@@ -148,26 +148,12 @@ async function showResults(r) {
   $("#results").dataset.loaded = "true";
 }
 
-$("#cancel-btn").addEventListener("click", async () => {
-  try {
-    showRecord(await api(`${base}/cancel`, { method: "POST" }));
-  } catch (e) {
-    showError($("#run-error"), e);
-  }
+runPage({
+  recordUrl: base,
+  eventsUrl: `${base}/events`,
+  cancelUrl: `${base}/cancel`,
+  what: "the experiment",
+  showRecord,
+  onEvent,
+  showResults,
 });
-
-async function main() {
-  try {
-    showRecord(await api(base));
-  } catch (e) {
-    showError($("#run-error"), e);
-    return;
-  }
-  const final = await follow(base, `${base}/events`, onEvent, showRecord);
-  showRecord(final);
-  if (final.status === "succeeded") await showResults(final);
-  else showError($("#run-error"), `the experiment ${final.status}: ${final.message || ""}`);
-}
-
-main();
-

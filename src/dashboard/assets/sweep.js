@@ -1,6 +1,6 @@
 // One design map (a sweep): live progress over SSE, then the recommendations, the heat maps with
 // the paper's points, the bias plots and every cell with its 95 % interval.
-import { api, el, $, clear, num, when, badge, showError, setupToken, follow, progressBar, inlineSvg, pageId, TERMINAL, API, eventLog } from "./common.js";
+import { api, el, $, clear, num, when, badge, showError, setupToken, runPage, progressBar, inlineSvg, pageId, TERMINAL, API, eventLog } from "./common.js";
 
 setupToken();
 const id = pageId();
@@ -116,25 +116,12 @@ async function showResults() {
   $("#results").dataset.loaded = "true";
 }
 
-$("#cancel-btn").addEventListener("click", async () => {
-  try {
-    showRecord(await api(`/jobs/${encodeURIComponent(id)}/cancel`, { method: "POST" }));
-  } catch (e) {
-    showError($("#run-error"), e);
-  }
+runPage({
+  recordUrl: base,
+  eventsUrl: `/jobs/${encodeURIComponent(id)}/events`,
+  cancelUrl: `/jobs/${encodeURIComponent(id)}/cancel`,
+  what: "the sweep",
+  showRecord,
+  onEvent,
+  showResults,
 });
-
-async function main() {
-  try {
-    showRecord(await api(base));
-  } catch (e) {
-    showError($("#run-error"), e);
-    return;
-  }
-  const final = await follow(base, `/jobs/${encodeURIComponent(id)}/events`, onEvent, showRecord);
-  showRecord(final);
-  if (final.status === "succeeded") await showResults();
-  else showError($("#run-error"), `the sweep ${final.status}: ${final.message || ""}`);
-}
-
-main();
