@@ -3,6 +3,7 @@
 //! fields, the random part from the difference of the two analyses' random errors.
 
 use crate::dic::DicResult;
+use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 /// Terms of the quadratic surface: 1, x, y, x², xy, y² in coordinates centred and scaled to the
@@ -23,55 +24,25 @@ fn terms(x: f64, y: f64, (cx, cy, s): (f64, f64, f64)) -> [f64; QUADRATIC_TERMS]
     [1.0, a, b, a * a, a * b, b * b]
 }
 
-/// Solves the symmetric positive system `a x = b` (n ≤ 8) by Cholesky; None when singular.
+/// Solves the symmetric positive-definite system `a x = b` (n ≤ 8) by Cholesky (nalgebra); None
+/// when `a` is singular to working precision: a pivot below 1e-13 of the largest diagonal entry,
+/// as a degenerate layout of points (one row or column) gives.
 pub fn solve_spd(a: &[Vec<f64>], b: &[f64]) -> Option<Vec<f64>> {
-    let inv = invert_spd(a)?;
-    Some(
-        inv.iter()
-            .map(|row| row.iter().zip(b).map(|(x, y)| x * y).sum())
-            .collect(),
-    )
-}
-
-/// Inverse of a small symmetric positive-definite matrix (Gauss–Jordan with pivoting).
-pub fn invert_spd(a: &[Vec<f64>]) -> Option<Vec<Vec<f64>>> {
     let n = a.len();
-    let mut m: Vec<Vec<f64>> = a
-        .iter()
-        .enumerate()
-        .map(|(i, row)| {
-            let mut r = row.clone();
-            r.extend((0..n).map(|j| f64::from(u8::from(i == j))));
-            r
-        })
-        .collect();
     let scale = (0..n)
         .map(|i| a[i][i].abs())
         .fold(0.0, f64::max)
         .max(1e-300);
-    for col in 0..n {
-        let piv = (col..n).max_by(|&i, &j| m[i][col].abs().total_cmp(&m[j][col].abs()))?;
-        if !(m[piv][col].abs() > 1e-13 * scale) {
-            return None;
-        }
-        m.swap(col, piv);
-        let p = m[col][col];
-        for v in m[col].iter_mut() {
-            *v /= p;
-        }
-        for r in 0..n {
-            if r != col {
-                let f = m[r][col];
-                if f != 0.0 {
-                    let pivot_row = m[col].clone();
-                    for (v, pv) in m[r].iter_mut().zip(pivot_row) {
-                        *v -= f * pv;
-                    }
-                }
-            }
-        }
+    let chol = DMatrix::from_fn(n, n, |i, j| a[i][j]).cholesky()?;
+    let l = chol.l_dirty();
+    if !(0..n).all(|i| l[(i, i)] * l[(i, i)] > 1e-13 * scale) {
+        return None;
     }
-    Some(m.into_iter().map(|r| r[n..].to_vec()).collect())
+    Some(
+        chol.solve(&DVector::from_column_slice(b))
+            .as_slice()
+            .to_vec(),
+    )
 }
 
 /// Fits a quadratic surface to `values` at `xy`; None with fewer than 8 samples.

@@ -9,6 +9,7 @@
 use super::bspline::BSplineImage;
 use super::icgn::{cholesky, cholesky_solve, Scratch};
 use super::{PoiStatus, Warp};
+use nalgebra::Matrix6;
 
 /// p = (u, uₓ, u_y, uₓₓ, uₓ_y, u_yy, v, vₓ, v_y, vₓₓ, vₓ_y, v_yy).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -97,17 +98,13 @@ impl QuadraticWarp {
         }
     }
 
-    /// W(self) ∘ W(dp)⁻¹; None when W(dp) is singular.
+    /// W(self) ∘ W(dp)⁻¹; None when W(dp) is singular (nalgebra's LU inverse).
     pub fn compose_inverse(&self, dp: &QuadraticWarp) -> Option<Self> {
-        let inverse = invert(dp.matrix())?;
-        let m = self.matrix();
-        let mut out = [[0.0f64; 6]; 6];
-        for (i, row) in out.iter_mut().enumerate() {
-            for (j, v) in row.iter_mut().enumerate() {
-                *v = (0..6).map(|k| m[i][k] * inverse[k][j]).sum();
-            }
-        }
-        Some(Self::from_matrix(&out))
+        let matrix = |m: [[f64; 6]; 6]| Matrix6::from_fn(|i, j| m[i][j]);
+        let product = matrix(self.matrix()) * matrix(dp.matrix()).try_inverse()?;
+        Some(Self::from_matrix(&std::array::from_fn(|i| {
+            std::array::from_fn(|j| product[(i, j)])
+        })))
     }
 
     /// Largest displacement, px, the update causes in a subset of half-width `half`.
@@ -120,40 +117,6 @@ impl QuadraticWarp {
             + p[10] * p[10];
         (p[0] * p[0] + p[6] * p[6] + h2 * first + h2 * h2 * second).sqrt()
     }
-}
-
-/// Gauss-Jordan inverse of a 6x6 matrix with partial pivoting.
-#[allow(clippy::needless_range_loop)]
-fn invert(mut m: [[f64; 6]; 6]) -> Option<[[f64; 6]; 6]> {
-    let mut inv = [[0.0f64; 6]; 6];
-    for (i, row) in inv.iter_mut().enumerate() {
-        row[i] = 1.0;
-    }
-    for c in 0..6 {
-        let pivot = (c..6).max_by(|&a, &b| m[a][c].abs().total_cmp(&m[b][c].abs()))?;
-        if m[pivot][c].abs() < 1e-12 {
-            return None;
-        }
-        m.swap(c, pivot);
-        inv.swap(c, pivot);
-        let d = m[c][c];
-        for j in 0..6 {
-            m[c][j] /= d;
-            inv[c][j] /= d;
-        }
-        for r in 0..6 {
-            if r != c {
-                let f = m[r][c];
-                if f != 0.0 {
-                    for j in 0..6 {
-                        m[r][j] -= f * m[c][j];
-                        inv[r][j] -= f * inv[c][j];
-                    }
-                }
-            }
-        }
-    }
-    Some(inv)
 }
 
 /// The outcome of second-order IC-GN at one point.
