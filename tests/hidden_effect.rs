@@ -179,13 +179,18 @@ fn close(o: &Outcome, effect: &str, param: &str, truth: f64) {
     );
 }
 
-fn check(o: &Outcome, effect: &str, ratio: f64) {
+/// The diagnosis' verdict is `effect` ("none" for none).
+fn assert_verdict(o: &Outcome, effect: &str) {
     assert_eq!(
         ffdic::model::effects::verdict_name(o.diagnosis.verdict),
         effect,
         "{}",
         o.report
     );
+}
+
+fn check(o: &Outcome, effect: &str, ratio: f64) {
+    assert_verdict(o, effect);
     assert!(
         o.after_px <= ratio * o.before_px,
         "{effect}: discrepancy {} px after vs {} px before (limit ratio {ratio})\n{}",
@@ -308,12 +313,7 @@ fn fill_factor_outcome() -> Outcome {
 #[test]
 fn hidden_fill_factor() {
     let o = fill_factor_outcome();
-    assert_eq!(
-        ffdic::model::effects::verdict_name(o.diagnosis.verdict),
-        "fill_factor",
-        "{}",
-        o.report
-    );
+    assert_verdict(&o, "fill_factor");
     close(&o, "fill_factor", "fx", 0.5);
     close(&o, "fill_factor", "fy", 0.8);
 }
@@ -339,12 +339,7 @@ fn hidden_fill_factor_fine_speckle() {
         edge_softness_mm: 0.01,
     })];
     let o = run_with("fill_factor-fine", truth, sp, options(vec![native()], 0.0));
-    assert_eq!(
-        ffdic::model::effects::verdict_name(o.diagnosis.verdict),
-        "fill_factor",
-        "{}",
-        o.report
-    );
+    assert_verdict(&o, "fill_factor");
     close(&o, "fill_factor", "fx", 0.5);
     close(&o, "fill_factor", "fy", 0.8);
 }
@@ -384,12 +379,7 @@ fn hidden_sensor_noise() {
     // Shot noise acts on the photon-transfer curve; the displacement discrepancy sits at its
     // noise floor before and after (a fall there would be smaller than its standard error), so
     // the fall asked for is that curve's χ².
-    assert_eq!(
-        ffdic::model::effects::verdict_name(o.diagnosis.verdict),
-        "sensor_noise",
-        "{}",
-        o.report
-    );
+    assert_verdict(&o, "sensor_noise");
     let (before, after) = (
         o.diagnosis.before.as_ref().unwrap(),
         o.diagnosis.after.as_ref().unwrap(),
@@ -422,12 +412,7 @@ fn nothing_hidden() {
         ),
         vec![native(), ff50],
     );
-    assert_eq!(
-        ffdic::model::effects::verdict_name(o.diagnosis.verdict),
-        "none",
-        "{}",
-        o.report
-    );
+    assert_verdict(&o, "none");
     for c in &o.diagnosis.candidates {
         assert!(!c.significant, "{} reported significant: {c:?}", c.effect);
     }
