@@ -402,6 +402,137 @@ async fn repeats_pool_independent_captures_with_intervals_over_them() {
     assert!(new.abs() < 0.2, "a new layout: r = {new}");
 }
 
+/// The camera's own binning and decimation (issue 17): `GET /camera` lists the schemes the mock
+/// sensor offers; an experiment naming two of them captures every position in each mode beside
+/// the full-resolution frame, records the mode per run in the dataset, puts each scheme in the
+/// table beside the synthesised ones with its increase over the twin run's ff100, and leaves the
+/// camera at full resolution.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn hardware_schemes_are_captured_beside_their_synthesised_twins() {
+    let tmp = tempfile::tempdir().unwrap();
+    let server = TestServer::start(small_config(tmp.path())).await;
+    let camera: Value = daemon::get_json(&server.url("/camera")).await;
+    let offered: Vec<(&str, &str)> = camera["info"]["hardware_schemes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| {
+            (
+                s["name"].as_str().unwrap(),
+                s["equivalent_preset"].as_str().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        offered,
+        [
+            ("hw:bin2x2-average", "ff100"),
+            ("hw:dec2-bin2-average", "ff50"),
+            ("hw:dec2x2", "ff25")
+        ]
+    );
+    assert_eq!(
+        camera["info"]["hardware_schemes"][0]["binning_domain"],
+        "digital"
+    );
+
+    let mut request = small_request(2);
+    request["schemes"] = json!(["ff100", "ff25", "hw:bin2x2-average", "HW:DEC2X2"]);
+    let (id, results) = run_to_results(&server, &request).await;
+    let rows = results["rows"].as_array().unwrap();
+    let row = |run: &str, scheme: &str| {
+        rows.iter()
+            .find(|r| r["run"] == run && r["scheme"] == scheme)
+            .unwrap_or_else(|| panic!("no row {run} {scheme} in {rows:?}"))
+    };
+    assert_eq!(rows.len(), 8, "{rows:?}");
+    for k in ["a-x1", "a-x2"] {
+        let binned = row(&format!("{k}_hw-bin2x2-average"), "hw:bin2x2-average");
+        let decimated = row(&format!("{k}_hw-dec2x2"), "hw:dec2x2");
+        assert_eq!(binned["fill_factor"], json!([1.0, 1.0]));
+        assert_eq!(decimated["fill_factor"], json!([0.5, 0.5]));
+        // Increases over the twin's ff100, with a paired interval wherever the synthesised
+        // ff25 of the same pair has one (the same grid; too few blocks on this small bench).
+        let synthesised = row(k, "ff25");
+        for r in [binned, decimated] {
+            assert!(r["increase_pct"]["u"].is_number(), "{r}");
+            assert_eq!(
+                r["increase_ci95"].is_null(),
+                synthesised["increase_ci95"].is_null(),
+                "{r}"
+            );
+        }
+        // Same pattern, same move, a smaller pixel aperture: decimation raises the error over
+        // the twin's ff100 as the synthesised ff25 does (paper, Figure 5).
+        assert!(
+            decimated["increase_pct"]["u"].as_f64().unwrap() > 0.0,
+            "{decimated}"
+        );
+    }
+
+    let dir = server.service.store.run_dir(&id.parse().unwrap());
+    let manifest: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("frames/dataset.json")).unwrap()).unwrap();
+    let runs = manifest["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 6);
+    let hw = &runs[1];
+    assert_eq!(hw["id"], "a-x1_hw-bin2x2-average");
+    assert_eq!(hw["twin_of"], "a-x1");
+    assert_eq!(hw["capture"]["name"], "hw:bin2x2-average");
+    assert_eq!(hw["reference"], "hw-bin2x2-average_a_ref.tif");
+    assert!(runs[0].get("capture").is_none());
+    let (frame, _) = ffdic::image::read_tiff(&dir.join("frames/hw-dec2x2_a_x2.tif")).unwrap();
+    assert_eq!(
+        (frame.width(), frame.height()),
+        (daemon::WIDTH_PX / 2, daemon::HEIGHT_PX / 2)
+    );
+    let settings: Value = daemon::get_json(&server.url("/camera")).await;
+    assert_eq!(settings["settings"]["binning"], json!([1, 1]));
+    assert_eq!(settings["settings"]["decimation"], json!([1, 1]));
+    server.stop().await;
+}
+
+/// A camera without binning or decimation answers 422 naming the hardware scheme asked for, and
+/// an analysis of stored frames refuses `hw:` names (only the camera makes those frames).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_camera_without_the_features_refuses_hardware_schemes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut config = small_config(tmp.path());
+    config.camera = ffdic::service::CameraConfig::Mock {
+        width: daemon::WIDTH_PX,
+        height: daemon::HEIGHT_PX,
+        exposure_level: 0.5,
+        bench_model: "paper-bench".into(),
+        hardware_binning: ffdic::service::MockBinning::None,
+        hardware_decimation_max: 1,
+    };
+    let server = TestServer::start(config).await;
+    let camera: Value = daemon::get_json(&server.url("/camera")).await;
+    assert_eq!(camera["info"]["hardware_schemes"], json!([]));
+    let mut request = small_request(1);
+    request["schemes"] = json!(["ff100", "hw:bin2x2-average"]);
+    let r = client()
+        .post(server.url("/experiments"))
+        .json(&request)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 422);
+    let problem: Value = r.json().await.unwrap();
+    let text = problem.to_string();
+    assert!(
+        text.contains("schemes[1]") && text.contains("hw:bin2x2-average"),
+        "{problem}"
+    );
+    let runs: Value = daemon::get_json(&server.url("/experiments")).await;
+    assert_eq!(
+        runs.as_array().map_or(0, Vec::len),
+        0,
+        "nothing queued: {runs}"
+    );
+    server.stop().await;
+}
+
 /// Posts `request`, waits for success, and returns the run's id and its `results` (study.json).
 async fn run_to_results(server: &TestServer, request: &Value) -> (String, Value) {
     let c = client();

@@ -104,6 +104,7 @@ async fn bad_bodies_are_problems_naming_the_field_and_write_nothing() {
     for (body, field) in [
         (r#"{"binning": [0, 1]}"#, "binning"),
         (r#"{"binning": [1, 65]}"#, "binning"),
+        (r#"{"decimation": [0, 2]}"#, "decimation"),
         (
             r#"{"roi": {"x": 0, "y": 0, "width": 16, "height": 0}}"#,
             "roi",

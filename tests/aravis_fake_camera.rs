@@ -122,7 +122,7 @@ fn dic_recovers_a_stage_move_through_gige_vision() {
             }
             let at = bench.lock().unwrap().position_at(Instant::now());
             let i = frame_index.fetch_add(1, Ordering::SeqCst);
-            scene.render(at, exposure_us, 16, i)
+            scene.render(at, exposure_us, 16, i, None)
         })
     };
     let fake = FakeGvCamera::start("FFDIC-DIC", fill).expect("start the GigE Vision simulator");
@@ -227,7 +227,7 @@ fn features_fall_back_and_samples_arrive_exactly() {
         .collect();
     assert_eq!(
         names,
-        ["hw-bin2x2-vendor", "hw-bin3x3-vendor", "hw-bin4x4-vendor"]
+        ["hw:bin2x2-vendor", "hw:bin3x3-vendor", "hw:bin4x4-vendor"]
     );
 
     // ExposureTimeAbs stands in for ExposureTime; ROI values round down to the increments.

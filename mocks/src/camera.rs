@@ -1,7 +1,7 @@
 use crate::bench::SharedBench;
 use ffdic_hw::{
-    Camera, CameraCounters, CameraInfo, CameraSettings, Frame, HwError, HwResult, PixelFormat,
-    StagePosition, TriggerMode,
+    schemes_for, Camera, CameraCounters, CameraInfo, CameraSettings, Frame, HardwareScheme,
+    HwError, HwResult, PixelFormat, ReductionCaps, StagePosition, TriggerMode,
 };
 use std::time::{Duration, Instant, SystemTime};
 
@@ -13,15 +13,29 @@ pub const MAX_EXPOSURE_US: f64 = 10_000_000.0;
 pub trait Scene: Send + Sync {
     /// Sensor size, px.
     fn size(&self) -> (usize, usize);
-    /// The frame, in DN of `bit_depth` bits, with the target at `position`; `frame_index`
-    /// seeds the noise of this exposure.
+    /// The frame, in DN of `bit_depth` bits, with the target at `position`, read out in the
+    /// hardware scheme `readout` (`None`: every pixel): [`output_size`] samples, row-major.
+    /// `frame_index` seeds the noise of this exposure.
     fn render(
         &self,
         position: StagePosition,
         exposure_us: f64,
         bit_depth: u8,
         frame_index: u64,
+        readout: Option<&HardwareScheme>,
     ) -> Vec<u16>;
+}
+
+/// The frame a `sensor` (width, height) delivers in `readout`: every block of binned or
+/// decimated pixels is one output pixel; a partial block at an edge is dropped.
+pub fn output_size(sensor: (usize, usize), readout: Option<&HardwareScheme>) -> (usize, usize) {
+    match readout {
+        Some(s) => (
+            sensor.0 / s.x.factor() as usize,
+            sensor.1 / s.y.factor() as usize,
+        ),
+        None => sensor,
+    }
 }
 
 /// Faults to inject into the mock camera.
@@ -58,6 +72,7 @@ impl<S: Scene> MockCamera<S> {
                 pixel_formats: vec![PixelFormat::Mono8, PixelFormat::Mono12, PixelFormat::Mono16],
                 hardware_binning: false,
                 hardware_decimation: false,
+                hardware_schemes: Vec::new(),
                 exposure_range_us: Some((MIN_EXPOSURE_US, MAX_EXPOSURE_US)),
             },
             scene,
@@ -67,6 +82,23 @@ impl<S: Scene> MockCamera<S> {
             next_frame_id: 0,
             faults: CameraFaults::default(),
         }
+    }
+
+    /// The camera with the sensor's own binning and decimation (`caps`), offered as hardware
+    /// schemes; the scene renders every frame in the scheme the settings select.
+    pub fn with_reduction(mut self, caps: ReductionCaps) -> Self {
+        self.info.hardware_schemes = schemes_for(&caps);
+        self.info.hardware_binning = caps.binning_max != (1, 1) && caps.binning_mode.is_some();
+        self.info.hardware_decimation = caps.decimation_max != (1, 1);
+        self
+    }
+
+    /// The hardware scheme the current settings select (`None`: full resolution).
+    fn readout(&self) -> Option<&HardwareScheme> {
+        self.info
+            .hardware_schemes
+            .iter()
+            .find(|h| h.is_selected_by(&self.settings))
     }
 }
 
@@ -102,10 +134,33 @@ impl<S: Scene> Camera for MockCamera<S> {
                 s.pixel_format
             )));
         }
-        if s.roi.is_some() || s.binning != (1, 1) || s.decimation != (1, 1) {
-            return Err(HwError::Unsupported(
-                "ROI, binning and decimation on the mock camera".into(),
-            ));
+        if s.roi.is_some() {
+            return Err(HwError::Unsupported("ROI on the mock camera".into()));
+        }
+        let full_resolution = s.binning == (1, 1) && s.decimation == (1, 1);
+        if !full_resolution
+            && !self
+                .info
+                .hardware_schemes
+                .iter()
+                .any(|h| h.is_selected_by(s))
+        {
+            let offered: Vec<&str> = self
+                .info
+                .hardware_schemes
+                .iter()
+                .map(|h| h.name.as_str())
+                .collect();
+            return Err(HwError::Unsupported(format!(
+                "binning {:?} with decimation {:?} on the mock camera (it offers: {})",
+                s.binning,
+                s.decimation,
+                if offered.is_empty() {
+                    "none".to_string()
+                } else {
+                    offered.join(", ")
+                }
+            )));
         }
         self.settings = s.clone();
         Ok(self.settings.clone())
@@ -144,11 +199,12 @@ impl<S: Scene> Camera for MockCamera<S> {
                 self.counters.missing_packets += 3;
                 continue;
             }
-            let (w, h) = self.scene.size();
+            let readout = self.readout();
+            let (w, h) = output_size(self.scene.size(), readout);
             let bit_depth = self.settings.pixel_format.bit_depth();
-            let data = self
-                .scene
-                .render(position, self.settings.exposure_us, bit_depth, id);
+            let data =
+                self.scene
+                    .render(position, self.settings.exposure_us, bit_depth, id, readout);
             debug_assert_eq!(data.len(), w * h);
             self.counters.completed += 1;
             frames.push(Frame {

@@ -10,6 +10,6 @@ pub mod serial_sim;
 mod stage;
 
 pub use bench::{new_bench, BenchState, Motion, SharedBench};
-pub use camera::{CameraFaults, MockCamera, Scene};
+pub use camera::{output_size, CameraFaults, MockCamera, Scene};
 pub use serial_sim::{SimConfig, SimFaults, SimProtocol, StageSim};
 pub use stage::{MockStage, StageFaults};

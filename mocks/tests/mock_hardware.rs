@@ -1,7 +1,7 @@
 //! The mock stage and camera behave like hardware: travel takes time, homing is required, limits
 //! hold, faults surface as the typed errors the daemon maps to HTTP statuses.
 
-use ffdic_hw::{Camera, CameraSettings, HwError, Stage, StagePosition};
+use ffdic_hw::{Camera, CameraSettings, HardwareScheme, HwError, Stage, StagePosition};
 use ffdic_mocks::{new_bench, MockCamera, MockStage, Scene};
 use std::time::{Duration, Instant};
 
@@ -12,7 +12,14 @@ impl Scene for PositionScene {
     fn size(&self) -> (usize, usize) {
         (4, 3)
     }
-    fn render(&self, p: StagePosition, _: f64, _: u8, _: u64) -> Vec<u16> {
+    fn render(
+        &self,
+        p: StagePosition,
+        _: f64,
+        _: u8,
+        _: u64,
+        _: Option<&HardwareScheme>,
+    ) -> Vec<u16> {
         vec![(p.x_mm * 1000.0).round() as u16; 12]
     }
 }

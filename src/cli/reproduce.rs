@@ -14,8 +14,8 @@ use ffdic::experiment::{
     StudyRow,
 };
 use ffdic::service::{
-    mock_bench, CameraConfig, CompareRequest, DaemonConfig, NewModel, Service,
-    PAPER_BENCH_DISTORTION_TOML,
+    mock_bench, CameraConfig, CompareRequest, DaemonConfig, MockBinning, MockReduction, NewModel,
+    Service, PAPER_BENCH_DISTORTION_TOML,
 };
 use ffdic::store::{RunId, RunRecord, RunStatus};
 use std::path::PathBuf;
@@ -50,6 +50,28 @@ pub struct ReproduceArgs {
     /// Stop after the study: no comparison with the baseline model, no diagnosis.
     #[arg(long)]
     pub no_model: bool,
+    /// Where the mock sensor's own 2x2 binning combines pixels (the experiment's `hw:` schemes):
+    /// digital (read every pixel, average) or charge (sum the electrons, read once).
+    #[arg(long, value_enum, default_value_t = SensorBinning::Digital)]
+    pub hardware_binning: SensorBinning,
+}
+
+/// `--hardware-binning`: the mock sensor's binning domain.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum SensorBinning {
+    None,
+    Digital,
+    Charge,
+}
+
+impl From<SensorBinning> for MockBinning {
+    fn from(b: SensorBinning) -> Self {
+        match b {
+            SensorBinning::None => MockBinning::None,
+            SensorBinning::Digital => MockBinning::Digital,
+            SensorBinning::Charge => MockBinning::Charge,
+        }
+    }
 }
 
 pub fn run(args: &ReproduceArgs) -> Result<()> {
@@ -62,14 +84,26 @@ pub fn run(args: &ReproduceArgs) -> Result<()> {
     let mut config = DaemonConfig::embedded();
     config.data_dir = args.data.clone();
     config.bench.scale_px_per_mm = spec.camera.scale_px_per_mm;
+    let reduction = MockReduction {
+        binning: args.hardware_binning.into(),
+        ..MockReduction::default()
+    };
     config.camera = CameraConfig::Mock {
         width: spec.camera.width,
         height: spec.camera.height,
         exposure_level: spec.camera.exposure_level,
         bench_model: truth.name.clone(),
+        hardware_binning: reduction.binning,
+        hardware_decimation_max: reduction.decimation_max,
     };
     // A fast mock stage: travel time is not what this study measures.
-    let hardware = mock_bench(spec.camera.clone(), truth, 200.0, Duration::from_millis(5))?;
+    let hardware = mock_bench(
+        spec.camera.clone(),
+        truth,
+        reduction,
+        200.0,
+        Duration::from_millis(5),
+    )?;
     let (service, _) = Service::start(config, hardware)?;
     let request = ExperimentRequest {
         name: spec.name.clone(),

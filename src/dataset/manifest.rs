@@ -65,6 +65,14 @@ pub struct Run {
     /// study pools the runs that share it into one row with an interval over captures.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub repeat_of: Option<String>,
+    /// The hardware scheme the camera read both frames out in (its own binning or decimation);
+    /// absent: full resolution.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub capture: Option<ffdic_hw::HardwareScheme>,
+    /// With `capture`: the full-resolution run of the same pattern and move, whose synthesised
+    /// schemes the study sets beside this run's hardware scheme.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub twin_of: Option<String>,
     #[serde(flatten)]
     pub extra: Map<String, Value>,
 }
@@ -150,6 +158,15 @@ impl Manifest {
             }
         }
         Ok(())
+    }
+
+    /// The manifest without the runs a camera read out in its own binning or decimation
+    /// (`capture`), and how many those were.
+    pub fn full_resolution(mut self) -> (Manifest, usize) {
+        let before = self.runs.len();
+        self.runs.retain(|r| r.capture.is_none());
+        let set_aside = before - self.runs.len();
+        (self, set_aside)
     }
 
     /// Every frame file the runs name (reference, deformed, static frames), each once, in

@@ -3,9 +3,11 @@
 //! `diagnose` read it, whoever made it. Unknown fields are kept and ignored; a missing required
 //! field is an error naming it.
 
+mod capture;
 mod manifest;
 mod move_check;
 
+pub use capture::sensor_readout;
 pub use manifest::{
     is_plain_file_name, CameraInfo, DatasetError, Manifest, PatternInfo, Run, StageMove, FORMAT,
 };

@@ -47,6 +47,8 @@ pub struct Measurement {
     pub dic: Vec<Vec<DicResult>>,
     /// Speckle, white levels and noise floor; the stage is fitted per comparison.
     pub nominal: Nominal,
+    /// Runs of the dataset read out in a hardware scheme, not compared.
+    pub hardware_runs_set_aside: usize,
 }
 
 /// The model a comparison used: its file's name, a version hash, its effects, and the nominal
@@ -129,10 +131,18 @@ pub struct Comparison {
     pub runs: Vec<RunComparison>,
     pub images: Vec<ImageComparison>,
     pub chi2: Chi2,
+    /// Runs of the dataset the camera read out in its own binning or decimation: not compared
+    /// (the model renders full-resolution frames).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub hardware_runs_set_aside: usize,
     /// The model's analyses, per run and scheme (diagnose predicts geometric candidates from
     /// them without rendering).
     #[serde(skip)]
     pub model_dic: Vec<Vec<DicResult>>,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 /// A short, stable hash of the model's content (FNV-1a 64 of its canonical TOML).
@@ -170,7 +180,18 @@ pub fn load_measurement(
     options: &CompareOptions,
     progress: Progress,
 ) -> Result<Measurement, DiagnoseError> {
-    let manifest = Manifest::read(dir)?;
+    // Frames the sensor binned or decimated itself are not yet rendered by the model in their
+    // mode: the comparison holds the full-resolution runs and says how many it set aside.
+    let (manifest, hardware_runs_set_aside) = Manifest::read(dir)?.full_resolution();
+    if manifest.runs.is_empty() {
+        return Err(DiagnoseError::Frames {
+            run: "-".into(),
+            message: format!(
+                "all {hardware_runs_set_aside} runs were read out in a hardware scheme; the \
+                 model is compared with full-resolution runs only"
+            ),
+        });
+    }
     options.dic.validate().map_err(|e| DiagnoseError::Dic {
         run: "-".into(),
         scheme: "-".into(),
@@ -261,6 +282,7 @@ pub fn load_measurement(
         moved_stats,
         dic,
         nominal,
+        hardware_runs_set_aside,
     })
 }
 
@@ -734,6 +756,7 @@ pub(super) fn assemble(
         runs: out_runs,
         images,
         chi2: Chi2::default(),
+        hardware_runs_set_aside: meas.hardware_runs_set_aside,
         model_dic: Vec::new(),
     };
     cmp.chi2 = chi2(&cmp, None, &opts.dic);
@@ -775,7 +798,7 @@ pub fn compare(
     options: &CompareOptions,
     progress: Progress,
 ) -> Result<Comparison, DiagnoseError> {
-    let manifest_runs = Manifest::read(dir)?.runs.len() * options.schemes.len();
+    let manifest_runs = Manifest::read(dir)?.full_resolution().0.runs.len() * options.schemes.len();
     let total = 2 * manifest_runs;
     let meas = load_measurement(dir, options, &|d, _| progress(d, total))?;
     compare_prepared(&meas, model, &|d, _| progress(manifest_runs + d, total))

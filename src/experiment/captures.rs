@@ -115,6 +115,8 @@ impl TargetCapture {
             repeat: self.static_frames.clone(),
             exposure_us,
             repeat_of: run.repeat_of.clone(),
+            capture: None,
+            twin_of: None,
             extra: Default::default(),
         }
     }

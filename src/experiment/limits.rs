@@ -19,6 +19,9 @@ pub struct BenchLimits {
     pub travel_y_mm: Option<(f64, f64)>,
     /// Exposures the request may ask for, µs.
     pub exposure_us: (f64, f64),
+    /// The camera's own binning and decimation (`GET /camera`): the `hw:` schemes an experiment
+    /// may name.
+    pub hardware_schemes: Vec<ffdic_hw::HardwareScheme>,
 }
 
 /// A stage axis, so a refusal names the request field at fault whatever the request calls it.
@@ -63,6 +66,7 @@ impl BenchLimits {
             travel_x_mm: None,
             travel_y_mm: None,
             exposure_us: EXPOSURE_US,
+            hardware_schemes: Vec::new(),
         }
     }
 
@@ -156,6 +160,7 @@ mod tests {
             travel_x_mm: Some((-25.0, 25.0)),
             travel_y_mm: Some((-25.0, 25.0)),
             exposure_us: EXPOSURE_US,
+            hardware_schemes: Vec::new(),
         }
     }
 

@@ -2,8 +2,12 @@
 //! mock hardware does) is configured apart from any analysis model, so a comparison can hold a
 //! model against a bench that has effects the model lacks.
 
-use crate::model::{render_frame, Camera, ModelConfig, SpecklePattern, TargetDot, TooManyDots};
-use ffdic_hw::StagePosition;
+use crate::dataset::sensor_readout;
+use crate::model::{
+    render_frame_read_out, Camera, ModelConfig, SensorReadout, SpecklePattern, TargetDot,
+    TooManyDots,
+};
+use ffdic_hw::{HardwareScheme, StagePosition};
 use ffdic_mocks::Scene;
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -57,6 +61,7 @@ impl Scene for ModelScene {
         _exposure_us: f64,
         bit_depth: u8,
         _frame_index: u64,
+        readout: Option<&HardwareScheme>,
     ) -> Vec<u16> {
         let exposure = self.captures_since_mount.fetch_add(1, Ordering::Relaxed);
         let frame = crate::model::FrameSpec {
@@ -65,7 +70,14 @@ impl Scene for ModelScene {
             moved: p.x_mm != 0.0 || p.y_mm != 0.0,
             seed: crate::model::derive_seed(self.seed, 0xCA3E, exposure),
         };
-        let img = render_frame(&self.camera, &self.bench.effects, &self.dots, &frame);
+        let readout = readout.map_or_else(SensorReadout::default, sensor_readout);
+        let img = render_frame_read_out(
+            &self.camera,
+            &self.bench.effects,
+            &self.dots,
+            &frame,
+            &readout,
+        );
         // The model renders on a 16-bit scale; narrower formats keep the top bits.
         let shift = 16 - bit_depth.min(16) as u32;
         img.data()

@@ -7,6 +7,7 @@ use super::spec::{ExperimentSpec, MoveSpec, PatternSpec, StepSeries};
 use crate::dic::DicSettings;
 use crate::model::SpecklePattern;
 use crate::reduce::Scheme;
+use ffdic_hw::{HardwareScheme, HARDWARE_SCHEME_PREFIX};
 use serde::{Deserialize, Serialize};
 
 /// A reduction scheme by preset name (`ff100`, `ff50`, `ff25`) or spelled out per axis.
@@ -49,7 +50,9 @@ pub struct ExperimentRequest {
     /// Camera exposure for the experiment, µs (null: keep the camera's); within the camera's
     /// range (`GET /camera`).
     pub exposure_us: Option<f64>,
-    /// Reduction schemes (fill factors) to synthesise.
+    /// Reduction schemes (fill factors): presets and custom schemes are synthesised from the
+    /// full-resolution frames; `hw:` names (`GET /camera` lists the camera's) are captured in the
+    /// camera's own binning or decimation at every position, beside the full-resolution frame.
     #[schema(value_type = Vec<Object>)]
     pub schemes: Vec<SchemeSpec>,
     /// 2D DIC settings.
@@ -108,7 +111,10 @@ pub struct ExperimentPlan {
     pub frames_averaged: usize,
     pub settle_ms: u64,
     pub exposure_us: Option<f64>,
+    /// The synthesised schemes.
     pub schemes: Vec<Scheme>,
+    /// The camera's own schemes, captured beside the full-resolution frames.
+    pub hardware_schemes: Vec<HardwareScheme>,
     pub dic: DicSettings,
     pub seed: u64,
 }
@@ -151,7 +157,11 @@ impl ExperimentRequest {
                 "this bench has no target changer: the mounted target's layout cannot change",
             ));
         }
-        let frames = (1 + self.static_frames + moves.len()) * patterns.len() * self.repeats;
+        let (schemes, hardware_schemes) = self.check_schemes(limits)?;
+        let frames = (1 + self.static_frames + moves.len())
+            * patterns.len()
+            * self.repeats
+            * (1 + hardware_schemes.len());
         if frames > MAX_FRAMES {
             return Err(field_error(
                 "repeats",
@@ -176,10 +186,58 @@ impl ExperimentRequest {
             frames_averaged: self.frames_averaged,
             settle_ms: self.settle_ms,
             exposure_us: self.exposure_us,
-            schemes: check_schemes(&self.schemes)?,
+            schemes,
+            hardware_schemes,
             dic: check_dic(&self.dic)?,
             seed: self.seed,
         })
+    }
+
+    /// The synthesised schemes, and the `hw:` schemes the camera offers (looked up by name).
+    fn check_schemes(
+        &self,
+        limits: &BenchLimits,
+    ) -> Result<(Vec<Scheme>, Vec<HardwareScheme>), FieldError> {
+        check_scheme_count(self.schemes.len())?;
+        let mut synthesised: Vec<Scheme> = Vec::new();
+        let mut hardware: Vec<HardwareScheme> = Vec::new();
+        for (i, spec) in self.schemes.iter().enumerate() {
+            let field = format!("schemes[{i}]");
+            let Some(name) = hardware_name(spec) else {
+                push_unique(&mut synthesised, synthesised_scheme(i, spec)?, &field)?;
+                continue;
+            };
+            let scheme = limits
+                .hardware_schemes
+                .iter()
+                .find(|h| h.name.eq_ignore_ascii_case(name))
+                .ok_or_else(|| {
+                    let offered: Vec<&str> = limits
+                        .hardware_schemes
+                        .iter()
+                        .map(|h| h.name.as_str())
+                        .collect();
+                    let offered = if offered.is_empty() {
+                        "none".to_string()
+                    } else {
+                        offered.join(", ")
+                    };
+                    field_error(
+                        &field,
+                        format!(
+                            "the camera offers no hardware scheme '{name}' (it offers: {offered})"
+                        ),
+                    )
+                })?;
+            if hardware.iter().any(|h| h.name == scheme.name) {
+                return Err(field_error(
+                    field,
+                    format!("'{}' appears twice", scheme.name),
+                ));
+            }
+            hardware.push(scheme.clone());
+        }
+        Ok((synthesised, hardware))
     }
 
     fn check_patterns(&self, limits: &BenchLimits) -> Result<Vec<SpecklePattern>, FieldError> {
@@ -292,33 +350,74 @@ pub fn check_run_name(name: &str) -> Result<(), FieldError> {
     Ok(())
 }
 
-/// The reduction schemes of a request (shared by experiments, analyses and comparisons).
+/// The `hw:` name of a scheme spec, if it names a hardware scheme.
+fn hardware_name(spec: &SchemeSpec) -> Option<&str> {
+    match spec {
+        SchemeSpec::Preset(name) if is_hardware_name(name) => Some(name),
+        _ => None,
+    }
+}
+
+fn is_hardware_name(name: &str) -> bool {
+    name.get(..HARDWARE_SCHEME_PREFIX.len())
+        .is_some_and(|p| p.eq_ignore_ascii_case(HARDWARE_SCHEME_PREFIX))
+}
+
+/// The synthesised reduction schemes of a request (shared by analyses, comparisons and sweeps);
+/// a `hw:` name is refused: only an experiment captures those.
 pub fn check_schemes(specs: &[SchemeSpec]) -> Result<Vec<Scheme>, FieldError> {
-    if specs.is_empty() {
+    check_scheme_count(specs.len())?;
+    let mut schemes: Vec<Scheme> = Vec::new();
+    for (i, spec) in specs.iter().enumerate() {
+        if let Some(name) = hardware_name(spec) {
+            return Err(field_error(
+                format!("schemes[{i}]"),
+                format!(
+                    "'{name}' is a hardware scheme: the camera captures it in an experiment \
+                     (POST /experiments); a dataset's hardware runs are analysed in their own scheme"
+                ),
+            ));
+        }
+        push_unique(
+            &mut schemes,
+            synthesised_scheme(i, spec)?,
+            &format!("schemes[{i}]"),
+        )?;
+    }
+    Ok(schemes)
+}
+
+fn check_scheme_count(n: usize) -> Result<(), FieldError> {
+    if n == 0 {
         return Err(field_error("schemes", "at least one scheme"));
     }
-    if specs.len() > MAX_SCHEMES {
+    if n > MAX_SCHEMES {
         return Err(field_error(
             "schemes",
             format!("at most {MAX_SCHEMES} schemes"),
         ));
     }
-    let mut schemes: Vec<Scheme> = Vec::new();
-    for (i, s) in specs.iter().enumerate() {
-        let scheme = match s {
-            SchemeSpec::Preset(name) => Scheme::preset(name),
-            SchemeSpec::Custom(c) => Scheme::new(&c.name, c.x, c.y),
-        }
-        .map_err(|e| field_error(format!("schemes[{i}]"), e.to_string()))?;
-        if schemes.iter().any(|q| q.name == scheme.name) {
-            return Err(field_error(
-                format!("schemes[{i}]"),
-                format!("'{}' appears twice", scheme.name),
-            ));
-        }
-        schemes.push(scheme);
+    Ok(())
+}
+
+/// Scheme `i` of a request, a preset or spelled out per axis.
+fn synthesised_scheme(i: usize, spec: &SchemeSpec) -> Result<Scheme, FieldError> {
+    match spec {
+        SchemeSpec::Preset(name) => Scheme::preset(name),
+        SchemeSpec::Custom(c) => Scheme::new(&c.name, c.x, c.y),
     }
-    Ok(schemes)
+    .map_err(|e| field_error(format!("schemes[{i}]"), e.to_string()))
+}
+
+fn push_unique(schemes: &mut Vec<Scheme>, scheme: Scheme, field: &str) -> Result<(), FieldError> {
+    if schemes.iter().any(|q| q.name == scheme.name) {
+        return Err(field_error(
+            field,
+            format!("'{}' appears twice", scheme.name),
+        ));
+    }
+    schemes.push(scheme);
+    Ok(())
 }
 
 /// The DIC settings of a request, with the field named as `dic.<field>`.

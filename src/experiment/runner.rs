@@ -15,7 +15,7 @@ use super::study::{analyze_dataset_with, StudyError, StudyRow};
 use crate::dataset::{CameraInfo, Manifest, Run};
 use crate::image::{tiff_u16_bytes, ImageError};
 use crate::run_event::EventKind;
-use ffdic_hw::{CameraSettings, Frame, StagePosition};
+use ffdic_hw::{CameraSettings, Frame, HardwareScheme, StagePosition};
 use serde_json::{json, Value};
 use std::path::PathBuf;
 use std::time::Duration;
@@ -44,6 +44,8 @@ pub enum RunnerError {
     Write(String),
     #[error("the camera delivered frames of different sizes ({0})")]
     FrameSize(String),
+    #[error("hardware scheme {scheme}: {reason}")]
+    CaptureMode { scheme: String, reason: String },
 }
 
 /// What a finished experiment produced.
@@ -107,7 +109,11 @@ fn capture_and_analyse(
         written: Vec::new(),
     };
     let session = Session::prepare(plan, bench, lease, timeouts, sink)?;
-    let captured = session.capture(&mut files, scale_px_per_mm)?;
+    let captured = session.capture(&mut files, scale_px_per_mm);
+    // The camera's own binning and decimation go back to what they were, whatever happened.
+    let restored = session.restore_readout();
+    let captured = captured?;
+    restored?;
     session.check()?;
     let (captures, map_files) = analyse(plan, &captured, sink)?;
     let rows = write_results(plan, &captured.manifest, &captures, &mut files)?;
@@ -140,12 +146,51 @@ struct Captured {
     frames_dir: PathBuf,
 }
 
-/// Where a capture stands: frames taken of all, their common size, their folder.
+/// Where a capture stands: frames taken of all, the common size of each read-out mode's frames
+/// (full resolution under `None`), their folder.
 struct CaptureState {
     captured: usize,
     total: usize,
-    size: Option<(usize, usize, u8)>,
+    sizes: Vec<(Option<String>, (usize, usize, u8))>,
     frames_dir: PathBuf,
+}
+
+impl CaptureState {
+    /// Checks that `mode`'s frames keep one size.
+    fn check_size(
+        &mut self,
+        mode: Option<&HardwareScheme>,
+        size: (usize, usize, u8),
+    ) -> Result<(), RunnerError> {
+        let key = mode.map(|h| h.name.clone());
+        match self.sizes.iter().find(|(k, _)| *k == key) {
+            None => self.sizes.push((key, size)),
+            Some((_, (sw, sh, _))) if (*sw, *sh) != (size.0, size.1) => {
+                return Err(RunnerError::FrameSize(format!(
+                    "{sw}x{sh} then {}x{}",
+                    size.0, size.1
+                )))
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    fn full_resolution(&self) -> (usize, usize, u8) {
+        self.sizes
+            .iter()
+            .find(|(k, _)| k.is_none())
+            .map(|(_, s)| *s)
+            .unwrap_or_default()
+    }
+}
+
+/// The file of frame `name` read out in the hardware scheme `mode`.
+fn frame_file(mode: Option<&HardwareScheme>, name: &str) -> String {
+    match mode {
+        Some(h) => format!("{}_{name}", h.file_stem()),
+        None => name.to_string(),
+    }
 }
 
 /// One run's hold on the bench: the plan, the bench as it was found, who commands it and how long
@@ -156,6 +201,9 @@ struct Session<'a> {
     lease: &'a BenchLease,
     owner: Owner,
     status: BenchStatus,
+    /// The camera's settings for full-resolution frames (the plan's exposure applied); the
+    /// hardware schemes change only binning and decimation.
+    full_resolution: CameraSettings,
     timeouts: BenchTimeouts,
     sink: &'a dyn RunSink,
 }
@@ -169,21 +217,26 @@ impl<'a> Session<'a> {
         timeouts: BenchTimeouts,
         sink: &'a dyn RunSink,
     ) -> Result<Session<'a>, RunnerError> {
-        let session = Session {
+        let status = bench.status()?;
+        let mut session = Session {
             plan,
             bench,
             lease,
             owner: Owner::Run(lease.run_id.clone()),
-            status: bench.status()?,
+            full_resolution: status.camera.settings.clone(),
+            status,
             timeouts,
             sink,
         };
         session.check()?;
+        let mut settings = session.full_resolution.clone();
         if let Some(exposure_us) = plan.exposure_us {
-            let settings = CameraSettings {
-                exposure_us,
-                ..session.status.camera.settings.clone()
-            };
+            settings.exposure_us = exposure_us;
+        }
+        if !plan.hardware_schemes.is_empty() {
+            (settings.binning, settings.decimation) = ((1, 1), (1, 1));
+        }
+        if plan.exposure_us.is_some() || settings != session.full_resolution {
             let applied = bench.apply_camera(session.owner.clone(), settings)?;
             sink.event(
                 EventKind::CameraSet,
@@ -191,6 +244,7 @@ impl<'a> Session<'a> {
                 &format!("exposure {} µs", applied.exposure_us),
                 json!({ "settings": applied }),
             );
+            session.full_resolution = applied;
         }
         if session.status.stage.is_some() {
             sink.event(EventKind::Homing, 0.0, "homing the stage", Value::Null);
@@ -217,10 +271,15 @@ impl<'a> Session<'a> {
         let plan = self.plan;
         let labels: Vec<&str> = plan.patterns.iter().map(|p| p.label.as_str()).collect();
         let captures = capture_plan(&labels, &plan.moves, plan.static_frames, plan.repeats);
+        let modes = 1 + plan.hardware_schemes.len();
         let mut state = CaptureState {
             captured: 0,
-            total: captures.iter().map(TargetCapture::frame_count).sum(),
-            size: None,
+            total: modes
+                * captures
+                    .iter()
+                    .map(TargetCapture::frame_count)
+                    .sum::<usize>(),
+            sizes: Vec::new(),
             frames_dir: PathBuf::new(),
         };
         let mut manifest = Manifest::new(&plan.name, scale_px_per_mm);
@@ -240,22 +299,26 @@ impl<'a> Session<'a> {
                     y_mm: m.dy_mm,
                 };
                 self.shoot(&mut state, files, &run.deformed, at)?;
-                manifest.runs.push(
-                    target.manifest_run(
-                        run,
-                        m,
-                        super::simulate::pattern_info(&pattern.label, pattern, false),
-                        plan.exposure_us
-                            .or(Some(self.status.camera.settings.exposure_us)),
-                    ),
+                let full = target.manifest_run(
+                    run,
+                    m,
+                    super::simulate::pattern_info(&pattern.label, pattern, false),
+                    Some(self.full_resolution.exposure_us),
                 );
+                let hardware: Vec<Run> = plan
+                    .hardware_schemes
+                    .iter()
+                    .map(|h| hardware_run(&full, h))
+                    .collect();
+                manifest.runs.push(full);
+                manifest.runs.extend(hardware);
             }
             if self.status.stage.is_some() {
                 self.bench
                     .move_to(self.owner.clone(), home, self.timeouts.settle)?;
             }
         }
-        self.describe(&mut manifest, state.size.unwrap_or_default());
+        self.describe(&mut manifest, state.full_resolution());
         let manifest_text = serde_json::to_string_pretty(&manifest).expect("manifest serialises");
         files.write("frames/dataset.json".into(), manifest_text.as_bytes())?;
         self.sink.event(
@@ -294,7 +357,8 @@ impl<'a> Session<'a> {
     }
 
     /// Moves the stage to `at` (when there is one), waits, captures the averaged frame and writes
-    /// it as `frames/{name}`.
+    /// it as `frames/{name}`; then the same in every hardware scheme of the plan (same position,
+    /// same settle), back to full resolution at the end.
     fn shoot(
         &self,
         state: &mut CaptureState,
@@ -318,6 +382,63 @@ impl<'a> Session<'a> {
             );
             std::thread::sleep(Duration::from_millis(self.plan.settle_ms));
         }
+        self.grab(state, files, name, None)?;
+        for scheme in &self.plan.hardware_schemes {
+            self.select(Some(scheme))?;
+            self.grab(state, files, name, Some(scheme))?;
+        }
+        if !self.plan.hardware_schemes.is_empty() {
+            self.select(None)?;
+        }
+        Ok(())
+    }
+
+    /// Sets the camera's read-out to `mode` (a hardware scheme, or full resolution) and checks
+    /// what it read back.
+    fn select(&self, mode: Option<&HardwareScheme>) -> Result<(), RunnerError> {
+        let wanted = match mode {
+            Some(h) => h.applied_to(&self.full_resolution),
+            None => self.full_resolution.clone(),
+        };
+        let applied = self
+            .bench
+            .apply_camera(self.owner.clone(), wanted.clone())?;
+        if (applied.binning, applied.decimation) != (wanted.binning, wanted.decimation) {
+            return Err(RunnerError::CaptureMode {
+                scheme: mode.map_or_else(|| "full resolution".into(), |h| h.name.clone()),
+                reason: format!(
+                    "asked for binning {:?} and decimation {:?}, the camera read back {:?} and {:?}",
+                    wanted.binning, wanted.decimation, applied.binning, applied.decimation
+                ),
+            });
+        }
+        Ok(())
+    }
+
+    /// Puts the camera's binning and decimation back as the run found them (after a capture
+    /// with hardware schemes).
+    fn restore_readout(&self) -> Result<(), RunnerError> {
+        if self.plan.hardware_schemes.is_empty() {
+            return Ok(());
+        }
+        let found = &self.status.camera.settings;
+        let settings = CameraSettings {
+            binning: found.binning,
+            decimation: found.decimation,
+            ..self.full_resolution.clone()
+        };
+        self.bench.apply_camera(self.owner.clone(), settings)?;
+        Ok(())
+    }
+
+    /// Captures the averaged frame in the current read-out `mode` and writes it.
+    fn grab(
+        &self,
+        state: &mut CaptureState,
+        files: &mut Files<'_>,
+        name: &str,
+        mode: Option<&HardwareScheme>,
+    ) -> Result<(), RunnerError> {
         self.check()?;
         let frames = self.bench.capture(
             self.owner.clone(),
@@ -325,21 +446,16 @@ impl<'a> Session<'a> {
             self.timeouts.frame,
         )?;
         let (w, h, depth, data) = average(&frames)?;
-        match state.size {
-            None => state.size = Some((w, h, depth)),
-            Some((sw, sh, _)) if (sw, sh) != (w, h) => {
-                return Err(RunnerError::FrameSize(format!("{sw}x{sh} then {w}x{h}")))
-            }
-            _ => {}
-        }
-        let path = files.write(format!("frames/{name}"), &tiff_u16_bytes(w, h, &data)?)?;
+        state.check_size(mode, (w, h, depth))?;
+        let file = frame_file(mode, name);
+        let path = files.write(format!("frames/{file}"), &tiff_u16_bytes(w, h, &data)?)?;
         state.frames_dir = path.parent().map(PathBuf::from).unwrap_or_default();
         state.captured += 1;
         self.sink.event(
             EventKind::FrameCaptured,
             progress(state.captured, state.total, CAPTURE_SHARE),
-            &format!("{name} ({w}x{h}, {} frame(s) averaged)", frames.len()),
-            json!({ "file": name, "frame_ids": frames.iter().map(|f| f.frame_id).collect::<Vec<_>>() }),
+            &format!("{file} ({w}x{h}, {} frame(s) averaged)", frames.len()),
+            json!({ "file": file, "frame_ids": frames.iter().map(|f| f.frame_id).collect::<Vec<_>>() }),
         );
         Ok(())
     }
@@ -449,6 +565,22 @@ fn write_results(
         files.write("results/captures.json".into(), text.as_bytes())?;
     }
     Ok(rows)
+}
+
+/// The manifest entry of `full`'s frames read out in the hardware scheme `scheme`.
+fn hardware_run(full: &Run, scheme: &HardwareScheme) -> Run {
+    let stem = scheme.file_stem();
+    let file = |name: &String| frame_file(Some(scheme), name);
+    Run {
+        id: format!("{}_{stem}", full.id),
+        reference: file(&full.reference),
+        deformed: file(&full.deformed),
+        repeat: full.repeat.iter().map(file).collect(),
+        repeat_of: full.repeat_of.as_ref().map(|r| format!("{r}_{stem}")),
+        capture: Some(scheme.clone()),
+        twin_of: Some(full.id.clone()),
+        ..full.clone()
+    }
 }
 
 fn progress(done: usize, total: usize, share: f64) -> f64 {

@@ -9,7 +9,7 @@ use crate::dic::{
     CorrelationLengths, DicError, DicResult, DicSettings, PreparedReference, Stats, Summary,
 };
 use crate::image::{read_tiff, Image, ImageError};
-use crate::reduce::{reduce, Scheme};
+use crate::reduce::{reduce, AxisScheme, Scheme};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -108,6 +108,11 @@ pub fn analyze_dataset(
 pub type ResultHook<'a> = dyn Fn(&Run, &Scheme, &DicResult) + Sync + 'a;
 
 /// [`analyze_dataset`], handing every pair's full result to `on_result`.
+///
+/// A run the camera read out in its own binning or decimation (`capture`) is correlated as it is,
+/// under the hardware scheme's name, and compared with the first scheme of its full-resolution
+/// twin (`twin_of`: same pattern, same move), so the table sets the sensor's scheme beside the
+/// synthesised ones.
 pub fn analyze_dataset_with(
     dir: &Path,
     manifest: &Manifest,
@@ -116,16 +121,118 @@ pub fn analyze_dataset_with(
     progress: &(dyn Fn(usize, usize) -> bool + Sync),
     on_result: &ResultHook<'_>,
 ) -> Result<Vec<StudyRow>, StudyError> {
-    let total = manifest.runs.len() * schemes.len();
-    let mut rows = Vec::with_capacity(total);
-    let mut cached: Option<(String, Image)> = None;
+    let total: usize = manifest
+        .runs
+        .iter()
+        .map(|r| {
+            if r.capture.is_some() {
+                1
+            } else {
+                schemes.len()
+            }
+        })
+        .sum();
+    let mut rows: Vec<StudyRow> = Vec::with_capacity(total);
+    let mut frames = RunFrames::default();
+    // The baseline (first scheme) of every full-resolution run a hardware run is the twin of.
+    let mut twins: Vec<(String, usize, DicResult)> = Vec::new();
     for run in &manifest.runs {
-        // Runs of one pattern share the reference: read it once.
-        let reference = match &cached {
+        let (reference, deformed) = frames.read(dir, run)?;
+        let pattern = run
+            .pattern
+            .as_ref()
+            .map_or_else(|| run.id.clone(), |p| p.label.clone());
+        // Appends the row of `scheme`; its index, or Cancelled when progress says stop.
+        let mut row = |scheme: &Scheme, result: &DicResult, base: Option<(usize, &DicResult)>| {
+            on_result(run, scheme, result);
+            let index = rows.len();
+            rows.push(StudyRow {
+                run: run.id.clone(),
+                pattern: pattern.clone(),
+                scheme: scheme.name.clone(),
+                fill_factor: scheme.linear_fill_factor(),
+                summary: result.summary,
+                increase_pct: base.map(|(i, _)| increase(&rows[i].summary, &result.summary)),
+                increase_ci95: base.and_then(|(_, b)| increase_interval(b, result)),
+                repeats: 1,
+            });
+            if progress(rows.len(), total) {
+                Ok(index)
+            } else {
+                Err(StudyError::Cancelled)
+            }
+        };
+        let dic_error = |scheme: &Scheme| {
+            let (run, scheme) = (run.id.clone(), scheme.name.clone());
+            move |source| StudyError::Dic {
+                run,
+                scheme,
+                source,
+            }
+        };
+        if let Some(hardware) = &run.capture {
+            let scheme = hardware_geometry(hardware);
+            let result = PreparedReference::new(&reference, dic)
+                .and_then(|p| p.correlate(&deformed, None))
+                .map_err(dic_error(&scheme))?;
+            let base = run.twin_of.as_ref().and_then(|twin| {
+                twins
+                    .iter()
+                    .find(|(id, _, _)| id == twin)
+                    .map(|(_, i, r)| (*i, r))
+            });
+            row(&scheme, &result, base)?;
+            continue;
+        }
+        let is_twin = manifest
+            .runs
+            .iter()
+            .any(|r| r.twin_of.as_deref() == Some(run.id.as_str()));
+        let mut baseline: Option<(usize, DicResult)> = None;
+        for scheme in schemes {
+            let result =
+                study_pair_result(&reference, &deformed, scheme, dic).map_err(dic_error(scheme))?;
+            let base = baseline.as_ref().map(|(i, r)| (*i, r));
+            let index = row(scheme, &result, base)?;
+            if baseline.is_none() {
+                baseline = Some((index, result));
+            }
+        }
+        if let (true, Some((index, result))) = (is_twin, baseline) {
+            twins.push((run.id.clone(), index, result));
+        }
+    }
+    Ok(rows)
+}
+
+/// A hardware scheme as the study's reduction vocabulary: the same block per axis, the whole
+/// block active when binned, its first pixel when decimated; the name keeps the `hw:` prefix.
+fn hardware_geometry(scheme: &ffdic_hw::HardwareScheme) -> Scheme {
+    let axis = |a: ffdic_hw::AxisReduction| AxisScheme {
+        block: a.factor() as usize,
+        first: 0,
+        active: a.active_px() as usize,
+    };
+    Scheme {
+        name: scheme.name.clone(),
+        x: axis(scheme.x),
+        y: axis(scheme.y),
+    }
+}
+
+/// The frames of one run after another: runs of one pattern share the reference, read once.
+#[derive(Default)]
+struct RunFrames {
+    reference: Option<(String, Image)>,
+}
+
+impl RunFrames {
+    fn read(&mut self, dir: &Path, run: &Run) -> Result<(Image, Image), StudyError> {
+        let reference = match &self.reference {
             Some((name, img)) if *name == run.reference => img.clone(),
             _ => {
                 let (img, _) = read_tiff(&dir.join(&run.reference))?;
-                cached = Some((run.reference.clone(), img.clone()));
+                self.reference = Some((run.reference.clone(), img.clone()));
                 img
             }
         };
@@ -139,49 +246,8 @@ pub fn analyze_dataset_with(
                 def_h: deformed.height(),
             });
         }
-        let pattern = run
-            .pattern
-            .as_ref()
-            .map_or_else(|| run.id.clone(), |p| p.label.clone());
-        let first_row = rows.len();
-        let mut baseline: Option<DicResult> = None;
-        for scheme in schemes {
-            let result =
-                study_pair_result(&reference, &deformed, scheme, dic).map_err(|source| {
-                    StudyError::Dic {
-                        run: run.id.clone(),
-                        scheme: scheme.name.clone(),
-                        source,
-                    }
-                })?;
-            on_result(run, scheme, &result);
-            let summary = result.summary;
-            let increase_pct = (rows.len() > first_row).then(|| {
-                let base: &StudyRow = &rows[first_row];
-                increase(&base.summary, &summary)
-            });
-            let increase_ci95 = baseline
-                .as_ref()
-                .and_then(|base| increase_interval(base, &result));
-            if baseline.is_none() {
-                baseline = Some(result);
-            }
-            rows.push(StudyRow {
-                run: run.id.clone(),
-                pattern: pattern.clone(),
-                scheme: scheme.name.clone(),
-                fill_factor: scheme.linear_fill_factor(),
-                summary,
-                increase_pct,
-                increase_ci95,
-                repeats: 1,
-            });
-            if !progress(rows.len(), total) {
-                return Err(StudyError::Cancelled);
-            }
-        }
+        Ok((reference, deformed))
     }
-    Ok(rows)
 }
 
 /// DIC of one full-resolution pair after reduction with `scheme`: every point's displacement

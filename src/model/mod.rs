@@ -7,6 +7,7 @@
 mod config;
 pub mod effects;
 mod pattern;
+mod readout;
 mod render;
 mod seed;
 mod speckle;
@@ -14,6 +15,7 @@ mod speckle;
 pub use config::{ModelConfig, ModelError};
 pub use effects::{EffectId, Effects, Stage};
 pub use pattern::{SpecklePattern, TargetDot, TooManyDots, MAX_TARGET_DOTS};
-pub use render::{project, render_frame, Camera, FrameSpec};
+pub use readout::{BinnedValue, BinningDomain, SensorChain, SensorReadout};
+pub use render::{project, render_frame, render_frame_read_out, Camera, FrameSpec};
 pub use seed::derive_seed;
 pub use speckle::{render_dots, GaussianDot, SpeckleLayout};

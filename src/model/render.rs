@@ -9,11 +9,12 @@
 
 use super::effects::Effects;
 use super::pattern::TargetDot;
+use super::readout::{SensorChain, SensorReadout};
 use super::speckle::{render_dots, GaussianDot};
 use crate::image::Image;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, Normal, Poisson};
+use rand_distr::{Distribution, Normal};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -112,6 +113,19 @@ pub fn render_frame(
     dots: &[TargetDot],
     frame: &FrameSpec,
 ) -> Image {
+    let mut image = render_irradiance(camera, effects, dots, frame);
+    apply_sensor(camera, effects, frame, &mut image);
+    image
+}
+
+/// The optical image on the sensor, DN per pixel (each pixel's aperture integrated exactly),
+/// before radiometry and noise.
+fn render_irradiance(
+    camera: &Camera,
+    effects: &Effects,
+    dots: &[TargetDot],
+    frame: &FrameSpec,
+) -> Image {
     let full_scale = effects.quantization.map_or(65535.0, |q| q.max_dn());
     let background = camera.exposure_level * full_scale;
     let mag = if frame.moved {
@@ -147,7 +161,7 @@ pub fn render_frame(
         })
         .collect();
 
-    let mut image = match effects
+    match effects
         .motion_blur
         .filter(|m| frame.moved && m.length_px > 0.0)
     {
@@ -174,65 +188,105 @@ pub fn render_frame(
             Image::from_vec(w, h, acc).expect("sized")
         }
         None => render_dots(w, h, &px_dots, background, aperture),
-    };
-    apply_sensor(camera, effects, frame, &mut image, full_scale);
-    image
+    }
 }
 
-/// Radiometry and the sensor chain, per pixel, rows in parallel with per-row seeds so the
-/// result does not depend on the thread count.
-fn apply_sensor(
-    camera: &Camera,
-    effects: &Effects,
-    frame: &FrameSpec,
-    image: &mut Image,
-    full_scale: f64,
-) {
-    let w = camera.width;
-    let (cx, cy) = camera.centre();
-    let r0 = camera.half_diagonal_px();
-    let illum = effects.illumination_change.filter(|_| frame.moved);
+/// Radiometry per pixel (vignetting, illumination change, PRNU/DSNU): the irradiance in DN
+/// before the sensor's noise.
+struct Radiometry<'a> {
+    effects: &'a Effects,
+    centre: (f64, f64),
+    r0: f64,
+    illumination: Option<super::effects::IlluminationChange>,
+}
+
+impl<'a> Radiometry<'a> {
+    fn new(camera: &Camera, effects: &'a Effects, frame: &FrameSpec) -> Self {
+        Self {
+            effects,
+            centre: camera.centre(),
+            r0: camera.half_diagonal_px(),
+            illumination: effects.illumination_change.filter(|_| frame.moved),
+        }
+    }
+
+    /// The fixed-pattern noise of one sensor row: the same sensor in every frame.
+    fn fixed_pattern_rng(row: usize) -> ChaCha8Rng {
+        ChaCha8Rng::seed_from_u64(SENSOR_SEED ^ (row as u64).wrapping_mul(0xD1B5_4A32_D192_ED03))
+    }
+
+    /// Pixel (`col`, `row`) of irradiance `px`; `fpn` is its row's fixed-pattern stream, read
+    /// left to right.
+    fn pixel(&self, col: usize, row: usize, px: f32, fpn: &mut ChaCha8Rng) -> f64 {
+        // Irradiance cannot be negative where dots overlap.
+        let mut v = (px as f64).max(0.0);
+        if let Some(vg) = self.effects.vignetting {
+            let (cx, cy) = self.centre;
+            let r2 = ((col as f64 - cx).powi(2) + (row as f64 - cy).powi(2)) / (self.r0 * self.r0);
+            v *= 1.0 - vg.v * r2;
+        }
+        if let Some(ic) = self.illumination {
+            v = ic.gain * v + ic.offset;
+        }
+        if let Some(fp) = self.effects.fixed_pattern {
+            let std_normal = Normal::new(0.0, 1.0).expect("valid");
+            let (a, b): (f64, f64) = (std_normal.sample(fpn), std_normal.sample(fpn));
+            v = v * (1.0 + fp.prnu * a) + fp.dsnu * b;
+        }
+        v
+    }
+}
+
+/// Radiometry and the sensor chain, per pixel at full resolution, rows in parallel with per-row
+/// seeds so the result does not depend on the thread count.
+fn apply_sensor(camera: &Camera, effects: &Effects, frame: &FrameSpec, image: &mut Image) {
+    let radiometry = Radiometry::new(camera, effects, frame);
+    let chain = SensorChain::new(effects);
     image
         .data_mut()
-        .par_chunks_mut(w)
+        .par_chunks_mut(camera.width)
         .enumerate()
         .for_each(|(row, line)| {
-            let mut rng = ChaCha8Rng::seed_from_u64(
-                frame.seed ^ (row as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
-            );
-            let mut fpn = ChaCha8Rng::seed_from_u64(
-                SENSOR_SEED ^ (row as u64).wrapping_mul(0xD1B5_4A32_D192_ED03),
-            );
-            let std_normal = Normal::new(0.0, 1.0).expect("valid");
+            let mut rng = SensorChain::row_rng(frame.seed, row);
+            let mut fpn = Radiometry::fixed_pattern_rng(row);
             for (col, px) in line.iter_mut().enumerate() {
-                // Irradiance cannot be negative where dots overlap.
-                let mut v = (*px as f64).max(0.0);
-                if let Some(vg) = effects.vignetting {
-                    let r2 = ((col as f64 - cx).powi(2) + (row as f64 - cy).powi(2)) / (r0 * r0);
-                    v *= 1.0 - vg.v * r2;
-                }
-                if let Some(ic) = illum {
-                    v = ic.gain * v + ic.offset;
-                }
-                if let Some(fp) = effects.fixed_pattern {
-                    let (a, b): (f64, f64) =
-                        (std_normal.sample(&mut fpn), std_normal.sample(&mut fpn));
-                    v = v * (1.0 + fp.prnu * a) + fp.dsnu * b;
-                }
-                if let Some(n) = effects.sensor_noise {
-                    let electrons = (v * n.gain).clamp(0.0, n.full_well_e);
-                    let shot = if electrons > 0.0 {
-                        Poisson::new(electrons).map_or(electrons, |p| p.sample(&mut rng))
-                    } else {
-                        0.0
-                    };
-                    let read: f64 = n.read_noise_e * std_normal.sample(&mut rng);
-                    v = (shot + read) / n.gain;
-                }
-                if effects.quantization.is_some() {
-                    v = v.round().clamp(0.0, full_scale);
-                }
-                *px = v as f32;
+                let v = radiometry.pixel(col, row, *px, &mut fpn);
+                *px = chain.quantise(chain.read_pixel(v, &mut rng)) as f32;
             }
         });
+}
+
+/// Renders one frame as the sensor reads it out in `readout` (hardware binning or decimation):
+/// the same scene, optics and radiometry as [`render_frame`], then the noise and the ADC per
+/// output pixel as `readout` combines the sensor's pixels.
+pub fn render_frame_read_out(
+    camera: &Camera,
+    effects: &Effects,
+    dots: &[TargetDot],
+    frame: &FrameSpec,
+    readout: &SensorReadout,
+) -> Image {
+    if readout.is_full_resolution() {
+        return render_frame(camera, effects, dots, frame);
+    }
+    let image = render_irradiance(camera, effects, dots, frame);
+    let radiometry = Radiometry::new(camera, effects, frame);
+    let w = camera.width;
+    let mut irradiance = vec![0.0f64; image.data().len()];
+    irradiance
+        .par_chunks_mut(w)
+        .zip(image.data().par_chunks(w))
+        .enumerate()
+        .for_each(|(row, (out, line))| {
+            let mut fpn = Radiometry::fixed_pattern_rng(row);
+            for (col, (o, &px)) in out.iter_mut().zip(line).enumerate() {
+                *o = radiometry.pixel(col, row, px, &mut fpn);
+            }
+        });
+    readout.read(
+        &irradiance,
+        (w, camera.height),
+        &SensorChain::new(effects),
+        frame.seed,
+    )
 }

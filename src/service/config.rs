@@ -151,6 +151,13 @@ pub enum CameraConfig {
         /// The bench's truth: `paper-bench` (embedded) or a model file.
         #[serde(default = "default_bench_model")]
         bench_model: String,
+        /// The sensor's own 2x2 averaging binning: `digital` (every pixel read, then averaged,
+        /// as most sCMOS), `charge` (electrons summed, read once) or `none`.
+        #[serde(default)]
+        hardware_binning: MockBinning,
+        /// The sensor's own decimation up to this factor per axis (1: none).
+        #[serde(default = "default_mock_decimation")]
+        hardware_decimation_max: u32,
     },
     /// A GenICam camera through Aravis (build with `--features aravis`).
     Aravis {
@@ -169,6 +176,54 @@ pub enum CameraConfig {
 
 fn default_exposure_level() -> f64 {
     0.5
+}
+fn default_mock_decimation() -> u32 {
+    MockReduction::default().decimation_max
+}
+
+/// Where the mock sensor bins, if it does.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MockBinning {
+    None,
+    #[default]
+    Digital,
+    Charge,
+}
+
+/// The mock camera's own binning and decimation (offered as hardware fill-factor schemes).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MockReduction {
+    pub binning: MockBinning,
+    pub decimation_max: u32,
+}
+
+impl Default for MockReduction {
+    /// 2x2 digital averaging and decimation by 2: the paper's three geometries in hardware.
+    fn default() -> Self {
+        Self {
+            binning: MockBinning::Digital,
+            decimation_max: 2,
+        }
+    }
+}
+
+impl MockReduction {
+    /// What the mock sensor tells the drivers' scheme naming.
+    pub fn caps(self) -> ffdic_hw::ReductionCaps {
+        use ffdic_hw::{BinningDomain, BinningMode, ReductionCaps};
+        let domain = match self.binning {
+            MockBinning::None => None,
+            MockBinning::Digital => Some(BinningDomain::Digital),
+            MockBinning::Charge => Some(BinningDomain::Charge),
+        };
+        ReductionCaps {
+            binning_max: if domain.is_some() { (2, 2) } else { (1, 1) },
+            binning_mode: domain.map(|_| BinningMode::Average),
+            binning_domain: domain.unwrap_or(BinningDomain::Unknown),
+            decimation_max: (self.decimation_max, self.decimation_max),
+        }
+    }
 }
 fn default_bench_model() -> String {
     "paper-bench".into()
@@ -231,10 +286,21 @@ impl DaemonConfig {
         if !(config.bench.scale_px_per_mm <= 1e4) {
             return Err(parse("bench.scale_px_per_mm must be at most 10000".into()));
         }
-        if let CameraConfig::Mock { width, height, .. } = config.camera {
+        if let CameraConfig::Mock {
+            width,
+            height,
+            hardware_decimation_max,
+            ..
+        } = config.camera
+        {
             if !(64..=16_384).contains(&width) || !(64..=16_384).contains(&height) {
                 return Err(parse(
                     "camera: the mock sensor is 64x64 to 16384x16384 px".into(),
+                ));
+            }
+            if !(1..=4).contains(&hardware_decimation_max) {
+                return Err(parse(
+                    "camera.hardware_decimation_max: 1 (none) to 4".into(),
                 ));
             }
         }
@@ -283,6 +349,21 @@ impl DaemonConfig {
         self.read_requires_token
             .unwrap_or(!self.listen.ip().is_loopback())
             && self.token().is_some()
+    }
+
+    /// The mock camera's own binning and decimation; `None` for a real camera.
+    pub fn mock_reduction(&self) -> Option<MockReduction> {
+        match &self.camera {
+            CameraConfig::Mock {
+                hardware_binning,
+                hardware_decimation_max,
+                ..
+            } => Some(MockReduction {
+                binning: *hardware_binning,
+                decimation_max: *hardware_decimation_max,
+            }),
+            _ => None,
+        }
     }
 
     /// The mock camera's geometry as the model sees it.

@@ -2,10 +2,12 @@
 //! The mock bench wires the imaging model in as the mock camera's scene, with a target changer
 //! that swaps the speckle pattern in front of it.
 
-use super::config::{load_bench_model, CameraConfig, ConfigError, DaemonConfig, StageConfig};
+use super::config::{
+    load_bench_model, CameraConfig, ConfigError, DaemonConfig, MockReduction, StageConfig,
+};
 use crate::experiment::{BenchHardware, ModelScene, TargetMount};
 use crate::model::{Camera as ModelCamera, ModelConfig, SpecklePattern};
-use ffdic_hw::{Camera, HwError, Stage, StagePosition};
+use ffdic_hw::{Camera, HardwareScheme, HwError, Stage, StagePosition};
 use ffdic_mocks::{new_bench, MockCamera, MockStage, Scene, SharedBench};
 use std::sync::{Arc, RwLock};
 use std::time::Duration;
@@ -38,11 +40,18 @@ impl Scene for SwappableScene {
         self.0.read().expect("scene lock").size()
     }
 
-    fn render(&self, p: StagePosition, exposure_us: f64, bit_depth: u8, index: u64) -> Vec<u16> {
+    fn render(
+        &self,
+        p: StagePosition,
+        exposure_us: f64,
+        bit_depth: u8,
+        index: u64,
+        readout: Option<&HardwareScheme>,
+    ) -> Vec<u16> {
         self.0
             .read()
             .expect("scene lock")
-            .render(p, exposure_us, bit_depth, index)
+            .render(p, exposure_us, bit_depth, index, readout)
     }
 }
 
@@ -75,11 +84,12 @@ impl TargetMount for MockTargets {
 pub fn mock_bench(
     geometry: ModelCamera,
     truth: ModelConfig,
+    reduction: MockReduction,
     speed_mm_s: f64,
     settle: Duration,
 ) -> Result<BenchHardware, HardwareError> {
     let bench = new_bench();
-    let (camera, targets) = mock_camera(geometry, truth, bench.clone())?;
+    let (camera, targets) = mock_camera(geometry, truth, reduction, bench.clone())?;
     Ok(BenchHardware {
         camera,
         stage: Some(Box::new(MockStage::new(bench, speed_mm_s, settle))),
@@ -93,6 +103,7 @@ type MockCameraAndTargets = (Box<dyn Camera>, Box<dyn TargetMount>);
 fn mock_camera(
     geometry: ModelCamera,
     truth: ModelConfig,
+    reduction: MockReduction,
     bench: SharedBench,
 ) -> Result<MockCameraAndTargets, HardwareError> {
     let pattern = SpecklePattern::preset("b").expect("preset b exists");
@@ -104,7 +115,7 @@ fn mock_camera(
         1,
     )?)));
     Ok((
-        Box::new(MockCamera::new(scene.clone(), bench)),
+        Box::new(MockCamera::new(scene.clone(), bench).with_reduction(reduction.caps())),
         Box::new(MockTargets { scene }),
     ))
 }
@@ -115,7 +126,9 @@ pub fn open_bench(config: &DaemonConfig) -> Result<BenchHardware, HardwareError>
     let (camera, targets): (Box<dyn Camera>, Option<Box<dyn TargetMount>>) = match &config.camera {
         CameraConfig::Mock { bench_model, .. } => {
             let geometry = config.mock_geometry().expect("mock camera has a geometry");
-            let (c, t) = mock_camera(geometry, load_bench_model(bench_model)?, shared.clone())?;
+            let reduction = config.mock_reduction().unwrap_or_default();
+            let truth = load_bench_model(bench_model)?;
+            let (c, t) = mock_camera(geometry, truth, reduction, shared.clone())?;
             (c, Some(t))
         }
         CameraConfig::Aravis { device, buffers } => (open_aravis(device, *buffers)?, None),

@@ -11,7 +11,7 @@ mod work;
 
 pub use config::{
     load_bench_model, BenchConfig, CameraConfig, ConfigError, DaemonConfig, HttpLimits,
-    StageConfig, SweepLimits, DEFAULT_CONFIG_TOML, PAPER_BENCH_TOML,
+    MockBinning, MockReduction, StageConfig, SweepLimits, DEFAULT_CONFIG_TOML, PAPER_BENCH_TOML,
 };
 pub use hardware::{mock_bench, open_bench, HardwareError, SwappableScene};
 pub use jobs::{JobContext, JobError, JobOutput, Jobs, Lane, Work};
@@ -70,6 +70,7 @@ impl Service {
                 .info()
                 .exposure_range_us
                 .unwrap_or(EXPOSURE_US),
+            hardware_schemes: hardware.camera.info().hardware_schemes.clone(),
         });
         let bench = BenchHandle::spawn(hardware, Duration::from_secs(30));
         let jobs = Jobs::start(store.clone());

@@ -2,7 +2,7 @@
 //! A daemon for tests: the real service and router on a loopback port 0, on a small mock bench
 //! (400x320 px at 13 px/mm) so an experiment takes a second, and an SSE reader.
 
-use ffdic::service::{mock_bench, CameraConfig, DaemonConfig, Service};
+use ffdic::service::{mock_bench, CameraConfig, DaemonConfig, MockBinning, Service};
 use serde_json::{json, Value};
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -21,6 +21,8 @@ pub fn small_config(data_dir: &Path) -> DaemonConfig {
         height: HEIGHT_PX,
         exposure_level: 0.5,
         bench_model: "paper-bench".into(),
+        hardware_binning: MockBinning::Digital,
+        hardware_decimation_max: 2,
     };
     c
 }
@@ -70,7 +72,14 @@ impl TestServer {
     pub async fn start(config: DaemonConfig) -> Self {
         let geometry = config.mock_geometry().unwrap();
         let truth = ffdic::service::load_bench_model("paper-bench").unwrap();
-        let hardware = mock_bench(geometry, truth, 25.0, Duration::from_millis(10)).unwrap();
+        let hardware = mock_bench(
+            geometry,
+            truth,
+            config.mock_reduction().unwrap_or_default(),
+            25.0,
+            Duration::from_millis(10),
+        )
+        .unwrap();
         let (service, _) = Service::start(config, hardware).unwrap();
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let base = format!("http://{}", listener.local_addr().unwrap());

@@ -7,6 +7,7 @@ use ffdic::model::effects::{
     Quantization, Rotation, Scale, SensorNoise, StageError, StageMisalignment, Vignetting,
 };
 use ffdic::model::{Effects, ModelConfig};
+use ffdic_hw::{schemes_for, BinningDomain, BinningMode, HardwareScheme, ReductionCaps};
 use proptest::num::f64 as float;
 use proptest::prelude::*;
 use serde_json::{Map, Value};
@@ -159,7 +160,7 @@ fn run(number: impl Strategy<Value = f64> + Clone + 'static) -> impl Strategy<Va
         (number.clone(), number.clone()),
         prop::collection::vec(file_name(), 0..3),
         prop::option::of(number.clone()),
-        prop::option::of(text()),
+        (prop::option::of(text()), capture_mode()),
         extra(number),
     )
         .prop_map(
@@ -168,7 +169,7 @@ fn run(number: impl Strategy<Value = f64> + Clone + 'static) -> impl Strategy<Va
                 (dx_mm, dy_mm),
                 repeat,
                 exposure_us,
-                repeat_of,
+                (repeat_of, (capture, twin_of)),
                 extra,
             )| Run {
                 id,
@@ -179,9 +180,25 @@ fn run(number: impl Strategy<Value = f64> + Clone + 'static) -> impl Strategy<Va
                 repeat,
                 exposure_us,
                 repeat_of,
+                capture,
+                twin_of,
                 extra,
             },
         )
+}
+
+/// A hardware capture mode (any scheme a camera with every reduction offers) and its twin run.
+fn capture_mode() -> impl Strategy<Value = (Option<HardwareScheme>, Option<String>)> {
+    let caps = ReductionCaps {
+        binning_max: (4, 4),
+        binning_mode: Some(BinningMode::Sum),
+        binning_domain: BinningDomain::Charge,
+        decimation_max: (4, 4),
+    };
+    (
+        prop::option::of(prop::sample::select(schemes_for(&caps))),
+        prop::option::of(text()),
+    )
 }
 
 /// A valid manifest whose floats come from `number` (positive ones from `positive_number`).

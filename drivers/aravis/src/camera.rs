@@ -8,10 +8,10 @@ use crate::config::AravisConfig;
 use crate::error::ctl;
 use crate::features::Features;
 use crate::frame::frame_from_buffer;
-use crate::schemes::{schemes_for, HardwareScheme};
 use aravis::glib::object::Cast;
 use aravis::prelude::*;
 use aravis::{Buffer, GvStream, Stream};
+use ffdic_hw::{schemes_for, HardwareScheme};
 use ffdic_hw::{
     Camera, CameraCounters, CameraInfo, CameraSettings, Frame, HwError, HwResult, TriggerMode,
 };
@@ -111,6 +111,7 @@ impl AravisCamera {
             pixel_formats: features.pixel_formats.clone(),
             hardware_binning: caps.binning_max != (1, 1) && caps.binning_mode.is_some(),
             hardware_decimation: caps.decimation_max != (1, 1),
+            hardware_schemes: schemes_for(&caps),
             exposure_range_us: camera.float_bounds(features.exposure).ok(),
         };
         let mut cam = Self {
@@ -137,7 +138,7 @@ impl AravisCamera {
 
     /// Hardware binning/decimation this camera offers, as fill-factor schemes.
     pub fn hardware_schemes(&self) -> Vec<HardwareScheme> {
-        schemes_for(&self.features.reduction_caps())
+        self.info.hardware_schemes.clone()
     }
 
     /// Whether the camera has been lost (heartbeat failed, or it stopped answering).

@@ -7,10 +7,10 @@
 
 use crate::error::ctl;
 use crate::roi::{fit_roi, IntRange, RoiLimits};
-use crate::schemes::{BinningMode, ReductionCaps};
 use crate::unpack::{from_genicam_name, genicam_name};
 use aravis::prelude::*;
 use aravis::Camera;
+use ffdic_hw::{BinningDomain, BinningMode, ReductionCaps};
 use ffdic_hw::{HwError, HwResult, PixelFormat, SensorRoi, TriggerMode};
 
 /// Where exposure time lives (both in µs).
@@ -123,6 +123,8 @@ impl Features {
         ReductionCaps {
             binning_max: self.binning.map_or((1, 1), |p| p.max),
             binning_mode: self.binning_mode,
+            // GenICam's SFNC has no feature saying where the sensor bins.
+            binning_domain: BinningDomain::Unknown,
             decimation_max: self.decimation.map_or((1, 1), |p| p.max),
         }
     }

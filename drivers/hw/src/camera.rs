@@ -1,4 +1,4 @@
-use crate::{Frame, HwResult};
+use crate::{Frame, HardwareScheme, HwResult};
 use serde::{Deserialize, Serialize};
 use std::time::Duration;
 
@@ -78,6 +78,10 @@ pub struct CameraInfo {
     /// Binning and decimation the hardware does itself (offered as hardware fill-factor schemes).
     pub hardware_binning: bool,
     pub hardware_decimation: bool,
+    /// The hardware fill-factor schemes the camera offers (`schemes_for` its reduction caps):
+    /// an experiment names them in its `schemes` (`hw:bin2x2-average`, …).
+    #[serde(default)]
+    pub hardware_schemes: Vec<HardwareScheme>,
     /// The exposures the camera accepts, µs, when it says (GenICam feature bounds); requests
     /// are checked against it before anything is captured.
     #[serde(default)]

@@ -5,6 +5,7 @@
 mod camera;
 mod error;
 mod frame;
+mod schemes;
 mod stage;
 
 pub use camera::{
@@ -12,6 +13,10 @@ pub use camera::{
 };
 pub use error::HwError;
 pub use frame::Frame;
+pub use schemes::{
+    schemes_for, AxisReduction, BinningDomain, BinningMode, HardwareScheme, ReductionCaps,
+    HARDWARE_SCHEME_PREFIX,
+};
 pub use stage::{Stage, StageInfo, StagePosition};
 
 pub type HwResult<T> = Result<T, HwError>;

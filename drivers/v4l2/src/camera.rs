@@ -115,6 +115,7 @@ impl V4l2Camera {
             pixel_formats,
             hardware_binning: false,
             hardware_decimation: false,
+            hardware_schemes: Vec::new(),
             // V4L2 reports the control's range per control query; exposure is optional there.
             exposure_range_us: None,
         };

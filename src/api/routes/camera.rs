@@ -27,7 +27,7 @@ pub async fn get_camera(State(svc): State<Service>) -> ApiResult<Json<Value>> {
     ))
 }
 
-/// The largest binning factor a request may ask for: beyond what GenICam cameras offer (2–8),
+/// The largest binning (or decimation) factor a request may ask for: beyond what GenICam cameras offer (2–8),
 /// so the camera, not this check, names its own limit.
 pub const MAX_BINNING: u32 = 64;
 
@@ -45,6 +45,8 @@ pub struct CameraPatch {
     pub roi: Option<Option<SensorRoi>>,
     /// Hardware binning `[horizontal, vertical]`.
     pub binning: Option<(u32, u32)>,
+    /// Hardware decimation `[horizontal, vertical]` (one pixel of every block kept).
+    pub decimation: Option<(u32, u32)>,
 }
 
 /// Tells `"roi": null` (clear it) from no `roi` at all (keep it).
@@ -76,12 +78,14 @@ pub async fn patch_camera(
             ));
         }
     }
-    if let Some((h, v)) = patch.binning {
-        if !(1..=MAX_BINNING).contains(&h) || !(1..=MAX_BINNING).contains(&v) {
-            return Err(ApiError::invalid(
-                "binning",
-                format!("each factor 1 to {MAX_BINNING}"),
-            ));
+    for (field, factors) in [("binning", patch.binning), ("decimation", patch.decimation)] {
+        if let Some((h, v)) = factors {
+            if !(1..=MAX_BINNING).contains(&h) || !(1..=MAX_BINNING).contains(&v) {
+                return Err(ApiError::invalid(
+                    field,
+                    format!("each factor 1 to {MAX_BINNING}"),
+                ));
+            }
         }
     }
     let bench = svc.bench.clone();
@@ -93,6 +97,7 @@ pub async fn patch_camera(
             pixel_format: patch.pixel_format.unwrap_or(current.pixel_format),
             roi: patch.roi.unwrap_or(current.roi),
             binning: patch.binning.unwrap_or(current.binning),
+            decimation: patch.decimation.unwrap_or(current.decimation),
             ..current
         };
         bench.apply_camera(Owner::Direct, next)
