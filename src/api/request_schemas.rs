@@ -104,6 +104,11 @@ pub fn refinements() -> Vec<(&'static str, &'static str, Value)> {
         ),
         (
             "CameraPatch",
+            "decimation",
+            json!({ "prefixItems": [binning_factor(), binning_factor()], "minItems": 2 }),
+        ),
+        (
+            "CameraPatch",
             "pixel_format",
             json!({ "enum": ["mono8", "mono10", "mono12", "mono16", null] }),
         ),

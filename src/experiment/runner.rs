@@ -233,9 +233,9 @@ impl<'a> Session<'a> {
         if let Some(exposure_us) = plan.exposure_us {
             settings.exposure_us = exposure_us;
         }
-        if !plan.hardware_schemes.is_empty() {
-            (settings.binning, settings.decimation) = ((1, 1), (1, 1));
-        }
+        // Every frame the study synthesises from is a full-resolution frame, whatever binning
+        // someone left set (`PATCH /camera`): the sensor's own reduction only as `hw:` schemes.
+        (settings.binning, settings.decimation) = ((1, 1), (1, 1));
         if plan.exposure_us.is_some() || settings != session.full_resolution {
             let applied = bench.apply_camera(session.owner.clone(), settings)?;
             sink.event(
@@ -416,12 +416,15 @@ impl<'a> Session<'a> {
     }
 
     /// Puts the camera's binning and decimation back as the run found them (after a capture
-    /// with hardware schemes).
+    /// that changed them: hardware schemes, or a camera found binned).
     fn restore_readout(&self) -> Result<(), RunnerError> {
-        if self.plan.hardware_schemes.is_empty() {
+        let found = &self.status.camera.settings;
+        let full = (1, 1);
+        if self.plan.hardware_schemes.is_empty()
+            && (found.binning, found.decimation) == (full, full)
+        {
             return Ok(());
         }
-        let found = &self.status.camera.settings;
         let settings = CameraSettings {
             binning: found.binning,
             decimation: found.decimation,

@@ -22,8 +22,11 @@ async function loadBench() {
       ["gain", `${num(cam.settings.gain_db)} dB`],
       ["pixel format", String(cam.settings.pixel_format)],
       ["binning", (cam.settings.binning || []).join(" × ")],
+      ["decimation", (cam.settings.decimation || []).join(" × ")],
+      ["hardware schemes", (cam.info.hardware_schemes || []).map((h) => h.name).join(", ") || "none"],
       ["frames", cam.counters ? `${cam.counters.completed} completed, ${cam.counters.failed} failed, ${cam.counters.missing_packets} packets missing` : "—"],
     ]);
+    offerHardwareSchemes(cam.info.hardware_schemes || []);
     const form = $("#camera-form");
     if (document.activeElement?.form !== form) {
       form.exposure_us.value = cam.settings.exposure_us;
@@ -47,6 +50,18 @@ async function loadBench() {
   } catch (e) {
     kv($("#camera-state"), [["error", e.message]]);
   }
+}
+
+/** The camera's own binning/decimation as experiment schemes (unchecked), once per page. */
+function offerHardwareSchemes(schemes) {
+  const holder = $("#hardware-schemes");
+  if (!holder || holder.dataset.filled) return;
+  holder.dataset.filled = "1";
+  clear(holder, schemes.map((h) => {
+    const twin = h.equivalent_preset ? `, beside ${h.equivalent_preset}` : "";
+    const domain = h.binning_domain ? `, ${h.binning_domain} binning` : "";
+    return el("label", {}, el("input", { type: "checkbox", name: "scheme", value: h.name }), ` ${h.name} (on the sensor${twin}${domain})`);
+  }));
 }
 
 /** Decodes an uncompressed 8/16-bit grey baseline TIFF (what the daemon writes). */
