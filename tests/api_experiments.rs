@@ -493,7 +493,7 @@ async fn hardware_schemes_are_captured_beside_their_synthesised_twins() {
 }
 
 /// A camera without binning or decimation answers 422 naming the hardware scheme asked for, and
-/// an analysis of stored frames refuses `hw:` names (only the camera makes those frames).
+/// queues nothing (the refusals of `hw:` names elsewhere are unit tests of `experiment::request`).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_camera_without_the_features_refuses_hardware_schemes() {
     let tmp = tempfile::tempdir().unwrap();

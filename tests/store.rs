@@ -744,8 +744,17 @@ fn an_experiment_export_is_imported_as_a_dataset() {
         std::fs::read(store.dataset_dir(&rec.id).join("a_x5.tif")).unwrap(),
         tif
     );
-    // The run's own folder is untouched.
+    // The run's own folder is untouched, and its frames are not written a second time: the
+    // dataset's file is the same inode.
     assert!(frames.join("a_ref.tif").is_file());
+    {
+        use std::os::unix::fs::MetadataExt;
+        let inode = |p: &std::path::Path| std::fs::metadata(p).unwrap().ino();
+        assert_eq!(
+            inode(&frames.join("a_x5.tif")),
+            inode(&store.dataset_dir(&rec.id).join("a_x5.tif"))
+        );
+    }
     let missing = store.import_dataset_dir(&dir.path().join("nowhere"), "x", DatasetSource::Upload);
     assert!(matches!(missing, Err(StoreError::NotFound(_))));
     assert_eq!(store.list_datasets().unwrap().len(), 1);

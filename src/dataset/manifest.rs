@@ -77,6 +77,22 @@ pub struct Run {
     pub extra: Map<String, Value>,
 }
 
+/// The largest hardware binning or decimation factor a manifest may state (what any camera
+/// offers is 2 to 8).
+pub const MAX_CAPTURE_FACTOR: u32 = 64;
+
+impl Run {
+    /// Image px per mm in this run's frames: the dataset's scale (full resolution), divided by
+    /// the block of the hardware scheme the camera read the frames out in (the geometric mean of
+    /// its two axes).
+    pub fn frame_px_per_mm(&self, scale_px_per_mm: f64) -> f64 {
+        match &self.capture {
+            Some(c) => scale_px_per_mm / ((c.x.factor() * c.y.factor()) as f64).sqrt(),
+            None => scale_px_per_mm,
+        }
+    }
+}
+
 #[derive(Debug, thiserror::Error)]
 pub enum DatasetError {
     #[error("cannot read {path}: {source}")]
@@ -155,6 +171,42 @@ impl Manifest {
             }
             if !(run.stage.dx_mm.is_finite() && run.stage.dy_mm.is_finite()) {
                 return Err(format!("run {}: stage move is not finite", run.id));
+            }
+            self.check_capture(run)?;
+        }
+        Ok(())
+    }
+
+    /// A hardware run's capture mode (factors 1 to [`MAX_CAPTURE_FACTOR`]) and its twin: an
+    /// earlier run of this manifest at full resolution (the study compares with its first
+    /// scheme as it goes).
+    fn check_capture(&self, run: &Run) -> Result<(), String> {
+        let Some(capture) = &run.capture else {
+            return match run.twin_of {
+                Some(_) => Err(format!("run {}: twin_of without capture", run.id)),
+                None => Ok(()),
+            };
+        };
+        let factors = [capture.x.factor(), capture.y.factor()];
+        if factors
+            .iter()
+            .any(|f| !(1..=MAX_CAPTURE_FACTOR).contains(f))
+        {
+            return Err(format!(
+                "run {}: capture factors must be 1 to {MAX_CAPTURE_FACTOR}, got {factors:?}",
+                run.id
+            ));
+        }
+        if let Some(twin) = &run.twin_of {
+            let earlier = self.runs.iter().take_while(|r| r.id != run.id);
+            if !earlier
+                .into_iter()
+                .any(|r| r.id == *twin && r.capture.is_none())
+            {
+                return Err(format!(
+                    "run {}: twin_of '{twin}' must name an earlier full-resolution run",
+                    run.id
+                ));
             }
         }
         Ok(())
@@ -252,5 +304,44 @@ mod tests {
         ] {
             assert!(!is_plain_file_name(bad), "{bad}");
         }
+    }
+
+    /// A hardware run states a plausible capture mode and an earlier full-resolution twin.
+    #[test]
+    fn a_hardware_run_needs_sane_factors_and_an_earlier_twin() {
+        let caps = ffdic_hw::ReductionCaps {
+            binning_max: (2, 2),
+            binning_mode: Some(ffdic_hw::BinningMode::Average),
+            binning_domain: ffdic_hw::BinningDomain::Charge,
+            decimation_max: (2, 2),
+        };
+        let scheme = ffdic_hw::schemes_for(&caps).remove(0);
+        let mut m: Manifest = serde_json::from_str(EXAMPLE).unwrap();
+        let full = m.runs[0].clone();
+        let hw = Run {
+            id: "b-x5mm_hw".into(),
+            capture: Some(scheme.clone()),
+            twin_of: Some(full.id.clone()),
+            ..full.clone()
+        };
+        m.runs.push(hw.clone());
+        m.validate().unwrap();
+        assert_eq!(m.runs[1].frame_px_per_mm(26.0), 13.0);
+        assert_eq!(m.clone().full_resolution().1, 1);
+
+        let mut later = m.clone();
+        later.runs.reverse();
+        assert!(later.validate().unwrap_err().contains("earlier"));
+        let mut no_capture = m.clone();
+        no_capture.runs[1].capture = None;
+        assert!(no_capture
+            .validate()
+            .unwrap_err()
+            .contains("twin_of without capture"));
+        let mut zero = m.clone();
+        let mut bad = scheme;
+        bad.x = ffdic_hw::AxisReduction::Decimate { factor: 0 };
+        zero.runs[1].capture = Some(bad);
+        assert!(zero.validate().unwrap_err().contains("capture factors"));
     }
 }

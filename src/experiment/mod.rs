@@ -30,9 +30,9 @@ pub use maps::{field_map_svgs, map_file_name};
 pub use model_scene::ModelScene;
 pub use pool::pool_captures;
 pub use request::{
-    check_dic, check_run_name, check_schemes, ExperimentPlan, ExperimentRequest, FieldError,
-    SchemeSpec, MAX_FRAMES_AVERAGED, MAX_MOVES, MAX_PATTERNS, MAX_REPEATS, MAX_RUN_NAME_CHARS,
-    MAX_SCHEMES, MAX_SETTLE_MS, MAX_STATIC_FRAMES,
+    check_dic, check_run_name, check_schemes, is_hardware_scheme_name, ExperimentPlan,
+    ExperimentRequest, FieldError, SchemeSpec, MAX_FRAMES_AVERAGED, MAX_MOVES, MAX_PATTERNS,
+    MAX_REPEATS, MAX_RUN_NAME_CHARS, MAX_SCHEMES, MAX_SETTLE_MS, MAX_STATIC_FRAMES,
 };
 pub use runner::{run_experiment, BenchTimeouts, ExperimentOutcome, RunSink, RunnerError};
 pub use simulate::{pattern_dots, render_stage_frame, simulate_dataset, SimulateError};

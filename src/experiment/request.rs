@@ -164,7 +164,12 @@ impl ExperimentRequest {
             * (1 + hardware_schemes.len());
         if frames > MAX_FRAMES {
             return Err(field_error(
-                "repeats",
+                // The hardware schemes are to blame when the frames would fit without them.
+                if frames / (1 + hardware_schemes.len()) <= MAX_FRAMES {
+                    "schemes"
+                } else {
+                    "repeats"
+                },
                 format!("{frames} frames in all; at most {MAX_FRAMES}"),
             ));
         }
@@ -236,6 +241,13 @@ impl ExperimentRequest {
                 ));
             }
             hardware.push(scheme.clone());
+        }
+        if synthesised.is_empty() {
+            // A hardware scheme's increase is taken over its twin's first synthesised scheme.
+            return Err(field_error(
+                "schemes",
+                "at least one synthesised scheme (e.g. ff100) beside the hardware ones",
+            ));
         }
         Ok((synthesised, hardware))
     }
@@ -353,12 +365,13 @@ pub fn check_run_name(name: &str) -> Result<(), FieldError> {
 /// The `hw:` name of a scheme spec, if it names a hardware scheme.
 fn hardware_name(spec: &SchemeSpec) -> Option<&str> {
     match spec {
-        SchemeSpec::Preset(name) if is_hardware_name(name) => Some(name),
+        SchemeSpec::Preset(name) if is_hardware_scheme_name(name) => Some(name),
         _ => None,
     }
 }
 
-fn is_hardware_name(name: &str) -> bool {
+/// Whether a scheme name names one of the camera's own schemes (`hw:…`, any case).
+pub fn is_hardware_scheme_name(name: &str) -> bool {
     name.get(..HARDWARE_SCHEME_PREFIX.len())
         .is_some_and(|p| p.eq_ignore_ascii_case(HARDWARE_SCHEME_PREFIX))
 }
@@ -521,5 +534,44 @@ mod tests {
         .plan(&BenchLimits::analysis_only(26.0))
         .unwrap_err();
         assert_eq!(fixed_target.field, "new_layout_per_repeat");
+    }
+
+    #[test]
+    fn hardware_schemes_come_from_the_camera_and_need_a_synthesised_twin() {
+        let caps = ffdic_hw::ReductionCaps {
+            binning_max: (2, 2),
+            binning_mode: Some(ffdic_hw::BinningMode::Average),
+            binning_domain: ffdic_hw::BinningDomain::Digital,
+            decimation_max: (1, 1),
+        };
+        let with_binning = BenchLimits {
+            hardware_schemes: ffdic_hw::schemes_for(&caps),
+            ..limits()
+        };
+        let plan = |schemes: &str, l: &BenchLimits| {
+            let r: ExperimentRequest =
+                serde_json::from_str(&format!(r#"{{"schemes":{schemes}}}"#)).unwrap();
+            r.plan(l)
+        };
+        let p = plan(r#"["ff100","HW:BIN2X2-AVERAGE"]"#, &with_binning).unwrap();
+        assert_eq!(p.schemes.len(), 1);
+        assert_eq!(p.hardware_schemes[0].name, "hw:bin2x2-average");
+        let e = plan(r#"["ff100","hw:dec2x2"]"#, &with_binning).unwrap_err();
+        assert_eq!(e.field, "schemes[1]");
+        assert!(e.reason.contains("'hw:dec2x2'") && e.reason.contains("hw:bin2x2-average"));
+        let e = plan(r#"["ff100","hw:bin2x2-average"]"#, &limits()).unwrap_err();
+        assert!(e.reason.contains("offers: none"), "{e}");
+        let e = plan(r#"["hw:bin2x2-average"]"#, &with_binning).unwrap_err();
+        assert_eq!(e.field, "schemes");
+        let e = plan(
+            r#"["ff100","hw:bin2x2-average","hw:bin2x2-average"]"#,
+            &with_binning,
+        )
+        .unwrap_err();
+        assert_eq!(e.field, "schemes[2]");
+        // An analysis of stored frames cannot ask for the camera's own schemes.
+        let e = check_schemes(&[SchemeSpec::Preset("hw:bin2x2-average".into())]).unwrap_err();
+        assert_eq!(e.field, "schemes[0]");
+        assert!(e.reason.contains("hardware scheme"), "{e}");
     }
 }

@@ -209,7 +209,8 @@ struct Session<'a> {
 }
 
 impl<'a> Session<'a> {
-    /// Reads the bench, sets the exposure the plan asks for and homes the stage.
+    /// Reads the bench, sets the exposure the plan asks for and full resolution (no binning or
+    /// decimation, checked on read-back), and homes the stage.
     fn prepare(
         plan: &'a ExperimentPlan,
         bench: &'a BenchHandle,
@@ -241,14 +242,21 @@ impl<'a> Session<'a> {
             sink.event(
                 EventKind::CameraSet,
                 0.0,
-                &format!("exposure {} µs", applied.exposure_us),
+                &format!(
+                    "exposure {} µs, binning {:?}, decimation {:?}",
+                    applied.exposure_us, applied.binning, applied.decimation
+                ),
                 json!({ "settings": applied }),
             );
             session.full_resolution = applied;
+            session.select(None)?;
         }
         if session.status.stage.is_some() {
             sink.event(EventKind::Homing, 0.0, "homing the stage", Value::Null);
-            bench.home(session.owner.clone(), timeouts.home)?;
+            if let Err(e) = bench.home(session.owner.clone(), timeouts.home) {
+                let _ = session.restore_readout();
+                return Err(e.into());
+            }
         }
         Ok(session)
     }
@@ -486,7 +494,7 @@ impl<'a> Session<'a> {
 }
 
 /// The study of the captured frames (every pair with every scheme), and the u, v and strain maps
-/// of each pattern's first run with every scheme: the rows (one per capture, run and scheme) and
+/// of each pattern's first run with every synthesised scheme (none for hardware runs): the rows (one per capture, run and scheme) and
 /// the maps' files.
 fn analyse(
     plan: &ExperimentPlan,

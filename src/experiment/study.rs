@@ -37,7 +37,8 @@ pub enum StudyError {
     },
 }
 
-/// Percent increase of each standard deviation over the same run's first (100 %) scheme.
+/// Percent increase of each standard deviation over the same run's first (100 %) scheme — for a
+/// hardware scheme's run, over its twin's first scheme.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Increase {
     #[serde(deserialize_with = "f64_or_nan")]
@@ -134,7 +135,15 @@ pub fn analyze_dataset_with(
         .sum();
     let mut rows: Vec<StudyRow> = Vec::with_capacity(total);
     let mut frames = RunFrames::default();
-    // The baseline (first scheme) of every full-resolution run a hardware run is the twin of.
+    // The baseline (first scheme) of every full-resolution run a hardware run is the twin of,
+    // kept until its last hardware run has used it.
+    let mut pending: Vec<(&str, usize)> = Vec::new();
+    for twin in manifest.runs.iter().filter_map(|r| r.twin_of.as_deref()) {
+        match pending.iter_mut().find(|(id, _)| *id == twin) {
+            Some((_, n)) => *n += 1,
+            None => pending.push((twin, 1)),
+        }
+    }
     let mut twins: Vec<(String, usize, DicResult)> = Vec::new();
     for run in &manifest.runs {
         let (reference, deformed) = frames.read(dir, run)?;
@@ -175,19 +184,24 @@ pub fn analyze_dataset_with(
             let result = PreparedReference::new(&reference, dic)
                 .and_then(|p| p.correlate(&deformed, None))
                 .map_err(dic_error(&scheme))?;
-            let base = run.twin_of.as_ref().and_then(|twin| {
-                twins
-                    .iter()
-                    .find(|(id, _, _)| id == twin)
-                    .map(|(_, i, r)| (*i, r))
-            });
+            let twin = run
+                .twin_of
+                .as_ref()
+                .and_then(|twin| twins.iter().position(|(id, _, _)| id == twin));
+            let base = twin.map(|k| (twins[k].1, &twins[k].2));
             row(&scheme, &result, base)?;
+            if let Some(k) = twin {
+                let left = pending.iter_mut().find(|(id, _)| *id == twins[k].0);
+                if let Some((_, n)) = left {
+                    *n -= 1;
+                    if *n == 0 {
+                        twins.swap_remove(k);
+                    }
+                }
+            }
             continue;
         }
-        let is_twin = manifest
-            .runs
-            .iter()
-            .any(|r| r.twin_of.as_deref() == Some(run.id.as_str()));
+        let is_twin = pending.iter().any(|(id, n)| *id == run.id && *n > 0);
         let mut baseline: Option<(usize, DicResult)> = None;
         for scheme in schemes {
             let result =
@@ -220,19 +234,28 @@ fn hardware_geometry(scheme: &ffdic_hw::HardwareScheme) -> Scheme {
     }
 }
 
-/// The frames of one run after another: runs of one pattern share the reference, read once.
+/// The frames of one run after another: runs of one pattern share the reference, read once
+/// (a few are kept: an experiment with hardware schemes alternates between the full-resolution
+/// reference and each scheme's).
 #[derive(Default)]
 struct RunFrames {
-    reference: Option<(String, Image)>,
+    references: Vec<(String, Image)>,
 }
+
+/// References kept by [`RunFrames`]: the full-resolution one and three hardware schemes'.
+const REFERENCES_KEPT: usize = 4;
 
 impl RunFrames {
     fn read(&mut self, dir: &Path, run: &Run) -> Result<(Image, Image), StudyError> {
-        let reference = match &self.reference {
-            Some((name, img)) if *name == run.reference => img.clone(),
-            _ => {
+        let cached = self.references.iter().find(|(n, _)| *n == run.reference);
+        let reference = match cached {
+            Some((_, img)) => img.clone(),
+            None => {
                 let (img, _) = read_tiff(&dir.join(&run.reference))?;
-                self.reference = Some((run.reference.clone(), img.clone()));
+                if self.references.len() == REFERENCES_KEPT {
+                    self.references.remove(0);
+                }
+                self.references.push((run.reference.clone(), img.clone()));
                 img
             }
         };
@@ -281,8 +304,8 @@ fn increase(base: &Summary, s: &Summary) -> Increase {
 }
 
 /// The paired bootstrap interval of every % increase of `result` over `base`: the same blocks
-/// of the same grid drawn in both (their errors are correlated: one pair of frames, reduced
-/// twice). None when the grids differ in shape or hold too few blocks.
+/// of the same grid drawn in both (their errors are correlated: one pair of frames reduced
+/// twice, or a hardware scheme's frames of the same print and move as the twin's). None when the grids differ in shape or hold too few blocks.
 fn increase_interval(base: &DicResult, result: &DicResult) -> Option<IncreaseInterval> {
     let (nx, ny) = (result.grid.nx(), result.grid.ny());
     if (base.grid.nx(), base.grid.ny()) != (nx, ny) || base.points.len() != result.points.len() {

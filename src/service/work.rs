@@ -92,10 +92,21 @@ pub fn experiment(service: Service, plan: ExperimentPlan) -> Work {
             &format!("frames registered as dataset {}", dataset.id),
             json!({ "dataset_id": dataset.id }),
         );
+        let hardware_runs = outcome
+            .manifest
+            .runs
+            .iter()
+            .filter(|r| r.capture.is_some())
+            .count();
+        let full_resolution_runs = outcome.manifest.runs.len() - hardware_runs;
+        let hardware = if hardware_runs > 0 {
+            format!(" and {hardware_runs} runs in the camera's own schemes")
+        } else {
+            String::new()
+        };
         Ok(JobOutput {
             message: format!(
-                "{} runs x {} schemes analysed; frames are dataset {}",
-                outcome.manifest.runs.len(),
+                "{full_resolution_runs} runs x {} schemes{hardware} analysed; frames are dataset {}",
                 plan.schemes.len(),
                 dataset.id
             ),

@@ -143,7 +143,11 @@ impl RunStore {
         }
         let (width, height) = match &manifest.camera {
             Some(c) => (c.width, c.height),
-            None => tiff_size(&dir.join(&manifest.runs[0].reference))?,
+            // The full-resolution frames' size (a hardware scheme's frames are smaller).
+            None => {
+                let first = manifest.runs.iter().find(|r| r.capture.is_none());
+                tiff_size(&dir.join(&first.unwrap_or(&manifest.runs[0]).reference))?
+            }
         };
         let name = if name.trim().is_empty() {
             manifest.name.clone()
@@ -186,8 +190,8 @@ impl RunStore {
         Ok(record)
     }
 
-    /// Copies the dataset folder `src` (e.g. an experiment's `frames/`) into the store through a
-    /// staging folder and commits it. Hidden files are left out; symbolic links are refused.
+    /// Brings the dataset folder `src` (e.g. an experiment's `frames/`) into the store through a
+    /// staging folder (hard links on the same filesystem, copies elsewhere) and commits it. Hidden files are left out; symbolic links are refused.
     pub fn import_dataset_dir(
         &self,
         src: &Path,
@@ -204,10 +208,16 @@ impl RunStore {
             if let Some(parent) = to.parent() {
                 std::fs::create_dir_all(parent).map_err(io(parent))?;
             }
-            std::fs::copy(&from, &to).map_err(io(&from))?;
-            std::fs::File::open(&to)
-                .and_then(|f| f.sync_all())
-                .map_err(io(&to))?;
+            // A frame the store already holds (an experiment's export in its run folder) is
+            // linked, not written again: its bytes exist once on disk, in both places. Every
+            // store file is written under a temporary name and renamed, never rewritten in
+            // place, so neither side can change the other. Across filesystems: a copy.
+            if std::fs::hard_link(&from, &to).is_err() {
+                std::fs::copy(&from, &to).map_err(io(&from))?;
+                std::fs::File::open(&to)
+                    .and_then(|f| f.sync_all())
+                    .map_err(io(&to))?;
+            }
         }
         self.commit_dataset(staging, name, source)
     }

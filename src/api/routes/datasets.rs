@@ -201,7 +201,7 @@ fn check_frames(dir: &std::path::Path, m: &Manifest) -> ApiResult<()> {
             ref_img,
             &deformed,
             (run.stage.dx_mm, run.stage.dy_mm),
-            m.scale_px_per_mm,
+            run.frame_px_per_mm(m.scale_px_per_mm),
         )
         .map_err(|e| ApiError::invalid(format!("runs[{}].stage", run.id), e.to_string()))?;
         for name in &run.repeat {
@@ -468,11 +468,16 @@ pub struct DatasetRun {
     /// Commanded stage move, mm.
     pub dx_mm: f64,
     pub dy_mm: f64,
-    /// The same move in full-resolution px (× scale_px_per_mm).
+    /// The same move in px of the run's frames (× scale_px_per_mm at full resolution, over the
+    /// hardware scheme's block otherwise).
     pub dx_px: f64,
     pub dy_px: f64,
     /// Further static frames of the reference position.
     pub static_repeats: usize,
+    /// The camera's own scheme the frames were read out in (`hw:…`); null: full resolution.
+    pub capture: Option<String>,
+    /// With `capture`: the full-resolution run of the same pattern and move.
+    pub twin_of: Option<String>,
 }
 
 /// `GET /datasets/{id}/details`: what the manifest and the frames say of the measurement.
@@ -530,9 +535,11 @@ pub async fn details(
                         deformed: r.deformed.clone(),
                         dx_mm: r.stage.dx_mm,
                         dy_mm: r.stage.dy_mm,
-                        dx_px: r.stage.dx_mm * scale,
-                        dy_px: r.stage.dy_mm * scale,
+                        dx_px: r.stage.dx_mm * r.frame_px_per_mm(scale),
+                        dy_px: r.stage.dy_mm * r.frame_px_per_mm(scale),
                         static_repeats: r.repeat.len(),
+                        capture: r.capture.as_ref().map(|c| c.name.clone()),
+                        twin_of: r.twin_of.clone(),
                     })
                     .collect(),
             })
