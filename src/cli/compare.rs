@@ -134,6 +134,13 @@ pub fn comparison_text(cmp: &Comparison) -> String {
         ],
         &rows,
     );
+    if cmp.hardware_runs_set_aside > 0 {
+        s.push_str(&format!(
+            "{} runs read out in the camera's own binning or decimation were set aside: the \
+             model is compared with full-resolution runs\n",
+            cmp.hardware_runs_set_aside
+        ));
+    }
     let images: Vec<Vec<String>> = cmp
         .images
         .iter()

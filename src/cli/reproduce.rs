@@ -114,12 +114,9 @@ pub fn run(args: &ReproduceArgs) -> Result<()> {
         repeats: args.repeats.map_or(spec.repeats, |n| n as usize),
         new_layout_per_repeat: args.new_layouts || spec.new_layout_per_repeat,
         settle_ms: 0,
-        // The model is compared with the full-resolution runs: the camera's own schemes
-        // (`hw:`) are the study's, not the comparison's.
         schemes: spec
             .schemes
             .iter()
-            .filter(|s| !ffdic::experiment::is_hardware_scheme_name(s))
             .cloned()
             .map(SchemeSpec::Preset)
             .collect(),
@@ -237,9 +234,12 @@ fn model_story(
         .with_context(|| format!("experiment {experiment} registered no dataset"))?;
     let dataset = service.store.get_dataset(&dataset_id)?;
     let request = CompareRequest {
+        // The model is compared with the full-resolution runs: the camera's own schemes
+        // (`hw:`) are the study's, not the comparison's.
         schemes: spec
             .schemes
             .iter()
+            .filter(|s| !ffdic::experiment::is_hardware_scheme_name(s))
             .cloned()
             .map(SchemeSpec::Preset)
             .collect(),
