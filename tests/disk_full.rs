@@ -2,7 +2,7 @@
 //! ever, and cancel must end it or say why it cannot. The data folder sits on a small tmpfs the
 //! test mounts (root, as in CI); the job fills the disk itself, so its end cannot be written.
 
-use ffdic::service::{JobOutput, Jobs, Lane};
+use ffdic::service::{JobOutput, JobResult, Jobs, Lane};
 use ffdic::store::{RunKind, RunStatus, RunStore};
 use serde_json::json;
 use std::io::Write;
@@ -83,6 +83,7 @@ fn a_run_whose_end_cannot_be_written_ends_once_space_returns_and_cancel_says_why
                 fill(&filler_in_job);
                 Ok(JobOutput {
                     message: "done".into(),
+                    result: JobResult::Files,
                 })
             }),
         )

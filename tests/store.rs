@@ -806,3 +806,49 @@ fn a_damaged_index_is_rebuilt_at_open() {
     let listed = store.list(None, None, 1000).unwrap();
     assert_eq!(listed.len(), ids.len());
 }
+
+/// A job's typed result is kept for an in-process caller only when it asked (`keep_results`),
+/// handed out once, and never kept for a daemon (nobody would take it).
+#[test]
+fn job_results_are_kept_only_when_asked_and_taken_once() {
+    use ffdic::service::{JobOutput, JobResult, Jobs, Lane};
+    let run = |jobs: &Jobs| {
+        let (record, _) = jobs
+            .submit(
+                RunKind::Analysis,
+                Lane::Compute,
+                json!({}),
+                None,
+                None,
+                Box::new(|_| {
+                    Ok(JobOutput {
+                        message: "done".into(),
+                        result: JobResult::Study {
+                            rows: Vec::new(),
+                            captures: Vec::new(),
+                        },
+                    })
+                }),
+            )
+            .unwrap();
+        let t0 = std::time::Instant::now();
+        while !jobs.store().get(&record.id).unwrap().status.is_terminal() {
+            assert!(t0.elapsed().as_secs() < 30, "the job never ended");
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+        record.id
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let jobs = Jobs::start(Arc::new(open(dir.path())));
+    let id = run(&jobs);
+    assert!(jobs.take_result(&id).is_none(), "a daemon keeps nothing");
+    jobs.keep_results();
+    let id = run(&jobs);
+    assert!(matches!(
+        jobs.take_result(&id),
+        Some(JobResult::Study { .. })
+    ));
+    assert!(jobs.take_result(&id).is_none(), "taken once");
+    jobs.cancel_all();
+    jobs.join_workers(std::time::Duration::from_secs(5));
+}

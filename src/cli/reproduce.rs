@@ -14,8 +14,8 @@ use ffdic::experiment::{
     StudyRow,
 };
 use ffdic::service::{
-    mock_bench, CameraConfig, CompareRequest, DaemonConfig, MockBinning, MockReduction, NewModel,
-    Service, PAPER_BENCH_DISTORTION_TOML,
+    mock_bench, CameraConfig, CompareRequest, DaemonConfig, JobResult, MockBinning, MockReduction,
+    NewModel, Service, PAPER_BENCH_DISTORTION_TOML,
 };
 use ffdic::store::{RunId, RunRecord, RunStatus};
 use std::path::PathBuf;
@@ -105,6 +105,8 @@ pub fn run(args: &ReproduceArgs) -> Result<()> {
         Duration::from_millis(5),
     )?;
     let (service, _) = Service::start(config, hardware)?;
+    // This process waits for its own jobs: their typed results, not their files read back.
+    service.jobs.keep_results();
     let request = ExperimentRequest {
         name: spec.name.clone(),
         patterns: spec.patterns.clone(),
@@ -138,21 +140,11 @@ pub fn run(args: &ReproduceArgs) -> Result<()> {
     };
     service.stop(Duration::from_secs(5));
     let run_dir = service.store.run_dir(&record.id);
-    let rows_path = run_dir.join("results/rows.json");
-    let rows: Vec<StudyRow> = serde_json::from_slice(
-        &std::fs::read(&rows_path)
-            .with_context(|| format!("cannot read {}", rows_path.display()))?,
-    )?;
-    let captures_path = run_dir.join("results/captures.json");
-    let captures: Vec<StudyRow> = match std::fs::read(&captures_path) {
-        Ok(bytes) => serde_json::from_slice(&bytes)
-            .with_context(|| format!("cannot read {}", captures_path.display()))?,
-        // A single capture writes no captures.json.
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
-        Err(e) => {
-            return Err(e).with_context(|| format!("cannot read {}", captures_path.display()))
-        }
-    };
+    let (rows, captures): (Vec<StudyRow>, Vec<StudyRow>) =
+        match service.jobs.take_result(&record.id) {
+            Some(JobResult::Study { rows, captures }) => (rows, captures),
+            _ => bail!("experiment {} succeeded without a study", record.id),
+        };
     if args.json {
         let mut doc = study_json(&rows, &captures);
         if !captures.is_empty() {
@@ -251,20 +243,22 @@ fn model_story(
         let (job, _) = service.submit_comparison(&dataset.id, request, None)?;
         wait(service, &job.id, what, show)?;
         jobs.push(job.id.to_string());
-        let cmp: serde_json::Value = serde_json::from_slice(
-            &service
-                .store
-                .read_file(&job.id, "results/comparison.json")?,
-        )?;
-        cmp["discrepancy_px"]
-            .as_f64()
-            .context("comparison.json has no discrepancy_px")
+        match service.jobs.take_result(&job.id) {
+            Some(JobResult::Comparison(cmp)) => Ok(cmp.discrepancy_px),
+            _ => bail!("comparison {} succeeded without a comparison", job.id),
+        }
     };
     let baseline_px = comparison(&request, "comparing with the baseline model")?;
     let (job, _) = service.submit_diagnosis(&dataset.id, &request, None)?;
     wait(service, &job.id, "diagnosing", show)?;
-    let diagnosis: Diagnosis =
-        serde_json::from_slice(&service.store.read_file(&job.id, "results/diagnosis.json")?)?;
+    let Some(JobResult::Diagnosis(rounds)) = service.jobs.take_result(&job.id) else {
+        bail!("diagnosis {} succeeded without a diagnosis", job.id);
+    };
+    let diagnosis: Diagnosis = rounds
+        .diagnoses
+        .first()
+        .cloned()
+        .with_context(|| format!("diagnosis {} ran no round", job.id))?;
     let diagnosis_job = job.id.to_string();
     let winner = diagnosis
         .candidates
@@ -274,11 +268,8 @@ fn model_story(
     let (model, after_px) = match &winner {
         None => (None, None),
         Some(_) => {
-            let toml = String::from_utf8(
-                service
-                    .store
-                    .read_file(&job.id, "results/winner-model.toml")?,
-            )?;
+            // The model with every verdict added (one round: the winner).
+            let toml = rounds.final_model.to_toml();
             let (added, _) = service.add_model(&NewModel { toml })?;
             let name = added.summary.name;
             let after = comparison(

@@ -55,6 +55,8 @@ pub struct ExperimentOutcome {
     /// The dataset export: `frames/` of the run folder.
     pub frames_dir: PathBuf,
     pub rows: Vec<StudyRow>,
+    /// Every capture's own rows when the plan repeats captures (empty for one capture).
+    pub captures: Vec<StudyRow>,
     pub files: Vec<String>,
 }
 
@@ -122,6 +124,11 @@ fn capture_and_analyse(
         manifest: captured.manifest,
         frames_dir: captured.frames_dir,
         rows,
+        captures: if plan.repeats > 1 {
+            captures
+        } else {
+            Vec::new()
+        },
         files: files.written,
     })
 }
@@ -556,9 +563,10 @@ fn analyse(
     Ok((captures, map_files))
 }
 
-/// The study's tables and figures; the rows as the library holds them, for clients that read
-/// them back (`ffdic reproduce`), and with repeats every capture's own rows beside them. Returns
-/// the rows pooled over the captures.
+/// The study's tables and figures; the rows as the library serialises them (`rows.json`, every
+/// field of `StudyRow`), and with repeats every capture's own rows beside them. Returns the rows
+/// pooled over the captures (an in-process caller takes them from the job's result, not from
+/// these files).
 fn write_results(
     plan: &ExperimentPlan,
     manifest: &Manifest,

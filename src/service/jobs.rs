@@ -3,7 +3,8 @@
 //! a time on the bench lane, others wait their turn — and its events go to the run's log and to
 //! live subscribers (SSE). Cancellation is cooperative: the work checks its token between steps.
 
-use crate::experiment::RunSink;
+use crate::diagnose::{Comparison, Rounds};
+use crate::experiment::{RunSink, StudyRow};
 use crate::run_event::EventKind;
 use crate::store::{DatasetId, Event, RunId, RunKind, RunRecord, RunStatus, RunStore, StoreError};
 use serde_json::Value;
@@ -23,11 +24,33 @@ pub enum Lane {
     Compute,
 }
 
-/// What a job reports when it ends well: a message (the files it wrote are in its record's
-/// `result_files`).
+/// What a job reports when it ends well: a message for its record (the files it wrote are in
+/// the record's `result_files`) and its typed result, which a caller in the same process may
+/// take ([`Jobs::take_result`]) instead of reading the files back by key.
 pub struct JobOutput {
     pub message: String,
+    pub result: JobResult,
 }
+
+/// A finished job's result as the library holds it.
+#[derive(Clone, Debug)]
+pub enum JobResult {
+    /// An experiment's or an analysis' study: the rows pooled over captures, and every
+    /// capture's own rows (empty for a single capture).
+    Study {
+        rows: Vec<StudyRow>,
+        captures: Vec<StudyRow>,
+    },
+    Comparison(Box<Comparison>),
+    /// Every round of a diagnosis and the model with every verdict added.
+    Diagnosis(Box<Rounds>),
+    /// Nothing beyond the files the job wrote (a design map's merged files).
+    Files,
+}
+
+/// Results kept for [`Jobs::take_result`]; `None`: none are kept (the daemon's clients read
+/// the files).
+type KeptResults = Arc<Mutex<Option<HashMap<RunId, JobResult>>>>;
 
 #[derive(Debug, thiserror::Error)]
 pub enum JobError {
@@ -105,6 +128,7 @@ impl RunSink for JobContext {
 pub struct Jobs {
     store: Arc<RunStore>,
     live: Arc<Mutex<HashMap<RunId, Live>>>,
+    kept: KeptResults,
     lanes: Mutex<HashMap<Lane, mpsc::Sender<Queued>>>,
     workers: Mutex<Vec<(Lane, std::thread::JoinHandle<()>)>>,
 }
@@ -114,6 +138,7 @@ impl Jobs {
         let jobs = Arc::new(Self {
             store,
             live: Arc::new(Mutex::new(HashMap::new())),
+            kept: Arc::new(Mutex::new(None)),
             lanes: Mutex::new(HashMap::new()),
             workers: Mutex::new(Vec::new()),
         });
@@ -121,9 +146,10 @@ impl Jobs {
             let (tx, rx) = mpsc::channel::<Queued>();
             let store = jobs.store.clone();
             let live = jobs.live.clone();
+            let kept = jobs.kept.clone();
             let handle = std::thread::Builder::new()
                 .name(format!("jobs-{lane:?}").to_lowercase())
-                .spawn(move || worker(rx, store, live))
+                .spawn(move || worker(rx, store, live, kept))
                 .expect("spawn a job worker");
             jobs.lanes.lock().expect("lanes").insert(lane, tx);
             jobs.workers.lock().expect("workers").push((lane, handle));
@@ -133,6 +159,21 @@ impl Jobs {
 
     pub fn store(&self) -> &Arc<RunStore> {
         &self.store
+    }
+
+    /// From now on, keeps every successful job's typed result until [`Jobs::take_result`]
+    /// takes it: for a caller in this process that waits for its jobs (`ffdic reproduce`); a
+    /// daemon does not keep them (nobody would take them).
+    pub fn keep_results(&self) {
+        self.kept
+            .lock()
+            .expect("kept results")
+            .get_or_insert_with(HashMap::new);
+    }
+
+    /// The typed result of run `id`, once it has succeeded (with [`Jobs::keep_results`]).
+    pub fn take_result(&self, id: &RunId) -> Option<JobResult> {
+        self.kept.lock().expect("kept results").as_mut()?.remove(id)
     }
 
     /// Lanes whose worker has ended although the server still takes work: `/health` reports
@@ -297,6 +338,7 @@ fn worker(
     rx: mpsc::Receiver<Queued>,
     store: Arc<RunStore>,
     live: Arc<Mutex<HashMap<RunId, Live>>>,
+    kept: KeptResults,
 ) {
     while let Ok(job) = rx.recv() {
         let Some((cancel, events, work_done)) = live
@@ -335,7 +377,12 @@ fn worker(
         };
         let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| (job.work)(&ctx)));
         let (status, message) = match outcome {
-            Ok(Ok(out)) => (RunStatus::Succeeded, out.message),
+            Ok(Ok(out)) => {
+                if let Some(results) = kept.lock().expect("kept results").as_mut() {
+                    results.insert(job.id.clone(), out.result);
+                }
+                (RunStatus::Succeeded, out.message)
+            }
             Ok(Err(JobError::Cancelled)) => (RunStatus::Cancelled, "cancelled".to_string()),
             Ok(Err(JobError::Failed(m))) => (RunStatus::Failed, m),
             Err(_) => (

@@ -14,7 +14,7 @@ pub use config::{
     MockBinning, MockReduction, StageConfig, SweepLimits, DEFAULT_CONFIG_TOML, PAPER_BENCH_TOML,
 };
 pub use hardware::{mock_bench, open_bench, HardwareError, SwappableScene};
-pub use jobs::{JobContext, JobError, JobOutput, Jobs, Lane, Work};
+pub use jobs::{JobContext, JobError, JobOutput, JobResult, Jobs, Lane, Work};
 pub use models::{
     embedded_model, find_analysis_model, ModelDetail, ModelLookupError, ModelSource,
     ModelStoreError, ModelSummary, NewModel, EMBEDDED_MODELS, PAPER_BENCH_DISTORTION_TOML,

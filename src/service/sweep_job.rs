@@ -4,7 +4,7 @@
 //! outputs go: `results/map.csv`, `results/map.json`, `results/recommendations.txt` and
 //! `plots/*.svg`.
 
-use super::jobs::{JobContext, JobError, JobOutput, Work};
+use super::jobs::{JobContext, JobError, JobOutput, JobResult, Work};
 use super::{Service, SweepLimits};
 use crate::experiment::{FieldError, RunSink};
 use crate::model::ModelConfig;
@@ -101,6 +101,7 @@ pub fn sweep(plan: Plan) -> Work {
                 counts.tasks_run,
                 counts.shards_skipped
             ),
+            result: JobResult::Files,
         })
     })
 }

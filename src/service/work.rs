@@ -1,6 +1,6 @@
 //! What each kind of job does once its lane picks it up.
 
-use super::jobs::{JobContext, JobError, JobOutput, Work};
+use super::jobs::{JobContext, JobError, JobOutput, JobResult, Work};
 use super::Service;
 use crate::dataset::Manifest;
 use crate::diagnose::{
@@ -110,6 +110,10 @@ pub fn experiment(service: Service, plan: ExperimentPlan) -> Work {
                 plan.schemes.len(),
                 dataset.id
             ),
+            result: JobResult::Study {
+                rows: outcome.rows,
+                captures: outcome.captures,
+            },
         })
     })
 }
@@ -137,6 +141,10 @@ pub fn analysis(service: Service, dataset: DatasetId, plan: AnalysisPlan) -> Wor
         }
         Ok(JobOutput {
             message: format!("{} rows from dataset {dataset}", rows.len()),
+            result: JobResult::Study {
+                rows,
+                captures: Vec::new(),
+            },
         })
     })
 }
@@ -251,6 +259,7 @@ pub fn comparison(
                 "discrepancy {:.5} px against model {} ({})",
                 cmp.discrepancy_px, cmp.model.name, cmp.model.version
             ),
+            result: JobResult::Comparison(Box::new(cmp)),
         })
     })
 }
@@ -304,19 +313,21 @@ pub fn diagnosis(
             .map(|x| format!("{:.5}", x.discrepancy_px))
             .chain(std::iter::once(format!("{:.5}", r.final_discrepancy_px)))
             .collect();
+        let message = if r.verdicts.is_empty() {
+            format!(
+                "verdict none: no candidate explains the discrepancy of {:.5} ± {:.5} px",
+                first.discrepancy_px, first.discrepancy_se_px
+            )
+        } else {
+            format!(
+                "verdict {}: discrepancy {} px",
+                crate::model::effects::join_effects(&r.verdicts, ", "),
+                fall.join(" → ")
+            )
+        };
         Ok(JobOutput {
-            message: if r.verdicts.is_empty() {
-                format!(
-                    "verdict none: no candidate explains the discrepancy of {:.5} ± {:.5} px",
-                    first.discrepancy_px, first.discrepancy_se_px
-                )
-            } else {
-                format!(
-                    "verdict {}: discrepancy {} px",
-                    crate::model::effects::join_effects(&r.verdicts, ", "),
-                    fall.join(" → ")
-                )
-            },
+            message,
+            result: JobResult::Diagnosis(Box::new(r)),
         })
     })
 }
