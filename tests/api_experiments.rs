@@ -489,6 +489,17 @@ async fn hardware_schemes_are_captured_beside_their_synthesised_twins() {
     let settings: Value = daemon::get_json(&server.url("/camera")).await;
     assert_eq!(settings["settings"]["binning"], json!([1, 1]));
     assert_eq!(settings["settings"]["decimation"], json!([1, 1]));
+
+    // Each read-out mode has its own noise stream: the synthesised rows are those of the same
+    // request without hardware schemes, number for number.
+    request["schemes"] = json!(["ff100", "ff25"]);
+    let (_, alone) = run_to_results(&server, &request).await;
+    let alone = alone["rows"].as_array().unwrap();
+    assert_eq!(alone.len(), 4);
+    for a in alone {
+        let r = row(a["run"].as_str().unwrap(), a["scheme"].as_str().unwrap());
+        assert_eq!((&a["u"], &a["v"], &a["exx"]), (&r["u"], &r["v"], &r["exx"]), "{a}");
+    }
     server.stop().await;
 }
 

@@ -9,18 +9,20 @@ use crate::model::{
 };
 use ffdic_hw::{HardwareScheme, StagePosition};
 use ffdic_mocks::Scene;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Mutex;
 
 pub struct ModelScene {
     pub camera: Camera,
     pub bench: ModelConfig,
     pub dots: Vec<TargetDot>,
     pub seed: u64,
-    /// Exposures since this target was mounted: the noise of exposure k is seeded by (seed, k),
-    /// not by the camera's lifetime frame count, so an experiment (which mounts its targets and
-    /// holds the bench while it captures) gets the same frames whatever was captured before —
-    /// dashboard snapshots, earlier runs.
-    captures_since_mount: AtomicU64,
+    /// Exposures since this target was mounted, counted per read-out mode (full resolution
+    /// first, then each hardware scheme by name): the noise of exposure k is seeded by (seed,
+    /// mode, k), not by the camera's lifetime frame count, so an experiment (which mounts its
+    /// targets and holds the bench while it captures) gets the same frames whatever was captured
+    /// before — dashboard snapshots, earlier runs — and its full-resolution frames are the same
+    /// with or without hardware schemes captured between them.
+    captures_since_mount: Mutex<Vec<(Option<String>, u64)>>,
 }
 
 impl ModelScene {
@@ -38,7 +40,7 @@ impl ModelScene {
             bench,
             dots,
             seed,
-            captures_since_mount: AtomicU64::new(0),
+            captures_since_mount: Mutex::new(Vec::new()),
         })
     }
 
@@ -46,7 +48,10 @@ impl ModelScene {
     pub fn mount(&mut self, dots: Vec<TargetDot>, seed: u64) {
         self.dots = dots;
         self.seed = seed;
-        *self.captures_since_mount.get_mut() = 0;
+        self.captures_since_mount
+            .get_mut()
+            .expect("exposure counters")
+            .clear();
     }
 }
 
@@ -63,12 +68,36 @@ impl Scene for ModelScene {
         _frame_index: u64,
         readout: Option<&HardwareScheme>,
     ) -> Vec<u16> {
-        let exposure = self.captures_since_mount.fetch_add(1, Ordering::Relaxed);
+        let mode = readout.map(|h| h.name.clone());
+        let exposure = {
+            let mut counts = self.captures_since_mount.lock().expect("exposure counters");
+            match counts.iter_mut().find(|(m, _)| *m == mode) {
+                Some((_, n)) => {
+                    *n += 1;
+                    *n - 1
+                }
+                None => {
+                    counts.push((mode.clone(), 1));
+                    0
+                }
+            }
+        };
+        // Full resolution keeps the stream it always had; each hardware scheme (a camera offers
+        // one per geometry) gets its own, numbered by its binning and decimation factors.
+        let stream = match readout {
+            None => self.seed,
+            Some(h) => {
+                let ((bx, by), (dx, dy)) = h.settings();
+                let geometry =
+                    u64::from(bx) | u64::from(by) << 16 | u64::from(dx) << 32 | u64::from(dy) << 48;
+                crate::model::derive_seed(self.seed, 0x4B1D, geometry)
+            }
+        };
         let frame = crate::model::FrameSpec {
             stage_dx_mm: p.x_mm,
             stage_dy_mm: p.y_mm,
             moved: p.x_mm != 0.0 || p.y_mm != 0.0,
-            seed: crate::model::derive_seed(self.seed, 0xCA3E, exposure),
+            seed: crate::model::derive_seed(stream, 0xCA3E, exposure),
         };
         let readout = readout.map_or_else(SensorReadout::default, sensor_readout);
         let img = render_frame_read_out(
