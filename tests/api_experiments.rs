@@ -498,7 +498,11 @@ async fn hardware_schemes_are_captured_beside_their_synthesised_twins() {
     assert_eq!(alone.len(), 4);
     for a in alone {
         let r = row(a["run"].as_str().unwrap(), a["scheme"].as_str().unwrap());
-        assert_eq!((&a["u"], &a["v"], &a["exx"]), (&r["u"], &r["v"], &r["exx"]), "{a}");
+        assert_eq!(
+            (&a["u"], &a["v"], &a["exx"]),
+            (&r["u"], &r["v"], &r["exx"]),
+            "{a}"
+        );
     }
     server.stop().await;
 }
