@@ -9,12 +9,17 @@
 //! that one test) under `unshare -rn` and asserts the child passed.
 
 use ffdic::dic::{analyze, DicSettings};
-use ffdic::experiment::ModelScene;
+use ffdic::experiment::{
+    run_experiment, BenchHandle, BenchHardware, BenchLimits, BenchTimeouts, ExperimentRequest,
+    ModelScene, MoveSpec, PatternSpec, RunSink, SchemeSpec,
+};
 use ffdic::image::{Image, Roi};
 use ffdic::model::{Camera as ModelCamera, ModelConfig, SpecklePattern};
-use ffdic_aravis::{AravisCamera, FakeGvCamera, FillFn};
+use ffdic::run_event::EventKind;
+use ffdic_aravis::{AravisCamera, FakeGvCamera, FillFn, FillRequest};
 use ffdic_hw::{
-    Camera, CameraSettings, HwError, PixelFormat, SensorRoi, Stage, StagePosition, TriggerMode,
+    schemes_for, BinningDomain, BinningMode, Camera, CameraSettings, HardwareScheme, HwError,
+    PixelFormat, ReductionCaps, SensorRoi, Stage, StagePosition, TriggerMode,
 };
 use ffdic_mocks::{new_bench, MockStage, Scene};
 use std::process::Command;
@@ -80,11 +85,9 @@ fn to_image(f: &ffdic_hw::Frame) -> Image {
 const SCALE_PX_PER_MM: f64 = 20.0;
 const SENSOR: (u32, u32) = (512, 384);
 
-#[test]
-fn dic_recovers_a_stage_move_through_gige_vision() {
-    if !isolated("dic_recovers_a_stage_move_through_gige_vision") {
-        return;
-    }
+/// The paper's bench sensor (shot and read noise, 16-bit ADC) looking at print `b` on the mock
+/// stage, SENSOR px at SCALE_PX_PER_MM.
+fn bench_scene() -> Arc<ModelScene> {
     let model_camera = ModelCamera {
         width: SENSOR.0 as usize,
         height: SENSOR.1 as usize,
@@ -98,7 +101,7 @@ fn dic_recovers_a_stage_move_through_gige_vision() {
         std::path::Path::new("inline"),
     )
     .unwrap();
-    let scene = Arc::new(
+    Arc::new(
         ModelScene::new(
             model_camera,
             bench_model,
@@ -107,30 +110,12 @@ fn dic_recovers_a_stage_move_through_gige_vision() {
             5,
         )
         .unwrap(),
-    );
-    let bench = new_bench();
-    let mut stage = MockStage::new(bench.clone(), 50.0, Duration::from_millis(5));
-    stage.home(Duration::from_secs(1)).unwrap();
+    )
+}
 
-    // The simulator renders what the sensor sees where the stage is when the frame is made.
-    let frame_index = Arc::new(AtomicU64::new(0));
-    let fill: FillFn = {
-        let (scene, bench, frame_index) = (scene.clone(), bench.clone(), frame_index.clone());
-        Arc::new(move |w, h, exposure_us| {
-            if (w, h) != scene.size() {
-                return vec![0; w * h]; // not yet set to the scene's size: a black frame
-            }
-            let at = bench.lock().unwrap().position_at(Instant::now());
-            let i = frame_index.fetch_add(1, Ordering::SeqCst);
-            scene.render(at, exposure_us, 16, i, None)
-        })
-    };
-    let fake = FakeGvCamera::start("FFDIC-DIC", fill).expect("start the GigE Vision simulator");
-    let mut camera = AravisCamera::open(fake.address()).expect("open the camera by address");
-    assert_eq!(camera.info().serial, "FFDIC-DIC");
-    assert!(camera.info().pixel_formats.contains(&PixelFormat::Mono16));
-
-    let wanted = CameraSettings {
+/// Full resolution, 16 bit, the scene's size as the region.
+fn scene_settings() -> CameraSettings {
+    CameraSettings {
         exposure_us: 8000.0,
         pixel_format: PixelFormat::Mono16,
         roi: Some(SensorRoi {
@@ -140,7 +125,67 @@ fn dic_recovers_a_stage_move_through_gige_vision() {
             height: SENSOR.1,
         }),
         ..CameraSettings::default()
+    }
+}
+
+/// The read-out the simulator is set to, as a hardware scheme (None at full resolution); a
+/// combination no scheme names is None too and the frame goes out black.
+fn read_out_of(request: &FillRequest) -> Result<Option<HardwareScheme>, ()> {
+    if (request.binning, request.decimation) == ((1, 1), (1, 1)) {
+        return Ok(None);
+    }
+    let caps = ReductionCaps {
+        binning_max: (4, 4),
+        binning_mode: Some(if request.binning_average {
+            BinningMode::Average
+        } else {
+            BinningMode::Sum
+        }),
+        binning_domain: BinningDomain::Unknown,
+        decimation_max: (4, 4),
     };
+    schemes_for(&caps)
+        .into_iter()
+        .find(|s| s.settings() == (request.binning, request.decimation))
+        .map(Some)
+        .ok_or(())
+}
+
+/// The simulator renders what the sensor sees where the stage is when the frame is made, read
+/// out as the camera is set (binning, decimation); a frame of any other size goes out black
+/// (the region not yet set to the scene's).
+fn scene_fill(scene: Arc<ModelScene>, bench: ffdic_mocks::SharedBench) -> FillFn {
+    let frame_index = Arc::new(AtomicU64::new(0));
+    Arc::new(move |request: &FillRequest| {
+        let (w, h) = (request.width, request.height);
+        let Ok(readout) = read_out_of(request) else {
+            return vec![0; w * h];
+        };
+        if (w, h) != ffdic_mocks::output_size(scene.size(), readout.as_ref()) {
+            return vec![0; w * h];
+        }
+        let at = bench.lock().unwrap().position_at(Instant::now());
+        let i = frame_index.fetch_add(1, Ordering::SeqCst);
+        scene.render(at, request.exposure_us, 16, i, readout.as_ref())
+    })
+}
+
+#[test]
+fn dic_recovers_a_stage_move_through_gige_vision() {
+    if !isolated("dic_recovers_a_stage_move_through_gige_vision") {
+        return;
+    }
+    let scene = bench_scene();
+    let bench = new_bench();
+    let mut stage = MockStage::new(bench.clone(), 50.0, Duration::from_millis(5));
+    stage.home(Duration::from_secs(1)).unwrap();
+    let fill = scene_fill(scene, bench.clone());
+    let fake = FakeGvCamera::start("FFDIC-DIC", fill).expect("start the GigE Vision simulator");
+    let mut camera = AravisCamera::open(fake.address()).expect("open the camera by address");
+    assert_eq!(camera.info().serial, "FFDIC-DIC");
+    assert!(camera.info().pixel_formats.contains(&PixelFormat::Mono16));
+
+    let wanted = scene_settings();
     let applied = camera.apply(&wanted).unwrap();
     assert_eq!(
         applied, wanted,
@@ -201,9 +246,9 @@ fn pattern(x: usize, y: usize) -> u16 {
 }
 
 fn pattern_fill() -> FillFn {
-    Arc::new(|w, h, _| {
-        (0..h)
-            .flat_map(|y| (0..w).map(move |x| pattern(x, y)))
+    Arc::new(|r: &FillRequest| {
+        (0..r.height)
+            .flat_map(|y| (0..r.width).map(move |x| pattern(x, y)))
             .collect()
     })
 }
@@ -379,5 +424,204 @@ fn killed_camera_is_a_disconnect_not_a_short_frame_list() {
     assert_eq!(frames[1].data[64 + 5], pattern(5, 1));
     // The camera before the simulator: Aravis leaves control on drop, which needs an answer.
     drop(camera);
+    drop(fake);
+}
+
+/// Writes a run's files into a folder and keeps its events (the service writes them into the
+/// store; this is the same runner without HTTP).
+struct FolderSink {
+    dir: std::path::PathBuf,
+    events: std::sync::Mutex<Vec<String>>,
+}
+
+impl RunSink for FolderSink {
+    fn event(&self, kind: EventKind, _progress: f64, message: &str, _data: serde_json::Value) {
+        self.events
+            .lock()
+            .unwrap()
+            .push(format!("{kind:?}: {message}"));
+    }
+
+    fn write(&self, rel: &str, bytes: &[u8]) -> Result<std::path::PathBuf, String> {
+        let path = self.dir.join(rel);
+        std::fs::create_dir_all(path.parent().unwrap()).map_err(|e| e.to_string())?;
+        std::fs::write(&path, bytes).map_err(|e| e.to_string())?;
+        Ok(path)
+    }
+
+    fn cancelled(&self) -> bool {
+        false
+    }
+}
+
+/// Issue 17: a camera with SFNC decimation and an averaging binning mode (the simulator's
+/// description extended) offers the hardware schemes; an experiment naming two of them runs end
+/// to end over GigE Vision — every read-out applied and read back through the driver, frames of
+/// the binned and decimated size, rows beside their synthesised twins — and leaves the camera
+/// at full resolution.
+#[test]
+fn a_hardware_scheme_experiment_runs_through_gige_vision() {
+    if !isolated("a_hardware_scheme_experiment_runs_through_gige_vision") {
+        return;
+    }
+    let mock_bench = new_bench();
+    let mut stage = MockStage::new(mock_bench.clone(), 50.0, Duration::from_millis(5));
+    stage.home(Duration::from_secs(1)).unwrap();
+    let fake = FakeGvCamera::start_sfnc("FFDIC-HW", scene_fill(bench_scene(), mock_bench))
+        .expect("start the GigE Vision simulator with SFNC features");
+    let mut camera = AravisCamera::open(fake.address()).expect("open the camera by address");
+    let info = camera.info().clone();
+    assert!(info.hardware_binning && info.hardware_decimation);
+    let names: Vec<String> = info
+        .hardware_schemes
+        .iter()
+        .map(|s| s.name.clone())
+        .collect();
+    for wanted in ["hw:bin2x2-average", "hw:dec2-bin2-average", "hw:dec2x2"] {
+        assert!(names.iter().any(|n| n == wanted), "{wanted} in {names:?}");
+    }
+    let full_resolution = scene_settings();
+    camera.apply(&full_resolution).unwrap();
+    // The driver sets decimation on the camera and reads it back.
+    let dec = info
+        .hardware_schemes
+        .iter()
+        .find(|s| s.name == "hw:dec2x2")
+        .unwrap();
+    let applied = camera.apply(&dec.applied_to(&full_resolution)).unwrap();
+    assert_eq!((applied.binning, applied.decimation), ((1, 1), (2, 2)));
+    assert_eq!(applied.roi, full_resolution.roi);
+    let frame = camera.acquire(1, Duration::from_secs(5)).unwrap().remove(0);
+    assert_eq!((frame.width, frame.height), (256, 192));
+    assert!(
+        frame.mean() > 10_000.0,
+        "a rendered frame: {}",
+        frame.mean()
+    );
+    camera.apply(&full_resolution).unwrap();
+
+    let bench = BenchHandle::spawn(
+        BenchHardware {
+            camera: Box::new(camera),
+            stage: Some(Box::new(stage)),
+            targets: None,
+        },
+        Duration::from_secs(30),
+    );
+    let status = bench.status().unwrap();
+    let limits = BenchLimits {
+        scale_px_per_mm: SCALE_PX_PER_MM,
+        target_field_mm: None,
+        travel_x_mm: Some((-5.0, 5.0)),
+        travel_y_mm: Some((-5.0, 5.0)),
+        exposure_us: (10.0, 1e6),
+        hardware_schemes: status.camera.info.hardware_schemes.clone(),
+    };
+    let request = ExperimentRequest {
+        name: "gige-hardware-schemes".into(),
+        patterns: vec![PatternSpec::Preset("b".into())],
+        moves: vec![MoveSpec {
+            id: "m1".into(),
+            dx_mm: 0.3617,
+            dy_mm: -0.0843,
+        }],
+        step_series: Vec::new(),
+        static_frames: 0,
+        schemes: ["ff100", "ff25", "hw:bin2x2-average", "hw:dec2x2"]
+            .into_iter()
+            .map(|s| SchemeSpec::Preset(s.into()))
+            .collect(),
+        dic: DicSettings {
+            subset_px: 21,
+            step_px: 8,
+            ..DicSettings::default()
+        },
+        ..ExperimentRequest::default()
+    };
+    let plan = request.plan(&limits).expect("a valid plan");
+    let dir = tempfile::tempdir().unwrap();
+    let sink = FolderSink {
+        dir: dir.path().to_owned(),
+        events: Default::default(),
+    };
+    let lease = bench.hold("gige-hw").unwrap();
+    let outcome = run_experiment(
+        &plan,
+        &bench,
+        &lease,
+        SCALE_PX_PER_MM,
+        BenchTimeouts::default(),
+        &sink,
+    )
+    .unwrap_or_else(|e| panic!("{e}; events {:?}", sink.events.lock().unwrap()));
+    drop(lease);
+
+    // Frames in each read-out, each run with its capture mode and twin.
+    for (stem, size) in [
+        ("b_ref", (512, 384)),
+        ("hw-bin2x2-average_b_ref", (256, 192)),
+        ("hw-dec2x2_b_m1", (256, 192)),
+    ] {
+        let path = outcome.frames_dir.join(format!("{stem}.tif"));
+        let (image, _) = ffdic::image::read_tiff(&path).unwrap();
+        assert_eq!((image.width(), image.height()), size, "{stem}");
+    }
+    let runs = &outcome.manifest.runs;
+    let hw: Vec<_> = runs.iter().filter(|r| r.capture.is_some()).collect();
+    assert_eq!(hw.len(), 2, "{runs:?}");
+    for r in &hw {
+        let twin = r.twin_of.as_deref().expect("a twin");
+        assert!(runs.iter().any(|t| t.id == twin && t.capture.is_none()));
+    }
+    // Rows: every scheme of the one move, the hardware ones recovering the commanded move in
+    // their own pixels (half the full-resolution px) as well as their synthesised twins do.
+    let row = |scheme: &str| {
+        outcome
+            .rows
+            .iter()
+            .find(|r| r.scheme == scheme)
+            .unwrap_or_else(|| panic!("a {scheme} row in {:?}", outcome.rows))
+    };
+    let (u, v) = (
+        0.3617 * SCALE_PX_PER_MM / 2.0,
+        -0.0843 * SCALE_PX_PER_MM / 2.0,
+    );
+    for (hw, twin) in [("hw:bin2x2-average", "ff100"), ("hw:dec2x2", "ff25")] {
+        let (h, t) = (&row(hw).summary, &row(twin).summary);
+        println!(
+            "{hw}: u {:.4} ± {:.4}, v {:.4} ± {:.4}; {twin}: u {:.4} ± {:.4}, v {:.4} ± {:.4} (commanded {u:.4}, {v:.4})",
+            h.u.mean, h.u.std, h.v.mean, h.v.std, t.u.mean, t.u.std, t.v.mean, t.v.std
+        );
+        println!(
+            "{hw}: {} of {} points valid; {twin}: {} of {}",
+            h.valid, h.points, t.valid, t.points
+        );
+        // Points whose subset the move carries out of the frame fail on either side.
+        assert!(
+            h.valid as f64 >= 0.9 * h.points as f64,
+            "{hw}: {} of {} points valid",
+            h.valid,
+            h.points
+        );
+        for (axis, got, want) in [("u", h.u.mean, u), ("v", h.v.mean, v)] {
+            assert!((got - want).abs() < 0.02, "{hw} {axis}: {got} vs {want}");
+        }
+        // And as their twins do, within the noise: the blocks of the bootstrap (16 points) are
+        // the independent units of a mean.
+        let blocks = (h.valid as f64 / 16.0).max(1.0);
+        for (axis, a, b) in [("u", &h.u, &t.u), ("v", &h.v, &t.v)] {
+            let se = (a.std.powi(2) + b.std.powi(2)).sqrt() / blocks.sqrt();
+            assert!(
+                (a.mean - b.mean).abs() < 3.0 * se,
+                "{hw} {axis}: {} vs {twin} {} (se {se})",
+                a.mean,
+                b.mean
+            );
+        }
+    }
+    // Restored: the camera reads out at full resolution again.
+    let after = bench.status().unwrap().camera.settings;
+    assert_eq!((after.binning, after.decimation), ((1, 1), (1, 1)));
+    drop(bench);
     drop(fake);
 }

@@ -17,5 +17,7 @@ pub mod unpack;
 
 pub use camera::AravisCamera;
 pub use config::AravisConfig;
-pub use fake::{FakeCameraError, FakeGvCamera, FillFn, FAKE_ADDRESS};
+pub use fake::{
+    FakeCameraError, FakeGvCamera, FillFn, FillRequest, FAKE_ADDRESS, FAKE_DECIMATION_MAX,
+};
 pub use ffdic_hw::{AxisReduction, BinningMode, HardwareScheme};
