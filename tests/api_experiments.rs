@@ -489,6 +489,7 @@ async fn hardware_schemes_are_captured_beside_their_synthesised_twins() {
     let settings: Value = daemon::get_json(&server.url("/camera")).await;
     assert_eq!(settings["settings"]["binning"], json!([1, 1]));
     assert_eq!(settings["settings"]["decimation"], json!([1, 1]));
+    compare_renders_each_capture_mode(&dir.join("frames"));
 
     // Each read-out mode has its own noise stream: the synthesised rows are those of the same
     // request without hardware schemes, number for number.
@@ -505,6 +506,43 @@ async fn hardware_schemes_are_captured_beside_their_synthesised_twins() {
         );
     }
     server.stop().await;
+}
+
+/// `compare` renders the model in each hardware run's capture mode, beside the fit: the model's
+/// displacements are in the captured frames' px (rendered at full resolution they would be twice
+/// the measured ones: a discrepancy of the move's size) and its random error follows the mode's
+/// pixel aperture (decimation's is larger than binning's, as measured), within the sampling
+/// error of two random-error estimates (±40 % here: a few hundred overlapping subsets).
+fn compare_renders_each_capture_mode(frames: &std::path::Path) {
+    use ffdic::diagnose::{compare, CompareOptions, BASELINE_TOML};
+    let model =
+        ffdic::model::ModelConfig::from_toml(BASELINE_TOML, std::path::Path::new("baseline"))
+            .unwrap();
+    let dic = serde_json::from_value(small_request(2)["dic"].clone()).unwrap();
+    let options = CompareOptions::from_presets(&["ff100".into(), "ff25".into()], dic, 1).unwrap();
+    let cmp = compare(frames, &model, &options, &|_, _| true).unwrap();
+    assert_eq!(cmp.hardware_runs_set_aside, 0);
+    let hw = cmp.hardware.as_ref().expect("the hardware runs compared");
+    assert_eq!(hw.runs.len(), 4, "{:?}", hw.runs);
+    let twin_d = cmp.discrepancy_px;
+    for r in &hw.runs {
+        println!(
+            "{} ({}): D {:.5} px (the fit's {twin_d:.5}); random u {:.5} meas, {:.5} model",
+            r.id, r.scheme, r.discrepancy_px, r.measured_random_px[0], r.model_random_px[0]
+        );
+        assert!(r.discrepancy_px < 0.02, "{r:?}");
+        for axis in 0..2 {
+            let ratio = r.model_random_px[axis] / r.measured_random_px[axis];
+            assert!(
+                (0.6..1.6).contains(&ratio),
+                "{}: random ratio {ratio}",
+                r.id
+            );
+        }
+        // The model's reference in the capture mode has the measured mean level.
+        let (m, o) = (&r.reference[0], &r.reference[1]);
+        assert!((o.mean_dn / m.mean_dn - 1.0).abs() < 0.02, "{m:?} {o:?}");
+    }
 }
 
 /// A camera without binning or decimation answers 422 naming the hardware scheme asked for, and

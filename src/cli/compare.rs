@@ -94,6 +94,52 @@ pub fn write_outputs(out: &std::path::Path, cmp: &Comparison) -> Result<()> {
     Ok(())
 }
 
+/// The runs read out in the camera's own binning or decimation, compared in that mode.
+fn hardware_text(hw: &ffdic::diagnose::capture_mode::HardwareComparison) -> String {
+    let f = |x: f64| format!("{x:.5}");
+    let rows: Vec<Vec<String>> = hw
+        .runs
+        .iter()
+        .map(|r| {
+            vec![
+                r.id.clone(),
+                r.twin.clone(),
+                r.scheme.clone(),
+                f(r.discrepancy_px),
+                f(r.parts.rigid_px),
+                f(r.parts.field_px),
+                f(r.parts.std_px),
+                f(r.measured_random_px[0]),
+                f(r.model_random_px[0]),
+                f(r.measured_random_px[1]),
+                f(r.model_random_px[1]),
+            ]
+        })
+        .collect();
+    let mut s = format!(
+        "\nIn the camera's own read-out (rendered in that mode, beside the fit; px of the \
+         captured frames): D {:.5} px\n",
+        hw.discrepancy_px
+    );
+    s.push_str(&ffdic::report::text_table(
+        &[
+            "run",
+            "twin",
+            "capture",
+            "D [px]",
+            "rigid",
+            "field",
+            "std",
+            "random u meas",
+            "random u model",
+            "random v meas",
+            "random v model",
+        ],
+        &rows,
+    ));
+    s
+}
+
 /// The comparison as a table for people.
 pub fn comparison_text(cmp: &Comparison) -> String {
     let f = |x: f64| format!("{x:.5}");
@@ -134,10 +180,13 @@ pub fn comparison_text(cmp: &Comparison) -> String {
         ],
         &rows,
     );
+    if let Some(hw) = &cmp.hardware {
+        s.push_str(&hardware_text(hw));
+    }
     if cmp.hardware_runs_set_aside > 0 {
         s.push_str(&format!(
-            "{} runs read out in the camera's own binning or decimation were set aside: the \
-             model is compared with full-resolution runs\n",
+            "{} runs read out in the camera's own binning or decimation have no full-resolution \
+             twin in the dataset and were set aside\n",
             cmp.hardware_runs_set_aside
         ));
     }

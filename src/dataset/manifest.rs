@@ -213,12 +213,11 @@ impl Manifest {
     }
 
     /// The manifest without the runs a camera read out in its own binning or decimation
-    /// (`capture`), and how many those were.
-    pub fn full_resolution(mut self) -> (Manifest, usize) {
-        let before = self.runs.len();
-        self.runs.retain(|r| r.capture.is_none());
-        let set_aside = before - self.runs.len();
-        (self, set_aside)
+    /// (`capture`), and those runs.
+    pub fn full_resolution(mut self) -> (Manifest, Vec<Run>) {
+        let (full, hardware) = self.runs.into_iter().partition(|r| r.capture.is_none());
+        self.runs = full;
+        (self, hardware)
     }
 
     /// Every frame file the runs name (reference, deformed, static frames), each once, in
@@ -327,7 +326,7 @@ mod tests {
         m.runs.push(hw.clone());
         m.validate().unwrap();
         assert_eq!(m.runs[1].frame_px_per_mm(26.0), 13.0);
-        assert_eq!(m.clone().full_resolution().1, 1);
+        assert_eq!(m.clone().full_resolution().1.len(), 1);
 
         let mut later = m.clone();
         later.runs.reverse();

@@ -5,6 +5,10 @@
 //! renders and analyses the model's side against it (diagnose calls it once per candidate).
 
 use super::bic::{chi2, Chi2};
+use super::capture_mode::{
+    compare_hardware, measure_hardware, model_hardware, HardwareComparison, HardwareMeasurement,
+    HardwareModelSide,
+};
 use super::discrepancy::{run_discrepancy, RunDiscrepancy};
 use super::image_stats::{centre_crop, frame_stats, FrameStats, STATS_CROP_PX};
 use super::nominal::{
@@ -47,7 +51,9 @@ pub struct Measurement {
     pub dic: Vec<Vec<DicResult>>,
     /// Speckle, white levels and noise floor; the stage is fitted per comparison.
     pub nominal: Nominal,
-    /// Runs of the dataset read out in a hardware scheme, not compared.
+    /// Runs of the dataset read out in a hardware scheme ([`super::capture_mode`]).
+    pub hardware: Vec<HardwareMeasurement>,
+    /// Such runs without a full-resolution twin in the dataset: not compared.
     pub hardware_runs_set_aside: usize,
 }
 
@@ -131,8 +137,11 @@ pub struct Comparison {
     pub runs: Vec<RunComparison>,
     pub images: Vec<ImageComparison>,
     pub chi2: Chi2,
-    /// Runs of the dataset the camera read out in its own binning or decimation: not compared
-    /// (the model renders full-resolution frames).
+    /// The runs the camera read out in its own binning or decimation, compared in that mode
+    /// beside the fit ([`super::capture_mode`]); absent without such runs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hardware: Option<HardwareComparison>,
+    /// Such runs without a full-resolution twin in the dataset: not compared.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub hardware_runs_set_aside: usize,
     /// The model's analyses, per run and scheme (diagnose predicts geometric candidates from
@@ -180,15 +189,16 @@ pub fn load_measurement(
     options: &CompareOptions,
     progress: Progress,
 ) -> Result<Measurement, DiagnoseError> {
-    // Frames the sensor binned or decimated itself are not yet rendered by the model in their
-    // mode: the comparison holds the full-resolution runs and says how many it set aside.
-    let (manifest, hardware_runs_set_aside) = Manifest::read(dir)?.full_resolution();
+    // Frames the sensor binned or decimated itself are compared beside the fit, in their mode
+    // (`capture_mode`); the fit holds the full-resolution runs.
+    let (manifest, hardware_runs) = Manifest::read(dir)?.full_resolution();
     if manifest.runs.is_empty() {
         return Err(DiagnoseError::Frames {
             run: "-".into(),
             message: format!(
-                "all {hardware_runs_set_aside} runs were read out in a hardware scheme; the \
-                 model is compared with full-resolution runs only"
+                "all {} runs were read out in a hardware scheme; the model is fitted to \
+                 full-resolution runs (each hardware run is compared beside its twin)",
+                hardware_runs.len()
             ),
         });
     }
@@ -258,6 +268,8 @@ pub fn load_measurement(
     }
     let (width, height) = size.expect("a manifest has runs");
     let nominal = references.nominal(&manifest, &pattern_of_run, (width, height), bit_depth);
+    let (hardware, hardware_runs_set_aside) =
+        measure_hardware(dir, hardware_runs, &manifest, options)?;
     Ok(Measurement {
         dir: dir.to_owned(),
         manifest,
@@ -282,6 +294,7 @@ pub fn load_measurement(
         moved_stats,
         dic,
         nominal,
+        hardware,
         hardware_runs_set_aside,
     })
 }
@@ -677,22 +690,44 @@ pub fn compare_with_scene(
         .into_iter()
         .map(|r| r.expect("every run rendered"))
         .collect();
-    Ok(assemble(meas, model, nominal, model_dic, images))
+    let hardware = model_hardware(&meas.hardware, &scene, &nominal, &meas.pattern_of_run, opts)?;
+    Ok(assemble(meas, model, nominal, model_dic, images, hardware))
 }
 
 /// The comparison from the model's analyses: the landings refined against them
-/// ([`refine_landings`]), every run's discrepancy, the totals and the χ².
+/// ([`refine_landings`]), every run's discrepancy, the totals and the χ²; the capture-mode runs
+/// beside it when `hardware_model` holds their model side (empty for a prediction).
 pub(super) fn assemble(
     meas: &Measurement,
     model: &ModelConfig,
     nominal: Nominal,
     mut model_dic: Vec<Vec<DicResult>>,
     images: Vec<ImageComparison>,
+    hardware_model: Vec<HardwareModelSide>,
 ) -> Comparison {
     let opts = &meas.options;
     let runs = &meas.manifest.runs;
     let mut nominal = nominal;
+    let rendered_at: Vec<[f64; 2]> = (0..runs.len())
+        .map(|ri| nominal.stage.applied_offset_px(ri))
+        .collect();
     refine_landings(meas, &mut nominal, &mut model_dic);
+    let landing_shift_px: Vec<[f64; 2]> = rendered_at
+        .iter()
+        .enumerate()
+        .map(|(ri, old)| {
+            let new = nominal.stage.applied_offset_px(ri);
+            [new[0] - old[0], new[1] - old[1]]
+        })
+        .collect();
+    let hardware = compare_hardware(
+        &meas.hardware,
+        hardware_model,
+        &meas.labels,
+        &meas.pattern_of_run,
+        &landing_shift_px,
+        opts,
+    );
     let mut out_runs = Vec::new();
     for (ri, run) in runs.iter().enumerate() {
         let model_results = &model_dic[ri];
@@ -756,6 +791,7 @@ pub(super) fn assemble(
         runs: out_runs,
         images,
         chi2: Chi2::default(),
+        hardware,
         hardware_runs_set_aside: meas.hardware_runs_set_aside,
         model_dic: Vec::new(),
     };

@@ -441,6 +441,7 @@ fn predict(
         nominal,
         dic,
         before.images.clone(),
+        Vec::new(),
     ))
 }
 

@@ -81,6 +81,7 @@
 
 mod basis;
 mod bic;
+pub mod capture_mode;
 pub mod compare;
 // The brief names the file after its job; the module is the entry point of the folder's job.
 #[allow(clippy::module_inception)]

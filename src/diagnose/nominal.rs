@@ -22,7 +22,8 @@ use crate::image::Image;
 use crate::model::derive_seed;
 use crate::model::effects::{Quantization, StageMisalignment};
 use crate::model::{
-    project, render_frame, Camera, Effects, FrameSpec, SpecklePattern, TargetDot, TooManyDots,
+    project, render_frame, render_frame_read_out, Camera, Effects, FrameSpec, SensorReadout,
+    SpecklePattern, TargetDot, TooManyDots,
 };
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -212,10 +213,35 @@ impl Scene {
     pub fn render(
         &self,
         pattern: usize,
+        at_mm: (f64, f64),
+        moved: bool,
+        frame: u64,
+        crop: Option<usize>,
+    ) -> Image {
+        self.render_in(pattern, at_mm, moved, frame, crop, None)
+    }
+
+    /// [`Scene::render`] of the whole frame as the camera reads it out in `readout` (its own
+    /// binning or decimation; see [`super::capture_mode`] for where the noise goes).
+    pub fn render_read_out(
+        &self,
+        pattern: usize,
+        at_mm: (f64, f64),
+        moved: bool,
+        frame: u64,
+        readout: &SensorReadout,
+    ) -> Image {
+        self.render_in(pattern, at_mm, moved, frame, None, Some(readout))
+    }
+
+    fn render_in(
+        &self,
+        pattern: usize,
         (dx_mm, dy_mm): (f64, f64),
         moved: bool,
         frame: u64,
         crop: Option<usize>,
+        readout: Option<&SensorReadout>,
     ) -> Image {
         let n = &self.nominal;
         let mut camera = n.camera(pattern);
@@ -264,8 +290,12 @@ impl Scene {
         } else {
             all
         };
+        let readout = readout.filter(|r| !r.is_full_resolution());
         if effects.sensor_noise.is_some() || n.noise_floor_dn <= 0.0 {
-            return render_frame(&camera, &effects, dots, &spec);
+            return match readout {
+                Some(r) => render_frame_read_out(&camera, &effects, dots, &spec, r),
+                None => render_frame(&camera, &effects, dots, &spec),
+            };
         }
         // The dataset's own sensor: signal-independent noise, then the ADC.
         let bits = effects.quantization.take().map_or(16, |q| q.bits);
@@ -273,6 +303,9 @@ impl Scene {
         camera.exposure_level *= n.full_scale_dn() / 65535.0;
         let mut img = render_frame(&camera, &effects, dots, &spec);
         let sigma = n.noise_floor_dn;
+        if let Some(r) = readout {
+            return super::capture_mode::read_out_with_floor(&img, r, sigma, full, seed);
+        }
         let w = img.width();
         img.data_mut()
             .par_chunks_mut(w)
