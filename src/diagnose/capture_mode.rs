@@ -67,8 +67,12 @@ pub struct HardwareRunComparison {
     pub scheme: String,
     /// In px of the captured (reduced) frames, as the synthesised schemes' are in theirs.
     pub discrepancy_px: f64,
+    /// Its standard error from the noise of both analyses.
+    pub discrepancy_se_px: f64,
     #[serde(flatten)]
     pub parts: DiscrepancyParts,
+    /// Points valid in both analyses.
+    pub points: usize,
     /// Random error of each side (std of u and v about their own quadratic surface), px.
     pub measured_random_px: [f64; 2],
     pub model_random_px: [f64; 2],
@@ -206,11 +210,13 @@ pub fn compare_hardware(
                 pattern: labels[pattern_of_run[h.twin]].clone(),
                 scheme: h.capture.name.clone(),
                 discrepancy_px: d.discrepancy_px,
+                discrepancy_se_px: d.discrepancy_se_px(),
                 parts: DiscrepancyParts {
                     rigid_px: d.rigid_px,
                     field_px: d.field_px,
                     std_px: d.std_px,
                 },
+                points: d.points,
                 measured_random_px: [d.measured_random_px.0, d.measured_random_px.1],
                 model_random_px: [d.model_random_px.0, d.model_random_px.1],
                 mean_diff_px: [d.mean_diff_px.0, d.mean_diff_px.1],

@@ -154,6 +154,11 @@ fn random_error(xy: &[(f64, f64)], v: &[f64]) -> f64 {
 }
 
 impl RunDiscrepancy {
+    /// The standard error of `discrepancy_px` from the noise of both analyses.
+    pub fn discrepancy_se_px(&self) -> f64 {
+        se_of_length(self.discrepancy_px, self.discrepancy_sq_var)
+    }
+
     /// Too few points valid in both analyses to fit the difference: every figure NaN.
     fn unmeasurable(points: usize) -> RunDiscrepancy {
         let nan2 = (f64::NAN, f64::NAN);

@@ -86,6 +86,8 @@ DEFAULT_SPEC = {
         "overlap_samples": 20000,
     },
     "overwrite": False,
+    # The camera's own binning/decimation: extra frames of every position read out in each mode.
+    "hardware_readouts": [],
 }
 
 PATTERN_DEFAULTS = {
@@ -226,6 +228,21 @@ def _validate(spec: dict) -> None:
         raise SpecError("stage.constant_offset_px must be [dx, dy]")
     if float(st["repeatability_um"]) < 0:
         raise SpecError("stage.repeatability_um must be >= 0")
+    names = set()
+    for ro in spec["hardware_readouts"]:
+        name = ro.get("name")
+        if not isinstance(name, str) or not name or name in names:
+            raise SpecError("every hardware read-out needs a unique name")
+        names.add(name)
+        b, d = ro.get("binning", [1, 1]), ro.get("decimation", [1, 1])
+        if len(b) != 2 or len(d) != 2 or not all(isinstance(f, int) and 1 <= f <= 8 for f in b + d):
+            raise SpecError(f"read-out {name}: binning and decimation are [x, y] integers 1..8")
+        if any(b[i] > 1 and d[i] > 1 for i in range(2)) or b + d == [1, 1, 1, 1]:
+            raise SpecError(f"read-out {name}: per axis binning or decimation, and at least one of them")
+        if ro.get("value", "average") not in ("average", "sum"):
+            raise SpecError(f"read-out {name}: value must be average or sum")
+        if ro.get("domain", "digital") not in ("digital", "charge"):
+            raise SpecError(f"read-out {name}: domain must be digital or charge")
     if not (int(spec["render"]["disk_supersample"]) >= 8):
         raise SpecError("render.disk_supersample must be >= 8 (strips of at most 1/8 px)")
     if not (float(spec["render"]["window_sigmas"]) >= 4):
@@ -895,6 +912,73 @@ def expose(irr: np.ndarray, spec: dict, rng: np.random.Generator):
     return dn.astype(dtype), {"pixels_saturated": n_sat, "pixels_clipped_at_0": n_zero}
 
 
+def read_out(irr: np.ndarray, spec: dict, rng: np.random.Generator, ro: dict):
+    """The camera's own read-out of one frame. Per axis a block of b·d sensor pixels gives one
+    output pixel: the first b pixels of the block binned (decimation d keeps the first pixel of
+    every d). Digital binning: every sensor pixel exposed and digitised on its own (`expose`:
+    shot noise, read noise, ADC), then averaged or summed and rounded. Charge binning: the
+    block's mean electrons summed, one Poisson draw and one read noise for the sum, then divided
+    by the pixel count for an average, offset, rounded. A partial block at an edge is dropped."""
+    bx, by = ro.get("binning", [1, 1])
+    dx, dy = ro.get("decimation", [1, 1])
+    kx, ky = bx * dx, by * dy
+    H, W = irr.shape
+    oh, ow = H // ky, W // kx
+    blocks = irr[: oh * ky, : ow * kx].reshape(oh, ky, ow, kx)[:, :by, :, :bx]
+    n = bx * by
+    average = ro.get("value", "average") == "average"
+    full = 2 ** spec["bit_depth"] - 1
+    if ro.get("domain", "digital") == "digital" or n == 1:
+        dn, _ = expose(blocks, spec, rng)
+        dn = dn.astype(np.float64).sum(axis=(1, 3))
+        if average:
+            dn /= n
+    else:
+        white = float(spec["white_level_dn"])
+        g = spec["gain_e_per_dn"]
+        mean_dn = white * blocks.sum(axis=(1, 3))
+        if spec["noise"]:
+            dn = rng.poisson(mean_dn * float(g)) / float(g) if g is not None else mean_dn.copy()
+            rn = float(spec["read_noise_dn"])
+            if rn > 0:
+                dn += rng.normal(0.0, rn, dn.shape)
+        else:
+            dn = mean_dn.copy()
+        if average:
+            dn /= n
+        dn += float(spec["dark_offset_dn"])
+    dn = np.clip(np.rint(dn), 0, full)
+    return dn.astype(np.uint16 if spec["bit_depth"] == 16 else np.uint8)
+
+
+def capture_mode(ro: dict) -> dict:
+    """The manifest's `capture` of a read-out (ffdic-dataset/1: per axis a bin or a decimation)."""
+    value = ro.get("value", "average")
+
+    def axis(i):
+        d = ro.get("decimation", [1, 1])[i]
+        if d > 1:
+            return {"kind": "decimate", "factor": d}
+        return {"kind": "bin", "factor": ro.get("binning", [1, 1])[i], "mode": value}
+
+    x, y = axis(0), axis(1)
+    bins = any(a["kind"] == "bin" and a["factor"] > 1 for a in (x, y))
+    fill = 1.0
+    for a in (x, y):
+        fill *= 1.0 if a["kind"] == "bin" else 1.0 / a["factor"]
+    return {"name": ro["name"], "x": x, "y": y,
+            "binning_domain": ro.get("domain", "digital") if bins else None,
+            "equivalent_preset": None, "fill_factor": fill}
+
+
+def _readout_stem(ro: dict) -> str:
+    return re.sub(r"[^A-Za-z0-9_.+-]", "-", ro["name"])
+
+
+def _readout_file(ro: dict, fname: str) -> str:
+    return _readout_stem(ro) + "_" + fname
+
+
 def write_tiff(path: Path, img: np.ndarray):
     tifffile.imwrite(path, img, photometric="minisblack", byteorder="<", compression=None)
 
@@ -1106,6 +1190,10 @@ def generate(spec: dict, out_dir, overwrite: bool | None = None, quiet: bool = T
             frames_truth[fname] = {"kind": "reference" if fname == ref.name else "repeat", "pattern": lab,
                                    "noise_seed": f"SeedSequence(entropy={seed}, spawn_key=(2, crc32('{fname}')))",
                                    **diag, **qd}
+        for ro in spec["hardware_readouts"]:
+            fname = _readout_file(ro, ref.name)
+            write_tiff(out_dir / fname, read_out(irr, spec, np.random.default_rng(_seed_seq(seed, 4, fname)), ro))
+            frames_truth[fname] = {"kind": "reference", "pattern": lab, "read_out": ro["name"]}
         del irr
         pm = _pattern_manifest(spec, pr, cam)
         for r, fr in zip(pruns, dframes):
@@ -1122,6 +1210,17 @@ def generate(spec: dict, out_dir, overwrite: bool | None = None, quiet: bool = T
             if spec["repeats"] > 0:
                 run["repeat"] = ref_files[1:]
             manifest_runs.append(run)
+            # The same irradiance read out in each of the camera's own modes: a run per mode,
+            # after its full-resolution twin.
+            for ro in spec["hardware_readouts"]:
+                fname = _readout_file(ro, fr.name)
+                write_tiff(out_dir / fname,
+                           read_out(irr, spec, np.random.default_rng(_seed_seq(seed, 4, fname)), ro))
+                frames_truth[fname] = {"kind": "deformed", "pattern": lab, "run": r["id"], "read_out": ro["name"]}
+                manifest_runs.append({
+                    "id": f"{r['id']}_{_readout_stem(ro)}", "pattern": dict(pm),
+                    "reference": _readout_file(ro, r["reference"]), "deformed": fname,
+                    "stage": dict(run["stage"]), "capture": capture_mode(ro), "twin_of": r["id"]})
 
     manifest = {
         "format": "ffdic-dataset/1",
@@ -1160,6 +1259,10 @@ def generate(spec: dict, out_dir, overwrite: bool | None = None, quiet: bool = T
             "print_to_image": "u = M (scale*P_mm + d_px) (undistorted offset from the axis; M = I, d = 0 for the reference); "
                               "x = axis + u (1 + k1_per_px2 |u|^2)",
             "print_origin": "print coordinate (0, 0) mm images onto the optical axis in the reference frame",
+            "hardware_read_out": "per axis a block of binning*decimation sensor pixels per output pixel; the "
+                                 "first `binning` pixels of the block binned (decimation keeps the first pixel); "
+                                 "digital: each pixel exposed and digitised, then averaged/summed and rounded; "
+                                 "charge: electrons summed, one shot and read noise draw, /n for an average",
         },
         "camera": {"width": cam.W, "height": cam.H, "bit_depth": spec["bit_depth"], "scale_px_per_mm": cam.scale},
         "effects": {

@@ -436,6 +436,38 @@ def check_noise(tmp):
               f"measured {meas:.2f} DN², predicted {pred:.2f} DN² ({e * 100:+.2f} %, limit 3 %)")
 
 
+def check_hardware_readout():
+    """The camera's own read-out on flat and ramp irradiances: block geometry, means, and the
+    noise of one output pixel against photon transfer (Janesick 2007): digital binning
+    (S/g + r² + 1/12)/n + 1/12, charge binning S/(n g) + r²/n² + 1/12, decimation S/g + r² + 1/12."""
+    spec = G.effective_spec(_spec(white_level_dn=30000.0, gain_e_per_dn=1.0, read_noise_dn=25.0))
+    rng = np.random.default_rng(5)
+    irr = np.full((512, 512), 0.02)
+    m = 30000.0 * 0.02
+    worst = 0.0
+    details = []
+    for ro, mean, var in (
+        ({"name": "d", "binning": [2, 2], "domain": "digital"}, m, (m + 625 + 1 / 12) / 4 + 1 / 12),
+        ({"name": "c", "binning": [2, 2], "domain": "charge"}, m, m / 4 + 625 / 16 + 1 / 12),
+        ({"name": "s", "binning": [2, 2], "domain": "charge", "value": "sum"}, 4 * m, 4 * m + 625 + 1 / 12),
+        ({"name": "x", "decimation": [2, 2]}, m, m + 625 + 1 / 12),
+    ):
+        out = G.read_out(irr, spec, rng, ro).astype(float)
+        e = max(abs(out.mean() / mean - 1), abs(out.var() / var - 1))
+        worst = max(worst, e)
+        details.append(f"{ro['name']}: var {out.var():.1f} vs {var:.1f}")
+    quiet = dict(spec, noise=False)
+    ramp = np.tile(np.arange(64.0) / 64.0, (8, 1))
+    dec = G.read_out(ramp, quiet, rng, {"name": "x", "decimation": [2, 1]}).astype(float)
+    binned = G.read_out(ramp, quiet, rng, {"name": "b", "binning": [2, 1]}).astype(float)
+    pixel = np.rint(30000.0 * np.arange(64) / 64.0)  # each sensor pixel digitised (digital binning)
+    want_dec = pixel[0::2]
+    want_bin = np.rint((pixel[0::2] + pixel[1::2]) / 2)
+    geometry = np.array_equal(dec[0], want_dec) and np.array_equal(binned[0], want_bin)
+    check("hardware read-out: first pixel kept, block averaged, noise per photon transfer",
+          worst < 0.03 and geometry, f"{'; '.join(details)}; worst {worst * 100:.2f} % (limit 3 %), geometry {geometry}")
+
+
 def check_vignetting(tmp):
     v = 0.35
     W, H = 480, 400
@@ -632,7 +664,8 @@ def main():
         shutil.rmtree(tmp)
     Path(tmp).mkdir(parents=True, exist_ok=True)
     try:
-        for fn in (check_special_functions, check_disk_area, check_pixel_centre, check_single_dots):
+        for fn in (check_special_functions, check_disk_area, check_pixel_centre, check_single_dots,
+                   check_hardware_readout):
             t = time.perf_counter()
             fn()
             print(f"    ({time.perf_counter() - t:.1f} s)", flush=True)
