@@ -489,6 +489,11 @@ async fn hardware_schemes_are_captured_beside_their_synthesised_twins() {
     let settings: Value = daemon::get_json(&server.url("/camera")).await;
     assert_eq!(settings["settings"]["binning"], json!([1, 1]));
     assert_eq!(settings["settings"]["decimation"], json!([1, 1]));
+    // Maps of the first run in every scheme, the hardware ones beside the synthesised.
+    for scheme in ["ff100", "ff25", "hw-bin2x2-average", "hw-dec2x2"] {
+        let map = dir.join(format!("plots/map_a_{scheme}_u.svg"));
+        assert!(map.is_file(), "{map:?}");
+    }
     compare_renders_each_capture_mode(&dir.join("frames"));
 
     // Each read-out mode has its own noise stream: the synthesised rows are those of the same

@@ -54,9 +54,10 @@ const FIELDS: [Field; 5] = [
     },
 ];
 
-/// The file name of a map: `map_{pattern}_{scheme}_{u|v|exx|eyy|exy}.svg`.
+/// The file name of a map: `map_{pattern}_{scheme}_{u|v|exx|eyy|exy}.svg`, a hardware scheme's
+/// `:` written as `-` (`map_b_hw-bin2x2-average_u.svg`).
 pub fn map_file_name(pattern: &str, scheme: &str, field: &str) -> String {
-    format!("map_{pattern}_{scheme}_{field}.svg")
+    format!("map_{pattern}_{}_{field}.svg", scheme.replace(':', "-"))
 }
 
 /// The u, v, εxx, εyy and εxy maps of `result` (run `run` of `pattern`, reduced with `scheme`):

@@ -501,8 +501,8 @@ impl<'a> Session<'a> {
 }
 
 /// The study of the captured frames (every pair with every scheme), and the u, v and strain maps
-/// of each pattern's first run with every synthesised scheme (none for hardware runs): the rows (one per capture, run and scheme) and
-/// the maps' files.
+/// of each pattern's first run with every synthesised scheme and of its hardware twins in their
+/// schemes: the rows (one per capture, run and scheme) and the maps' files.
 fn analyse(
     plan: &ExperimentPlan,
     captured: &Captured,
@@ -522,7 +522,12 @@ fn analyse(
         .collect();
     let maps: std::sync::Mutex<Result<Vec<String>, String>> = std::sync::Mutex::new(Ok(Vec::new()));
     let draw_maps = |run: &Run, scheme: &crate::reduce::Scheme, result: &crate::dic::DicResult| {
-        if !first_runs.contains(&run.id.as_str()) {
+        let mapped = first_runs.contains(&run.id.as_str())
+            || run
+                .twin_of
+                .as_deref()
+                .is_some_and(|twin| first_runs.contains(&twin));
+        if !mapped {
             return;
         }
         let pattern = run.pattern.as_ref().map_or("", |p| p.label.as_str());
