@@ -337,6 +337,7 @@ fn hidden_fill_factor_fine_speckle() {
         dot_spacing_mm: 0.22,
         contrast: 0.85,
         edge_softness_mm: 0.01,
+        placement: Default::default(),
     })];
     let o = run_with("fill_factor-fine", truth, sp, options(vec![native()], 0.0));
     assert_verdict(&o, "fill_factor");

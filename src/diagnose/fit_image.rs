@@ -131,14 +131,14 @@ pub fn fit_psf_blur(meas: &Measurement, before: &Comparison, model: &Effects) ->
     };
     // The spectra's shape, not their level: the level is the print's contrast and density
     // (calibrated or stated), the shape is where a blur acts.
-    // Above each print's dot-spacing frequency only: below it the spectrum is the dots'
-    // placement statistics (a printer's, which no model knows), above it their profile and
-    // whatever blurs it.
+    // Above half each print's dot-spacing frequency: below it the spectrum's shape is the
+    // dots' placement statistics (which the comparison chose there, `compare::choose_placement`),
+    // above it their profile and whatever blurs it.
     let nominal = &before.model.nominal;
     let f_min: Vec<f64> = nominal
         .patterns
         .iter()
-        .map(|p| 1.0 / (p.pattern.dot_spacing_mm * nominal.scale_px_per_mm))
+        .map(|p| super::print::placement_band_edge(&p.pattern, nominal.scale_px_per_mm))
         .collect();
     let obj = |x: &[f64]| {
         measured

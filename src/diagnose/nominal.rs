@@ -14,7 +14,7 @@
 //! ([`super::stage`]).
 
 use super::image_stats::{noise_variance, percentile};
-use super::print::{characterised, PrintCalibration, PrintKnowledge};
+use super::print::{characterised, stated_placement, PrintCalibration, PrintKnowledge};
 use super::stage::StageLanding;
 use super::DiagnoseError;
 use crate::dataset::{Manifest, Run};
@@ -22,8 +22,8 @@ use crate::image::Image;
 use crate::model::derive_seed;
 use crate::model::effects::{Quantization, StageMisalignment};
 use crate::model::{
-    project, render_frame, render_frame_read_out, Camera, Effects, FrameSpec, SensorReadout,
-    SpecklePattern, TargetDot, TooManyDots,
+    project, render_frame, render_frame_read_out, Camera, Effects, FrameSpec, Placement,
+    SensorReadout, SpecklePattern, TargetDot, TooManyDots,
 };
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -52,6 +52,14 @@ pub struct PatternEstimate {
     /// The calibration, when there was one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibration: Option<PrintCalibration>,
+    /// Whether the manifest states the dots' placement (`"placement"` in the pattern);
+    /// otherwise it is chosen from the measured spectrum below the dot-spacing frequency.
+    #[serde(default)]
+    pub placement_stated: bool,
+    /// That choice's evidence: the spectral-shape χ² there of the jittered grid and of Poisson
+    /// placement.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub placement_chi2: Option<[f64; 2]>,
 }
 
 /// Everything the model needs beyond its effects to render the dataset's experiment.
@@ -364,6 +372,21 @@ pub fn pattern_for(
     noise_var: f64,
     scale_px_per_mm: f64,
 ) -> PatternEstimate {
+    let mut estimate = pattern_guess(run, crop, white_dn, noise_var, scale_px_per_mm);
+    if let Some(placement) = stated_placement(run) {
+        estimate.pattern.placement = placement;
+        estimate.placement_stated = true;
+    }
+    estimate
+}
+
+fn pattern_guess(
+    run: &Run,
+    crop: &Image,
+    white_dn: f64,
+    noise_var: f64,
+    scale_px_per_mm: f64,
+) -> PatternEstimate {
     let info = run.pattern.as_ref();
     let label = info.map_or_else(|| run.reference.clone(), |p| p.label.clone());
     let extra = |key: &str| info.and_then(|p| p.extra.get(key)).and_then(|v| v.as_f64());
@@ -381,11 +404,14 @@ pub fn pattern_for(
                 dot_spacing_mm: s,
                 contrast: c,
                 edge_softness_mm: 0.0,
+                placement: Placement::default(),
             },
             source: "manifest".into(),
             white_level_dn: white_dn,
             print: PrintKnowledge::Characterised,
             calibration: None,
+            placement_stated: false,
+            placement_chi2: None,
         };
     }
     if let (Some(d), Some(s), Some(c)) = (diameter, spacing, contrast) {
@@ -396,11 +422,14 @@ pub fn pattern_for(
                 dot_spacing_mm: s,
                 contrast: c,
                 edge_softness_mm: softness,
+                placement: Placement::default(),
             },
             source: "manifest".into(),
             white_level_dn: white_dn,
             print: PrintKnowledge::Calibrated,
             calibration: None,
+            placement_stated: false,
+            placement_chi2: None,
         };
     }
     let est = estimate_speckle(crop, white_dn, noise_var);
@@ -441,6 +470,7 @@ pub fn pattern_for(
             dot_spacing_mm: spacing_mm,
             contrast: c,
             edge_softness_mm,
+            placement: Placement::default(),
         },
         source: if all_missing {
             "estimated"
@@ -451,6 +481,8 @@ pub fn pattern_for(
         white_level_dn: white_dn,
         print: PrintKnowledge::Calibrated,
         calibration: None,
+        placement_stated: false,
+        placement_chi2: None,
     }
 }
 

@@ -171,6 +171,7 @@ mod tests {
             dot_spacing_mm: s,
             contrast: 0.8,
             edge_softness_mm: 0.0,
+            placement: Default::default(),
         }
     }
 

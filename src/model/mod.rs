@@ -14,7 +14,7 @@ mod speckle;
 
 pub use config::{ModelConfig, ModelError};
 pub use effects::{EffectId, Effects, Stage};
-pub use pattern::{SpecklePattern, TargetDot, TooManyDots, MAX_TARGET_DOTS};
+pub use pattern::{Placement, SpecklePattern, TargetDot, TooManyDots, MAX_TARGET_DOTS};
 pub use readout::{BinnedValue, BinningDomain, SensorChain, SensorReadout};
 pub use render::{project, render_frame, render_frame_read_out, Camera, FrameSpec};
 pub use seed::derive_seed;

@@ -22,6 +22,29 @@ pub struct SpecklePattern {
     /// Standard deviation of the print's blur, mm.
     #[serde(default)]
     pub edge_softness_mm: f64,
+    /// Where the dots sit: [`Placement`] (absent: the jittered grid).
+    #[serde(default, skip_serializing_if = "Placement::is_jittered_grid")]
+    pub placement: Placement,
+}
+
+/// How a print's dots are placed. The placement sets the print's spectrum below the
+/// dot-spacing frequency (a grid suppresses it, independent positions leave it flat) and how
+/// much sparse and crowded patches a subset sees — which is what sets DIC's error under
+/// subsampling (the paper's ff50 and ff25), beside the dot profile and contrast.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Placement {
+    /// One dot per cell of the spacing grid, anywhere in it (ffdic's targets).
+    #[default]
+    JitteredGrid,
+    /// Every dot anywhere in the field, independently (a Poisson process of the same density).
+    Poisson,
+}
+
+impl Placement {
+    pub fn is_jittered_grid(&self) -> bool {
+        *self == Placement::JitteredGrid
+    }
 }
 
 /// The most dots one target layout may hold (32 bytes each: 128 MiB). Every layout is sized
@@ -60,6 +83,7 @@ impl SpecklePattern {
             dot_spacing_mm: s,
             contrast: c,
             edge_softness_mm: soft,
+            placement: Placement::JitteredGrid,
         };
         match label {
             "a" => Some(p(0.5, 0.75, 0.85, 0.02)),
@@ -110,9 +134,18 @@ impl SpecklePattern {
         let mut dots = Vec::with_capacity(nx * ny);
         for j in 0..ny {
             for i in 0..nx {
+                // The jittered grid keeps the cell; Poisson draws the cell too (the same count
+                // and the same stream of draws, so the two layouts differ only in placement).
+                let (ci, cj) = match self.placement {
+                    Placement::JitteredGrid => (i as f64, j as f64),
+                    Placement::Poisson => (
+                        (rng.gen::<f64>() * nx as f64).floor(),
+                        (rng.gen::<f64>() * ny as f64).floor(),
+                    ),
+                };
                 dots.push(TargetDot {
-                    x_mm: x0 + (i as f64 + rng.gen::<f64>()) * s,
-                    y_mm: y0 + (j as f64 + rng.gen::<f64>()) * s,
+                    x_mm: x0 + (ci + rng.gen::<f64>()) * s,
+                    y_mm: y0 + (cj + rng.gen::<f64>()) * s,
                     sigma_mm: sigma,
                     depth: self.contrast * (1.0 + 0.15 * (2.0 * rng.gen::<f64>() - 1.0)),
                 });

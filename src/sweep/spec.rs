@@ -117,6 +117,7 @@ impl PrintAxis {
                     dot_spacing_mm: 1.5 * diameter_mm,
                     contrast: 0.85,
                     edge_softness_mm: 0.0,
+                    placement: Default::default(),
                 }
             }
             PrintAxis::Pattern(label) => {
