@@ -6,11 +6,10 @@
 use super::ProgressBar;
 use anyhow::{Context, Result};
 use clap::Args;
-use ffdic::diagnose::{
-    append_history, compare, comparison_svgs, CompareOptions, Comparison, HistoryEntry,
-};
+use ffdic::diagnose::{append_history, compare, CompareOptions, Comparison, HistoryEntry};
 use ffdic::dic::DicSettings;
 use ffdic::model::ModelConfig;
+use ffdic::report::comparison_svgs;
 use std::path::PathBuf;
 
 /// How the comparison analyses both sides (shared by compare and diagnose).

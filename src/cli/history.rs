@@ -3,7 +3,8 @@
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use ffdic::diagnose::{history_chart, read_history};
+use ffdic::diagnose::read_history;
+use ffdic::report::history_chart;
 use std::path::PathBuf;
 
 #[derive(Debug, Args)]

@@ -9,10 +9,8 @@ use super::ProgressBar;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use ffdic::diagnose::Diagnosis;
-use ffdic::experiment::{
-    figures_text, findings_text, paper_findings, study_json, ExperimentRequest, SchemeSpec,
-    StudyRow,
-};
+use ffdic::experiment::{findings_text, paper_findings, ExperimentRequest, SchemeSpec, StudyRow};
+use ffdic::report::{figures_text, study_json};
 use ffdic::service::{
     mock_bench, CameraConfig, CompareRequest, DaemonConfig, JobResult, MockBinning, MockReduction,
     NewModel, Service, PAPER_BENCH_DISTORTION_TOML,

@@ -2,6 +2,8 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 use std::path::{Component, Path, PathBuf};
 
+use crate::model::Placement;
+
 pub const FORMAT: &str = "ffdic-dataset/1";
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -30,15 +32,89 @@ pub struct CameraInfo {
     pub extra: Map<String, Value>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+/// What a dataset states of a pattern's print. The size and spacing are what the lab asked the
+/// printer for (nominal); a `profile` with its `contrast` and size (`dot_diameter_mm` or a
+/// measured `mtf`) characterises the print (see `diagnose::print`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct PatternInfo {
     pub label: String,
+    /// Dot diameter (FWHM for Gaussian dots), mm.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dot_diameter_mm: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dot_spacing_mm: Option<f64>,
+    /// The dots' measured profile.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub profile: Option<DotProfile>,
+    /// A dot's depth: 1 − its reflectance over the background's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contrast: Option<f64>,
+    /// σ of the print's own blur, mm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub edge_softness_mm: Option<f64>,
+    /// The print's measured transfer function: `[cycles_per_mm, modulation]` pairs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mtf: Option<Vec<[f64; 2]>>,
+    /// How the dots are placed; absent: chosen from the measured spectrum.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub placement: Option<Placement>,
     #[serde(flatten)]
     pub extra: Map<String, Value>,
+}
+
+/// A print's dot profile as a lab measured it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DotProfile {
+    /// Deficit c·exp(−ρ²/2σ²) per dot.
+    Gaussian,
+    /// Hard-edged disks.
+    Disk,
+}
+
+impl PatternInfo {
+    /// The first number of this entry outside its range, named.
+    fn check(&self) -> Result<(), String> {
+        let positive = [
+            ("dot_diameter_mm", self.dot_diameter_mm),
+            ("dot_spacing_mm", self.dot_spacing_mm),
+        ];
+        for (name, value) in positive {
+            if let Some(v) = value.filter(|v| !(v.is_finite() && *v > 0.0)) {
+                return Err(format!(
+                    "pattern {}: {name} must be positive, got {v}",
+                    self.label
+                ));
+            }
+        }
+        if let Some(c) = self.contrast.filter(|c| !(*c > 0.0 && *c <= 1.0)) {
+            return Err(format!(
+                "pattern {}: contrast must lie in (0, 1], got {c}",
+                self.label
+            ));
+        }
+        if let Some(s) = self
+            .edge_softness_mm
+            .filter(|s| !(s.is_finite() && *s >= 0.0))
+        {
+            return Err(format!(
+                "pattern {}: edge_softness_mm must be at least 0, got {s}",
+                self.label
+            ));
+        }
+        if let Some(bad) = self
+            .mtf
+            .iter()
+            .flatten()
+            .find(|p| !p.iter().all(|v| v.is_finite()))
+        {
+            return Err(format!(
+                "pattern {}: mtf pair {bad:?} is not finite",
+                self.label
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// The commanded stage move, not what happened.
@@ -173,6 +249,9 @@ impl Manifest {
                 return Err(format!("run {}: stage move is not finite", run.id));
             }
             self.check_capture(run)?;
+            if let Some(p) = &run.pattern {
+                p.check().map_err(|e| format!("run {}: {e}", run.id))?;
+            }
         }
         Ok(())
     }
@@ -276,6 +355,29 @@ mod tests {
         assert_eq!(m.extra["operator"], "kept");
         let back = serde_json::to_string(&m).unwrap();
         assert!(back.contains("\"operator\":\"kept\""));
+    }
+
+    #[test]
+    fn a_characterised_print_is_typed_and_checked() {
+        let print = r#""dot_spacing_mm": 0.36, "profile": "gaussian", "contrast": 0.7,
+            "edge_softness_mm": 0.01, "mtf": [[0.0, 1.0], [2.0, 0.6]], "placement": "poisson""#;
+        let text = EXAMPLE.replace(r#""dot_spacing_mm": 0.36"#, print);
+        let m: Manifest = serde_json::from_str(&text).unwrap();
+        m.validate().unwrap();
+        let p = m.runs[0].pattern.as_ref().unwrap();
+        assert_eq!(p.profile, Some(DotProfile::Gaussian));
+        assert_eq!(p.mtf.as_deref(), Some(&[[0.0, 1.0], [2.0, 0.6]][..]));
+        assert_eq!(p.placement, Some(Placement::Poisson));
+        assert!(p.extra.is_empty(), "{:?}", p.extra);
+        let mut bad = m.clone();
+        bad.runs[0].pattern.as_mut().unwrap().contrast = Some(1.5);
+        let err = bad.validate().unwrap_err();
+        assert!(err.contains("contrast") && err.contains("b-x5mm"), "{err}");
+        let unknown = text.replace(r#""poisson""#, r#""dart""#);
+        let err = serde_json::from_str::<Manifest>(&unknown)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("dart"), "{err}");
     }
 
     #[test]

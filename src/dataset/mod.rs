@@ -9,7 +9,8 @@ mod move_check;
 
 pub use capture::sensor_readout;
 pub use manifest::{
-    is_plain_file_name, CameraInfo, DatasetError, Manifest, PatternInfo, Run, StageMove, FORMAT,
+    is_plain_file_name, CameraInfo, DatasetError, DotProfile, Manifest, PatternInfo, Run,
+    StageMove, FORMAT,
 };
 pub use move_check::{
     check_stated_move, measure_move, MeasuredMove, MoveContradiction, MAX_RATIO, MIN_DIFFERENCE_PX,

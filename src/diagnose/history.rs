@@ -103,23 +103,6 @@ pub fn read_history(dataset_dir: &Path) -> Result<Vec<HistoryEntry>, DiagnoseErr
         .collect()
 }
 
-/// The history drawn: the discrepancy of each comparison in the order made, labelled with the
-/// model's name and the start of its version.
-pub fn history_chart(entries: &[HistoryEntry]) -> String {
-    let points: Vec<crate::report::HistoryPoint> = entries
-        .iter()
-        .map(|e| crate::report::HistoryPoint {
-            label: format!("{} {}", e.model, &e.version[..e.version.len().min(6)]),
-            discrepancy_px: e.discrepancy_px,
-        })
-        .collect();
-    let title = match entries.first() {
-        Some(e) => format!("Discrepancy of {} over model versions", e.dataset),
-        None => "No comparison yet".to_string(),
-    };
-    crate::report::history_svg(&title, &points, 760, 460)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

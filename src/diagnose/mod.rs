@@ -110,14 +110,12 @@ pub use diagnose::{
     PRINT_SEPARATION,
 };
 pub use discrepancy::{quadratic_fit, run_discrepancy, RunDiscrepancy};
-pub use history::{
-    append_history, history_chart, history_path, read_history, HistoryEntry, HISTORY_FILE,
-};
+pub use history::{append_history, history_path, read_history, HistoryEntry, HISTORY_FILE};
 pub use identifiability::{design_of, Confounded, DatasetDesign, NotIdentifiable};
 pub use image_stats::{noise_variance, FrameStats, MeanMap, PsdBin, PtcPoint};
 pub use nominal::{Nominal, BASELINE_TOML};
 pub use print::{PrintCalibration, PrintKnowledge};
-pub use residuals::{comparison_svgs, ResidualMap};
+pub use residuals::ResidualMap;
 pub use rounds::{diagnose_rounds, diagnose_rounds_prepared, Round, Rounds, MAX_ROUNDS};
 pub use stage::{RepeatabilitySource, StageLanding};
 

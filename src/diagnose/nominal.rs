@@ -389,11 +389,10 @@ fn pattern_guess(
 ) -> PatternEstimate {
     let info = run.pattern.as_ref();
     let label = info.map_or_else(|| run.reference.clone(), |p| p.label.clone());
-    let extra = |key: &str| info.and_then(|p| p.extra.get(key)).and_then(|v| v.as_f64());
     let diameter = info.and_then(|p| p.dot_diameter_mm);
     let spacing = info.and_then(|p| p.dot_spacing_mm);
-    let contrast = extra("contrast");
-    let softness = extra("edge_softness_mm").unwrap_or(0.0);
+    let contrast = info.and_then(|p| p.contrast);
+    let softness = info.and_then(|p| p.edge_softness_mm).unwrap_or(0.0);
     if let (Some((sigma_mm, c, Some(s))), _) | (Some((sigma_mm, c, None)), Some(s)) =
         (characterised(run), spacing)
     {

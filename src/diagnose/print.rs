@@ -34,7 +34,7 @@
 //! transfer function). `edge_softness_mm` adds in quadrature. The model renders it as stated.
 
 use super::image_stats::{psd, FrameStats, PsdBin};
-use crate::dataset::Run;
+use crate::dataset::{DotProfile, Run};
 use crate::image::Image;
 use crate::model::{Placement, SpecklePattern};
 use serde::{Deserialize, Serialize};
@@ -73,31 +73,22 @@ pub fn placement_band_edge(pattern: &SpecklePattern, scale_px_per_mm: f64) -> f6
     0.5 / (pattern.dot_spacing_mm * scale_px_per_mm)
 }
 
-/// The dots' placement the manifest states for `run`'s pattern (`"placement": "poisson"` or
-/// `"jittered_grid"`); None when it states none ffdic renders.
+/// The dots' placement the manifest states for `run`'s pattern.
 pub fn stated_placement(run: &Run) -> Option<Placement> {
-    let value = run.pattern.as_ref()?.extra.get("placement")?.clone();
-    serde_json::from_value(value).ok()
+    run.pattern.as_ref()?.placement
 }
 
 /// The print of `run`'s pattern as the manifest characterises it: (dot σ in mm, contrast,
 /// spacing in mm), or None when it is not characterised (module doc).
 pub fn characterised(run: &Run) -> Option<(f64, f64, Option<f64>)> {
     let p = run.pattern.as_ref()?;
-    let get = |k: &str| p.extra.get(k);
-    if get("profile").and_then(|v| v.as_str()) != Some("gaussian") {
+    if p.profile != Some(DotProfile::Gaussian) {
         return None;
     }
-    let contrast = get("contrast").and_then(|v| v.as_f64())?;
-    let softness = get("edge_softness_mm")
-        .and_then(|v| v.as_f64())
-        .unwrap_or(0.0);
-    let from_mtf = get("mtf").and_then(|v| {
-        let pairs: Vec<(f64, f64)> = v
-            .as_array()?
-            .iter()
-            .filter_map(|p| Some((p.get(0)?.as_f64()?, p.get(1)?.as_f64()?)))
-            .collect();
+    let contrast = p.contrast?;
+    let softness = p.edge_softness_mm.unwrap_or(0.0);
+    let from_mtf = p.mtf.as_deref().and_then(|pairs| {
+        let pairs: Vec<(f64, f64)> = pairs.iter().map(|&[f, m]| (f, m)).collect();
         sigma_from_mtf(&pairs)
     });
     let sigma = from_mtf.or(p.dot_diameter_mm.map(|d| d / FWHM_PER_SIGMA))?;

@@ -4,10 +4,8 @@
 
 mod bench;
 mod captures;
-mod figures;
 mod findings;
 mod limits;
-mod maps;
 mod model_scene;
 mod pool;
 mod request;
@@ -15,18 +13,17 @@ mod runner;
 mod simulate;
 mod spec;
 mod study;
+mod study_files;
 
 pub use bench::{
     BenchError, BenchHandle, BenchHardware, BenchLease, BenchStatus, CameraStatus, Owner,
     StageStatus, TargetMount,
 };
 pub use captures::{capture_plan, layout_seed, CaptureRun, TargetCapture};
-pub use figures::{figure_svgs, figures_text, rows_json, study_csv, study_files, study_json};
 pub use findings::{findings_text, paper_findings, Finding, Verdict};
 pub use limits::{
     BenchLimits, OutOfTravel, StageAxis, DOT_DIAMETER_PX, EXPOSURE_US, MIN_DOT_SPACING_PX,
 };
-pub use maps::{field_map_svgs, map_file_name};
 pub use model_scene::ModelScene;
 pub use pool::pool_captures;
 pub use request::{
@@ -41,3 +38,4 @@ pub use study::{
     analyze_dataset, analyze_dataset_with, study_pair_result, Increase, ResultHook, StudyError,
     StudyRow,
 };
+pub use study_files::study_files;

@@ -8,12 +8,12 @@
 
 use super::bench::{BenchError, BenchHandle, BenchLease, BenchStatus, Owner};
 use super::captures::{capture_plan, layout_seed, TargetCapture};
-use super::figures::study_files;
-use super::maps::field_map_svgs;
 use super::request::ExperimentPlan;
 use super::study::{analyze_dataset_with, StudyError, StudyRow};
+use super::study_files::study_files;
 use crate::dataset::{CameraInfo, Manifest, Run};
 use crate::image::{tiff_u16_bytes, ImageError};
+use crate::report::field_map_svgs;
 use crate::run_event::EventKind;
 use ffdic_hw::{CameraSettings, Frame, HardwareScheme, StagePosition};
 use serde_json::{json, Value};

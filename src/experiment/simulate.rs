@@ -4,7 +4,7 @@
 
 use super::captures::{capture_plan, layout_seed, TargetCapture};
 use super::spec::ExperimentSpec;
-use crate::dataset::{CameraInfo, DatasetError, Manifest, PatternInfo};
+use crate::dataset::{CameraInfo, DatasetError, DotProfile, Manifest, PatternInfo};
 use crate::image::{write_tiff_u16, Image, ImageError};
 use crate::model::derive_seed;
 use crate::model::{render_frame, FrameSpec, ModelConfig, SpecklePattern, TargetDot, TooManyDots};
@@ -140,20 +140,13 @@ pub(crate) fn pattern_info(
     pattern: &crate::model::SpecklePattern,
     characterised: bool,
 ) -> PatternInfo {
-    let profile = characterised.then(|| ("profile".to_string(), serde_json::json!("gaussian")));
     PatternInfo {
         label: label.to_string(),
         dot_diameter_mm: Some(pattern.dot_diameter_mm),
         dot_spacing_mm: Some(pattern.dot_spacing_mm),
-        extra: [
-            ("contrast".to_string(), serde_json::json!(pattern.contrast)),
-            (
-                "edge_softness_mm".to_string(),
-                serde_json::json!(pattern.edge_softness_mm),
-            ),
-        ]
-        .into_iter()
-        .chain(profile)
-        .collect(),
+        profile: characterised.then_some(DotProfile::Gaussian),
+        contrast: Some(pattern.contrast),
+        edge_softness_mm: Some(pattern.edge_softness_mm),
+        ..PatternInfo::default()
     }
 }

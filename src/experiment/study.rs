@@ -4,13 +4,12 @@
 //! the paper's Figures 5 (x: u, exx) and 6 (y: v, eyy).
 
 use crate::dataset::{DatasetError, Manifest, Run};
-use crate::dic::{f64_or_nan, interval_or_nan};
 use crate::dic::{
     CorrelationLengths, DicError, DicResult, DicSettings, PreparedReference, Stats, Summary,
 };
 use crate::image::{read_tiff, Image, ImageError};
 use crate::reduce::{reduce, AxisScheme, Scheme};
-use serde::{Deserialize, Serialize};
+pub use crate::report::{Increase, IncreaseInterval, StudyRow};
 use std::path::Path;
 
 #[derive(Debug, thiserror::Error)]
@@ -35,61 +34,6 @@ pub enum StudyError {
         def_w: usize,
         def_h: usize,
     },
-}
-
-/// Percent increase of each standard deviation over the same run's first (100 %) scheme — for a
-/// hardware scheme's run, over its twin's first scheme.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Increase {
-    #[serde(deserialize_with = "f64_or_nan")]
-    pub u: f64,
-    #[serde(deserialize_with = "f64_or_nan")]
-    pub v: f64,
-    #[serde(deserialize_with = "f64_or_nan")]
-    pub exx: f64,
-    #[serde(deserialize_with = "f64_or_nan")]
-    pub eyy: f64,
-    #[serde(deserialize_with = "f64_or_nan")]
-    pub exy: f64,
-}
-
-/// 95 % intervals of the [`Increase`] percentages: a block bootstrap resampling the same
-/// grid blocks in the baseline and this scheme (`dic::bootstrap`).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct IncreaseInterval {
-    #[serde(deserialize_with = "interval_or_nan")]
-    pub u: [f64; 2],
-    #[serde(deserialize_with = "interval_or_nan")]
-    pub v: [f64; 2],
-    #[serde(deserialize_with = "interval_or_nan")]
-    pub exx: [f64; 2],
-    #[serde(deserialize_with = "interval_or_nan")]
-    pub eyy: [f64; 2],
-    #[serde(deserialize_with = "interval_or_nan")]
-    pub exy: [f64; 2],
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct StudyRow {
-    pub run: String,
-    pub pattern: String,
-    pub scheme: String,
-    /// Linear fill factors (x, y) of the scheme.
-    pub fill_factor: (f64, f64),
-    pub summary: Summary,
-    /// None for the baseline scheme itself.
-    pub increase_pct: Option<Increase>,
-    /// None for the baseline, and where the two grids differ in shape or hold too few blocks.
-    #[serde(default)]
-    pub increase_ci95: Option<IncreaseInterval>,
-    /// Independent captures pooled into this row (`pool::pool_captures`); 1 for a single capture,
-    /// whose intervals are the block bootstrap's.
-    #[serde(default = "one_capture")]
-    pub repeats: usize,
-}
-
-fn one_capture() -> usize {
-    1
 }
 
 /// Runs the study over every run of a dataset in `dir`. `progress(done, total)` after each pair;

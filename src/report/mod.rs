@@ -3,18 +3,26 @@
 //! so nothing depends on system fonts and every asset ships in the binary.
 
 mod bar_chart;
+mod comparison_figures;
 mod dic_summary;
+mod field_maps;
 mod heatmap;
 mod history_chart;
 mod png;
+mod study_figures;
+mod study_rows;
 mod svg;
 mod table;
 mod xy_plot;
 
 pub use bar_chart::{BarChart, Series};
+pub use comparison_figures::comparison_svgs;
 pub use dic_summary::{dic_settings_json, dic_summary_json};
+pub use field_maps::{field_map_svgs, map_file_name};
 pub use heatmap::{Heatmap, HeatmapMarker};
-pub use history_chart::{history_svg, HistoryPoint};
+pub use history_chart::{history_chart, history_svg, HistoryPoint};
 pub use png::png_quicklook;
+pub use study_figures::{figure_svgs, figures_text, rows_json, study_csv, study_json};
+pub use study_rows::{Increase, IncreaseInterval, StudyRow};
 pub use table::{csv, text_table};
 pub use xy_plot::{Mark, XyPlot, XySeries};

@@ -4,8 +4,8 @@ use super::jobs::{JobContext, JobError, JobOutput, JobResult, Work};
 use super::Service;
 use crate::dataset::Manifest;
 use crate::diagnose::{
-    append_history, compare, comparison_svgs, diagnose_rounds, CompareOptions, Comparison,
-    DiagnoseError, HistoryEntry, MAX_ROUNDS,
+    append_history, compare, diagnose_rounds, CompareOptions, Comparison, DiagnoseError,
+    HistoryEntry, MAX_ROUNDS,
 };
 use crate::dic::DicSettings;
 use crate::experiment::{
@@ -14,6 +14,7 @@ use crate::experiment::{
 };
 use crate::model::ModelConfig;
 use crate::reduce::Scheme;
+use crate::report::comparison_svgs;
 use crate::run_event::EventKind;
 use crate::store::{DatasetId, DatasetSource};
 use serde::{Deserialize, Serialize};

@@ -1,12 +1,12 @@
 //! 4. Round trips: a model through its TOML file, a dataset manifest through `dataset.json`.
 
 use super::config;
-use ffdic::dataset::{CameraInfo, Manifest, PatternInfo, Run, StageMove};
+use ffdic::dataset::{CameraInfo, DotProfile, Manifest, PatternInfo, Run, StageMove};
 use ffdic::model::effects::{
     FillFactor, FixedPattern, IlluminationChange, LensDistortion, MotionBlur, PsfBlur,
     Quantization, Rotation, Scale, SensorNoise, StageError, StageMisalignment, Vignetting,
 };
-use ffdic::model::{Effects, ModelConfig};
+use ffdic::model::{Effects, ModelConfig, Placement};
 use ffdic_hw::{schemes_for, BinningDomain, BinningMode, HardwareScheme, ReductionCaps};
 use proptest::num::f64 as float;
 use proptest::prelude::*;
@@ -141,17 +141,50 @@ fn file_name() -> impl Strategy<Value = String> {
 }
 
 fn run(number: impl Strategy<Value = f64> + Clone + 'static) -> impl Strategy<Value = Run> {
+    // Sizes positive, softness at least 0, contrast in (0, 1]: what `validate` accepts.
+    let size = number
+        .clone()
+        .prop_map(f64::abs)
+        .prop_filter("a size is positive", |v| *v > 0.0);
+    let print = (
+        prop::option::of(prop_oneof![
+            Just(DotProfile::Gaussian),
+            Just(DotProfile::Disk)
+        ]),
+        prop::option::of((1u32..=1000).prop_map(|k| k as f64 / 1000.0)),
+        prop::option::of(number.clone().prop_map(f64::abs)),
+        prop::option::of(prop::collection::vec(
+            [number.clone(), number.clone()],
+            0..4,
+        )),
+        prop::option::of(prop_oneof![
+            Just(Placement::JitteredGrid),
+            Just(Placement::Poisson)
+        ]),
+    );
     let pattern = (
         text(),
-        prop::option::of(number.clone()),
-        prop::option::of(number.clone()),
+        prop::option::of(size.clone()),
+        prop::option::of(size),
+        print,
         extra(number.clone()),
     )
         .prop_map(
-            |(label, dot_diameter_mm, dot_spacing_mm, extra)| PatternInfo {
+            |(
                 label,
                 dot_diameter_mm,
                 dot_spacing_mm,
+                (profile, contrast, edge_softness_mm, mtf, placement),
+                extra,
+            )| PatternInfo {
+                label,
+                dot_diameter_mm,
+                dot_spacing_mm,
+                profile,
+                contrast,
+                edge_softness_mm,
+                mtf,
+                placement,
                 extra,
             },
         );

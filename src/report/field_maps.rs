@@ -2,8 +2,8 @@
 //! displacement varies over the field and where the strain error sits. Points the DIC rejected are
 //! grey. Coordinates are those of the reduced image the DIC saw.
 
+use super::Heatmap;
 use crate::dic::{DicResult, PoiResult};
-use crate::report::Heatmap;
 
 /// One map: which field, its label with units, how to read it from a point, and whether the map
 /// shows the variation about the mean (a displacement of a rigid move is nearly constant: its

@@ -1,9 +1,10 @@
 //! The paper's Figures 5 and 6 from a study: terminal tables, CSV, JSON and SVG bar charts.
-//! Shared by `ffdic reproduce`, the experiment runner and the API, so all show the same numbers.
+//! Shared by `ffdic reproduce`, the experiment runner and the API (through
+//! `experiment::study_files`), so all show the same numbers.
 
-use super::study::{Increase, IncreaseInterval, StudyRow};
+use super::study_rows::{Increase, IncreaseInterval, StudyRow};
+use super::{csv, text_table, BarChart, Series};
 use crate::dic::{BLOCK_PER_CORRELATION_LENGTH, MIN_BLOCKS};
-use crate::report::{csv, text_table, BarChart, Series};
 use serde_json::json;
 
 /// `{"rows":[{"pattern","scheme","u":{"mean","std"},...}]}` as the issue specifies.
@@ -24,30 +25,6 @@ pub fn rows_json(rows: &[StudyRow]) -> serde_json::Value {
             "repeats": r.repeats,
         })).collect::<Vec<_>>()
     })
-}
-
-/// The study's files from every capture's rows, beside the pooled rows they show:
-/// `results/study.json`, `results/study.csv` and the figures under `plots/` — one writer for the
-/// experiment runner and the dataset analysis job.
-pub fn study_files(
-    manifest: &crate::dataset::Manifest,
-    captures: &[StudyRow],
-) -> (Vec<StudyRow>, Vec<(String, Vec<u8>)>) {
-    let rows = super::pool::pool_captures(manifest, captures);
-    let json = serde_json::to_string_pretty(&study_json(&rows, captures)).expect("rows serialise");
-    let mut files = vec![
-        ("results/study.json".to_string(), json.into_bytes()),
-        (
-            "results/study.csv".to_string(),
-            study_csv(&rows).into_bytes(),
-        ),
-    ];
-    files.extend(
-        figure_svgs(&rows)
-            .into_iter()
-            .map(|(name, svg)| (format!("plots/{name}"), svg.into_bytes())),
-    );
-    (rows, files)
 }
 
 /// `results/study.json`: the rows (pooled over captures), and with repeats every capture's own

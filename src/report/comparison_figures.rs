@@ -1,0 +1,188 @@
+//! A comparison drawn: where the model fails — the residual map of each run and scheme, its
+//! profiles against position, the mean residual against the sub-pixel fraction of the motion
+//! (interpolation bias is periodic in it: Schreier, Braasch & Sutton, Opt. Eng. 39 (2000)) — and
+//! the image statistics measured beside the model's.
+
+use super::{Heatmap, Mark, XyPlot, XySeries};
+use crate::diagnose::{Comparison, ImageComparison};
+
+fn file_safe(s: &str) -> String {
+    s.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// Every plot of a comparison as (file name, SVG text).
+pub fn comparison_svgs(cmp: &Comparison) -> Vec<(String, String)> {
+    let mut out = residual_map_svgs(cmp);
+    out.extend(residual_profile_svgs(cmp));
+    out.push(("residual_vs_fraction.svg".into(), fraction_svg(cmp)));
+    for im in &cmp.images {
+        out.extend(image_svgs(im));
+    }
+    out
+}
+
+/// The residual maps (Δu and Δv) of each run and scheme.
+fn residual_map_svgs(cmp: &Comparison) -> Vec<(String, String)> {
+    let mut out = Vec::new();
+    for r in &cmp.runs {
+        for (comp, values) in [("u", &r.residual.du), ("v", &r.residual.dv)] {
+            let map = Heatmap {
+                title: format!(
+                    "Residual Δ{comp} (measured − model), run {}, {}",
+                    r.id, r.scheme
+                ),
+                x_label: "x [px]".into(),
+                y_label: "y [px]".into(),
+                value_label: format!("Δ{comp} [px]"),
+                xs: r.residual.xs.clone(),
+                ys: r.residual.ys.clone(),
+                values: values.clone(),
+                diverging: true,
+                x_tick_labels: Vec::new(),
+                y_tick_labels: Vec::new(),
+                markers: Vec::new(),
+            };
+            out.push((
+                format!(
+                    "residual_{}_{}_{comp}.svg",
+                    file_safe(&r.id),
+                    file_safe(&r.scheme)
+                ),
+                map.to_svg(640, 520),
+            ));
+        }
+    }
+    out
+}
+
+/// The mean residual against x and against y, one line per run, scheme and component.
+fn residual_profile_svgs(cmp: &Comparison) -> Vec<(String, String)> {
+    let mut out = Vec::new();
+    for (name, along_x) in [("x", true), ("y", false)] {
+        let mut plot = XyPlot::new(
+            &format!("Residual against {name}"),
+            &format!("{name} [px]"),
+            "mean residual [px]",
+        );
+        plot.zero_line = true;
+        for r in &cmp.runs {
+            let prof = if along_x {
+                &r.residual.profile_x
+            } else {
+                &r.residual.profile_y
+            };
+            for (k, comp) in [(1usize, "u"), (2, "v")] {
+                plot.series.push(XySeries {
+                    name: format!("Δ{comp} {} {}", r.id, r.scheme),
+                    points: prof.iter().map(|p| (p[0], p[k])).collect(),
+                    mark: Mark::LinePoints,
+                });
+            }
+        }
+        out.push((
+            format!("residual_vs_{name}.svg"),
+            plot.to_svg(760, 460 + 16 * plot.series.len() as u32),
+        ));
+    }
+    out
+}
+
+/// Each run's mean residual against the sub-pixel fraction of its displacement.
+fn fraction_svg(cmp: &Comparison) -> String {
+    let mut frac = XyPlot::new(
+        "Mean residual against sub-pixel fraction",
+        "sub-pixel fraction of the measured displacement [px]",
+        "mean residual [px]",
+    );
+    frac.zero_line = true;
+    for (k, comp) in [(0usize, "u"), (1, "v")] {
+        let mut pts: Vec<(f64, f64)> = cmp
+            .runs
+            .iter()
+            .map(|r| (r.subpixel_fraction[k], r.mean_diff_px[k]))
+            .collect();
+        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        frac.series.push(XySeries {
+            name: format!("Δ{comp} against fraction of {comp}"),
+            points: pts,
+            mark: Mark::Points,
+        });
+    }
+    frac.to_svg(700, 460)
+}
+
+/// The image statistics of one frame, measured beside model: its power spectra, and for a
+/// reference its photon-transfer curve and mean-intensity ratio map.
+fn image_svgs(im: &ImageComparison) -> Vec<(String, String)> {
+    let mut out = Vec::new();
+    let tag = match &im.run {
+        Some(run) => format!("moved_{}", file_safe(run)),
+        None => format!("reference_{}", file_safe(&im.pattern)),
+    };
+    let mut spec = XyPlot::new(
+        &format!("Power spectrum, {tag}"),
+        "f [cycles/px]",
+        "P / mean² [1/(cycles/px)]",
+    );
+    spec.log_x = true;
+    spec.log_y = true;
+    for (name, s) in [
+        ("along x, measured", &im.measured.psd_x),
+        ("along x, model", &im.model.psd_x),
+        ("along y, measured", &im.measured.psd_y),
+        ("along y, model", &im.model.psd_y),
+    ] {
+        spec.series.push(XySeries {
+            name: name.into(),
+            points: s.iter().map(|b| (b.f, b.value)).collect(),
+            mark: Mark::LinePoints,
+        });
+    }
+    out.push((format!("spectrum_{tag}.svg"), spec.to_svg(700, 520)));
+    if im.run.is_none() {
+        let mut ptc = XyPlot::new(
+            &format!("Noise against mean, {tag}"),
+            "mean [DN]",
+            "noise variance [DN²]",
+        );
+        for (name, s) in [("measured", &im.measured.ptc), ("model", &im.model.ptc)] {
+            ptc.series.push(XySeries {
+                name: name.into(),
+                points: s.iter().map(|p| (p.mean_dn, p.variance_dn2)).collect(),
+                mark: Mark::LinePoints,
+            });
+        }
+        out.push((format!("noise_vs_mean_{tag}.svg"), ptc.to_svg(700, 460)));
+        let ratio: Vec<f64> = im
+            .measured
+            .mean_map
+            .values
+            .iter()
+            .zip(&im.model.mean_map.values)
+            .map(|(a, b)| a / b - 1.0)
+            .collect();
+        let map = Heatmap {
+            title: format!("Mean intensity, measured / model − 1, {tag}"),
+            x_label: "x [px]".into(),
+            y_label: "y [px]".into(),
+            value_label: "relative difference [1]".into(),
+            xs: im.measured.mean_map.xs.clone(),
+            ys: im.measured.mean_map.ys.clone(),
+            values: ratio,
+            diverging: true,
+            x_tick_labels: Vec::new(),
+            y_tick_labels: Vec::new(),
+            markers: Vec::new(),
+        };
+        out.push((format!("mean_map_{tag}.svg"), map.to_svg(640, 520)));
+    }
+    out
+}

@@ -1,0 +1,60 @@
+//! The rows of the fill-factor study (one per run and scheme, or per pooled captures): what its
+//! tables, CSV, JSON and figures show.
+
+use crate::dic::{f64_or_nan, interval_or_nan, Summary};
+use serde::{Deserialize, Serialize};
+
+/// Percent increase of each standard deviation over the same run's first (100 %) scheme — for a
+/// hardware scheme's run, over its twin's first scheme.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Increase {
+    #[serde(deserialize_with = "f64_or_nan")]
+    pub u: f64,
+    #[serde(deserialize_with = "f64_or_nan")]
+    pub v: f64,
+    #[serde(deserialize_with = "f64_or_nan")]
+    pub exx: f64,
+    #[serde(deserialize_with = "f64_or_nan")]
+    pub eyy: f64,
+    #[serde(deserialize_with = "f64_or_nan")]
+    pub exy: f64,
+}
+
+/// 95 % intervals of the [`Increase`] percentages: a block bootstrap resampling the same
+/// grid blocks in the baseline and this scheme (`dic::bootstrap`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct IncreaseInterval {
+    #[serde(deserialize_with = "interval_or_nan")]
+    pub u: [f64; 2],
+    #[serde(deserialize_with = "interval_or_nan")]
+    pub v: [f64; 2],
+    #[serde(deserialize_with = "interval_or_nan")]
+    pub exx: [f64; 2],
+    #[serde(deserialize_with = "interval_or_nan")]
+    pub eyy: [f64; 2],
+    #[serde(deserialize_with = "interval_or_nan")]
+    pub exy: [f64; 2],
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StudyRow {
+    pub run: String,
+    pub pattern: String,
+    pub scheme: String,
+    /// Linear fill factors (x, y) of the scheme.
+    pub fill_factor: (f64, f64),
+    pub summary: Summary,
+    /// None for the baseline scheme itself.
+    pub increase_pct: Option<Increase>,
+    /// None for the baseline, and where the two grids differ in shape or hold too few blocks.
+    #[serde(default)]
+    pub increase_ci95: Option<IncreaseInterval>,
+    /// Independent captures pooled into this row (`pool::pool_captures`); 1 for a single capture,
+    /// whose intervals are the block bootstrap's.
+    #[serde(default = "one_capture")]
+    pub repeats: usize,
+}
+
+fn one_capture() -> usize {
+    1
+}
