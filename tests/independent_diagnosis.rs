@@ -274,42 +274,34 @@ fn hidden_psf_blur_with_a_nominal_print_is_confounded_with_it() {
     }
 }
 
-/// Not met: with the placement chosen from the spectrum and the psf fitted above half the
-/// spacing frequency, σ is right (1.205 ± 0.022 px against 1.269 on this draw, −5 %), but adding
-/// it does not lower the comparison's χ²: ΔBIC +26.7, the image statistics' χ² drop −0.4 ± 1.4,
-/// the displacement drop −0.00009 ± 0.00009 px — the blur is seen in the spectrum's shape the
-/// fit reads, not in the statistics the verdict weighs.
+/// With a characterised print the blur is the lens's: named, its σ within 20 % (the issue's
+/// figure). Met since the model's lens blur spreads each dot's darkening instead of adding to it
+/// (`model::render`: the depth falls as σ² grows); before, adding the blur darkened the model's
+/// frames, the white level rose 27 % to match the mean and the image statistics grew worse
+/// (ΔBIC +26.7, verdict `none`). The σ had needed the print's placement chosen from the
+/// spectrum (`compare::choose_placement`; a jittered grid left it 28 % low) and the fit on the
+/// spectrum's shape above half the spacing frequency.
 #[test]
-#[ignore = "not met: σ within 5 % but ΔBIC +26.7 (the image χ² does not fall; see the doc comment)"]
-fn hidden_psf_blur_with_a_characterised_print_is_named() {
+fn hidden_psf_blur_with_a_characterised_print_is_named_within_20_percent() {
     let (spec, sigma) = psf_spec("characterised");
     let (r, _) = diagnose(&spec, 1);
     let d = &r.diagnoses[0];
-    if let Some(c) = d
+    let criteria = d
         .candidates
         .iter()
         .find(|c| c.effect.as_str() == "psf_blur")
-    {
-        println!(
-            "psf_blur: ΔBIC {:.1}, drop {:.5} px, {:?} ± {:?}, criteria {:?}",
-            c.delta_bic, c.drop_px, c.params, c.stderr, c.criteria
-        );
-    }
-    assert_eq!(ffdic::model::effects::verdict_name(d.verdict), "psf_blur");
+        .map(|c| format!("ΔBIC {:.1}, {:?}", c.delta_bic, c.criteria));
+    assert_eq!(
+        ffdic::model::effects::verdict_name(d.verdict),
+        "psf_blur",
+        "psf_blur candidate: {criteria:?}"
+    );
     let (fit, se) = param(d, "psf_blur", "sigma_px");
-    println!("psf_blur σ {fit} ± {se} px, truth {sigma} px");
-}
-
-/// The issue asks for σ within 20 % with a characterised print. Met since the model's dots are
-/// placed as the measured spectrum says (`compare::choose_placement`: Poisson here, as the
-/// generator places them; the jittered grid had left σ 28 % low) and the psf is fitted on the
-/// spectrum's shape above half the spacing frequency.
-#[test]
-fn hidden_psf_blur_with_a_characterised_print_within_20_percent() {
-    let (spec, sigma) = psf_spec("characterised");
-    let (r, _) = diagnose(&spec, 1);
-    let (fit, se) = param(&r.diagnoses[0], "psf_blur", "sigma_px");
-    println!("psf_blur σ {fit} ± {se} px, truth {sigma} px");
+    println!(
+        "psf_blur σ {fit} ± {se} px, truth {sigma} px; discrepancy {} -> {:?} px",
+        d.discrepancy_px,
+        d.after.as_ref().map(|a| a.discrepancy_px)
+    );
     assert!(
         (fit / sigma - 1.0).abs() <= 0.2,
         "psf_blur σ {fit} px, truth {sigma} px"

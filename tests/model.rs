@@ -235,3 +235,80 @@ fn fill_factor_lowers_contrast_but_not_the_mean() {
     // A smaller aperture averages less: the speckle keeps more contrast.
     assert!(s2 > s1, "std {s2} should exceed {s1}");
 }
+
+/// The complex 2D Fourier coefficient of `img` at (kx / width, ky / height) cycles per px,
+/// divided by the pixel count (k = 0, 0 is the mean).
+fn coefficient(img: &ffdic::image::Image, kx: usize, ky: usize) -> (f64, f64) {
+    let (w, h) = (img.width(), img.height());
+    let (mut re, mut im) = (0.0, 0.0);
+    for y in 0..h {
+        for (x, &v) in img.row(y).iter().enumerate() {
+            let ph = 2.0
+                * std::f64::consts::PI
+                * (kx as f64 * x as f64 / w as f64 + ky as f64 * y as f64 / h as f64);
+            re += v as f64 * ph.cos();
+            im -= v as f64 * ph.sin();
+        }
+    }
+    let n = (w * h) as f64;
+    (re / n, im / n)
+}
+
+/// A lens blur against its closed form: a Gaussian PSF of σ multiplies every spatial frequency
+/// f of the optical image by exp(−2π²σ²f²) and leaves the mean (f = 0) alone — it spreads the
+/// dots' darkening, it does not add to it. Checked on a lattice of dots (period 8 px) through
+/// the model's whole renderer, pixel aperture included (the same with and without the blur).
+#[test]
+fn a_lens_blur_follows_the_gaussian_transfer_function_and_keeps_the_mean() {
+    use ffdic::model::effects::PsfBlur;
+    use ffdic::model::TargetDot;
+    let camera = Camera {
+        width: 128,
+        height: 64,
+        scale_px_per_mm: 10.0,
+        exposure_level: 0.5,
+        principal_dx_px: 0.0,
+        principal_dy_px: 0.0,
+    };
+    // Dots every 0.8 mm = 8 px, σ 0.12 mm = 1.2 px, over the field and beyond its edges.
+    let dots: Vec<TargetDot> = (-12..=12)
+        .flat_map(|i| {
+            (-8..=8).map(move |j| TargetDot {
+                x_mm: 0.8 * i as f64,
+                y_mm: 0.8 * j as f64,
+                sigma_mm: 0.12,
+                depth: 0.6,
+            })
+        })
+        .collect();
+    let frame = FrameSpec {
+        stage_dx_mm: 0.0,
+        stage_dy_mm: 0.0,
+        moved: false,
+        seed: 1,
+    };
+    let sharp = render_frame(&camera, &Effects::default(), &dots, &frame);
+    for sigma_px in [0.6, 1.27, 2.0] {
+        let effects = Effects {
+            psf_blur: Some(PsfBlur { sigma_px }),
+            ..Effects::default()
+        };
+        let blurred = render_frame(&camera, &effects, &dots, &frame);
+        let (m0, m1) = (coefficient(&sharp, 0, 0).0, coefficient(&blurred, 0, 0).0);
+        assert!(
+            (m1 / m0 - 1.0).abs() < 1e-4,
+            "σ {sigma_px}: mean {m1} against {m0} without the blur"
+        );
+        // (16, 0) and (0, 8): one cycle per 8 px along x and along y; (16, 8) diagonally.
+        for (kx, ky) in [(16, 0), (0, 8), (16, 8)] {
+            let f2 = (kx as f64 / 128.0).powi(2) + (ky as f64 / 64.0).powi(2);
+            let (a, b) = (coefficient(&sharp, kx, ky), coefficient(&blurred, kx, ky));
+            let ratio = b.0.hypot(b.1) / a.0.hypot(a.1);
+            let expect = (-2.0 * std::f64::consts::PI.powi(2) * sigma_px * sigma_px * f2).exp();
+            assert!(
+                (ratio / expect - 1.0).abs() < 0.01,
+                "σ {sigma_px}, f² {f2}: transfer {ratio} against exp(−2π²σ²f²) = {expect}"
+            );
+        }
+    }
+}

@@ -31,7 +31,8 @@
 //! A pattern is characterised when its manifest entry says `"profile": "gaussian"` and gives the
 //! dot's `contrast` and its size, as `dot_diameter_mm` (FWHM) or as a measured `mtf` — pairs
 //! `[cycles_per_mm, modulation]` of the print alone, fitted to exp(−2π²σ²f²) (a Gaussian dot's
-//! transfer function). `edge_softness_mm` adds in quadrature. The model renders it as stated.
+//! transfer function). `edge_softness_mm` adds in quadrature to the diameter's σ (a measured MTF
+//! already holds it). The model renders it as stated.
 
 use super::image_stats::{psd, FrameStats, PsdBin};
 use crate::dataset::{DotProfile, Run};
@@ -91,8 +92,12 @@ pub fn characterised(run: &Run) -> Option<(f64, f64, Option<f64>)> {
         let pairs: Vec<(f64, f64)> = pairs.iter().map(|&[f, m]| (f, m)).collect();
         sigma_from_mtf(&pairs)
     });
-    let sigma = from_mtf.or(p.dot_diameter_mm.map(|d| d / FWHM_PER_SIGMA))?;
-    Some((sigma.hypot(softness), contrast, p.dot_spacing_mm))
+    // A measured MTF is the whole print's, its softness included; a nominal diameter is the
+    // dot's before the print's own blur.
+    let sigma = from_mtf.or(p
+        .dot_diameter_mm
+        .map(|d| (d / FWHM_PER_SIGMA).hypot(softness)))?;
+    Some((sigma, contrast, p.dot_spacing_mm))
 }
 
 /// σ (mm) of the Gaussian whose transfer function exp(−2π²σ²f²) fits the MTF pairs

@@ -148,14 +148,21 @@ fn render_irradiance(
                 && x < w as f64 + margin + 60.0
                 && y < h as f64 + margin + 60.0;
             inside.then(|| {
-                let sigma =
-                    ((d.sigma_mm * camera.scale_px_per_mm * mag).powi(2) + psf * psf).sqrt();
+                let sigma_print = d.sigma_mm * camera.scale_px_per_mm * mag;
+                let sigma = sigma_print.hypot(psf);
+                // The lens spreads a dot's darkening, it does not add to it: the convolution
+                // keeps the dot's volume depth·2πσ², so the depth falls as σ² grows.
+                let spread = if sigma > 0.0 {
+                    (sigma_print / sigma).powi(2)
+                } else {
+                    1.0
+                };
                 GaussianDot {
                     x_px: x,
                     y_px: y,
                     sigma_x_px: sigma,
                     sigma_y_px: sigma,
-                    depth: d.depth * background,
+                    depth: d.depth * background * spread,
                 }
             })
         })
