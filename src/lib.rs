@@ -14,6 +14,7 @@ pub mod dic;
 pub mod experiment;
 pub mod image;
 pub mod model;
+pub mod pairs;
 pub mod reduce;
 pub mod report;
 pub mod run_event;

@@ -158,3 +158,126 @@ fn the_arrows_have_no_cycle() {
         }
     }
 }
+
+/// `text` with the contents of string and character literals and of comments blanked (newlines
+/// kept), so the braces left are the code's.
+fn code_only(text: &str) -> String {
+    let chars: Vec<char> = text.chars().collect();
+    let mut out = String::with_capacity(text.len());
+    let mut i = 0;
+    let blank = |c: char| if c == '\n' { '\n' } else { ' ' };
+    while i < chars.len() {
+        let c = chars[i];
+        let next = chars.get(i + 1).copied();
+        if c == '/' && next == Some('/') {
+            while i < chars.len() && chars[i] != '\n' {
+                i += 1;
+            }
+        } else if c == '/' && next == Some('*') {
+            while i + 1 < chars.len() && !(chars[i] == '*' && chars[i + 1] == '/') {
+                out.push(blank(chars[i]));
+                i += 1;
+            }
+            i += 2;
+        } else if c == 'r' && (next == Some('"') || next == Some('#')) {
+            // A raw string r#…"…"#…: ends at a quote followed by as many #.
+            let mut j = i + 1;
+            let mut hashes = 0;
+            while chars.get(j) == Some(&'#') {
+                hashes += 1;
+                j += 1;
+            }
+            if chars.get(j) != Some(&'"') {
+                out.push(c);
+                i += 1;
+                continue;
+            }
+            j += 1;
+            while j < chars.len() {
+                if chars[j] == '"' && (1..=hashes).all(|k| chars.get(j + k) == Some(&'#')) {
+                    break;
+                }
+                out.push(blank(chars[j]));
+                j += 1;
+            }
+            i = j + 1 + hashes;
+        } else if c == '"' {
+            i += 1;
+            while i < chars.len() && chars[i] != '"' {
+                if chars[i] == '\\' {
+                    i += 1;
+                }
+                out.push(blank(chars[i]));
+                i += 1;
+            }
+            i += 1;
+        } else if c == '\'' && (chars.get(i + 2) == Some(&'\'') || next == Some('\\')) {
+            // A character literal ('{', '\n', '\''); a lifetime ('a) has no closing quote.
+            i += 1;
+            while i < chars.len() && chars[i] != '\'' {
+                if chars[i] == '\\' {
+                    i += 1;
+                }
+                i += 1;
+            }
+            i += 1;
+        } else {
+            out.push(c);
+            i += 1;
+        }
+    }
+    out
+}
+
+/// Issue 16: no function in `src/` longer than 100 lines (signature to closing brace).
+#[test]
+fn no_function_in_src_is_over_100_lines() {
+    let mut files = Vec::new();
+    rust_files(&root().join("src"), &mut files);
+    let mut long = Vec::new();
+    for file in files {
+        let code = code_only(&std::fs::read_to_string(&file).unwrap());
+        let lines: Vec<&str> = code.lines().collect();
+        for (start, line) in lines.iter().enumerate() {
+            let words: Vec<&str> = line.split_whitespace().collect();
+            let Some(at) = words.iter().position(|w| *w == "fn") else {
+                continue;
+            };
+            if !words[..at]
+                .iter()
+                .all(|w| w.starts_with("pub") || matches!(*w, "async" | "const" | "unsafe"))
+            {
+                continue;
+            }
+            let mut depth = 0i32;
+            let mut opened = false;
+            for (k, l) in lines[start..].iter().enumerate() {
+                for ch in l.chars() {
+                    match ch {
+                        '{' => {
+                            depth += 1;
+                            opened = true;
+                        }
+                        '}' => depth -= 1,
+                        _ => {}
+                    }
+                }
+                if !opened && l.trim_end().ends_with(';') {
+                    break;
+                }
+                if opened && depth == 0 {
+                    if k + 1 > 100 {
+                        long.push(format!(
+                            "{}:{} ({} lines)",
+                            file.strip_prefix(root()).unwrap().display(),
+                            start + 1,
+                            k + 1
+                        ));
+                    }
+                    break;
+                }
+            }
+        }
+    }
+    assert!(long.is_empty(), "functions over 100 lines: {long:#?}");
+}

@@ -189,6 +189,26 @@ pub fn comparison_text(cmp: &Comparison) -> String {
             cmp.hardware_runs_set_aside
         ));
     }
+    s += "\n";
+    s += &images_text(cmp);
+    s += &format!(
+        "\nmodel {} ({}), dataset {}: discrepancy {:.5} px (rigid {:.5}, field {:.5}, std {:.5}); stage misalignment {:.6} rad, travel scale {:.6}{}\n",
+        cmp.model.name,
+        cmp.model.version,
+        cmp.dataset,
+        cmp.discrepancy_px,
+        cmp.parts.rigid_px,
+        cmp.parts.field_px,
+        cmp.parts.std_px,
+        cmp.model.nominal.misalignment_rad,
+        cmp.model.nominal.travel_scale,
+        stage_text(cmp)
+    );
+    s
+}
+
+/// The image statistics of each frame, measured beside the model's.
+fn images_text(cmp: &Comparison) -> String {
     let images: Vec<Vec<String>> = cmp
         .images
         .iter()
@@ -215,8 +235,7 @@ pub fn comparison_text(cmp: &Comparison) -> String {
             ]
         })
         .collect();
-    s += "\n";
-    s += &ffdic::report::text_table(
+    ffdic::report::text_table(
         &[
             "frame",
             "mean meas",
@@ -227,21 +246,7 @@ pub fn comparison_text(cmp: &Comparison) -> String {
             "noise slope model",
         ],
         &images,
-    );
-    s += &format!(
-        "\nmodel {} ({}), dataset {}: discrepancy {:.5} px (rigid {:.5}, field {:.5}, std {:.5}); stage misalignment {:.6} rad, travel scale {:.6}{}\n",
-        cmp.model.name,
-        cmp.model.version,
-        cmp.dataset,
-        cmp.discrepancy_px,
-        cmp.parts.rigid_px,
-        cmp.parts.field_px,
-        cmp.parts.std_px,
-        cmp.model.nominal.misalignment_rad,
-        cmp.model.nominal.travel_scale,
-        stage_text(cmp)
-    );
-    s
+    )
 }
 
 /// The stage landing in words: the offsets' RMS against the repeatability that bounded them.

@@ -24,8 +24,10 @@ use super::nominal::{check_sizes, Nominal, Scene};
 use super::{CompareOptions, DiagnoseError};
 use crate::dataset::{sensor_readout, Manifest, Run};
 use crate::dic::{DicResult, PreparedReference};
-use crate::image::{read_tiff, Image};
+use crate::image::Image;
 use crate::model::{BinnedValue, SensorReadout};
+use crate::pairs::{correlate_pairs, PairVisitor, RunPair};
+use crate::reduce::Scheme;
 use ffdic_hw::HardwareScheme;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -98,43 +100,68 @@ pub fn measure_hardware(
     manifest: &Manifest,
     options: &CompareOptions,
 ) -> Result<(Vec<HardwareMeasurement>, usize), DiagnoseError> {
-    let mut out = Vec::new();
-    let mut set_aside = 0;
-    let mut cached: Option<(String, Image, PreparedReference, FrameStats)> = None;
-    for run in hardware {
-        let twin = run
-            .twin_of
+    let twin_of = |run: &Run| {
+        run.twin_of
             .as_ref()
-            .and_then(|t| manifest.runs.iter().position(|r| &r.id == t));
-        let (Some(twin), Some(capture)) = (twin, run.capture.clone()) else {
-            set_aside += 1;
-            continue;
-        };
-        let dic_error = |source| DiagnoseError::Dic {
-            run: run.id.clone(),
-            scheme: capture.name.clone(),
-            source,
-        };
-        if cached.as_ref().map(|c| &c.0) != Some(&run.reference) {
-            let (reference, _) = read_tiff(&dir.join(&run.reference))?;
-            let prepared = PreparedReference::new(&reference, &options.dic).map_err(dic_error)?;
-            let stats = stats_of(&reference);
-            cached = Some((run.reference.clone(), reference, prepared, stats));
+            .and_then(|t| manifest.runs.iter().position(|r| &r.id == t))
+    };
+    let total = hardware.len();
+    let (runs, twins): (Vec<Run>, Vec<usize>) = hardware
+        .into_iter()
+        .filter(|r| r.capture.is_some())
+        .filter_map(|r| twin_of(&r).map(|t| (r, t)))
+        .unzip();
+    let mut measured = MeasuredCaptures {
+        twins: &twins,
+        reference_stats: None,
+        out: Vec::with_capacity(runs.len()),
+    };
+    correlate_pairs(dir, &runs, &[], &options.dic, &mut measured)?;
+    Ok((measured.out, total - runs.len()))
+}
+
+/// The capture-mode side of the pair loop: each run's analysis and image statistics.
+struct MeasuredCaptures<'a> {
+    /// Each run's twin (an index into the manifest's runs).
+    twins: &'a [usize],
+    /// The last reference's file and statistics (runs of one pattern and mode share it).
+    reference_stats: Option<(String, FrameStats)>,
+    out: Vec<HardwareMeasurement>,
+}
+
+impl PairVisitor for MeasuredCaptures<'_> {
+    type Error = DiagnoseError;
+
+    fn frames(&mut self, pair: &RunPair<'_>) -> Result<(), DiagnoseError> {
+        check_sizes(pair.run, pair.reference, pair.deformed)?;
+        if self.reference_stats.as_ref().map(|r| &r.0) != Some(&pair.run.reference) {
+            self.reference_stats = Some((pair.run.reference.clone(), stats_of(pair.reference)));
         }
-        let (_, reference, prepared, reference_stats) = cached.as_ref().expect("just filled");
-        let (moved, _) = read_tiff(&dir.join(&run.deformed))?;
-        check_sizes(&run, reference, &moved)?;
-        let dic = prepared.correlate(&moved, None).map_err(dic_error)?;
-        out.push(HardwareMeasurement {
-            twin,
-            reference_stats: reference_stats.clone(),
-            moved_stats: stats_of(&moved),
+        Ok(())
+    }
+
+    fn result(
+        &mut self,
+        pair: &RunPair<'_>,
+        _scheme: &Scheme,
+        dic: DicResult,
+    ) -> Result<(), DiagnoseError> {
+        let run = pair.run.clone();
+        self.out.push(HardwareMeasurement {
+            twin: self.twins[pair.index],
+            reference_stats: self
+                .reference_stats
+                .as_ref()
+                .expect("frames came first")
+                .1
+                .clone(),
+            moved_stats: stats_of(pair.deformed),
             dic,
-            capture,
+            capture: run.capture.clone().expect("a capture-mode run"),
             run,
         });
+        Ok(())
     }
-    Ok((out, set_aside))
 }
 
 fn stats_of(frame: &Image) -> FrameStats {

@@ -28,6 +28,7 @@ use crate::dataset::{Manifest, Run};
 use crate::dic::{DicResult, PreparedReference, Summary};
 use crate::image::{read_tiff, Image};
 use crate::model::{Effects, ModelConfig, Placement};
+use crate::pairs::{correlate_pairs, PairVisitor, RunPair};
 use crate::reduce::{reduce, Scheme};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -211,64 +212,36 @@ pub fn load_measurement(
         source: e,
     })?;
     let (labels, pattern_of_run) = pattern_indices(&manifest);
-    let total = manifest.runs.len() * options.schemes.len();
-    let mut done = 0;
-    let mut dic = Vec::with_capacity(manifest.runs.len());
-    let mut moved_crops = Vec::new();
-    let mut moved_stats = Vec::new();
-    let mut references = ReferenceStats::new(labels.len());
-    let mut size = None;
-    let mut bit_depth = 16u8;
-    // The prepared references of the last reference file (runs sharing it reuse them).
-    let mut cached: Option<(String, Image, Vec<PreparedReference>)> = None;
-    for (ri, run) in manifest.runs.iter().enumerate() {
-        if cached.as_ref().map(|c| &c.0) != Some(&run.reference) {
-            let (img, info) = read_tiff(&dir.join(&run.reference))?;
-            bit_depth = info.bit_depth.min(16);
-            let mut prepared = Vec::new();
-            for s in &options.schemes {
-                let r = reduce(&img, s)?;
-                prepared.push(
-                    PreparedReference::new(&r, &options.dic)
-                        .map_err(|e| dic_error(&run.id, s, e))?,
-                );
-            }
-            cached = Some((run.reference.clone(), img, prepared));
-        }
-        let (_, reference, prepared) = cached.as_ref().expect("just filled");
-        let (deformed, _) = read_tiff(&dir.join(&run.deformed))?;
-        check_sizes(run, reference, &deformed)?;
-        // A move stated an order of magnitude off would send the fit chasing a travel scale of
-        // hundreds: say so with the measured figure instead.
-        check_stated_move(
-            reference,
-            &deformed,
-            (run.stage.dx_mm, run.stage.dy_mm),
-            manifest.scale_px_per_mm,
-        )
-        .map_err(|e| DiagnoseError::Frames {
-            run: run.id.clone(),
-            message: e.to_string(),
-        })?;
-        same_size_as_first(run, reference, &mut size)?;
-        references.observe(pattern_of_run[ri], dir, run, reference)?;
-        let crop = centre_crop(&deformed, STATS_CROP_PX);
-        moved_stats.push(frame_stats(Some(&deformed), &crop, None));
-        moved_crops.push(crop);
-        let mut per_scheme = Vec::with_capacity(options.schemes.len());
-        for (s, prep) in options.schemes.iter().zip(prepared) {
-            let d = reduce(&deformed, s)?;
-            per_scheme.push(
-                prep.correlate(&d, None)
-                    .map_err(|e| dic_error(&run.id, s, e))?,
-            );
-            done += 1;
-            if !progress(done, total) {
-                return Err(DiagnoseError::Cancelled);
-            }
-        }
-        dic.push(per_scheme);
-    }
+    let mut measured = MeasuredPairs {
+        dir,
+        scale_px_per_mm: manifest.scale_px_per_mm,
+        pattern_of_run: &pattern_of_run,
+        total: manifest.runs.len() * options.schemes.len(),
+        done: 0,
+        progress,
+        dic: Vec::with_capacity(manifest.runs.len()),
+        moved_crops: Vec::new(),
+        moved_stats: Vec::new(),
+        references: ReferenceStats::new(labels.len()),
+        size: None,
+        bit_depth: 16,
+    };
+    correlate_pairs(
+        dir,
+        &manifest.runs,
+        &options.schemes,
+        &options.dic,
+        &mut measured,
+    )?;
+    let MeasuredPairs {
+        dic,
+        moved_crops,
+        moved_stats,
+        references,
+        size,
+        bit_depth,
+        ..
+    } = measured;
     let (width, height) = size.expect("a manifest has runs");
     let nominal = references.nominal(&manifest, &pattern_of_run, (width, height), bit_depth);
     let (hardware, hardware_runs_set_aside) =
@@ -300,6 +273,68 @@ pub fn load_measurement(
         hardware,
         hardware_runs_set_aside,
     })
+}
+
+/// The measured side of the pair loop: each run's checks, image statistics and analyses.
+struct MeasuredPairs<'a> {
+    dir: &'a Path,
+    scale_px_per_mm: f64,
+    pattern_of_run: &'a [usize],
+    total: usize,
+    done: usize,
+    progress: Progress<'a>,
+    dic: Vec<Vec<DicResult>>,
+    moved_crops: Vec<Image>,
+    moved_stats: Vec<FrameStats>,
+    references: ReferenceStats,
+    size: Option<(usize, usize)>,
+    bit_depth: u8,
+}
+
+impl PairVisitor for MeasuredPairs<'_> {
+    type Error = DiagnoseError;
+
+    fn frames(&mut self, pair: &RunPair<'_>) -> Result<(), DiagnoseError> {
+        let (run, reference, deformed) = (pair.run, pair.reference, pair.deformed);
+        check_sizes(run, reference, deformed)?;
+        // A move stated an order of magnitude off would send the fit chasing a travel scale of
+        // hundreds: say so with the measured figure instead.
+        check_stated_move(
+            reference,
+            deformed,
+            (run.stage.dx_mm, run.stage.dy_mm),
+            self.scale_px_per_mm,
+        )
+        .map_err(|e| DiagnoseError::Frames {
+            run: run.id.clone(),
+            message: e.to_string(),
+        })?;
+        same_size_as_first(run, reference, &mut self.size)?;
+        self.bit_depth = pair.bit_depth;
+        self.references
+            .observe(self.pattern_of_run[pair.index], self.dir, run, reference)?;
+        let crop = centre_crop(deformed, STATS_CROP_PX);
+        self.moved_stats
+            .push(frame_stats(Some(deformed), &crop, None));
+        self.moved_crops.push(crop);
+        self.dic.push(Vec::new());
+        Ok(())
+    }
+
+    fn result(
+        &mut self,
+        _pair: &RunPair<'_>,
+        _scheme: &Scheme,
+        result: DicResult,
+    ) -> Result<(), DiagnoseError> {
+        self.dic.last_mut().expect("frames came first").push(result);
+        self.done += 1;
+        if (self.progress)(self.done, self.total) {
+            Ok(())
+        } else {
+            Err(DiagnoseError::Cancelled)
+        }
+    }
 }
 
 /// Every run's frames have the size of the dataset's first run.
@@ -769,8 +804,47 @@ pub(super) fn assemble(
         &landing_shift_px,
         opts,
     );
+    let out_runs = run_comparisons(meas, &nominal, &model_dic);
+    let rms = |f: fn(&RunComparison) -> f64| {
+        let v: Vec<f64> = out_runs.iter().map(f).filter(|x| x.is_finite()).collect();
+        (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
+    };
+    let mut cmp = Comparison {
+        dataset: meas.manifest.name.clone(),
+        model: ModelInfo {
+            name: model.name.clone(),
+            version: model_version(model),
+            effects: model.effects.clone(),
+            nominal,
+        },
+        discrepancy_px: rms(|r| r.discrepancy_px),
+        discrepancy_se_px: discrepancy_se(&out_runs),
+        parts: DiscrepancyParts {
+            rigid_px: rms(|r| r.rigid_px),
+            field_px: rms(|r| r.field_px),
+            std_px: rms(|r| r.std_px),
+        },
+        runs: out_runs,
+        images,
+        chi2: Chi2::default(),
+        hardware,
+        hardware_runs_set_aside: meas.hardware_runs_set_aside,
+        model_dic: Vec::new(),
+    };
+    cmp.chi2 = chi2(&cmp, None, &opts.dic);
+    cmp.model_dic = model_dic;
+    cmp
+}
+
+/// Every run and scheme of a comparison: the measured analysis against the model's.
+fn run_comparisons(
+    meas: &Measurement,
+    nominal: &Nominal,
+    model_dic: &[Vec<DicResult>],
+) -> Vec<RunComparison> {
+    let opts = &meas.options;
     let mut out_runs = Vec::new();
-    for (ri, run) in runs.iter().enumerate() {
+    for (ri, run) in meas.manifest.runs.iter().enumerate() {
         let model_results = &model_dic[ri];
         let move_px = nominal.actual_move_px(ri, (run.stage.dx_mm, run.stage.dy_mm));
         let um = |p: [f64; 2]| p.map(|x| x * 1000.0 / nominal.scale_px_per_mm);
@@ -810,35 +884,7 @@ pub(super) fn assemble(
             });
         }
     }
-    let rms = |f: fn(&RunComparison) -> f64| {
-        let v: Vec<f64> = out_runs.iter().map(f).filter(|x| x.is_finite()).collect();
-        (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
-    };
-    let mut cmp = Comparison {
-        dataset: meas.manifest.name.clone(),
-        model: ModelInfo {
-            name: model.name.clone(),
-            version: model_version(model),
-            effects: model.effects.clone(),
-            nominal,
-        },
-        discrepancy_px: rms(|r| r.discrepancy_px),
-        discrepancy_se_px: discrepancy_se(&out_runs),
-        parts: DiscrepancyParts {
-            rigid_px: rms(|r| r.rigid_px),
-            field_px: rms(|r| r.field_px),
-            std_px: rms(|r| r.std_px),
-        },
-        runs: out_runs,
-        images,
-        chi2: Chi2::default(),
-        hardware,
-        hardware_runs_set_aside: meas.hardware_runs_set_aside,
-        model_dic: Vec::new(),
-    };
-    cmp.chi2 = chi2(&cmp, None, &opts.dic);
-    cmp.model_dic = model_dic;
-    cmp
+    out_runs
 }
 
 /// Standard error of the total discrepancy D = √(mean D_r²) from the noise of each analysis,

@@ -158,6 +158,35 @@ pub enum DiagnoseError {
     Cancelled,
 }
 
+impl From<crate::pairs::PairError> for DiagnoseError {
+    fn from(e: crate::pairs::PairError) -> Self {
+        use crate::pairs::PairError;
+        match e {
+            PairError::Image(e) => DiagnoseError::Image(e),
+            PairError::SizeMismatch {
+                run,
+                ref_w,
+                ref_h,
+                def_w,
+                def_h,
+            } => DiagnoseError::Frames {
+                run,
+                message: format!("reference is {ref_w}x{ref_h}, deformed {def_w}x{def_h}"),
+            },
+            PairError::Reduce { source, .. } => DiagnoseError::Reduce(source),
+            PairError::Dic {
+                run,
+                scheme,
+                source,
+            } => DiagnoseError::Dic {
+                run,
+                scheme,
+                source,
+            },
+        }
+    }
+}
+
 /// How a comparison is made: the DIC settings, the reduction schemes and the seed of the model's
 /// speckle layouts and noise (fixed, so a comparison is reproducible).
 #[derive(Clone, Debug, PartialEq)]

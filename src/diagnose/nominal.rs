@@ -62,6 +62,27 @@ pub struct PatternEstimate {
     pub placement_chi2: Option<[f64; 2]>,
 }
 
+impl PatternEstimate {
+    /// A print from `source` (`manifest`, `estimated`, …), not yet calibrated to the frames and
+    /// its placement not yet chosen.
+    fn new(
+        pattern: SpecklePattern,
+        source: &str,
+        white_level_dn: f64,
+        print: PrintKnowledge,
+    ) -> Self {
+        PatternEstimate {
+            pattern,
+            source: source.into(),
+            white_level_dn,
+            print,
+            calibration: None,
+            placement_stated: false,
+            placement_chi2: None,
+        }
+    }
+}
+
 /// Everything the model needs beyond its effects to render the dataset's experiment.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Nominal {
@@ -396,8 +417,8 @@ fn pattern_guess(
     if let (Some((sigma_mm, c, Some(s))), _) | (Some((sigma_mm, c, None)), Some(s)) =
         (characterised(run), spacing)
     {
-        return PatternEstimate {
-            pattern: SpecklePattern {
+        return PatternEstimate::new(
+            SpecklePattern {
                 label,
                 dot_diameter_mm: sigma_mm * FWHM_PER_SIGMA,
                 dot_spacing_mm: s,
@@ -405,17 +426,14 @@ fn pattern_guess(
                 edge_softness_mm: 0.0,
                 placement: Placement::default(),
             },
-            source: "manifest".into(),
-            white_level_dn: white_dn,
-            print: PrintKnowledge::Characterised,
-            calibration: None,
-            placement_stated: false,
-            placement_chi2: None,
-        };
+            "manifest",
+            white_dn,
+            PrintKnowledge::Characterised,
+        );
     }
     if let (Some(d), Some(s), Some(c)) = (diameter, spacing, contrast) {
-        return PatternEstimate {
-            pattern: SpecklePattern {
+        return PatternEstimate::new(
+            SpecklePattern {
                 label,
                 dot_diameter_mm: d,
                 dot_spacing_mm: s,
@@ -423,13 +441,10 @@ fn pattern_guess(
                 edge_softness_mm: softness,
                 placement: Placement::default(),
             },
-            source: "manifest".into(),
-            white_level_dn: white_dn,
-            print: PrintKnowledge::Calibrated,
-            calibration: None,
-            placement_stated: false,
-            placement_chi2: None,
-        };
+            "manifest",
+            white_dn,
+            PrintKnowledge::Calibrated,
+        );
     }
     let est = estimate_speckle(crop, white_dn, noise_var);
     let fwhm = FWHM_PER_SIGMA;
@@ -462,8 +477,8 @@ fn pattern_guess(
         None => (sigma_mm * fwhm, 0.0),
     };
     let all_missing = diameter.is_none() && spacing.is_none() && contrast.is_none();
-    PatternEstimate {
-        pattern: SpecklePattern {
+    PatternEstimate::new(
+        SpecklePattern {
             label,
             dot_diameter_mm,
             dot_spacing_mm: spacing_mm,
@@ -471,18 +486,14 @@ fn pattern_guess(
             edge_softness_mm,
             placement: Placement::default(),
         },
-        source: if all_missing {
+        if all_missing {
             "estimated"
         } else {
             "manifest+estimated"
-        }
-        .into(),
-        white_level_dn: white_dn,
-        print: PrintKnowledge::Calibrated,
-        calibration: None,
-        placement_stated: false,
-        placement_chi2: None,
-    }
+        },
+        white_dn,
+        PrintKnowledge::Calibrated,
+    )
 }
 
 /// Moments of a speckle frame relative to its white level.

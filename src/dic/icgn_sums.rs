@@ -247,6 +247,62 @@ mod avx2 {
         [w0, w1, w2, w3]
     }
 
+    /// The interpolated values of eight pixels whose 4x4 taps start at eight consecutive
+    /// coefficients from `first`: one unaligned load per tap column.
+    ///
+    /// # Safety
+    /// AVX2 and FMA; every tap inside the coefficients.
+    #[inline]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn contiguous_taps(
+        first: *const f32,
+        stride: usize,
+        wx: &[__m256; 4],
+        wy: &[__m256; 4],
+    ) -> __m256 {
+        let mut g = _mm256_setzero_ps();
+        for (j, wyj) in wy.iter().enumerate() {
+            let row = first.add(j * stride);
+            let mut v = _mm256_mul_ps(wx[0], _mm256_loadu_ps(row));
+            v = _mm256_fmadd_ps(wx[1], _mm256_loadu_ps(row.add(1)), v);
+            v = _mm256_fmadd_ps(wx[2], _mm256_loadu_ps(row.add(2)), v);
+            v = _mm256_fmadd_ps(wx[3], _mm256_loadu_ps(row.add(3)), v);
+            g = _mm256_fmadd_ps(*wyj, v, g);
+        }
+        g
+    }
+
+    /// The interpolated values of eight pixels whose taps start at the coefficient indices
+    /// `base`, gathered; lanes outside `read` are not read (and are 0).
+    ///
+    /// # Safety
+    /// AVX2 and FMA; every tap of a read lane inside the coefficients.
+    #[inline]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn gathered_taps(
+        coeffs: *const f32,
+        base: __m256i,
+        vstride: __m256i,
+        read: __m256i,
+        wx: &[__m256; 4],
+        wy: &[__m256; 4],
+    ) -> __m256 {
+        let readf = _mm256_castsi256_ps(read);
+        let mut g = _mm256_setzero_ps();
+        let mut row_idx = base;
+        for wyj in wy {
+            let mut v = _mm256_setzero_ps();
+            for (i, wxi) in wx.iter().enumerate() {
+                let idx = _mm256_add_epi32(row_idx, _mm256_set1_epi32(i as i32));
+                let taps = _mm256_mask_i32gather_ps::<4>(_mm256_setzero_ps(), coeffs, idx, readf);
+                v = _mm256_fmadd_ps(*wxi, taps, v);
+            }
+            g = _mm256_fmadd_ps(*wyj, v, g);
+            row_idx = _mm256_add_epi32(row_idx, vstride);
+        }
+        g
+    }
+
     /// # Safety
     /// The CPU must support AVX2 and FMA, every tap of the warped subset must lie inside the
     /// padded coefficients (the caller's corner test), and their indices must fit an i32.
@@ -313,16 +369,7 @@ mod avx2 {
                     )) == -1;
                 let g = if consecutive {
                     let first = coeffs.add(_mm256_cvtsi256_si32(base) as usize);
-                    let mut g = _mm256_setzero_ps();
-                    for (j, wyj) in wy.iter().enumerate() {
-                        let row = first.add(j * stride as usize);
-                        let mut v = _mm256_mul_ps(wx[0], _mm256_loadu_ps(row));
-                        v = _mm256_fmadd_ps(wx[1], _mm256_loadu_ps(row.add(1)), v);
-                        v = _mm256_fmadd_ps(wx[2], _mm256_loadu_ps(row.add(2)), v);
-                        v = _mm256_fmadd_ps(wx[3], _mm256_loadu_ps(row.add(3)), v);
-                        g = _mm256_fmadd_ps(*wyj, v, g);
-                    }
-                    g
+                    contiguous_taps(first, stride as usize, &wx, &wy)
                 } else {
                     // Lanes beyond a narrow subset are never read.
                     let read = if in_subset {
@@ -330,40 +377,16 @@ mod avx2 {
                     } else {
                         _mm256_cmpgt_epi32(_mm256_set1_epi32((side - c0) as i32), lane_ids)
                     };
-                    let readf = _mm256_castsi256_ps(read);
-                    let mut g = _mm256_setzero_ps();
-                    let mut row_idx = base;
-                    for wyj in wy {
-                        let mut v = _mm256_setzero_ps();
-                        for (i, wxi) in wx.iter().enumerate() {
-                            let idx = _mm256_add_epi32(row_idx, _mm256_set1_epi32(i as i32));
-                            let taps = _mm256_mask_i32gather_ps::<4>(
-                                _mm256_setzero_ps(),
-                                coeffs,
-                                idx,
-                                readf,
-                            );
-                            v = _mm256_fmadd_ps(*wxi, taps, v);
-                        }
-                        g = _mm256_fmadd_ps(wyj, v, g);
-                        row_idx = _mm256_add_epi32(row_idx, vstride);
+                    gathered_taps(coeffs, base, vstride, read, &wx, &wy)
+                };
+                let [f0, gx, gy] = [&subset.f0, &subset.gx, &subset.gy].map(|a| {
+                    let at = a.as_ptr().add(row_off + c0);
+                    if in_subset {
+                        _mm256_loadu_ps(at)
+                    } else {
+                        _mm256_maskload_ps(at, live)
                     }
-                    g
-                };
-                let at = row_off + c0;
-                let (f0, gx, gy) = if in_subset {
-                    (
-                        _mm256_loadu_ps(subset.f0.as_ptr().add(at)),
-                        _mm256_loadu_ps(subset.gx.as_ptr().add(at)),
-                        _mm256_loadu_ps(subset.gy.as_ptr().add(at)),
-                    )
-                } else {
-                    (
-                        _mm256_maskload_ps(subset.f0.as_ptr().add(at), live),
-                        _mm256_maskload_ps(subset.gx.as_ptr().add(at), live),
-                        _mm256_maskload_ps(subset.gy.as_ptr().add(at), live),
-                    )
-                };
+                });
                 let hv = _mm256_and_ps(_mm256_sub_ps(g, shift), _mm256_castsi256_ps(live));
                 let dx = _mm256_sub_ps(col, half_f);
                 let gxh = _mm256_mul_ps(gx, hv);

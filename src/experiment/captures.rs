@@ -89,10 +89,42 @@ pub fn layout_seed(first: u64, capture: usize) -> u64 {
     }
 }
 
+/// One frame of a capture, in the order taken: its file, where the stage stands (mm from
+/// home), and the run whose deformed frame it is (None for the reference and static frames).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Shot<'a> {
+    pub file: &'a str,
+    pub dx_mm: f64,
+    pub dy_mm: f64,
+    pub run: Option<&'a CaptureRun>,
+}
+
 impl TargetCapture {
     /// Frames this capture takes.
     pub fn frame_count(&self) -> usize {
         1 + self.static_frames.len() + self.runs.len()
+    }
+
+    /// The frames of this capture in the order a bench takes them and a simulation renders
+    /// them: the reference and its static frames at home, then each move's deformed frame.
+    pub fn shots<'a>(&'a self, moves: &'a [MoveSpec]) -> impl Iterator<Item = Shot<'a>> + 'a {
+        let home = |file: &'a String| Shot {
+            file,
+            dx_mm: 0.0,
+            dy_mm: 0.0,
+            run: None,
+        };
+        std::iter::once(home(&self.reference))
+            .chain(self.static_frames.iter().map(home))
+            .chain(self.runs.iter().map(move |run| {
+                let m = &moves[run.move_index];
+                Shot {
+                    file: &run.deformed,
+                    dx_mm: m.dx_mm,
+                    dy_mm: m.dy_mm,
+                    run: Some(run),
+                }
+            }))
     }
 
     /// The manifest entry of `run` (one of this capture's), moved by `m`.
@@ -146,6 +178,16 @@ mod tests {
         assert_eq!(plan[0].runs[1].id, "a-y");
         assert_eq!(plan[0].runs[1].deformed, "a_y.tif");
         assert_eq!(plan[0].runs[1].repeat_of, None);
+        let moves = moves();
+        let shots: Vec<Shot> = plan[0].shots(&moves).collect();
+        assert_eq!(shots.len(), plan[0].frame_count());
+        assert_eq!(
+            shots.iter().map(|s| s.file).collect::<Vec<_>>(),
+            ["a_ref.tif", "a_ref_r1.tif", "a_x.tif", "a_y.tif"]
+        );
+        assert_eq!((shots[1].dx_mm, shots[1].run), (0.0, None));
+        assert_eq!(shots[3].run.map(|r| r.id.as_str()), Some("a-y"));
+        assert_eq!(shots[3].dx_mm, 1.0);
     }
 
     #[test]

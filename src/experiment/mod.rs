@@ -35,7 +35,6 @@ pub use runner::{run_experiment, BenchTimeouts, ExperimentOutcome, RunSink, Runn
 pub use simulate::{pattern_dots, render_stage_frame, simulate_dataset, SimulateError};
 pub use spec::{ExperimentSpec, MoveSpec, PatternSpec, SpecError, StepSeries, PAPER_TOML};
 pub use study::{
-    analyze_dataset, analyze_dataset_with, study_pair_result, Increase, ResultHook, StudyError,
-    StudyRow,
+    analyze_dataset, analyze_dataset_with, Increase, ResultHook, StudyError, StudyRow,
 };
 pub use study_files::study_files;

@@ -303,20 +303,18 @@ impl<'a> Session<'a> {
             self.mount(target, &state)?;
             let pattern = &plan.patterns[target.pattern_index];
             let home = StagePosition::default();
-            self.shoot(&mut state, files, &target.reference, home)?;
-            for name in &target.static_frames {
-                self.shoot(&mut state, files, name, home)?;
-            }
-            for run in &target.runs {
-                let m = &plan.moves[run.move_index];
+            for shot in target.shots(&plan.moves) {
                 let at = StagePosition {
-                    x_mm: m.dx_mm,
-                    y_mm: m.dy_mm,
+                    x_mm: shot.dx_mm,
+                    y_mm: shot.dy_mm,
                 };
-                self.shoot(&mut state, files, &run.deformed, at)?;
+                self.shoot(&mut state, files, shot.file, at)?;
+                let Some(run) = shot.run else {
+                    continue;
+                };
                 let full = target.manifest_run(
                     run,
-                    m,
+                    &plan.moves[run.move_index],
                     super::simulate::pattern_info(&pattern.label, pattern, false),
                     Some(self.full_resolution.exposure_us),
                 );

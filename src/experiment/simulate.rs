@@ -112,19 +112,16 @@ pub fn simulate_dataset(
             progress(done, total);
             Ok(())
         };
-        shoot(&target.reference, (0.0, 0.0))?;
-        for name in &target.static_frames {
-            shoot(name, (0.0, 0.0))?;
-        }
-        for run in &target.runs {
-            let m = &moves[run.move_index];
-            shoot(&run.deformed, (m.dx_mm, m.dy_mm))?;
-            manifest.runs.push(target.manifest_run(
-                run,
-                m,
-                pattern_info(&pattern.label, pattern, true),
-                None,
-            ));
+        for shot in target.shots(&moves) {
+            shoot(shot.file, (shot.dx_mm, shot.dy_mm))?;
+            if let Some(run) = shot.run {
+                manifest.runs.push(target.manifest_run(
+                    run,
+                    &moves[run.move_index],
+                    pattern_info(&pattern.label, pattern, true),
+                    None,
+                ));
+            }
         }
     }
     manifest.write(out)?;

@@ -4,36 +4,21 @@
 //! the paper's Figures 5 (x: u, exx) and 6 (y: v, eyy).
 
 use crate::dataset::{DatasetError, Manifest, Run};
-use crate::dic::{
-    CorrelationLengths, DicError, DicResult, DicSettings, PreparedReference, Stats, Summary,
-};
-use crate::image::{read_tiff, Image, ImageError};
-use crate::reduce::{reduce, AxisScheme, Scheme};
+use crate::dic::{CorrelationLengths, DicResult, DicSettings, Stats, Summary};
+use crate::pairs::{correlate_pairs, PairError, PairVisitor, RunPair};
+use crate::reduce::Scheme;
 pub use crate::report::{Increase, IncreaseInterval, StudyRow};
 use std::path::Path;
 
 #[derive(Debug, thiserror::Error)]
 pub enum StudyError {
     #[error(transparent)]
-    Image(#[from] ImageError),
-    #[error(transparent)]
     Dataset(#[from] DatasetError),
-    #[error("run {run}, scheme {scheme}: {source}")]
-    Dic {
-        run: String,
-        scheme: String,
-        source: DicError,
-    },
+    /// A frame unreadable, a pair of two sizes, a reduction or correlation that failed.
+    #[error(transparent)]
+    Pair(#[from] PairError),
     #[error("cancelled")]
     Cancelled,
-    #[error("run {run}: reference is {ref_w}x{ref_h}, deformed {def_w}x{def_h}")]
-    SizeMismatch {
-        run: String,
-        ref_w: usize,
-        ref_h: usize,
-        def_w: usize,
-        def_h: usize,
-    },
 }
 
 /// Runs the study over every run of a dataset in `dir`. `progress(done, total)` after each pair;
@@ -77,163 +62,119 @@ pub fn analyze_dataset_with(
             }
         })
         .sum();
-    let mut rows: Vec<StudyRow> = Vec::with_capacity(total);
-    let mut frames = RunFrames::default();
     // The baseline (first scheme) of every full-resolution run a hardware run is the twin of,
     // kept until its last hardware run has used it.
-    let mut pending: Vec<(&str, usize)> = Vec::new();
+    let mut pending: Vec<(String, usize)> = Vec::new();
     for twin in manifest.runs.iter().filter_map(|r| r.twin_of.as_deref()) {
-        match pending.iter_mut().find(|(id, _)| *id == twin) {
+        match pending.iter_mut().find(|(id, _)| id == twin) {
             Some((_, n)) => *n += 1,
-            None => pending.push((twin, 1)),
+            None => pending.push((twin.to_string(), 1)),
         }
     }
-    let mut twins: Vec<(String, usize, DicResult)> = Vec::new();
-    for run in &manifest.runs {
-        let (reference, deformed) = frames.read(dir, run)?;
-        let pattern = run
-            .pattern
-            .as_ref()
-            .map_or_else(|| run.id.clone(), |p| p.label.clone());
-        // Appends the row of `scheme`; its index, or Cancelled when progress says stop.
-        let mut row = |scheme: &Scheme, result: &DicResult, base: Option<(usize, &DicResult)>| {
-            on_result(run, scheme, result);
-            let index = rows.len();
-            rows.push(StudyRow {
-                run: run.id.clone(),
-                pattern: pattern.clone(),
-                scheme: scheme.name.clone(),
-                fill_factor: scheme.linear_fill_factor(),
-                summary: result.summary,
-                increase_pct: base.map(|(i, _)| increase(&rows[i].summary, &result.summary)),
-                increase_ci95: base.and_then(|(_, b)| increase_interval(b, result)),
-                repeats: 1,
-            });
-            if progress(rows.len(), total) {
-                Ok(index)
-            } else {
-                Err(StudyError::Cancelled)
-            }
-        };
-        let dic_error = |scheme: &Scheme| {
-            let (run, scheme) = (run.id.clone(), scheme.name.clone());
-            move |source| StudyError::Dic {
-                run,
-                scheme,
-                source,
-            }
-        };
-        if let Some(hardware) = &run.capture {
-            let scheme = hardware_geometry(hardware);
-            let result = PreparedReference::new(&reference, dic)
-                .and_then(|p| p.correlate(&deformed, None))
-                .map_err(dic_error(&scheme))?;
-            let twin = run
-                .twin_of
-                .as_ref()
-                .and_then(|twin| twins.iter().position(|(id, _, _)| id == twin));
-            let base = twin.map(|k| (twins[k].1, &twins[k].2));
-            row(&scheme, &result, base)?;
-            if let Some(k) = twin {
-                let left = pending.iter_mut().find(|(id, _)| *id == twins[k].0);
-                if let Some((_, n)) = left {
-                    *n -= 1;
-                    if *n == 0 {
-                        twins.swap_remove(k);
-                    }
-                }
-            }
-            continue;
-        }
-        let is_twin = pending.iter().any(|(id, n)| *id == run.id && *n > 0);
-        let mut baseline: Option<(usize, DicResult)> = None;
-        for scheme in schemes {
-            let result =
-                study_pair_result(&reference, &deformed, scheme, dic).map_err(dic_error(scheme))?;
-            let base = baseline.as_ref().map(|(i, r)| (*i, r));
-            let index = row(scheme, &result, base)?;
-            if baseline.is_none() {
-                baseline = Some((index, result));
-            }
-        }
-        if let (true, Some((index, result))) = (is_twin, baseline) {
-            twins.push((run.id.clone(), index, result));
-        }
-    }
-    Ok(rows)
-}
-
-/// A hardware scheme as the study's reduction vocabulary: the same block per axis, the whole
-/// block active when binned, its first pixel when decimated; the name keeps the `hw:` prefix.
-fn hardware_geometry(scheme: &ffdic_hw::HardwareScheme) -> Scheme {
-    let axis = |a: ffdic_hw::AxisReduction| AxisScheme {
-        block: a.factor() as usize,
-        first: 0,
-        active: a.active_px() as usize,
+    let mut study = Study {
+        rows: Vec::with_capacity(total),
+        total,
+        progress,
+        on_result,
+        pending,
+        twins: Vec::new(),
+        baseline: None,
     };
-    Scheme {
-        name: scheme.name.clone(),
-        x: axis(scheme.x),
-        y: axis(scheme.y),
-    }
+    correlate_pairs(dir, &manifest.runs, schemes, dic, &mut study)?;
+    Ok(study.rows)
 }
 
-/// The frames of one run after another: runs of one pattern share the reference, read once
-/// (a few are kept: an experiment with hardware schemes alternates between the full-resolution
-/// reference and each scheme's).
-#[derive(Default)]
-struct RunFrames {
-    references: Vec<(String, Image)>,
+/// The study's side of the pair loop: one row per result, each against its baseline.
+struct Study<'a> {
+    rows: Vec<StudyRow>,
+    total: usize,
+    progress: &'a (dyn Fn(usize, usize) -> bool + Sync),
+    on_result: &'a ResultHook<'a>,
+    /// Twin ids with the number of hardware runs still to use them.
+    pending: Vec<(String, usize)>,
+    /// (twin id, its baseline row, its baseline result)
+    twins: Vec<(String, usize, DicResult)>,
+    /// The current full-resolution run's baseline: (run index, row, result).
+    baseline: Option<(usize, usize, DicResult)>,
 }
 
-/// References kept by [`RunFrames`]: the full-resolution one and three hardware schemes'.
-const REFERENCES_KEPT: usize = 4;
-
-impl RunFrames {
-    fn read(&mut self, dir: &Path, run: &Run) -> Result<(Image, Image), StudyError> {
-        let cached = self.references.iter().find(|(n, _)| *n == run.reference);
-        let reference = match cached {
-            Some((_, img)) => img.clone(),
-            None => {
-                let (img, _) = read_tiff(&dir.join(&run.reference))?;
-                if self.references.len() == REFERENCES_KEPT {
-                    self.references.remove(0);
-                }
-                self.references.push((run.reference.clone(), img.clone()));
-                img
-            }
-        };
-        let (deformed, _) = read_tiff(&dir.join(&run.deformed))?;
-        if (reference.width(), reference.height()) != (deformed.width(), deformed.height()) {
-            return Err(StudyError::SizeMismatch {
-                run: run.id.clone(),
-                ref_w: reference.width(),
-                ref_h: reference.height(),
-                def_w: deformed.width(),
-                def_h: deformed.height(),
-            });
+impl Study<'_> {
+    /// The baseline a result of `pair` is compared with: its run's first scheme, or for a
+    /// hardware run its twin's. (row, result)
+    fn base_of(&self, pair: &RunPair<'_>) -> Option<(usize, &DicResult)> {
+        match &pair.run.twin_of {
+            Some(twin) => self
+                .twins
+                .iter()
+                .find(|(id, _, _)| id == twin)
+                .map(|(_, row, result)| (*row, result)),
+            None => match &self.baseline {
+                Some((run, row, result)) if *run == pair.index => Some((*row, result)),
+                _ => None,
+            },
         }
-        Ok((reference, deformed))
+    }
+
+    /// A hardware run has used its twin's baseline: released after the twin's last one.
+    fn release_twin(&mut self, twin: &str) {
+        if let Some((_, n)) = self.pending.iter_mut().find(|(id, _)| id == twin) {
+            *n -= 1;
+            if *n == 0 {
+                self.twins.retain(|(id, _, _)| id != twin);
+            }
+        }
     }
 }
 
-/// DIC of one full-resolution pair after reduction with `scheme`: every point's displacement
-/// and strain, and their summary.
-pub fn study_pair_result(
-    reference: &Image,
-    deformed: &Image,
-    scheme: &Scheme,
-    dic: &DicSettings,
-) -> Result<DicResult, DicError> {
-    let r = reduce(reference, scheme).map_err(|e| DicError::Setting {
-        field: "scheme",
-        reason: e.to_string(),
-    })?;
-    let d = reduce(deformed, scheme).map_err(|e| DicError::Setting {
-        field: "scheme",
-        reason: e.to_string(),
-    })?;
-    PreparedReference::new(&r, dic)?.correlate(&d, None)
+impl PairVisitor for Study<'_> {
+    type Error = StudyError;
+
+    fn result(
+        &mut self,
+        pair: &RunPair<'_>,
+        scheme: &Scheme,
+        result: DicResult,
+    ) -> Result<(), StudyError> {
+        let run = pair.run;
+        (self.on_result)(run, scheme, &result);
+        let (increase_pct, increase_ci95) = match self.base_of(pair) {
+            Some((row, base)) => (
+                Some(increase(&self.rows[row].summary, &result.summary)),
+                increase_interval(base, &result),
+            ),
+            None => (None, None),
+        };
+        if let Some(twin) = &run.twin_of {
+            self.release_twin(twin);
+        }
+        let index = self.rows.len();
+        self.rows.push(StudyRow {
+            run: run.id.clone(),
+            pattern: run
+                .pattern
+                .as_ref()
+                .map_or_else(|| run.id.clone(), |p| p.label.clone()),
+            scheme: scheme.name.clone(),
+            fill_factor: scheme.linear_fill_factor(),
+            summary: result.summary,
+            increase_pct,
+            increase_ci95,
+            repeats: 1,
+        });
+        let first_scheme =
+            run.capture.is_none() && self.baseline.as_ref().map(|b| b.0) != Some(pair.index);
+        if first_scheme {
+            if self.pending.iter().any(|(id, n)| *id == run.id && *n > 0) {
+                self.twins.push((run.id.clone(), index, result.clone()));
+            }
+            self.baseline = Some((pair.index, index, result));
+        }
+        if (self.progress)(self.rows.len(), self.total) {
+            Ok(())
+        } else {
+            Err(StudyError::Cancelled)
+        }
+    }
 }
 
 fn increase(base: &Summary, s: &Summary) -> Increase {

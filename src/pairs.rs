@@ -1,0 +1,211 @@
+//! A dataset's frame pairs, read once and correlated under each scheme: the one loop of the
+//! fill-factor study (`experiment::study`) and of the model comparison (`diagnose::compare`,
+//! its full-resolution runs and its capture-mode runs).
+//!
+//! Runs that share a reference frame (every run of a pattern) reuse it: the reference is read,
+//! reduced and prepared (`dic::PreparedReference`: interpolation coefficients, gradients, subset
+//! sums) once per scheme and kept for the next runs — the last few references, since an
+//! experiment with hardware schemes alternates between the full-resolution reference and each
+//! scheme's. A run the camera read out in its own binning or decimation (`capture`) is
+//! correlated as it is, once, under its hardware scheme ([`hardware_geometry`]); every other run
+//! under each scheme given.
+
+use crate::dataset::Run;
+use crate::dic::{DicError, DicResult, DicSettings, PreparedReference};
+use crate::image::{read_tiff, Image, ImageError};
+use crate::reduce::{reduce, AxisScheme, ReduceError, Scheme};
+use std::path::Path;
+
+/// One run's frames, read and checked for equal size.
+pub struct RunPair<'a> {
+    /// The run's position in the runs handed to [`correlate_pairs`].
+    pub index: usize,
+    pub run: &'a Run,
+    pub reference: &'a Image,
+    pub deformed: &'a Image,
+    /// The reference file's bit depth.
+    pub bit_depth: u8,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum PairError {
+    #[error(transparent)]
+    Image(#[from] ImageError),
+    #[error("run {run}: reference is {ref_w}x{ref_h}, deformed {def_w}x{def_h}")]
+    SizeMismatch {
+        run: String,
+        ref_w: usize,
+        ref_h: usize,
+        def_w: usize,
+        def_h: usize,
+    },
+    #[error("run {run}, scheme {scheme}: {source}")]
+    Reduce {
+        run: String,
+        scheme: String,
+        source: ReduceError,
+    },
+    #[error("run {run}, scheme {scheme}: {source}")]
+    Dic {
+        run: String,
+        scheme: String,
+        source: DicError,
+    },
+}
+
+/// What [`correlate_pairs`] hands each run's frames and results to. An error stops the loop
+/// (a caller's cancellation, a check of its own) and is returned as it is.
+pub trait PairVisitor {
+    type Error: From<PairError>;
+
+    /// A run's frames, before its schemes are correlated.
+    fn frames(&mut self, _pair: &RunPair<'_>) -> Result<(), Self::Error> {
+        Ok(())
+    }
+
+    /// One scheme's result, in the order of the schemes (the hardware scheme's alone for a
+    /// capture-mode run).
+    fn result(
+        &mut self,
+        pair: &RunPair<'_>,
+        scheme: &Scheme,
+        result: DicResult,
+    ) -> Result<(), Self::Error>;
+}
+
+/// References kept prepared: the full-resolution one and three hardware schemes'.
+const REFERENCES_KEPT: usize = 4;
+
+/// A reference frame as read, with its schemes and their prepared references.
+struct PreparedFrame {
+    file: String,
+    captured: bool,
+    image: Image,
+    bit_depth: u8,
+    schemes: Vec<Scheme>,
+    prepared: Vec<PreparedReference>,
+}
+
+/// Correlates every run of `runs` (frames in `dir`) under each of `schemes`, or under its own
+/// hardware scheme when the camera read it out in one; see the module doc.
+pub fn correlate_pairs<V: PairVisitor>(
+    dir: &Path,
+    runs: &[Run],
+    schemes: &[Scheme],
+    dic: &DicSettings,
+    visitor: &mut V,
+) -> Result<(), V::Error> {
+    let mut kept: Vec<PreparedFrame> = Vec::new();
+    for (index, run) in runs.iter().enumerate() {
+        let captured = run.capture.is_some();
+        let position = kept
+            .iter()
+            .position(|f| f.file == run.reference && f.captured == captured);
+        let frame = match position {
+            Some(k) => kept.remove(k),
+            None => prepare(dir, run, schemes, dic)?,
+        };
+        let (deformed, _) = read_tiff(&dir.join(&run.deformed)).map_err(PairError::from)?;
+        let size = |i: &Image| (i.width(), i.height());
+        if size(&frame.image) != size(&deformed) {
+            return Err(PairError::SizeMismatch {
+                run: run.id.clone(),
+                ref_w: frame.image.width(),
+                ref_h: frame.image.height(),
+                def_w: deformed.width(),
+                def_h: deformed.height(),
+            }
+            .into());
+        }
+        let pair = RunPair {
+            index,
+            run,
+            reference: &frame.image,
+            deformed: &deformed,
+            bit_depth: frame.bit_depth,
+        };
+        visitor.frames(&pair)?;
+        for (scheme, prepared) in frame.schemes.iter().zip(&frame.prepared) {
+            let moved = if captured {
+                deformed.clone()
+            } else {
+                reduce(&deformed, scheme).map_err(|source| PairError::Reduce {
+                    run: run.id.clone(),
+                    scheme: scheme.name.clone(),
+                    source,
+                })?
+            };
+            let result = prepared
+                .correlate(&moved, None)
+                .map_err(|source| PairError::Dic {
+                    run: run.id.clone(),
+                    scheme: scheme.name.clone(),
+                    source,
+                })?;
+            visitor.result(&pair, scheme, result)?;
+        }
+        if kept.len() == REFERENCES_KEPT {
+            kept.remove(0);
+        }
+        kept.push(frame);
+    }
+    Ok(())
+}
+
+/// Reads `run`'s reference and prepares it for each scheme (the hardware scheme's alone, as
+/// read, for a capture-mode run).
+fn prepare(
+    dir: &Path,
+    run: &Run,
+    schemes: &[Scheme],
+    dic: &DicSettings,
+) -> Result<PreparedFrame, PairError> {
+    let (image, info) = read_tiff(&dir.join(&run.reference))?;
+    let schemes = match &run.capture {
+        Some(capture) => vec![hardware_geometry(capture)],
+        None => schemes.to_vec(),
+    };
+    let mut prepared = Vec::with_capacity(schemes.len());
+    for scheme in &schemes {
+        let dic_error = |source| PairError::Dic {
+            run: run.id.clone(),
+            scheme: scheme.name.clone(),
+            source,
+        };
+        let p = match run.capture {
+            Some(_) => PreparedReference::new(&image, dic),
+            None => {
+                let reduced = reduce(&image, scheme).map_err(|source| PairError::Reduce {
+                    run: run.id.clone(),
+                    scheme: scheme.name.clone(),
+                    source,
+                })?;
+                PreparedReference::new(&reduced, dic)
+            }
+        };
+        prepared.push(p.map_err(dic_error)?);
+    }
+    Ok(PreparedFrame {
+        file: run.reference.clone(),
+        captured: run.capture.is_some(),
+        bit_depth: info.bit_depth.min(16),
+        image,
+        schemes,
+        prepared,
+    })
+}
+
+/// A hardware scheme as the study's reduction vocabulary: the same block per axis, the whole
+/// block active when binned, its first pixel when decimated; the name keeps the `hw:` prefix.
+pub fn hardware_geometry(scheme: &ffdic_hw::HardwareScheme) -> Scheme {
+    let axis = |a: ffdic_hw::AxisReduction| AxisScheme {
+        block: a.factor() as usize,
+        first: 0,
+        active: a.active_px() as usize,
+    };
+    Scheme {
+        name: scheme.name.clone(),
+        x: axis(scheme.x),
+        y: axis(scheme.y),
+    }
+}
