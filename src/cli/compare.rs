@@ -94,7 +94,7 @@ pub fn write_outputs(out: &std::path::Path, cmp: &Comparison) -> Result<()> {
 }
 
 /// The runs read out in the camera's own binning or decimation, compared in that mode.
-fn hardware_text(hw: &ffdic::diagnose::capture_mode::HardwareComparison) -> String {
+fn hardware_text(hw: &ffdic::diagnose::HardwareComparison) -> String {
     let f = |x: f64| format!("{x:.5}");
     let rows: Vec<Vec<String>> = hw
         .runs

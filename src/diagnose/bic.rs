@@ -15,29 +15,12 @@
 //! comparison without the candidate held fixed. A candidate is significant when ΔBIC < −10
 //! (very strong evidence, Kass & Raftery, JASA 90 (1995)).
 
-use super::compare::{Comparison, RunComparison};
 use super::image_stats::{FrameStats, PtcPoint};
+use super::results::{Chi2, Comparison, RunComparison, IMAGE_KINDS};
 use crate::dic::DicSettings;
-use serde::{Deserialize, Serialize};
 
 /// ΔBIC below which a candidate counts as found.
 pub const SIGNIFICANT_DELTA_BIC: f64 = -10.0;
-
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct Chi2 {
-    pub field: f64,
-    pub std: f64,
-    pub image: f64,
-    pub total: f64,
-    /// Number of observations (for k·ln n).
-    pub observations: usize,
-    /// Of which image statistics.
-    #[serde(default)]
-    pub image_observations: usize,
-    /// The image χ² and observations per kind (spectra, photon transfer, mean map, contrast).
-    #[serde(default)]
-    pub image_parts: [(f64, usize); IMAGE_KINDS],
-}
 
 /// Covariance inflation of neighbouring points whose subsets overlap.
 pub fn inflation(dic: &DicSettings) -> f64 {
@@ -78,8 +61,6 @@ pub fn image_chi2(m: &FrameStats, o: &FrameStats) -> (f64, usize) {
     )
 }
 
-/// The image statistics' kinds: spectra, photon transfer, mean map, contrast.
-pub const IMAGE_KINDS: usize = 4;
 /// The index of the mean-intensity map among [`IMAGE_KINDS`].
 const MEAN_MAP: usize = 2;
 

@@ -4,12 +4,11 @@
 //! [`load_measurement`] reads a dataset and analyses the measured side once; [`compare_prepared`]
 //! renders and analyses the model's side against it (diagnose calls it once per candidate).
 
-use super::bic::{chi2, Chi2};
+use super::bic::chi2;
 use super::capture_mode::{
-    compare_hardware, measure_hardware, model_hardware, HardwareComparison, HardwareMeasurement,
-    HardwareModelSide,
+    compare_hardware, measure_hardware, model_hardware, HardwareMeasurement, HardwareModelSide,
 };
-use super::discrepancy::{run_discrepancy, RunDiscrepancy};
+use super::discrepancy::run_discrepancy;
 use super::image_stats::{centre_crop, frame_stats, FrameStats, STATS_CROP_PX};
 use super::nominal::{
     check_sizes, pattern_for, pattern_indices, pooled_noise_variance, white_level_guess, Nominal,
@@ -20,17 +19,19 @@ use super::print::{
     placement_band_edge, spectral_shape_chi2, spectral_shape_chi2_below, PrintCalibration,
     PrintKnowledge,
 };
-use super::residuals::{residual_map, ResidualMap};
+use super::residuals::residual_map;
+use super::results::{
+    Chi2, Comparison, DiscrepancyParts, ImageComparison, ModelInfo, RunComparison, Side,
+};
 use super::stage::{fit_stage, StageObservation};
 use super::{CompareOptions, DiagnoseError, Progress};
 use crate::dataset::check_stated_move;
 use crate::dataset::{Manifest, Run};
-use crate::dic::{DicResult, PreparedReference, Summary};
+use crate::dic::{DicResult, PreparedReference};
 use crate::image::{read_tiff, Image};
-use crate::model::{Effects, ModelConfig, Placement};
+use crate::model::{ModelConfig, Placement};
 use crate::pairs::{correlate_pairs, PairVisitor, RunPair};
 use crate::reduce::{reduce, Scheme};
-use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -59,103 +60,6 @@ pub struct Measurement {
     pub hardware: Vec<HardwareMeasurement>,
     /// Such runs without a full-resolution twin in the dataset: not compared.
     pub hardware_runs_set_aside: usize,
-}
-
-/// The model a comparison used: its file's name, a version hash, its effects, and the nominal
-/// experiment calibrated for this dataset.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct ModelInfo {
-    pub name: String,
-    pub version: String,
-    pub effects: Effects,
-    pub nominal: Nominal,
-}
-
-/// One side of a run's comparison: the paper's statistics and the random error.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Side {
-    pub summary: Summary,
-    /// Std of u and v about their own quadratic surface, px.
-    pub random_px: [f64; 2],
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct RunComparison {
-    pub id: String,
-    /// The run's pattern label (the reference frame it shares with other runs).
-    pub pattern: String,
-    pub scheme: String,
-    pub discrepancy_px: f64,
-    /// The three parts of the discrepancy (module doc of `diagnose`): rigid, field, std.
-    pub rigid_px: f64,
-    pub field_px: f64,
-    pub std_px: f64,
-    /// The stage landing offset the model rendered for this run, µm (x, y), and what the data
-    /// said before the stage's envelope clipped it.
-    pub stage_offset_um: [f64; 2],
-    pub stage_landing_um: [f64; 2],
-    pub measured: Side,
-    pub model: Side,
-    /// Mean of measured − model, px (u, v).
-    pub mean_diff_px: [f64; 2],
-    /// Sub-pixel fraction of the measured mean displacement (u, v), in [0, 1).
-    pub subpixel_fraction: [f64; 2],
-    /// Actual move of the nominal experiment, full-resolution px.
-    pub move_px: [f64; 2],
-    pub residual: ResidualMap,
-    #[serde(skip)]
-    pub detail: RunDiscrepancy,
-}
-
-/// Image statistics of one measured frame and the model's frame of it.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct ImageComparison {
-    /// "reference" (per pattern) or "moved" (per run).
-    pub frame: String,
-    pub pattern: String,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub run: Option<String>,
-    pub measured: FrameStats,
-    pub model: FrameStats,
-}
-
-/// Totals by part, px.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct DiscrepancyParts {
-    #[serde(default)]
-    pub rigid_px: f64,
-    pub field_px: f64,
-    pub std_px: f64,
-}
-
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct Comparison {
-    pub dataset: String,
-    pub model: ModelInfo,
-    /// RMS over every run and scheme of the per-run discrepancy, px.
-    pub discrepancy_px: f64,
-    /// Its standard error from the noise of both sides' analyses, px ([`discrepancy_se`]).
-    #[serde(default)]
-    pub discrepancy_se_px: f64,
-    pub parts: DiscrepancyParts,
-    pub runs: Vec<RunComparison>,
-    pub images: Vec<ImageComparison>,
-    pub chi2: Chi2,
-    /// The runs the camera read out in its own binning or decimation, compared in that mode
-    /// beside the fit ([`super::capture_mode`]); absent without such runs.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub hardware: Option<HardwareComparison>,
-    /// Such runs without a full-resolution twin in the dataset: not compared.
-    #[serde(default, skip_serializing_if = "is_zero")]
-    pub hardware_runs_set_aside: usize,
-    /// The model's analyses, per run and scheme (diagnose predicts geometric candidates from
-    /// them without rendering).
-    #[serde(skip)]
-    pub model_dic: Vec<Vec<DicResult>>,
-}
-
-fn is_zero(n: &usize) -> bool {
-    *n == 0
 }
 
 /// A short, stable hash of the model's content (FNV-1a 64 of its canonical TOML).

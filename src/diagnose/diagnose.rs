@@ -16,17 +16,16 @@
 
 use super::basis::{geometric_basis, GeometricParam};
 use super::bic::{chi2, delta_bic, image_change, SIGNIFICANT_DELTA_BIC};
-use super::compare::{
-    compare_prepared, compare_with_scene, load_measurement, Comparison, Measurement, ModelInfo,
-};
+use super::compare::{compare_prepared, compare_with_scene, load_measurement, Measurement};
 use super::fit_geometric::{fit_geometric, FieldSample};
 use super::fit_image::{
     fit_fill_factor, fit_illumination_change, fit_motion_blur, fit_psf_blur, fit_sensor_noise,
-    fit_vignetting, ImageFit,
+    fit_vignetting,
 };
 use super::identifiability::{design_of, separating_run, DatasetDesign};
 pub use super::identifiability::{Confounded, NotIdentifiable};
 use super::print::PrintKnowledge;
+use super::results::{Comparison, ImageFit, ModelInfo};
 use super::{CompareOptions, DiagnoseError, Progress};
 use crate::model::effects::{LensDistortion, Rotation, Scale};
 use crate::model::{EffectId, Effects, ModelConfig};
@@ -432,7 +431,7 @@ fn predict(
         None => {
             let e = with.effects.stage_error?;
             nominal.stage.repeatability_um = Some(e.repeatability_um);
-            nominal.stage.source = super::stage::RepeatabilitySource::Model;
+            nominal.stage.source = super::stage_landing::RepeatabilitySource::Model;
         }
     }
     Some(super::compare::assemble(

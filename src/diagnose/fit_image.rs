@@ -23,29 +23,17 @@
 //!   y; grid, then golden section.
 
 use super::bic::image_chi2;
-use super::compare::{Comparison, Measurement};
+use super::compare::Measurement;
 use super::image_stats::{psd, ptc, FrameStats, PsdBin, STATS_CROP_PX};
 use super::nominal::Scene;
 use super::optimise::{curvature_stderr, minimise_1d, nelder_mead};
+use super::results::{Comparison, ImageFit};
 use crate::model::effects::{
     FillFactor, IlluminationChange, MotionBlur, PsfBlur, SensorNoise, Vignetting,
 };
 use crate::model::EffectId;
 use crate::model::Effects;
 use std::collections::BTreeMap;
-
-/// A fitted candidate: its parameters, their standard errors (fitted ones only), the effects with
-/// it added, and whether any parameter differs from its null value by more than two standard
-/// errors.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ImageFit {
-    pub effect: EffectId,
-    pub params: BTreeMap<String, f64>,
-    pub stderr: BTreeMap<String, f64>,
-    pub effects: Effects,
-    pub k: usize,
-    pub beyond_null: bool,
-}
 
 fn spectra_chi2(measured: &[&FrameStats], crops: &[crate::image::Image]) -> f64 {
     let mut c = 0.0;
@@ -374,7 +362,7 @@ pub fn fit_illumination_change(
     model: &Effects,
 ) -> Option<ImageFit> {
     let noise = before.model.nominal.noise_floor_dn.powi(2);
-    let refs: Vec<&super::compare::ImageComparison> =
+    let refs: Vec<&super::results::ImageComparison> =
         before.images.iter().filter(|i| i.run.is_none()).collect();
     let (mut gains, mut offsets) = (Vec::new(), Vec::new());
     for im in before.images.iter().filter(|i| i.run.is_some()) {

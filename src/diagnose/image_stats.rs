@@ -76,7 +76,7 @@ pub fn percentile(v: &mut [f64], q: f64) -> f64 {
 
 /// Crops the centred window of at most `side` px.
 pub fn centre_crop(img: &Image, side: usize) -> Image {
-    let (x0, y0, w, h) = super::nominal::centred_crop(img.width(), img.height(), side);
+    let (x0, y0, w, h) = centred_crop(img.width(), img.height(), side);
     img.crop(crate::image::Roi {
         x: x0,
         y: y0,
@@ -316,6 +316,20 @@ pub fn frame_stats(full: Option<&Image>, crop: &Image, repeat_crop: Option<&Imag
         psd_x: psd(crop, true),
         psd_y: psd(crop, false),
     }
+}
+
+/// The centred crop window (x0, y0, w, h) of at most `side` px per axis, with the same centre as
+/// the frame (so a crop renders with the frame's optical axis).
+pub fn centred_crop(width: usize, height: usize, side: usize) -> (usize, usize, usize, usize) {
+    let fit = |n: usize| {
+        let c = side.min(n);
+        // Same parity as n keeps the centre exactly.
+        let c = if (n - c) % 2 == 1 { c - 1 } else { c };
+        ((n - c) / 2, c)
+    };
+    let (x0, w) = fit(width);
+    let (y0, h) = fit(height);
+    (x0, y0, w, h)
 }
 
 #[cfg(test)]

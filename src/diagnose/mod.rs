@@ -89,6 +89,7 @@ mod diagnose;
 mod discrepancy;
 mod fit_geometric;
 mod fit_image;
+mod floor_read_out;
 mod history;
 mod identifiability;
 mod image_stats;
@@ -96,14 +97,15 @@ pub mod nominal;
 mod optimise;
 pub mod print;
 mod residuals;
+mod results;
 pub mod rounds;
 pub mod stage;
+mod stage_landing;
 
 pub use basis::{geometric_basis, GeometricParam};
-pub use bic::{delta_bic, Chi2, SIGNIFICANT_DELTA_BIC};
+pub use bic::{delta_bic, SIGNIFICANT_DELTA_BIC};
 pub use compare::{
-    compare, compare_prepared, compare_with_scene, load_measurement, model_version, Comparison,
-    DiscrepancyParts, ImageComparison, Measurement, ModelInfo, RunComparison, Side,
+    compare, compare_prepared, compare_with_scene, load_measurement, model_version, Measurement,
 };
 pub use diagnose::{
     diagnose, diagnose_prepared, Candidate, Criteria, Diagnosis, Evidence, MODEL_SEEDS,
@@ -116,8 +118,12 @@ pub use image_stats::{noise_variance, FrameStats, MeanMap, PsdBin, PtcPoint};
 pub use nominal::{Nominal, BASELINE_TOML};
 pub use print::{PrintCalibration, PrintKnowledge};
 pub use residuals::ResidualMap;
+pub use results::{
+    Chi2, Comparison, DiscrepancyParts, HardwareComparison, HardwareRunComparison, ImageComparison,
+    ModelInfo, RunComparison, Side,
+};
 pub use rounds::{diagnose_rounds, diagnose_rounds_prepared, Round, Rounds, MAX_ROUNDS};
-pub use stage::{RepeatabilitySource, StageLanding};
+pub use stage_landing::{RepeatabilitySource, StageLanding};
 
 use crate::dataset::DatasetError;
 use crate::dic::{DicError, DicSettings};

@@ -13,9 +13,9 @@
 //! shifted by the run's landing offset, all fitted to the measured mean displacements
 //! ([`super::stage`]).
 
-use super::image_stats::{noise_variance, percentile};
+use super::image_stats::{centred_crop, noise_variance, percentile};
 use super::print::{characterised, stated_placement, PrintCalibration, PrintKnowledge};
-use super::stage::StageLanding;
+use super::stage_landing::StageLanding;
 use super::DiagnoseError;
 use crate::dataset::{Manifest, Run};
 use crate::image::Image;
@@ -169,20 +169,6 @@ impl Nominal {
     }
 }
 
-/// The centred crop window (x0, y0, w, h) of at most `side` px per axis, with the same centre as
-/// the frame (so a crop renders with the frame's optical axis).
-pub fn centred_crop(width: usize, height: usize, side: usize) -> (usize, usize, usize, usize) {
-    let fit = |n: usize| {
-        let c = side.min(n);
-        // Same parity as n keeps the centre exactly.
-        let c = if (n - c) % 2 == 1 { c - 1 } else { c };
-        ((n - c) / 2, c)
-    };
-    let (x0, w) = fit(width);
-    let (y0, h) = fit(height);
-    (x0, y0, w, h)
-}
-
 /// The model's frames for a dataset: the nominal experiment, the model's effects, the dots of
 /// every pattern (fixed seed).
 pub struct Scene {
@@ -251,7 +237,7 @@ impl Scene {
     }
 
     /// [`Scene::render`] of the whole frame as the camera reads it out in `readout` (its own
-    /// binning or decimation; see [`super::capture_mode`] for where the noise goes).
+    /// binning or decimation; see [`super::floor_read_out`] for where the noise goes).
     pub fn render_read_out(
         &self,
         pattern: usize,
@@ -333,7 +319,7 @@ impl Scene {
         let mut img = render_frame(&camera, &effects, dots, &spec);
         let sigma = n.noise_floor_dn;
         if let Some(r) = readout {
-            return super::capture_mode::read_out_with_floor(&img, r, sigma, full, seed);
+            return super::floor_read_out::read_out_with_floor(&img, r, sigma, full, seed);
         }
         let w = img.width();
         img.data_mut()
