@@ -4,7 +4,7 @@
 //!
 //! Runs that share a reference frame (every run of a pattern) reuse it: the reference is read,
 //! reduced and prepared (`dic::PreparedReference`: interpolation coefficients, gradients, subset
-//! sums) once per scheme and kept for the next runs — the last few references, since an
+//! sums) once per scheme and kept for the next runs — one reference per read-out mode, since an
 //! experiment with hardware schemes alternates between the full-resolution reference and each
 //! scheme's. A run the camera read out in its own binning or decimation (`capture`) is
 //! correlated as it is, once, under its hardware scheme ([`hardware_geometry`]); every other run
@@ -73,13 +73,11 @@ pub trait PairVisitor {
     ) -> Result<(), Self::Error>;
 }
 
-/// References kept prepared: the full-resolution one and three hardware schemes'.
-const REFERENCES_KEPT: usize = 4;
-
 /// A reference frame as read, with its schemes and their prepared references.
 struct PreparedFrame {
     file: String,
-    captured: bool,
+    /// The hardware scheme the frame was read out in; None at full resolution.
+    mode: Option<String>,
     image: Image,
     bit_depth: u8,
     schemes: Vec<Scheme>,
@@ -98,9 +96,10 @@ pub fn correlate_pairs<V: PairVisitor>(
     let mut kept: Vec<PreparedFrame> = Vec::new();
     for (index, run) in runs.iter().enumerate() {
         let captured = run.capture.is_some();
+        let mode = run.capture.as_ref().map(|c| c.name.clone());
         let position = kept
             .iter()
-            .position(|f| f.file == run.reference && f.captured == captured);
+            .position(|f| f.file == run.reference && f.mode == mode);
         let frame = match position {
             Some(k) => kept.remove(k),
             None => prepare(dir, run, schemes, dic)?,
@@ -144,9 +143,9 @@ pub fn correlate_pairs<V: PairVisitor>(
                 })?;
             visitor.result(&pair, scheme, result)?;
         }
-        if kept.len() == REFERENCES_KEPT {
-            kept.remove(0);
-        }
+        // One reference per read-out mode: a mode's runs come one pattern after another, and an
+        // experiment with hardware schemes alternates between the modes.
+        kept.retain(|f| f.mode != frame.mode);
         kept.push(frame);
     }
     Ok(())
@@ -187,7 +186,7 @@ fn prepare(
     }
     Ok(PreparedFrame {
         file: run.reference.clone(),
-        captured: run.capture.is_some(),
+        mode: run.capture.as_ref().map(|c| c.name.clone()),
         bit_depth: info.bit_depth.min(16),
         image,
         schemes,
