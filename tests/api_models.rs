@@ -49,15 +49,7 @@ fn simulate(dir: &Path) {
         description: String::new(),
         effects: Effects {
             stage_misalignment: Some(StageMisalignment { angle_rad: 0.004 }),
-            lens_distortion: Some(LensDistortion {
-                k1: K1,
-                k2: 0.0,
-                p1: 0.0,
-                p2: 0.0,
-                centre_dx_px: 0.0,
-                centre_dy_px: 0.0,
-                norm_radius_px: 0.0,
-            }),
+            lens_distortion: Some(LensDistortion::radial(K1)),
             // Signal-independent noise, as the baseline assumes: distortion is the one hidden effect.
             sensor_noise: Some(SensorNoise {
                 full_well_e: 1e10,

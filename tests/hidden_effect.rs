@@ -211,15 +211,7 @@ fn misaligned(e: Effects) -> Effects {
 fn hidden_lens_distortion() {
     let k1 = -0.003;
     let truth = misaligned(Effects {
-        lens_distortion: Some(LensDistortion {
-            k1,
-            k2: 0.0,
-            p1: 0.0,
-            p2: 0.0,
-            centre_dx_px: 0.0,
-            centre_dy_px: 0.0,
-            norm_radius_px: 0.0,
-        }),
+        lens_distortion: Some(LensDistortion::radial(k1)),
         sensor_noise: Some(flat_noise()),
         ..Effects::default()
     });

@@ -119,15 +119,7 @@ mod tests {
             (
                 GeometricParam::DistortionK1,
                 Effects {
-                    lens_distortion: Some(LensDistortion {
-                        k1: eps,
-                        k2: 0.0,
-                        p1: 0.0,
-                        p2: 0.0,
-                        centre_dx_px: 0.0,
-                        centre_dy_px: 0.0,
-                        norm_radius_px: 0.0,
-                    }),
+                    lens_distortion: Some(LensDistortion::radial(eps)),
                     ..Default::default()
                 },
             ),

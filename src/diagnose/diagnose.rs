@@ -149,17 +149,7 @@ fn geometric_fit_effects(model: &Effects, param: GeometricParam, value: f64) -> 
     match param {
         GeometricParam::Rotation => e.rotation = Some(Rotation { angle_rad: value }),
         GeometricParam::Scale => e.scale = Some(Scale { ds: value }),
-        GeometricParam::DistortionK1 => {
-            e.lens_distortion = Some(LensDistortion {
-                k1: value,
-                k2: 0.0,
-                p1: 0.0,
-                p2: 0.0,
-                centre_dx_px: 0.0,
-                centre_dy_px: 0.0,
-                norm_radius_px: 0.0,
-            })
-        }
+        GeometricParam::DistortionK1 => e.lens_distortion = Some(LensDistortion::radial(value)),
         GeometricParam::TravelScale | GeometricParam::Misalignment => {}
     }
     e

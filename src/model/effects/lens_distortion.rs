@@ -24,6 +24,20 @@ pub struct LensDistortion {
 }
 
 impl LensDistortion {
+    /// The first radial term alone (k1, normalised by the half diagonal, about the image
+    /// centre): what `diagnose` fits.
+    pub fn radial(k1: f64) -> Self {
+        LensDistortion {
+            k1,
+            k2: 0.0,
+            p1: 0.0,
+            p2: 0.0,
+            centre_dx_px: 0.0,
+            centre_dy_px: 0.0,
+            norm_radius_px: 0.0,
+        }
+    }
+
     /// Distorted position of an ideal image point, all in px; `centre` is the image centre and
     /// `half_diagonal_px` the default normalisation.
     pub fn distort(&self, x: f64, y: f64, centre: (f64, f64), half_diagonal_px: f64) -> (f64, f64) {
