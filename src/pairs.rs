@@ -14,6 +14,7 @@ use crate::dataset::Run;
 use crate::dic::{DicError, DicResult, DicSettings, PreparedReference};
 use crate::image::{read_tiff, Image, ImageError};
 use crate::reduce::{reduce, AxisScheme, ReduceError, Scheme};
+use std::borrow::Cow;
 use std::path::Path;
 
 /// One run's frames, read and checked for equal size.
@@ -95,7 +96,6 @@ pub fn correlate_pairs<V: PairVisitor>(
 ) -> Result<(), V::Error> {
     let mut kept: Vec<PreparedFrame> = Vec::new();
     for (index, run) in runs.iter().enumerate() {
-        let captured = run.capture.is_some();
         let mode = run.capture.as_ref().map(|c| c.name.clone());
         let position = kept
             .iter()
@@ -125,22 +125,15 @@ pub fn correlate_pairs<V: PairVisitor>(
         };
         visitor.frames(&pair)?;
         for (scheme, prepared) in frame.schemes.iter().zip(&frame.prepared) {
-            let moved = if captured {
-                deformed.clone()
-            } else {
-                reduce(&deformed, scheme).map_err(|source| PairError::Reduce {
-                    run: run.id.clone(),
-                    scheme: scheme.name.clone(),
-                    source,
-                })?
-            };
-            let result = prepared
-                .correlate(&moved, None)
-                .map_err(|source| PairError::Dic {
-                    run: run.id.clone(),
-                    scheme: scheme.name.clone(),
-                    source,
-                })?;
+            let moved = as_analysed(&deformed, run, scheme)?;
+            let result =
+                prepared
+                    .correlate(moved.as_ref(), None)
+                    .map_err(|source| PairError::Dic {
+                        run: run.id.clone(),
+                        scheme: scheme.name.clone(),
+                        source,
+                    })?;
             visitor.result(&pair, scheme, result)?;
         }
         // One reference per read-out mode: a mode's runs come one pattern after another, and an
@@ -166,23 +159,12 @@ fn prepare(
     };
     let mut prepared = Vec::with_capacity(schemes.len());
     for scheme in &schemes {
-        let dic_error = |source| PairError::Dic {
+        let p = PreparedReference::new(as_analysed(&image, run, scheme)?.as_ref(), dic);
+        prepared.push(p.map_err(|source| PairError::Dic {
             run: run.id.clone(),
             scheme: scheme.name.clone(),
             source,
-        };
-        let p = match run.capture {
-            Some(_) => PreparedReference::new(&image, dic),
-            None => {
-                let reduced = reduce(&image, scheme).map_err(|source| PairError::Reduce {
-                    run: run.id.clone(),
-                    scheme: scheme.name.clone(),
-                    source,
-                })?;
-                PreparedReference::new(&reduced, dic)
-            }
-        };
-        prepared.push(p.map_err(dic_error)?);
+        })?);
     }
     Ok(PreparedFrame {
         file: run.reference.clone(),
@@ -192,6 +174,25 @@ fn prepare(
         schemes,
         prepared,
     })
+}
+
+/// A frame of `run` as `scheme` analyses it: reduced, or as read when the camera read the run
+/// out in its own mode.
+fn as_analysed<'a>(
+    frame: &'a Image,
+    run: &Run,
+    scheme: &Scheme,
+) -> Result<Cow<'a, Image>, PairError> {
+    if run.capture.is_some() {
+        return Ok(Cow::Borrowed(frame));
+    }
+    reduce(frame, scheme)
+        .map(Cow::Owned)
+        .map_err(|source| PairError::Reduce {
+            run: run.id.clone(),
+            scheme: scheme.name.clone(),
+            source,
+        })
 }
 
 /// A hardware scheme as the study's reduction vocabulary: the same block per axis, the whole

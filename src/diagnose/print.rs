@@ -88,10 +88,7 @@ pub fn characterised(run: &Run) -> Option<(f64, f64, Option<f64>)> {
     }
     let contrast = p.contrast?;
     let softness = p.edge_softness_mm.unwrap_or(0.0);
-    let from_mtf = p.mtf.as_deref().and_then(|pairs| {
-        let pairs: Vec<(f64, f64)> = pairs.iter().map(|&[f, m]| (f, m)).collect();
-        sigma_from_mtf(&pairs)
-    });
+    let from_mtf = p.mtf.as_deref().and_then(sigma_from_mtf);
     // A measured MTF is the whole print's, its softness included; a nominal diameter is the
     // dot's before the print's own blur.
     let sigma = from_mtf.or(p
@@ -103,9 +100,9 @@ pub fn characterised(run: &Run) -> Option<(f64, f64, Option<f64>)> {
 /// σ (mm) of the Gaussian whose transfer function exp(−2π²σ²f²) fits the MTF pairs
 /// (cycles/mm, modulation) best in ln M against f², through the origin; points with M outside
 /// (0.02, 0.995) carry no usable information and are skipped.
-pub fn sigma_from_mtf(pairs: &[(f64, f64)]) -> Option<f64> {
+pub fn sigma_from_mtf(pairs: &[[f64; 2]]) -> Option<f64> {
     let (mut sxy, mut sxx) = (0.0, 0.0);
-    for &(f, m) in pairs {
+    for &[f, m] in pairs {
         if f > 0.0 && m > 0.02 && m < 0.995 {
             let x = f * f;
             sxy += x * m.ln();
@@ -163,14 +160,14 @@ mod tests {
     #[test]
     fn a_gaussian_mtf_gives_back_its_sigma() {
         let sigma = 0.08;
-        let pairs: Vec<(f64, f64)> = (0..15)
+        let pairs: Vec<[f64; 2]> = (0..15)
             .map(|k| {
                 let f = k as f64 * 0.5;
-                (f, (-2.0 * (std::f64::consts::PI * sigma * f).powi(2)).exp())
+                [f, (-2.0 * (std::f64::consts::PI * sigma * f).powi(2)).exp()]
             })
             .collect();
         let s = sigma_from_mtf(&pairs).unwrap();
         assert!((s / sigma - 1.0).abs() < 1e-9, "{s}");
-        assert_eq!(sigma_from_mtf(&[(1.0, 1.0)]), None);
+        assert_eq!(sigma_from_mtf(&[[1.0, 1.0]]), None);
     }
 }
