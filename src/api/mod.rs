@@ -11,6 +11,7 @@ mod request_schemas;
 mod routes;
 mod server;
 mod sse;
+mod stall_guard;
 
 pub use problem::{ApiError, Problem};
 
@@ -120,7 +121,11 @@ fn cors_layer(origins: &[String]) -> Option<CorsLayer> {
             .allow_headers([
                 axum::http::header::CONTENT_TYPE,
                 axum::http::header::AUTHORIZATION,
-            ]),
+                HeaderName::from_static("idempotency-key"),
+                HeaderName::from_static("last-event-id"),
+            ])
+            // A created job or dataset is named by Location; a page must be able to read it.
+            .expose_headers([axum::http::header::LOCATION]),
     )
 }
 

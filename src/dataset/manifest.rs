@@ -185,6 +185,24 @@ pub enum DatasetError {
     Invalid { path: PathBuf, message: String },
 }
 
+impl DatasetError {
+    /// The error with its file named by its name alone (for a client, who never sees the
+    /// server's folders).
+    pub fn without_folder(&self) -> String {
+        let name = |p: &std::path::Path| {
+            p.file_name()
+                .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
+        };
+        match self {
+            DatasetError::Read { path, source } => format!("cannot read {}: {source}", name(path)),
+            DatasetError::Write { path, source } => {
+                format!("cannot write {}: {source}", name(path))
+            }
+            DatasetError::Invalid { path, message } => format!("{}: {message}", name(path)),
+        }
+    }
+}
+
 impl Manifest {
     pub fn new(name: &str, scale_px_per_mm: f64) -> Self {
         Self {

@@ -4,10 +4,12 @@
 //! field is an error naming it.
 
 mod capture;
+mod frame_check;
 mod manifest;
 mod move_check;
 
 pub use capture::sensor_readout;
+pub use frame_check::{check_frames, CheckedFrames, FrameCheckError, FrameLimits};
 pub use manifest::{
     is_plain_file_name, CameraInfo, DatasetError, DotProfile, Manifest, PatternInfo, Run,
     StageMove, FORMAT,

@@ -16,6 +16,11 @@ pub const MAX_RATIO: f64 = 10.0;
 pub const MIN_DIFFERENCE_PX: f64 = 5.0;
 /// The least search range, px.
 const SEARCH_PX: usize = 256;
+/// The widest search on the frames as read, px: the phase correlation's L x L buffers grow with
+/// the square of the reach (L ≈ 384 + 2·reach), and the reach with the *stated* move, which the
+/// client chooses. A wider reach is searched on block-averaged copies, so the buffers stay
+/// under ≈ 8 MB whatever the manifest says.
+const MAX_FULL_RES_REACH_PX: usize = 256;
 /// Side of the centred window the offset is measured on.
 const WINDOW_PX: usize = 256;
 
@@ -101,8 +106,24 @@ pub fn check_stated_move(
     // Past the stated move, and at least SEARCH_PX whatever it says (a move stated far too small
     // is the common mislabel), within half the frame; the FFT grows with the square of it.
     let half = reference.width().min(reference.height()) / 2;
-    let reach = ((3.0 * stated_px).ceil() as usize).max(SEARCH_PX);
-    let Some(m) = measure_move(reference, deformed, reach.min(half.max(16))) else {
+    let reach = ((3.0 * stated_px).min(1e9).ceil() as usize)
+        .max(SEARCH_PX)
+        .min(half.max(16));
+    let block = reach.div_ceil(MAX_FULL_RES_REACH_PX);
+    let measured = if block <= 1 {
+        measure_move(reference, deformed, reach)
+    } else {
+        // Accurate to ±block px, ample for an order-of-magnitude check of a move this large.
+        let (a, b) = (block_mean(reference, block), block_mean(deformed, block));
+        measure_move(&a, &b, reach / block).map(|m| MeasuredMove {
+            measured_px: (
+                m.measured_px.0 * block as f64,
+                m.measured_px.1 * block as f64,
+            ),
+            ..m
+        })
+    };
+    let Some(m) = measured else {
         return Ok(None);
     };
     let measured_px = m.measured_px.0.hypot(m.measured_px.1);
@@ -122,6 +143,21 @@ pub fn check_stated_move(
     Ok(Some(m))
 }
 
+/// Means of `block` x `block` tiles (the partial tiles at the right and bottom edges dropped).
+fn block_mean(image: &Image, block: usize) -> Image {
+    let (w, h) = (image.width() / block, image.height() / block);
+    let norm = 1.0 / (block * block) as f32;
+    Image::from_fn(w.max(1), h.max(1), |c, r| {
+        let mut sum = 0.0f32;
+        for y in r * block..((r + 1) * block).min(image.height()) {
+            sum += image.row(y)[c * block..((c + 1) * block).min(image.width())]
+                .iter()
+                .sum::<f32>();
+        }
+        sum * norm
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -129,6 +165,10 @@ mod tests {
     /// Smoothed white noise (a hash per pixel, 3x3 box-blurred) and its copy shifted by
     /// whole pixels (dx, dy): no renderer of ours involved.
     fn pair(dx: i64, dy: i64) -> (Image, Image) {
+        sized_pair(320, 300, dx, dy)
+    }
+
+    fn sized_pair(w: usize, h: usize, dx: i64, dy: i64) -> (Image, Image) {
         let noise = |x: i64, y: i64| {
             let mut z = (x as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
                 ^ (y as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
@@ -145,8 +185,8 @@ mod tests {
             1000.0 + 400.0 * s
         };
         (
-            Image::from_fn(320, 300, |c, r| tex(c as i64, r as i64) as f32),
-            Image::from_fn(320, 300, |c, r| tex(c as i64 - dx, r as i64 - dy) as f32),
+            Image::from_fn(w, h, |c, r| tex(c as i64, r as i64) as f32),
+            Image::from_fn(w, h, |c, r| tex(c as i64 - dx, r as i64 - dy) as f32),
         )
     }
 
@@ -170,6 +210,33 @@ mod tests {
         // A stated 5 mm (130 px) on frames that did not move.
         let (a, b) = pair(0, 0);
         assert!(check_stated_move(&a, &b, (5.0, 0.0), 26.0).is_err());
+    }
+
+    /// Issue 36: a stated move of thousands of px once sized the correlation window from it
+    /// (2.3 GB for 3,000 px). Now a large reach is searched on block-averaged copies: a true
+    /// 130 px move stated as 0.2 mm is still refused, an honest one still passes, and a 3,000 px
+    /// statement on unmoved frames is refused with the small measured figure.
+    #[test]
+    fn a_large_stated_move_is_measured_on_block_averaged_copies() {
+        let (a, b) = sized_pair(1200, 1100, 130, 0);
+        let m = check_stated_move(&a, &b, (130.0 / 26.0, 0.0), 26.0)
+            .unwrap()
+            .expect("measured");
+        assert!((m.measured_px.0 - 130.0).abs() <= 2.0, "{m:?}");
+        let e = check_stated_move(&a, &b, (0.2, 0.0), 26.0).unwrap_err();
+        assert!((e.measured_px - 130.0).abs() <= 2.0, "{e}");
+        let (big, same) = sized_pair(1200, 1100, 0, 0);
+        let e = check_stated_move(&big, &same, (3000.0 / 26.0, 0.0), 26.0).unwrap_err();
+        assert!(e.measured_px < 5.0, "{e}");
+    }
+
+    #[test]
+    fn block_means_average_whole_tiles() {
+        let img = Image::from_fn(5, 4, |c, r| (c + 10 * r) as f32);
+        let m = block_mean(&img, 2);
+        assert_eq!((m.width(), m.height()), (2, 2));
+        assert_eq!(m.get(0, 0), (0.0 + 1.0 + 10.0 + 11.0) / 4.0);
+        assert_eq!(m.get(1, 1), (22.0 + 23.0 + 32.0 + 33.0) / 4.0);
     }
 
     #[test]

@@ -19,6 +19,7 @@ pub use gray::Image;
 pub use roi::Roi;
 pub use speckle_quality::{speckle_quality, SpeckleQuality, SpeckleQualityError};
 pub use tiff_io::{
-    decode_tiff, read_tiff, tiff_u16_bytes, write_tiff_u16, write_tiff_u8, FrameInfo,
+    decode_tiff, decode_tiff_within, read_tiff, read_tiff_header, tiff_u16_bytes, write_tiff_u16,
+    write_tiff_u8, FrameInfo,
 };
 pub use view::ImageView;

@@ -34,6 +34,17 @@ pub fn read_tiff(path: &Path) -> Result<(Image, FrameInfo), ImageError> {
 /// As [`read_tiff`], from the file's bytes (a frame fetched over HTTP); `path` names it in
 /// errors.
 pub fn decode_tiff(bytes: &[u8], path: &Path) -> Result<(Image, FrameInfo), ImageError> {
+    decode_tiff_within(bytes, path, usize::MAX)
+}
+
+/// As [`decode_tiff`], but a frame whose header states more than `max_pixels` pixels is refused
+/// before any pixel buffer is allocated, and the decoder's own buffers are held to that size: a
+/// deflate-compressed 16384² frame is 0.5 MB on the wire and 1 GB decoded.
+pub fn decode_tiff_within(
+    bytes: &[u8],
+    path: &Path,
+    max_pixels: usize,
+) -> Result<(Image, FrameInfo), ImageError> {
     let decode_err = |e: tiff::TiffError| ImageError::Decode {
         path: path.to_owned(),
         reason: e.to_string(),
@@ -42,15 +53,28 @@ pub fn decode_tiff(bytes: &[u8], path: &Path) -> Result<(Image, FrameInfo), Imag
         path: path.to_owned(),
         kind,
     };
+    if let Ok((w, h)) = Decoder::new(Cursor::new(bytes)).and_then(|mut d| d.dimensions()) {
+        let (width, height) = (w as usize, h as usize);
+        if width.saturating_mul(height) > max_pixels {
+            return Err(ImageError::TooLarge {
+                path: path.to_owned(),
+                width,
+                height,
+                max_pixels,
+            });
+        }
+    }
+    let limits = decoder_limits(max_pixels);
+    let open = |b| open_limited(b, &limits);
     let colortype = Decoder::new(Cursor::new(bytes)).and_then(|mut d| d.colortype());
     match colortype {
         Ok(ColorType::Gray(8 | 16 | 32)) => {
-            let mut decoder = Decoder::new(Cursor::new(bytes)).map_err(decode_err)?;
+            let mut decoder = open(bytes).map_err(decode_err)?;
             decode_grey(&mut decoder, path)
         }
         other => match rewrite_as_grey(bytes) {
             Some(Rewritten::Palette(copy)) => {
-                let mut decoder = Decoder::new(Cursor::new(copy.as_slice())).map_err(decode_err)?;
+                let mut decoder = open(copy.as_slice()).map_err(decode_err)?;
                 let (indices, info) = decode_grey(&mut decoder, path)?;
                 let map = decoder.get_tag_u16_vec(Tag::ColorMap).map_err(decode_err)?;
                 palette_to_grey(&indices, info, &map).ok_or_else(|| ImageError::Decode {
@@ -59,7 +83,7 @@ pub fn decode_tiff(bytes: &[u8], path: &Path) -> Result<(Image, FrameInfo), Imag
                 })
             }
             Some(Rewritten::GreyAlpha(copy)) => {
-                let mut decoder = Decoder::new(Cursor::new(copy.as_slice())).map_err(decode_err)?;
+                let mut decoder = open(copy.as_slice()).map_err(decode_err)?;
                 let (both, info) = decode_grey(&mut decoder, path)?;
                 let width = info.width / 2;
                 let grey: Vec<f32> = both.data().iter().step_by(2).copied().collect();
@@ -76,6 +100,54 @@ pub fn decode_tiff(bytes: &[u8], path: &Path) -> Result<(Image, FrameInfo), Imag
             },
         },
     }
+}
+
+/// The tiff crate's buffer limits for frames of at most `max_pixels` (two samples per pixel for
+/// grey+alpha, eight bytes per sample at most); its defaults (256 MB) when unbounded.
+fn decoder_limits(max_pixels: usize) -> tiff::decoder::Limits {
+    let mut limits = tiff::decoder::Limits::default();
+    if max_pixels != usize::MAX {
+        let bytes = max_pixels.saturating_mul(2 * 8);
+        limits.decoding_buffer_size = bytes;
+        limits.intermediate_buffer_size = bytes;
+    }
+    limits
+}
+
+fn open_limited<'a>(
+    bytes: &'a [u8],
+    limits: &tiff::decoder::Limits,
+) -> Result<Decoder<Cursor<&'a [u8]>>, tiff::TiffError> {
+    Ok(Decoder::new(Cursor::new(bytes))?.with_limits(limits.clone()))
+}
+
+/// Width, height and bit depth from the header alone (no pixel is decoded): grey, palette and
+/// grey+alpha files, as [`read_tiff`] reads them.
+pub fn read_tiff_header(path: &Path) -> Result<FrameInfo, ImageError> {
+    let file = std::fs::File::open(path).map_err(|source| ImageError::Open {
+        path: path.to_owned(),
+        source,
+    })?;
+    let decode_err = |e: tiff::TiffError| ImageError::Decode {
+        path: path.to_owned(),
+        reason: e.to_string(),
+    };
+    let mut decoder = Decoder::new(std::io::BufReader::new(file)).map_err(decode_err)?;
+    let (w, h) = decoder.dimensions().map_err(decode_err)?;
+    let bit_depth = match decoder.colortype().map_err(decode_err)? {
+        ColorType::Gray(b) | ColorType::Palette(b) | ColorType::GrayA(b) => b,
+        other => {
+            return Err(ImageError::Unsupported {
+                path: path.to_owned(),
+                kind: format!("{other:?}"),
+            })
+        }
+    };
+    Ok(FrameInfo {
+        width: w as usize,
+        height: h as usize,
+        bit_depth,
+    })
 }
 
 /// Decodes a grey first page (8/16-bit integer or 32-bit float).
@@ -98,9 +170,27 @@ fn decode_grey(
             })
         }
     };
+    // The f32 copy is sized from the header: asked for, not assumed (a refusal, not an abort).
+    let widen = |n: usize| -> Result<Vec<f32>, ImageError> {
+        let mut v = Vec::new();
+        v.try_reserve_exact(n)
+            .map_err(|_| ImageError::OutOfMemory {
+                path: path.to_owned(),
+                bytes: n.saturating_mul(4),
+            })?;
+        Ok(v)
+    };
     let data: Vec<f32> = match decoder.read_image().map_err(decode_err)? {
-        DecodingResult::U8(v) => v.into_iter().map(f32::from).collect(),
-        DecodingResult::U16(v) => v.into_iter().map(f32::from).collect(),
+        DecodingResult::U8(v) => {
+            let mut out = widen(v.len())?;
+            out.extend(v.into_iter().map(f32::from));
+            out
+        }
+        DecodingResult::U16(v) => {
+            let mut out = widen(v.len())?;
+            out.extend(v.into_iter().map(f32::from));
+            out
+        }
         DecodingResult::F32(v) => v,
         other => {
             let kind = match other {

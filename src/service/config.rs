@@ -46,6 +46,8 @@ pub struct DaemonConfig {
     #[serde(default)]
     pub http: HttpLimits,
     #[serde(default)]
+    pub uploads: UploadLimits,
+    #[serde(default)]
     pub sweeps: SweepLimits,
     pub bench: BenchConfig,
     pub camera: CameraConfig,
@@ -77,6 +79,11 @@ pub struct HttpLimits {
     pub request_timeout_ms: u64,
     /// Open connections at most; more are closed as soon as they are accepted.
     pub max_connections: usize,
+    /// Open connections at most from one client address, so one client cannot take every slot.
+    pub max_connections_per_client: usize,
+    /// A response the client does not read: how long a write may wait for the client before the
+    /// connection is closed (files are streamed, so a stalled reader holds one chunk, not a file).
+    pub write_stall_timeout_ms: u64,
     /// On shutdown, how long open requests get to finish before the daemon exits anyway.
     pub drain_ms: u64,
 }
@@ -88,7 +95,49 @@ impl Default for HttpLimits {
             body_read_timeout_ms: 30_000,
             request_timeout_ms: 300_000,
             max_connections: 4_096,
+            max_connections_per_client: 256,
+            write_stall_timeout_ms: 20_000,
             drain_ms: 3_000,
+        }
+    }
+}
+
+/// What a dataset upload (`POST /datasets`) may take: its pace, and the work its check may cost.
+/// The check decodes every frame, so its memory is bounded by `max_frame_pixels` (two frames
+/// are held at a time, one upload is checked at a time), not by what the manifest claims.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct UploadLimits {
+    /// Most pixels per frame (width × height, read from the TIFF header before decoding).
+    pub max_frame_pixels: usize,
+    /// Most runs per manifest.
+    pub max_runs: usize,
+    /// The slowest pace an upload may keep once its first `grace_ms` have passed, bytes/s (the
+    /// average since its start).
+    pub min_bytes_per_s: u64,
+    pub grace_ms: u64,
+    /// The whole upload, first byte to the last, at most.
+    pub deadline_ms: u64,
+}
+
+impl Default for UploadLimits {
+    fn default() -> Self {
+        Self {
+            // A 6144 x 6144 sensor is 37.7 M px.
+            max_frame_pixels: 40_000_000,
+            max_runs: 1_000,
+            min_bytes_per_s: 32 * 1024,
+            grace_ms: 10_000,
+            deadline_ms: 3_600_000,
+        }
+    }
+}
+
+impl UploadLimits {
+    pub fn frames(&self) -> crate::dataset::FrameLimits {
+        crate::dataset::FrameLimits {
+            max_pixels: self.max_frame_pixels,
+            max_runs: self.max_runs,
         }
     }
 }

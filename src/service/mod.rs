@@ -11,7 +11,8 @@ mod work;
 
 pub use config::{
     load_bench_model, BenchConfig, CameraConfig, ConfigError, DaemonConfig, HttpLimits,
-    MockBinning, MockReduction, StageConfig, SweepLimits, DEFAULT_CONFIG_TOML, PAPER_BENCH_TOML,
+    MockBinning, MockReduction, StageConfig, SweepLimits, UploadLimits, DEFAULT_CONFIG_TOML,
+    PAPER_BENCH_TOML,
 };
 pub use hardware::{mock_bench, open_bench, HardwareError, SwappableScene};
 pub use jobs::{JobContext, JobError, JobOutput, JobResult, Jobs, Lane, Work};
@@ -49,6 +50,9 @@ pub struct Service {
     pub limits: Arc<BenchLimits>,
     /// Cancelled when the server shuts down: live streams end with it.
     pub shutdown: tokio_util::sync::CancellationToken,
+    /// Upload checks (which decode every frame) run one at a time: their memory is two frames
+    /// of at most `uploads.max_frame_pixels`, however many clients upload at once.
+    pub frame_checks: Arc<tokio::sync::Semaphore>,
 }
 
 impl Service {
@@ -82,6 +86,7 @@ impl Service {
                 bench,
                 limits,
                 shutdown: tokio_util::sync::CancellationToken::new(),
+                frame_checks: Arc::new(tokio::sync::Semaphore::new(1)),
             },
             recovery,
         ))

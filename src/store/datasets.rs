@@ -47,19 +47,14 @@ impl Drop for StagingDir {
     }
 }
 
-/// Width and height of a TIFF, from its header alone.
-fn tiff_size(path: &Path) -> Result<(usize, usize)> {
-    let file = std::fs::File::open(path).map_err(io(path))?;
-    let invalid = |e: tiff::TiffError| {
+/// Width, height and bit depth of a TIFF, from its header alone.
+fn tiff_header(path: &Path) -> Result<crate::image::FrameInfo> {
+    crate::image::read_tiff_header(path).map_err(|e| {
         StoreError::Dataset(DatasetError::Invalid {
             path: path.into(),
             message: format!("not a readable TIFF: {e}"),
         })
-    };
-    let (w, h) = tiff::decoder::Decoder::new(std::io::BufReader::new(file))
-        .and_then(|mut d| d.dimensions())
-        .map_err(invalid)?;
-    Ok((w as usize, h as usize))
+    })
 }
 
 impl RunStore {
@@ -141,13 +136,12 @@ impl RunStore {
                 "'{DATASET_RECORD}' is the store's own file in a dataset"
             )));
         }
+        // The full-resolution frames' header (a hardware scheme's frames are smaller).
+        let first = manifest.runs.iter().find(|r| r.capture.is_none());
+        let header = tiff_header(&dir.join(&first.unwrap_or(&manifest.runs[0]).reference))?;
         let (width, height) = match &manifest.camera {
             Some(c) => (c.width, c.height),
-            // The full-resolution frames' size (a hardware scheme's frames are smaller).
-            None => {
-                let first = manifest.runs.iter().find(|r| r.capture.is_none());
-                tiff_size(&dir.join(&first.unwrap_or(&manifest.runs[0]).reference))?
-            }
+            None => (header.width, header.height),
         };
         let name = if name.trim().is_empty() {
             manifest.name.clone()
@@ -172,6 +166,7 @@ impl RunStore {
             runs: manifest.runs.len(),
             width,
             height,
+            bit_depth: Some(header.bit_depth),
             files,
         };
         write_json(&dir.join(DATASET_RECORD), &record)?;
@@ -243,9 +238,10 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("a.tif");
         std::fs::write(&p, crate::image::tiff_u16_bytes(7, 2, &[1u16; 14]).unwrap()).unwrap();
-        assert_eq!(tiff_size(&p).unwrap(), (7, 2));
+        let info = tiff_header(&p).unwrap();
+        assert_eq!((info.width, info.height, info.bit_depth), (7, 2, 16));
         std::fs::write(&p, b"II*\0garbage").unwrap();
-        assert!(matches!(tiff_size(&p), Err(StoreError::Dataset(_))));
+        assert!(matches!(tiff_header(&p), Err(StoreError::Dataset(_))));
     }
 
     #[test]

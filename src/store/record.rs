@@ -252,6 +252,10 @@ pub struct DatasetRecord {
     /// Frame size in pixels.
     pub width: usize,
     pub height: usize,
+    /// Bits per sample of the first full-resolution reference frame, read from its header when
+    /// the dataset was stored (absent in records written before it was recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bit_depth: Option<u8>,
     /// Every file of the dataset (not `record.json`), relative to its folder, sorted.
     pub files: Vec<String>,
 }

@@ -406,6 +406,26 @@ impl RunStore {
     }
 
     /// The bytes of `rel` inside run `id`'s folder; `NotFound` when there is no such file.
+    /// A file of run `id` opened for reading, and its length: for serving it piece by piece (a
+    /// client that reads slowly then holds a piece of it, not the whole file).
+    pub fn open_file(&self, id: &RunId, rel: &str) -> Result<(std::fs::File, u64)> {
+        let path = self.run_dir(id).join(safe_relative_path(rel)?);
+        let not_found = || StoreError::NotFound(format!("run {id} has no file '{rel}'"));
+        let file = match std::fs::File::open(&path) {
+            Ok(f) => f,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Err(not_found()),
+            Err(e) => return Err(StoreError::Io { path, source: e }),
+        };
+        let meta = file.metadata().map_err(|e| StoreError::Io {
+            path: path.clone(),
+            source: e,
+        })?;
+        if !meta.is_file() {
+            return Err(not_found());
+        }
+        Ok((file, meta.len()))
+    }
+
     pub fn read_file(&self, id: &RunId, rel: &str) -> Result<Vec<u8>> {
         let path = self.run_dir(id).join(safe_relative_path(rel)?);
         match std::fs::read(&path) {

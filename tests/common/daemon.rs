@@ -255,6 +255,17 @@ impl ServeProcess {
         Self::start(command, args)
     }
 
+    /// [`ServeProcess::spawn`] behind a wrapper command (`prlimit --as=… --`).
+    pub fn spawn_under(wrapper: &[&str], args: &[&str]) -> Self {
+        let mut command = std::process::Command::new(wrapper[0]);
+        command
+            .args(&wrapper[1..])
+            .arg(env!("CARGO_BIN_EXE_ffdic"))
+            .env("RUST_LOG", "warn")
+            .stderr(std::process::Stdio::inherit());
+        Self::start(command, args)
+    }
+
     /// [`ServeProcess::spawn`] at the default log level, stderr into the file `log`.
     pub fn spawn_logging_to(args: &[&str], log: &std::path::Path) -> Self {
         let mut command = std::process::Command::new(env!("CARGO_BIN_EXE_ffdic"));

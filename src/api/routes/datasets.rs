@@ -9,10 +9,9 @@ use super::blocking;
 use super::experiments::{accepted, idempotency_key};
 use crate::api::json::ApiJson;
 use crate::api::problem::{ApiError, ApiResult, Problem};
-use crate::dataset::{is_plain_file_name, Manifest};
+use crate::dataset::{check_frames, is_plain_file_name, FrameCheckError, Manifest};
 use crate::diagnose::{read_history, HistoryEntry};
-use crate::dic::MIN_FRAME_SIDE_PX;
-use crate::image::read_tiff;
+use crate::image::read_tiff_header;
 use crate::report::history_chart;
 use crate::service::{AnalysisRequest, CompareRequest, Service};
 use crate::store::{DatasetId, DatasetRecord, DatasetSource, RunKind};
@@ -21,6 +20,7 @@ use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::Json;
 use tokio::io::AsyncWriteExt;
+use tokio_util::sync::CancellationToken;
 
 pub fn dataset_id(raw: &str) -> ApiResult<DatasetId> {
     raw.parse().map_err(|_| {
@@ -48,9 +48,10 @@ fn multipart_error(e: axum::extract::multipart::MultipartError) -> ApiError {
                  description = "dataset.json and the TIFF frames it names, one part each"),
     responses((status = 201, description = "Stored; Location names it", body = Object),
               (status = 400, body = Problem), (status = 401, body = Problem),
+              (status = 408, description = "The upload was slower than uploads.min_bytes_per_s or took longer than uploads.deadline_ms", body = Problem),
               (status = 413, body = Problem),
               (status = 507, description = "The stored datasets and this upload would pass datasets_quota_bytes", body = Problem),
-              (status = 422, description = "Invalid manifest, missing or corrupt frame", body = Problem)))]
+              (status = 422, description = "Invalid manifest, missing, corrupt or oversized frame, too many runs", body = Problem)))]
 pub async fn upload(State(svc): State<Service>, mut form: Multipart) -> ApiResult<Response> {
     let store = svc.store.clone();
     let (staging, used_bytes) = blocking(move || -> Result<_, crate::store::StoreError> {
@@ -58,9 +59,13 @@ pub async fn upload(State(svc): State<Service>, mut form: Multipart) -> ApiResul
     })
     .await??;
     let quota_bytes = svc.config.datasets_quota_bytes;
-    let mut received_bytes = 0u64;
+    let mut pace = UploadPace::new(&svc.config.uploads);
     let mut names: Vec<String> = Vec::new();
-    while let Some(mut field) = form.next_field().await.map_err(multipart_error)? {
+    while let Some(mut field) = pace
+        .within(form.next_field())
+        .await?
+        .map_err(multipart_error)?
+    {
         let name = field
             .file_name()
             .or(field.name())
@@ -82,11 +87,11 @@ pub async fn upload(State(svc): State<Service>, mut form: Multipart) -> ApiResul
         let mut file = tokio::fs::File::create(&path)
             .await
             .map_err(|e| ApiError::internal("staging an upload", e))?;
-        while let Some(chunk) = field.chunk().await.map_err(multipart_error)? {
-            received_bytes += chunk.len() as u64;
+        while let Some(chunk) = pace.within(field.chunk()).await?.map_err(multipart_error)? {
+            pace.received(chunk.len());
             // Refused as soon as it would pass the quota: the staging folder goes with it.
-            if used_bytes + received_bytes > quota_bytes {
-                return Err(over_quota(used_bytes, received_bytes, quota_bytes));
+            if used_bytes + pace.received_bytes > quota_bytes {
+                return Err(over_quota(used_bytes, pace.received_bytes, quota_bytes));
             }
             file.write_all(&chunk)
                 .await
@@ -103,10 +108,24 @@ pub async fn upload(State(svc): State<Service>, mut form: Multipart) -> ApiResul
             "the upload has no dataset.json part",
         ));
     }
+    // One upload's frames are checked at a time (a check holds up to two decoded frames); the
+    // permit travels with the check, which outlives this future if the client leaves.
+    let permit = svc
+        .frame_checks
+        .clone()
+        .acquire_owned()
+        .await
+        .map_err(|e| ApiError::internal("waiting for the frame check", e))?;
+    // Cancelled when this future is dropped (the client left): the check stops at its next
+    // frame and the staging folder goes with it.
+    let abandoned = CancellationToken::new();
+    let _abandon_on_drop = abandoned.clone().drop_guard();
     let store = svc.store.clone();
+    let limits = svc.config.uploads.frames();
     let record = blocking(move || -> ApiResult<DatasetRecord> {
+        let _permit = permit;
         let manifest = Manifest::read(staging.path())
-            .map_err(|e| ApiError::invalid("dataset.json", e.to_string()))?;
+            .map_err(|e| ApiError::invalid("dataset.json", e.without_folder()))?;
         // A dataset holds what its manifest names: a stray part would be kept, counted against
         // the quota and never read.
         let named: std::collections::HashSet<&str> = manifest
@@ -127,7 +146,17 @@ pub async fn upload(State(svc): State<Service>, mut form: Multipart) -> ApiResul
                 ),
             ));
         }
-        check_frames(staging.path(), &manifest)?;
+        let left = || abandoned.is_cancelled();
+        check_frames(staging.path(), &manifest, limits, &left).map_err(|e| {
+            if matches!(e, FrameCheckError::Abandoned) {
+                tracing::info!("an upload's client left during its check: nothing kept");
+            }
+            ApiError::invalid(e.field(), e.to_string())
+        })?;
+        if left() {
+            tracing::info!("an upload's client left before its commit: nothing kept");
+            return Err(ApiError::invalid("file", "the client left"));
+        }
         let name = manifest.name.clone();
         Ok(store.commit_dataset(staging, &name, DatasetSource::Upload)?)
     })
@@ -141,6 +170,61 @@ pub async fn upload(State(svc): State<Service>, mut form: Multipart) -> ApiResul
         .into_response())
 }
 
+/// An upload's pace: every piece must arrive before the upload falls below
+/// `min_bytes_per_s` on average (after `grace_ms`) or passes `deadline_ms` in all. The body
+/// timeout alone (30 s between pieces) let a client sending a byte every 20 s hold its
+/// connection for as long as it liked.
+struct UploadPace {
+    started: tokio::time::Instant,
+    received_bytes: u64,
+    min_bytes_per_s: u64,
+    grace: std::time::Duration,
+    deadline: std::time::Duration,
+}
+
+impl UploadPace {
+    fn new(limits: &crate::service::UploadLimits) -> Self {
+        Self {
+            started: tokio::time::Instant::now(),
+            received_bytes: 0,
+            min_bytes_per_s: limits.min_bytes_per_s.max(1),
+            grace: std::time::Duration::from_millis(limits.grace_ms),
+            deadline: std::time::Duration::from_millis(limits.deadline_ms),
+        }
+    }
+
+    fn received(&mut self, bytes: usize) {
+        self.received_bytes += bytes as u64;
+    }
+
+    /// When the next piece is due: the bytes so far cover the pace until then.
+    fn due(&self) -> tokio::time::Instant {
+        let covered = std::time::Duration::from_secs_f64(
+            self.received_bytes as f64 / self.min_bytes_per_s as f64,
+        );
+        self.started + self.grace.max(covered).min(self.deadline)
+    }
+
+    async fn within<T>(&self, piece: impl std::future::Future<Output = T>) -> ApiResult<T> {
+        tokio::time::timeout_at(self.due(), piece)
+            .await
+            .map_err(|_| {
+                let secs = self.started.elapsed().as_secs_f64();
+                ApiError::new(
+                    StatusCode::REQUEST_TIMEOUT,
+                    "upload-too-slow",
+                    format!(
+                        "the upload sent {} bytes in {secs:.0} s: an upload must keep {} bytes/s on average after its first {} s and end within {} s (uploads.min_bytes_per_s, grace_ms, deadline_ms)",
+                        self.received_bytes,
+                        self.min_bytes_per_s,
+                        self.grace.as_secs(),
+                        self.deadline.as_secs()
+                    ),
+                )
+            })
+    }
+}
+
 /// 507: the stored datasets and this upload would pass `datasets_quota_bytes`.
 fn over_quota(used_bytes: u64, received_bytes: u64, quota_bytes: u64) -> ApiError {
     ApiError::new(
@@ -150,77 +234,6 @@ fn over_quota(used_bytes: u64, received_bytes: u64, quota_bytes: u64) -> ApiErro
             "the stored datasets take {used_bytes} bytes of the {quota_bytes}-byte quota (datasets_quota_bytes); this upload passed it after {received_bytes} bytes: delete datasets or raise the quota"
         ),
     )
-}
-
-/// Every frame the manifest names decodes and is at least `MIN_FRAME_SIDE_PX` square, each run's frames have one
-/// size, and no run's stated move contradicts its frames by an order of magnitude
-/// (`dataset::check_stated_move`, the measured figure in the refusal).
-fn check_frames(dir: &std::path::Path, m: &Manifest) -> ApiResult<()> {
-    let read = |run: &str, name: &str| -> ApiResult<crate::image::Image> {
-        let path = dir.join(name);
-        if !path.is_file() {
-            return Err(ApiError::invalid(
-                "file",
-                format!("run {run}: '{name}' was not uploaded"),
-            ));
-        }
-        let (img, _) = read_tiff(&path).map_err(|e| {
-            ApiError::invalid(
-                "file",
-                format!("run {run}: '{name}': {e}").replace(&dir.display().to_string(), ""),
-            )
-        })?;
-        if img.width() < MIN_FRAME_SIDE_PX || img.height() < MIN_FRAME_SIDE_PX {
-            return Err(ApiError::invalid(
-                "file",
-                format!(
-                    "'{name}' is {}x{} px; at least {MIN_FRAME_SIDE_PX}x{MIN_FRAME_SIDE_PX}",
-                    img.width(),
-                    img.height()
-                ),
-            ));
-        }
-        Ok(img)
-    };
-    let mut checked = std::collections::HashSet::new();
-    // Runs of one pattern share their reference: keep the last one read.
-    let mut reference: Option<(String, crate::image::Image)> = None;
-    for run in &m.runs {
-        if reference.as_ref().map(|r| &r.0) != Some(&run.reference) {
-            reference = Some((run.reference.clone(), read(&run.id, &run.reference)?));
-        }
-        let (_, ref_img) = reference.as_ref().expect("just read");
-        let deformed = read(&run.id, &run.deformed)?;
-        let size = |i: &crate::image::Image| (i.width(), i.height());
-        if size(ref_img) != size(&deformed) {
-            return Err(ApiError::invalid(
-                "file",
-                format!("run {}: reference and deformed differ in size", run.id),
-            ));
-        }
-        crate::dataset::check_stated_move(
-            ref_img,
-            &deformed,
-            (run.stage.dx_mm, run.stage.dy_mm),
-            run.frame_px_per_mm(m.scale_px_per_mm),
-        )
-        .map_err(|e| ApiError::invalid(format!("runs[{}].stage", run.id), e.to_string()))?;
-        for name in &run.repeat {
-            if checked.insert(name.clone()) {
-                let r = read(&run.id, name)?;
-                if size(&r) != size(ref_img) {
-                    return Err(ApiError::invalid(
-                        "file",
-                        format!(
-                            "run {}: '{name}' differs in size from the reference",
-                            run.id
-                        ),
-                    ));
-                }
-            }
-        }
-    }
-    Ok(())
 }
 
 #[utoipa::path(get, path = "/datasets", tag = "datasets",
@@ -511,12 +524,18 @@ pub async fn details(
             let dir = store.dataset_dir(&id);
             let m = Manifest::read(&dir)
                 .map_err(|e| ApiError::internal("reading a stored dataset's manifest", e))?;
-            let bit_depth = m.camera.as_ref().map(|c| c.bit_depth).or_else(|| {
-                let first = m.runs.first()?;
-                read_tiff(&dir.join(&first.reference))
-                    .ok()
-                    .map(|(_, info)| info.bit_depth)
-            });
+            // Recorded at upload; a record from before reads the header, never the pixels.
+            let bit_depth = m
+                .camera
+                .as_ref()
+                .map(|c| c.bit_depth)
+                .or(record.bit_depth)
+                .or_else(|| {
+                    let first = m.runs.first()?;
+                    read_tiff_header(&dir.join(&first.reference))
+                        .ok()
+                        .map(|info| info.bit_depth)
+                });
             let scale = m.scale_px_per_mm;
             Ok(DatasetDetails {
                 id: record.id.to_string(),

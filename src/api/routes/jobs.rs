@@ -49,6 +49,9 @@ pub async fn cancel(
     }
 }
 
+/// The piece a served file is read and sent in.
+const FILE_PIECE_BYTES: usize = 64 * 1024;
+
 /// Folders of a run folder a client may read.
 const READABLE: [&str; 3] = ["frames", "results", "plots"];
 
@@ -70,7 +73,13 @@ pub async fn file(
     let store = svc.store.clone();
     let key = id.clone();
     let name = rel.clone();
-    let bytes = blocking(move || store.read_file(&key, &name)).await??;
+    let (file, len) = blocking(move || store.open_file(&key, &name)).await??;
+    // Streamed in pieces: a client that stops reading holds one piece until the server's write
+    // stall timeout closes its connection, not the whole file (80 such readers once held 890 MB).
+    let body = axum::body::Body::from_stream(tokio_util::io::ReaderStream::with_capacity(
+        tokio::fs::File::from_std(file),
+        FILE_PIECE_BYTES,
+    ));
     let mime = match rel.rsplit('.').next() {
         Some("json") => "application/json",
         Some("csv") => "text/csv; charset=utf-8",
@@ -81,7 +90,14 @@ pub async fn file(
         Some("arrow") => "application/vnd.apache.arrow.file",
         _ => "application/octet-stream",
     };
-    Ok(([(header::CONTENT_TYPE, mime)], bytes).into_response())
+    Ok((
+        [
+            (header::CONTENT_TYPE, mime.to_string()),
+            (header::CONTENT_LENGTH, len.to_string()),
+        ],
+        body,
+    )
+        .into_response())
 }
 
 #[utoipa::path(get, path = "/jobs/{id}", tag = "jobs",

@@ -1,0 +1,332 @@
+//! What a dataset's frames must satisfy before anything is stored: every frame the manifest names
+//! is there, decodes, is at least [`MIN_FRAME_SIDE_PX`] square and at most
+//! [`FrameLimits::max_pixels`] (read from the header, before any pixel is decoded), each run's
+//! frames share one size, and no run's stated move contradicts its frames
+//! ([`check_stated_move`]).
+//!
+//! The work is bounded by the limits, not by the manifest: the runs are capped, each distinct
+//! frame is decoded once however many runs name it (two are held at a time), and each distinct
+//! (reference, deformed, stated move) is checked once. Errors name frames by their file name
+//! only, never by a server path.
+
+use super::{check_stated_move, Manifest, MoveContradiction};
+use crate::dic::MIN_FRAME_SIDE_PX;
+use crate::image::{decode_tiff_within, FrameInfo, Image, ImageError};
+use std::collections::HashSet;
+use std::path::Path;
+use std::rc::Rc;
+
+/// How much a dataset's check may take.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FrameLimits {
+    /// Most pixels a frame may have (width × height).
+    pub max_pixels: usize,
+    /// Most runs a manifest may list.
+    pub max_runs: usize,
+}
+
+/// What the frames say of the dataset once they passed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CheckedFrames {
+    /// The first full-resolution run's reference frame (its size and bit depth).
+    pub reference: FrameInfo,
+    /// Distinct frames decoded.
+    pub decoded: usize,
+}
+
+/// Why a dataset's frames were refused.
+#[derive(Debug, thiserror::Error)]
+pub enum FrameCheckError {
+    #[error("the manifest lists {runs} runs; at most {max_runs} are accepted")]
+    TooManyRuns { runs: usize, max_runs: usize },
+    #[error("run {run}: '{name}' was not uploaded")]
+    Missing { run: String, name: String },
+    #[error("run {run}: {source}")]
+    Unreadable {
+        run: String,
+        #[source]
+        source: ImageError,
+    },
+    #[error("'{name}' is {width}x{height} px; at least {MIN_FRAME_SIDE_PX}x{MIN_FRAME_SIDE_PX}")]
+    TooSmall {
+        name: String,
+        width: usize,
+        height: usize,
+    },
+    #[error("run {run}: '{name}' differs in size from the reference")]
+    SizeMismatch { run: String, name: String },
+    #[error("{source}")]
+    StatedMove {
+        run: String,
+        #[source]
+        source: MoveContradiction,
+    },
+    #[error("the check was abandoned: the client left")]
+    Abandoned,
+}
+
+impl FrameCheckError {
+    /// The manifest field or part a refusal is about (a problem document's `field`).
+    pub fn field(&self) -> String {
+        match self {
+            FrameCheckError::TooManyRuns { .. } => "runs".into(),
+            FrameCheckError::StatedMove { run, .. } => format!("runs[{run}].stage"),
+            FrameCheckError::Missing { .. }
+            | FrameCheckError::Unreadable { .. }
+            | FrameCheckError::TooSmall { .. }
+            | FrameCheckError::SizeMismatch { .. }
+            | FrameCheckError::Abandoned => "file".into(),
+        }
+    }
+}
+
+/// Checks the frames of the dataset in `dir` against `manifest`; `abandoned` is asked between
+/// frames, and a `true` stops the check.
+pub fn check_frames(
+    dir: &Path,
+    manifest: &Manifest,
+    limits: FrameLimits,
+    abandoned: &dyn Fn() -> bool,
+) -> Result<CheckedFrames, FrameCheckError> {
+    if manifest.runs.len() > limits.max_runs {
+        return Err(FrameCheckError::TooManyRuns {
+            runs: manifest.runs.len(),
+            max_runs: limits.max_runs,
+        });
+    }
+    let mut frames = Frames::new(dir, limits.max_pixels);
+    let mut moves_checked = HashSet::new();
+    let mut repeats_checked = HashSet::new();
+    let mut first_reference = None;
+    for run in &manifest.runs {
+        if abandoned() {
+            return Err(FrameCheckError::Abandoned);
+        }
+        let (reference, ref_info) = frames.get(&run.id, &run.reference)?;
+        if run.capture.is_none() && first_reference.is_none() {
+            first_reference = Some(ref_info);
+        }
+        let (deformed, _) = frames.get(&run.id, &run.deformed)?;
+        let size = |i: &Image| (i.width(), i.height());
+        if size(&reference) != size(&deformed) {
+            return Err(FrameCheckError::SizeMismatch {
+                run: run.id.clone(),
+                name: run.deformed.clone(),
+            });
+        }
+        let scale = run.frame_px_per_mm(manifest.scale_px_per_mm);
+        let key = (
+            run.reference.clone(),
+            run.deformed.clone(),
+            run.stage.dx_mm.to_bits(),
+            run.stage.dy_mm.to_bits(),
+            scale.to_bits(),
+        );
+        if moves_checked.insert(key) {
+            check_stated_move(
+                &reference,
+                &deformed,
+                (run.stage.dx_mm, run.stage.dy_mm),
+                scale,
+            )
+            .map_err(|source| FrameCheckError::StatedMove {
+                run: run.id.clone(),
+                source,
+            })?;
+        }
+        for name in &run.repeat {
+            if repeats_checked.insert((run.reference.clone(), name.clone())) {
+                if abandoned() {
+                    return Err(FrameCheckError::Abandoned);
+                }
+                let (repeat, _) = frames.get(&run.id, name)?;
+                if size(&repeat) != size(&reference) {
+                    return Err(FrameCheckError::SizeMismatch {
+                        run: run.id.clone(),
+                        name: name.clone(),
+                    });
+                }
+            }
+        }
+    }
+    let reference = match first_reference {
+        Some(info) => info,
+        None => {
+            let run = manifest.runs.first().ok_or(FrameCheckError::TooManyRuns {
+                runs: 0,
+                max_runs: limits.max_runs,
+            })?;
+            frames.get(&run.id, &run.reference)?.1
+        }
+    };
+    Ok(CheckedFrames {
+        reference,
+        decoded: frames.decoded,
+    })
+}
+
+/// Frames decoded on demand: the last two are held (a run's reference and deformed frame), so
+/// runs that share frames decode them once.
+struct Frames<'a> {
+    dir: &'a Path,
+    max_pixels: usize,
+    held: Vec<(String, Rc<Image>, FrameInfo)>,
+    decoded: usize,
+}
+
+impl<'a> Frames<'a> {
+    const HELD: usize = 2;
+
+    fn new(dir: &'a Path, max_pixels: usize) -> Self {
+        Self {
+            dir,
+            max_pixels,
+            held: Vec::with_capacity(Self::HELD),
+            decoded: 0,
+        }
+    }
+
+    fn get(&mut self, run: &str, name: &str) -> Result<(Rc<Image>, FrameInfo), FrameCheckError> {
+        if let Some(pos) = self.held.iter().position(|(n, _, _)| n == name) {
+            // Most recently used last.
+            let entry = self.held.remove(pos);
+            let out = (entry.1.clone(), entry.2);
+            self.held.push(entry);
+            return Ok(out);
+        }
+        let path = self.dir.join(name);
+        if !path.is_file() {
+            return Err(FrameCheckError::Missing {
+                run: run.into(),
+                name: name.into(),
+            });
+        }
+        let unreadable = |source| FrameCheckError::Unreadable {
+            run: run.into(),
+            source,
+        };
+        // Errors name the file, not the folder it was staged in.
+        let bytes = std::fs::read(&path).map_err(|e| {
+            unreadable(ImageError::Open {
+                path: name.into(),
+                source: e,
+            })
+        })?;
+        if self.held.len() == Self::HELD {
+            // Let go of the least recently used frame before decoding the next one.
+            self.held.remove(0);
+        }
+        let (image, info) =
+            decode_tiff_within(&bytes, Path::new(name), self.max_pixels).map_err(unreadable)?;
+        drop(bytes);
+        self.decoded += 1;
+        if image.width() < MIN_FRAME_SIDE_PX || image.height() < MIN_FRAME_SIDE_PX {
+            return Err(FrameCheckError::TooSmall {
+                name: name.into(),
+                width: image.width(),
+                height: image.height(),
+            });
+        }
+        let image = Rc::new(image);
+        self.held.push((name.into(), image.clone(), info));
+        Ok((image, info))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::tiff_u16_bytes;
+
+    /// A hashed texture (no renderer of ours), shifted by `dx` px.
+    fn texture(w: usize, h: usize, dx: i64) -> Vec<u8> {
+        let data: Vec<u16> = (0..w * h)
+            .map(|k| {
+                let (c, r) = ((k % w) as i64 - dx, (k / w) as u64);
+                let mut s = (c as u64).wrapping_mul(73_856_093) ^ r.wrapping_mul(19_349_663);
+                s ^= s >> 13;
+                (s.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 52) as u16
+            })
+            .collect();
+        tiff_u16_bytes(w, h, &data).unwrap()
+    }
+
+    fn dataset(runs: usize, dx_mm: f64) -> (tempfile::TempDir, Manifest) {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("ref.tif"), texture(96, 80, 0)).unwrap();
+        std::fs::write(dir.path().join("def.tif"), texture(96, 80, 13)).unwrap();
+        let runs: Vec<serde_json::Value> = (0..runs)
+            .map(|k| {
+                serde_json::json!({"id": format!("r{k}"), "reference": "ref.tif",
+                    "deformed": "def.tif", "stage": {"dx_mm": dx_mm, "dy_mm": 0.0}})
+            })
+            .collect();
+        let m = serde_json::json!({"format": "ffdic-dataset/1", "name": "t",
+            "scale_px_per_mm": 13.0, "runs": runs});
+        std::fs::write(dir.path().join("dataset.json"), m.to_string()).unwrap();
+        let manifest = Manifest::read(dir.path()).unwrap();
+        (dir, manifest)
+    }
+
+    const LIMITS: FrameLimits = FrameLimits {
+        max_pixels: 1 << 20,
+        max_runs: 1000,
+    };
+
+    #[test]
+    fn many_runs_over_one_pair_decode_two_frames() {
+        let (dir, m) = dataset(500, 1.0);
+        let checked = check_frames(dir.path(), &m, LIMITS, &|| false).unwrap();
+        assert_eq!(checked.decoded, 2);
+        assert_eq!(
+            (checked.reference.width, checked.reference.height),
+            (96, 80)
+        );
+        assert_eq!(checked.reference.bit_depth, 16);
+    }
+
+    #[test]
+    fn the_run_cap_and_the_pixel_cap_refuse_before_decoding() {
+        let (dir, m) = dataset(3, 1.0);
+        let tight = FrameLimits {
+            max_runs: 2,
+            ..LIMITS
+        };
+        let e = check_frames(dir.path(), &m, tight, &|| false).unwrap_err();
+        assert_eq!(e.field(), "runs");
+        let small = FrameLimits {
+            max_pixels: 96 * 80 - 1,
+            ..LIMITS
+        };
+        let e = check_frames(dir.path(), &m, small, &|| false).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                FrameCheckError::Unreadable {
+                    source: ImageError::TooLarge { .. },
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        let text = e.to_string();
+        assert!(
+            text.contains("'ref.tif'") || text.contains("ref.tif"),
+            "{text}"
+        );
+        assert!(
+            !text.contains(&dir.path().display().to_string()),
+            "no server path: {text}"
+        );
+    }
+
+    #[test]
+    fn a_contradicted_move_names_its_run_and_an_abandoned_check_stops() {
+        let (dir, m) = dataset(2, 0.001);
+        let e = check_frames(dir.path(), &m, LIMITS, &|| false).unwrap_err();
+        assert_eq!(e.field(), "runs[r0].stage");
+        let (dir, m) = dataset(2, 1.0);
+        let e = check_frames(dir.path(), &m, LIMITS, &|| true).unwrap_err();
+        assert!(matches!(e, FrameCheckError::Abandoned));
+    }
+}

@@ -1,0 +1,552 @@
+//! Issue 36: the daemon bounded. Each test is a reproducer of what a valid-looking request once
+//! did — an upload of 0.5 MB that allocated gigabytes, clients that never read and held every
+//! connection slot, an upload trickling a byte at a time, a check that outlived its client —
+//! and asserts the bound that now holds. The bomb frames are generated here, not committed.
+
+#[path = "common/daemon.rs"]
+mod daemon;
+
+use daemon::{
+    client, get_json, small_config, small_request, wait_terminal, ServeProcess, TestServer,
+};
+use serde_json::{json, Value};
+use std::net::SocketAddr;
+use std::time::{Duration, Instant};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+
+/// A deflate-compressed 16-bit grey TIFF of `side`² zeros (`side` a multiple of 256), written
+/// by hand: every strip of 256 rows is the same zlib stream, compressed once, so the test never
+/// holds the decoded frame. 16384² is 512 MB decoded and about 0.5 MB on the wire.
+fn deflate_bomb(side: u32) -> Vec<u8> {
+    use std::io::Write;
+    const ROWS: u32 = 256;
+    let strips = side / ROWS;
+    let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::best());
+    z.write_all(&vec![0u8; (side * ROWS * 2) as usize]).unwrap();
+    let strip = z.finish().unwrap();
+    // Little-endian header, then the strips, the two offset tables and the IFD.
+    let mut out = b"II*\0".to_vec();
+    out.extend_from_slice(&0u32.to_le_bytes()); // the IFD's offset, set below
+    let first = out.len() as u32;
+    for _ in 0..strips {
+        out.extend_from_slice(&strip);
+    }
+    let offsets_at = out.len() as u32;
+    for k in 0..strips {
+        out.extend_from_slice(&(first + k * strip.len() as u32).to_le_bytes());
+    }
+    let counts_at = out.len() as u32;
+    for _ in 0..strips {
+        out.extend_from_slice(&(strip.len() as u32).to_le_bytes());
+    }
+    let ifd_at = out.len() as u32;
+    out[4..8].copy_from_slice(&ifd_at.to_le_bytes());
+    // (tag, type: 3 SHORT / 4 LONG, count, value or offset), in ascending tag order.
+    let entries: [(u16, u16, u32, u32); 9] = [
+        (256, 4, 1, side),            // ImageWidth
+        (257, 4, 1, side),            // ImageLength
+        (258, 3, 1, 16),              // BitsPerSample
+        (259, 3, 1, 8),               // Compression: Deflate
+        (262, 3, 1, 1),               // PhotometricInterpretation: BlackIsZero
+        (273, 4, strips, offsets_at), // StripOffsets
+        (277, 3, 1, 1),               // SamplesPerPixel
+        (278, 4, 1, ROWS),            // RowsPerStrip
+        (279, 4, strips, counts_at),  // StripByteCounts
+    ];
+    out.extend_from_slice(&(entries.len() as u16).to_le_bytes());
+    for (tag, kind, count, value) in entries {
+        out.extend_from_slice(&tag.to_le_bytes());
+        out.extend_from_slice(&kind.to_le_bytes());
+        out.extend_from_slice(&count.to_le_bytes());
+        out.extend_from_slice(&value.to_le_bytes());
+    }
+    out.extend_from_slice(&0u32.to_le_bytes());
+    out
+}
+
+#[test]
+fn the_hand_written_bomb_is_a_valid_tiff() {
+    let bytes = deflate_bomb(512);
+    let (image, info) =
+        ffdic::image::decode_tiff(&bytes, std::path::Path::new("bomb.tif")).unwrap();
+    assert_eq!((info.width, info.height, info.bit_depth), (512, 512, 16));
+    assert!(image.data().iter().all(|&v| v == 0.0));
+}
+
+/// A hashed 16-bit texture (no renderer of ours) shifted by `dx` px, uncompressed.
+fn texture_tiff(w: usize, h: usize, dx: i64) -> Vec<u8> {
+    let data: Vec<u16> = (0..w * h)
+        .map(|k| {
+            let (c, r) = ((k % w) as i64 - dx, (k / w) as u64);
+            let mut s = (c as u64).wrapping_mul(73_856_093) ^ r.wrapping_mul(19_349_663);
+            s ^= s >> 13;
+            (s.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 52) as u16
+        })
+        .collect();
+    ffdic::image::tiff_u16_bytes(w, h, &data).unwrap()
+}
+
+fn manifest(runs: &[(&str, &str, &str, f64)], scale_px_per_mm: f64) -> Vec<u8> {
+    let runs: Vec<Value> = runs
+        .iter()
+        .map(|(id, reference, deformed, dx_mm)| {
+            json!({"id": id, "reference": reference, "deformed": deformed,
+                   "stage": {"dx_mm": dx_mm, "dy_mm": 0.0}})
+        })
+        .collect();
+    json!({"format": "ffdic-dataset/1", "name": "bounded", "scale_px_per_mm": scale_px_per_mm,
+           "runs": runs})
+    .to_string()
+    .into_bytes()
+}
+
+fn form(parts: Vec<(String, Vec<u8>)>) -> reqwest::multipart::Form {
+    parts
+        .into_iter()
+        .fold(reqwest::multipart::Form::new(), |f, (name, bytes)| {
+            f.part(
+                name.clone(),
+                reqwest::multipart::Part::bytes(bytes).file_name(name),
+            )
+        })
+}
+
+/// The upload bomb of issue 36: two 16384² frames of 0.5 MB each, a stated move of 3,000 px.
+fn bomb_form() -> reqwest::multipart::Form {
+    let bomb = deflate_bomb(16_384);
+    assert!(bomb.len() < 2 << 20, "{} bytes", bomb.len());
+    form(vec![
+        (
+            "dataset.json".into(),
+            manifest(&[("r1", "ref.tif", "def.tif", 3000.0 / 13.0)], 13.0),
+        ),
+        ("ref.tif".into(), bomb.clone()),
+        ("def.tif".into(), bomb),
+    ])
+}
+
+async fn assert_health_within(base_api: &str, limit: Duration) {
+    let c = reqwest::Client::builder().timeout(limit).build().unwrap();
+    let t0 = Instant::now();
+    let r = c.get(format!("{base_api}/health")).send().await;
+    let took = t0.elapsed();
+    let status = r.map(|r| r.status().as_u16());
+    assert_eq!(status.ok(), Some(200), "/health after {took:?}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_upload_bomb_is_refused_from_its_header_and_a_large_stated_move_costs_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let server = TestServer::start(small_config(tmp.path())).await;
+    let r = client()
+        .post(server.url("/datasets"))
+        .multipart(bomb_form())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 422);
+    let p: Value = r.json().await.unwrap();
+    let detail = p["detail"].as_str().unwrap();
+    assert!(
+        detail.contains("ref.tif") && detail.contains("16384x16384"),
+        "{p}"
+    );
+    assert!(
+        !detail.contains(&tmp.path().display().to_string()),
+        "no server path: {p}"
+    );
+    assert_eq!(p["field"], "file");
+    // Nothing left behind.
+    let staged: Vec<_> = std::fs::read_dir(tmp.path().join("datasets"))
+        .unwrap()
+        .flatten()
+        .collect();
+    assert!(staged.is_empty(), "{staged:?}");
+    assert_health_within(&server.url(""), Duration::from_secs(1)).await;
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_manifest_past_the_run_cap_is_refused_naming_runs_and_many_runs_over_one_pair_pass() {
+    let tmp = tempfile::tempdir().unwrap();
+    let server = TestServer::start(small_config(tmp.path())).await;
+    let (reference, deformed) = (texture_tiff(96, 80, 0), texture_tiff(96, 80, 13));
+    let upload = |runs: usize| {
+        let ids: Vec<String> = (0..runs).map(|k| format!("r{k}")).collect();
+        let rows: Vec<(&str, &str, &str, f64)> = ids
+            .iter()
+            .map(|id| (id.as_str(), "ref.tif", "def.tif", 1.0))
+            .collect();
+        form(vec![
+            ("dataset.json".into(), manifest(&rows, 13.0)),
+            ("ref.tif".into(), reference.clone()),
+            ("def.tif".into(), deformed.clone()),
+        ])
+    };
+    // Issue 36's 2,000 runs over one pair.
+    let r = client()
+        .post(server.url("/datasets"))
+        .multipart(upload(2_000))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 422);
+    let p: Value = r.json().await.unwrap();
+    assert_eq!(p["field"], "runs", "{p}");
+    assert!(p["detail"].as_str().unwrap().contains("1000"), "{p}");
+    // Within the cap, runs that share a pair are checked once: it lands.
+    let r = client()
+        .post(server.url("/datasets"))
+        .multipart(upload(1_000))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 201);
+    let record: Value = r.json().await.unwrap();
+    assert_eq!(record["runs"], 1000);
+    assert_eq!(record["bit_depth"], 16, "recorded at upload: {record}");
+    let id = record["id"].as_str().unwrap();
+    let details: Value = get_json(&server.url(&format!("/datasets/{id}/details"))).await;
+    assert_eq!(details["bit_depth"], 16);
+    server.stop().await;
+}
+
+/// Runs a one-move experiment on the daemon at `base`; the path of one of its frames.
+async fn experiment_frame(base: &str) -> String {
+    let r: Value = client()
+        .post(format!("{base}/api/v1/experiments"))
+        .json(&small_request(1))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let id = r["id"].as_str().unwrap().to_string();
+    let run = wait_terminal(&format!("{base}/api/v1/experiments/{id}")).await;
+    assert_eq!(run["status"], "succeeded", "{run}");
+    let frame = run["result_files"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|f| f.as_str())
+        .find(|f| f.starts_with("frames/") && f.ends_with(".tif"))
+        .unwrap()
+        .to_string();
+    format!("/api/v1/jobs/{id}/files/{frame}")
+}
+
+/// A socket from `source` (another loopback address: the per-client limit counts addresses)
+/// with a tiny receive buffer, so the server's writes stall as soon as the client stops reading.
+async fn slow_reader(
+    source: &str,
+    server: SocketAddr,
+    path: &str,
+) -> Option<tokio::net::TcpStream> {
+    let socket = tokio::net::TcpSocket::new_v4().unwrap();
+    socket.set_recv_buffer_size(4096).unwrap();
+    socket.bind(format!("{source}:0").parse().unwrap()).unwrap();
+    let mut stream = socket.connect(server).await.ok()?;
+    let head = format!("GET {path} HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n");
+    stream.write_all(head.as_bytes()).await.ok()?;
+    Some(stream)
+}
+
+/// Reads what is left of a stalled response; the number of bytes the client got in all.
+async fn drain(mut stream: tokio::net::TcpStream) -> usize {
+    let mut total = 0;
+    let mut buf = vec![0u8; 64 * 1024];
+    while let Ok(Ok(n)) = tokio::time::timeout(Duration::from_secs(5), stream.read(&mut buf)).await
+    {
+        if n == 0 {
+            break;
+        }
+        total += n;
+    }
+    total
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn clients_that_never_read_hold_neither_every_slot_nor_their_own_for_long() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut config = small_config(tmp.path());
+    config.http.max_connections = 80;
+    config.http.max_connections_per_client = 32;
+    config.http.write_stall_timeout_ms = 2_000;
+    // 8 MB frames, as a lab camera's (the issue's were 11 MB): more than the socket buffers on
+    // both sides hold, so a client that does not read stalls the server's writes.
+    config.camera = ffdic::service::CameraConfig::Mock {
+        width: 2048,
+        height: 2048,
+        exposure_level: 0.5,
+        bench_model: "paper-bench".into(),
+        hardware_binning: ffdic::service::MockBinning::Digital,
+        hardware_decimation_max: 2,
+    };
+    let server = TestServer::start(config).await;
+    let path = experiment_frame(&server.base).await;
+    let frame_bytes = client()
+        .get(format!("{}{path}", server.base))
+        .send()
+        .await
+        .unwrap()
+        .bytes()
+        .await
+        .unwrap()
+        .len();
+    let addr: SocketAddr = server.base.trim_start_matches("http://").parse().unwrap();
+
+    // Issue 36: 80 such clients held all 80 slots; every /health probe was refused.
+    let mut held = Vec::new();
+    for _ in 0..100 {
+        if let Some(s) = slow_reader("127.0.0.2", addr, &path).await {
+            held.push(s);
+        }
+    }
+    let t0 = Instant::now();
+    while t0.elapsed() < Duration::from_millis(1_500) {
+        assert_health_within(&server.url(""), Duration::from_secs(1)).await;
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    // Past the write stall timeout every stalled response has been cut short.
+    tokio::time::sleep(Duration::from_millis(2_500)).await;
+    let got: Vec<usize> = futures_lite(held.into_iter().map(drain)).await;
+    let cut = got.iter().filter(|&&n| n < frame_bytes).count();
+    assert_eq!(
+        cut,
+        got.len(),
+        "frame {frame_bytes} bytes; received {got:?}"
+    );
+    assert_health_within(&server.url(""), Duration::from_secs(1)).await;
+    server.stop().await;
+}
+
+/// Awaits the futures one after another (they are independent reads of closed sockets).
+async fn futures_lite<F: std::future::Future<Output = usize>>(
+    futures: impl Iterator<Item = F>,
+) -> Vec<usize> {
+    let mut out = Vec::new();
+    for f in futures {
+        out.push(f.await);
+    }
+    out
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_upload_that_trickles_is_ended_by_its_pace() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut config = small_config(tmp.path());
+    config.uploads.grace_ms = 1_000;
+    config.uploads.min_bytes_per_s = 1_000;
+    let server = TestServer::start(config).await;
+    let addr: SocketAddr = server.base.trim_start_matches("http://").parse().unwrap();
+    let mut stream = tokio::net::TcpStream::connect(addr).await.unwrap();
+    let head = "POST /api/v1/datasets HTTP/1.1\r\nHost: 127.0.0.1\r\n\
+                Content-Type: multipart/form-data; boundary=XyZ\r\nContent-Length: 100000\r\n\r\n\
+                --XyZ\r\nContent-Disposition: form-data; name=\"ref.tif\"; filename=\"ref.tif\"\r\n\r\n";
+    stream.write_all(head.as_bytes()).await.unwrap();
+    // A byte every 300 ms: each piece well within the 30 s body timeout, the pace far below.
+    let t0 = Instant::now();
+    let mut answer = Vec::new();
+    let mut buf = [0u8; 4096];
+    loop {
+        assert!(
+            t0.elapsed() < Duration::from_secs(10),
+            "still open after 10 s"
+        );
+        if stream.write_all(b"x").await.is_err() {
+            break;
+        }
+        match tokio::time::timeout(Duration::from_millis(300), stream.read(&mut buf)).await {
+            Ok(Ok(0)) | Ok(Err(_)) => break,
+            Ok(Ok(n)) => answer.extend_from_slice(&buf[..n]),
+            Err(_) => {}
+        }
+        if answer.windows(4).any(|w| w == b"\r\n\r\n") && answer.len() > 200 {
+            break;
+        }
+    }
+    let text = String::from_utf8_lossy(&answer);
+    assert!(text.starts_with("HTTP/1.1 408"), "{text}");
+    assert!(text.contains("min_bytes_per_s"), "{text}");
+    assert_health_within(&server.url(""), Duration::from_secs(1)).await;
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_check_whose_client_left_stops_and_keeps_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let server = TestServer::start(small_config(tmp.path())).await;
+    // 150 runs over 300 distinct flat 4096² frames: about 30 KB each on the wire, 64 MB each
+    // decoded; the check decodes them one after another for tens of seconds.
+    let flat = deflate_bomb(4096);
+    let ids: Vec<(String, String, String)> = (0..150)
+        .map(|k| {
+            (
+                format!("r{k}"),
+                format!("ref{k}.tif"),
+                format!("def{k}.tif"),
+            )
+        })
+        .collect();
+    let rows: Vec<(&str, &str, &str, f64)> = ids
+        .iter()
+        .map(|(i, r, d)| (i.as_str(), r.as_str(), d.as_str(), 0.0))
+        .collect();
+    let mut parts = vec![("dataset.json".to_string(), manifest(&rows, 13.0))];
+    for (_, r, d) in &ids {
+        parts.push((r.clone(), flat.clone()));
+        parts.push((d.clone(), flat.clone()));
+    }
+    let impatient = reqwest::Client::builder()
+        .timeout(Duration::from_secs(3))
+        .build()
+        .unwrap();
+    let r = impatient
+        .post(server.url("/datasets"))
+        .multipart(form(parts))
+        .send()
+        .await;
+    assert!(
+        r.is_err(),
+        "the check should outlast the client's 3 s: {r:?}"
+    );
+    let datasets = tmp.path().join("datasets");
+    let left_at = Instant::now();
+    loop {
+        let staged = std::fs::read_dir(&datasets).unwrap().flatten().count();
+        if staged == 0 {
+            break;
+        }
+        assert!(
+            left_at.elapsed() < Duration::from_secs(5),
+            "the staging folder outlived its client by 5 s"
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let listed: Vec<Value> = client()
+        .get(server.url("/datasets"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert!(listed.is_empty(), "{listed:?}");
+    server.stop().await;
+}
+
+/// The daemon's address-space budget under `prlimit --as` (issue 36 asks for one, e.g. 1 GB).
+const BUDGET_BYTES: u64 = 1 << 30;
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn within_an_address_space_budget_bombs_large_uploads_and_slow_readers_leave_it_alive() {
+    if std::process::Command::new("prlimit")
+        .arg("--version")
+        .output()
+        .is_err()
+    {
+        panic!("prlimit (util-linux) is needed for the memory budget test");
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    let config = tmp.path().join("ffdic.toml");
+    std::fs::write(
+        &config,
+        daemon::small_config_toml(&data)
+            + "[http]\nwrite_stall_timeout_ms = 2000\nmax_connections_per_client = 64\n",
+    )
+    .unwrap();
+    let server = ServeProcess::spawn_under(
+        &["prlimit", &format!("--as={BUDGET_BYTES}"), "--"],
+        &["--config", &config.display().to_string()],
+    );
+    let api = server.url("");
+    let health = tokio::spawn({
+        let api = api.clone();
+        async move {
+            // /health within 1 s, every 200 ms, for as long as the load lasts.
+            let mut probes = 0;
+            loop {
+                assert_health_within(&api, Duration::from_secs(1)).await;
+                probes += 1;
+                tokio::time::sleep(Duration::from_millis(200)).await;
+                if probes >= 100 {
+                    return probes;
+                }
+            }
+        }
+    });
+    // The bomb.
+    let r = client()
+        .post(server.url("/datasets"))
+        .multipart(bomb_form())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 422);
+    // Three concurrent large uploads: 4096² textured frames, 32 MB each, 64 MB decoded.
+    let (a, b) = (texture_tiff(4096, 4096, 0), texture_tiff(4096, 4096, 26));
+    let uploads: Vec<_> = (0..3)
+        .map(|_| {
+            let f = form(vec![
+                (
+                    "dataset.json".into(),
+                    manifest(&[("r1", "ref.tif", "def.tif", 2.0)], 13.0),
+                ),
+                ("ref.tif".into(), a.clone()),
+                ("def.tif".into(), b.clone()),
+            ]);
+            client().post(server.url("/datasets")).multipart(f).send()
+        })
+        .collect();
+    for r in futures_join(uploads).await {
+        assert_eq!(r.unwrap().status(), 201);
+    }
+    // A frame to read slowly (datasets serve no files; an experiment's run does).
+    let path = experiment_frame(&server.base).await;
+    let addr: SocketAddr = server.base.trim_start_matches("http://").parse().unwrap();
+    let mut readers = Vec::new();
+    for k in 0..100 {
+        let source = format!("127.0.0.{}", 2 + k % 4);
+        if let Some(s) = slow_reader(&source, addr, &path).await {
+            readers.push(s);
+        }
+    }
+    assert!(health.await.unwrap() >= 100);
+    drop(readers);
+    assert_health_within(&api, Duration::from_secs(1)).await;
+    let status = std::fs::read_to_string(format!("/proc/{}/status", daemon_pid(&server))).unwrap();
+    for line in status
+        .lines()
+        .filter(|l| l.starts_with("VmHWM") || l.starts_with("VmPeak"))
+    {
+        println!("daemon under the budget: {line}");
+    }
+    let mut server = server;
+    assert!(
+        server.child.try_wait().unwrap().is_none(),
+        "the daemon died under the budget"
+    );
+    server.child.kill().unwrap();
+    server.child.wait().unwrap();
+}
+
+/// The daemon's pid: the wrapper (`prlimit … --`) execs it, so it is the child's.
+fn daemon_pid(server: &ServeProcess) -> u32 {
+    server.child.id()
+}
+
+async fn futures_join<F>(futures: Vec<F>) -> Vec<F::Output>
+where
+    F: std::future::Future + Send + 'static,
+    F::Output: Send + 'static,
+{
+    // Spawned, so they run at once (a request future does nothing until polled).
+    let handles: Vec<_> = futures.into_iter().map(tokio::spawn).collect();
+    let mut out = Vec::new();
+    for h in handles {
+        out.push(h.await.unwrap());
+    }
+    out
+}
