@@ -1,5 +1,5 @@
 //! Files written whole or not at all: a crash never leaves half a file under its final name. The
-//! lowest floor of the house (no crate imports): the TIFF writer, the dataset manifest, the store,
+//! lowest floor of the house (no crate imports but libc's syncfs): the TIFF writer, the dataset manifest, the store,
 //! sweeps and the CLI's outputs all write through it.
 
 use std::io::Write;
@@ -22,6 +22,37 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
         let _ = std::fs::remove_file(&tmp);
     }
     result
+}
+
+/// As [`write_atomically`] but not synced: whole under its final name, yet only as durable as
+/// the next sync of its file system. For batches that sync once after many files
+/// ([`sync_file_system`]): three thousand synced writes took 30 s.
+pub fn write_atomically_unsynced(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let name = path.file_name().ok_or_else(|| {
+        std::io::Error::new(std::io::ErrorKind::InvalidInput, "path has no file name")
+    })?;
+    let tmp = path.with_file_name(format!(".{}.tmp", name.to_string_lossy()));
+    let result = std::fs::write(&tmp, bytes).and_then(|()| std::fs::rename(&tmp, path));
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// Syncs the whole file system that holds `dir` (Linux `syncfs`; elsewhere `dir` itself).
+pub fn sync_file_system(dir: &Path) -> std::io::Result<()> {
+    let folder = std::fs::File::open(dir)?;
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::fd::AsRawFd;
+        // SAFETY: syncfs only reads the descriptor, which `folder` keeps open.
+        if unsafe { libc::syncfs(folder.as_raw_fd()) } != 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+        Ok(())
+    }
+    #[cfg(not(target_os = "linux"))]
+    folder.sync_all()
 }
 
 #[cfg(test)]

@@ -11,7 +11,7 @@
 //! under each scheme given.
 
 use crate::dataset::Run;
-use crate::dic::{DicError, DicResult, DicSettings, PreparedReference};
+use crate::dic::{DicError, DicResult, DicSettings, PreparedReference, Watch};
 use crate::image::{read_tiff, Image, ImageError};
 use crate::reduce::{reduce, AxisScheme, ReduceError, Scheme};
 use std::borrow::Cow;
@@ -46,6 +46,9 @@ pub enum PairError {
         scheme: String,
         source: ReduceError,
     },
+    /// The visitor said stop ([`PairVisitor::cancelled`]) while a pair was correlated.
+    #[error("cancelled")]
+    Cancelled,
     #[error("run {run}, scheme {scheme}: {source}")]
     Dic {
         run: String,
@@ -62,6 +65,13 @@ pub trait PairVisitor {
     /// A run's frames, before its schemes are correlated.
     fn frames(&mut self, _pair: &RunPair<'_>) -> Result<(), Self::Error> {
         Ok(())
+    }
+
+    /// Whether the caller has given the loop up. Asked from the correlation's threads before
+    /// every point, so a long correlation stops within a point's IC-GN
+    /// ([`PairError::Cancelled`]); the default never stops.
+    fn cancelled(&self) -> bool {
+        false
     }
 
     /// One scheme's result, in the order of the schemes (the hardware scheme's alone for a
@@ -87,7 +97,7 @@ struct PreparedFrame {
 
 /// Correlates every run of `runs` (frames in `dir`) under each of `schemes`, or under its own
 /// hardware scheme when the camera read it out in one; see the module doc.
-pub fn correlate_pairs<V: PairVisitor>(
+pub fn correlate_pairs<V: PairVisitor + Sync>(
     dir: &Path,
     runs: &[Run],
     schemes: &[Scheme],
@@ -102,7 +112,7 @@ pub fn correlate_pairs<V: PairVisitor>(
             .position(|f| f.file == run.reference && f.mode == mode);
         let frame = match position {
             Some(k) => kept.remove(k),
-            None => prepare(dir, run, schemes, dic)?,
+            None => prepare(dir, run, schemes, dic, &|| visitor.cancelled())?,
         };
         let (deformed, _) = read_tiff(&dir.join(&run.deformed)).map_err(PairError::from)?;
         let size = |i: &Image| (i.width(), i.height());
@@ -126,14 +136,21 @@ pub fn correlate_pairs<V: PairVisitor>(
         visitor.frames(&pair)?;
         for (scheme, prepared) in frame.schemes.iter().zip(&frame.prepared) {
             let moved = as_analysed(&deformed, run, scheme)?;
-            let result =
-                prepared
-                    .correlate(moved.as_ref(), None)
-                    .map_err(|source| PairError::Dic {
+            let watching: &V = visitor;
+            let watch = Watch {
+                progress: None,
+                cancelled: Some(&|| watching.cancelled()),
+            };
+            let result = prepared
+                .correlate_watched(moved.as_ref(), watch)
+                .map_err(|source| match source {
+                    DicError::Cancelled => PairError::Cancelled,
+                    source => PairError::Dic {
                         run: run.id.clone(),
                         scheme: scheme.name.clone(),
                         source,
-                    })?;
+                    },
+                })?;
             visitor.result(&pair, scheme, result)?;
         }
         // One reference per read-out mode: a mode's runs come one pattern after another, and an
@@ -151,6 +168,7 @@ fn prepare(
     run: &Run,
     schemes: &[Scheme],
     dic: &DicSettings,
+    cancelled: &dyn Fn() -> bool,
 ) -> Result<PreparedFrame, PairError> {
     let (image, info) = read_tiff(&dir.join(&run.reference))?;
     let schemes = match &run.capture {
@@ -159,6 +177,10 @@ fn prepare(
     };
     let mut prepared = Vec::with_capacity(schemes.len());
     for scheme in &schemes {
+        // A dense grid's preparation takes seconds a scheme.
+        if cancelled() {
+            return Err(PairError::Cancelled);
+        }
         let p = PreparedReference::new(as_analysed(&image, run, scheme)?.as_ref(), dic);
         prepared.push(p.map_err(|source| PairError::Dic {
             run: run.id.clone(),

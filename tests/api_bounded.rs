@@ -550,3 +550,166 @@ where
     }
     out
 }
+
+/// Uploads one pair of `w`x`h` textured frames (moved 13 px = 1 mm at 13 px/mm) as a dataset of
+/// `runs` runs over it; its id.
+async fn upload_pair(api: &str, (w, h): (usize, usize), runs: usize) -> String {
+    let ids: Vec<String> = (0..runs).map(|k| format!("r{k}")).collect();
+    let rows: Vec<(&str, &str, &str, f64)> = ids
+        .iter()
+        .map(|id| (id.as_str(), "ref.tif", "def.tif", 1.0))
+        .collect();
+    let f = form(vec![
+        ("dataset.json".into(), manifest(&rows, 13.0)),
+        ("ref.tif".into(), texture_tiff(w, h, 0)),
+        ("def.tif".into(), texture_tiff(w, h, 13)),
+    ]);
+    let r = client()
+        .post(format!("{api}/datasets"))
+        .multipart(f)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 201);
+    let record: Value = r.json().await.unwrap();
+    record["id"].as_str().unwrap().to_string()
+}
+
+/// Issue 36's dense analysis: subset 101 px at every pixel of the 1280x1080 reductions, three
+/// schemes (1.16 M points a scheme, 3.5e10 subset pixels an iteration).
+fn dense_analysis() -> Value {
+    json!({"schemes": ["ff100", "ff50", "ff25"],
+           "dic": {"subset_px": 101, "step_px": 1,
+                   "roi": {"x": 0, "y": 0, "width": 1280, "height": 1080}}})
+}
+
+async fn submit(api: &str, dataset: &str, body: &Value) -> reqwest::Response {
+    client()
+        .post(format!("{api}/datasets/{dataset}/analyses"))
+        .json(body)
+        .send()
+        .await
+        .unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_dense_analysis_is_cancelled_within_a_second_and_a_full_lane_answers_429() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut config = small_config(tmp.path());
+    config.jobs.max_queued_per_lane = 2;
+    let server = TestServer::start(config).await;
+    let api = server.url("");
+    // Work bounded at submission: three runs of it pass jobs.max_analysis_subset_pixels.
+    let three = upload_pair(&api, (2560, 2160), 3).await;
+    let r = submit(&api, &three, &dense_analysis()).await;
+    assert_eq!(r.status(), 422);
+    let p: Value = r.json().await.unwrap();
+    assert_eq!(p["field"], "dic.step_px", "{p}");
+
+    let one = upload_pair(&api, (2560, 2160), 1).await;
+    let r = submit(&api, &one, &dense_analysis()).await;
+    assert_eq!(r.status(), 202);
+    let dense: Value = r.json().await.unwrap();
+    let dense_url = server.url(&format!("/jobs/{}", dense["id"].as_str().unwrap()));
+    daemon::wait_until(&dense_url, |r| r["status"] == "running").await;
+    // Two wait behind it; a third finds the lane full.
+    let light = json!({"schemes": ["ff100"], "dic": {"subset_px": 21, "step_px": 40}});
+    let mut queued = Vec::new();
+    for _ in 0..2 {
+        let r = submit(&api, &one, &light).await;
+        assert_eq!(r.status(), 202);
+        let v: Value = r.json().await.unwrap();
+        queued.push(server.url(&format!("/jobs/{}", v["id"].as_str().unwrap())));
+    }
+    let r = submit(&api, &one, &light).await;
+    assert_eq!(r.status(), 429);
+    assert!(r.headers().contains_key("retry-after"), "{:?}", r.headers());
+    // Deep in the correlation of its first scheme (its preparation takes about a second).
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    let t0 = Instant::now();
+    let r = client()
+        .post(format!("{dense_url}/cancel"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    let ended = loop {
+        let r: Value = get_json(&dense_url).await;
+        if r["status"] != "running" {
+            break r;
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    };
+    let took = t0.elapsed();
+    println!("dense analysis cancelled in {} ms", took.as_millis());
+    assert_eq!(ended["status"], "cancelled", "{ended}");
+    // Issue 36: it ignored cancel for more than 166 s.
+    assert!(took < Duration::from_secs(1), "cancelled after {took:?}");
+    for url in queued {
+        assert_eq!(wait_terminal(&url).await["status"], "succeeded");
+    }
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sigterm_with_three_thousand_queued_jobs_exits_within_ten_seconds_and_cancels_them_all() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    let config = tmp.path().join("ffdic.toml");
+    std::fs::write(
+        &config,
+        daemon::small_config_toml(&data) + "[jobs]\nmax_queued_per_lane = 5000\n",
+    )
+    .unwrap();
+    let mut server = ServeProcess::spawn(&["--config", &config.display().to_string()]);
+    let api = server.url("");
+    let big = upload_pair(&api, (2560, 2160), 1).await;
+    let small = upload_pair(&api, (96, 80), 1).await;
+    let r = submit(&api, &big, &dense_analysis()).await;
+    assert_eq!(r.status(), 202);
+    let dense: Value = r.json().await.unwrap();
+    let dense_id = dense["id"].as_str().unwrap().to_string();
+    daemon::wait_until(&server.url(&format!("/jobs/{dense_id}")), |r| {
+        r["status"] == "running"
+    })
+    .await;
+    // 3,000 analyses queued behind it, eight submissions in flight at a time.
+    let light = json!({"schemes": ["ff100"], "dic": {"subset_px": 21, "step_px": 20}});
+    let mut pending = tokio::task::JoinSet::new();
+    for _ in 0..3_000 {
+        if pending.len() == 8 {
+            let status: u16 = pending.join_next().await.unwrap().unwrap();
+            assert_eq!(status, 202);
+        }
+        let (api, small, light) = (api.clone(), small.clone(), light.clone());
+        pending.spawn(async move { submit(&api, &small, &light).await.status().as_u16() });
+    }
+    while let Some(status) = pending.join_next().await {
+        assert_eq!(status.unwrap(), 202);
+    }
+    let (exit, took) = server.terminate_within(Duration::from_secs(10));
+    println!("exit {took:?} after SIGTERM");
+    assert!(exit.success(), "{exit:?}");
+    // Every run's own record: none started after the signal, none succeeded, all cancelled.
+    let mut statuses: std::collections::BTreeMap<String, usize> = Default::default();
+    let mut started = Vec::new();
+    for entry in std::fs::read_dir(data.join("runs")).unwrap().flatten() {
+        let Ok(text) = std::fs::read(entry.path().join("run.json")) else {
+            continue;
+        };
+        let r: Value = serde_json::from_slice(&text).unwrap();
+        *statuses
+            .entry(r["status"].as_str().unwrap().to_string())
+            .or_default() += 1;
+        if r["started_at"].is_string() {
+            started.push(r["id"].as_str().unwrap().to_string());
+        }
+    }
+    assert_eq!(statuses.get("cancelled"), Some(&3_001), "{statuses:?}");
+    assert_eq!(statuses.len(), 1, "{statuses:?}");
+    assert_eq!(
+        started,
+        vec![dense_id],
+        "only the dense analysis ever started"
+    );
+}

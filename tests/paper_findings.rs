@@ -25,7 +25,15 @@ fn study(bench: &str) -> Vec<StudyRow> {
         .iter()
         .map(|s| Scheme::preset(s).unwrap())
         .collect();
-    analyze_dataset(dir.path(), &manifest, &schemes, &spec.dic, &|_, _| true).unwrap()
+    analyze_dataset(
+        dir.path(),
+        &manifest,
+        &schemes,
+        &spec.dic,
+        &|_, _| true,
+        &|| false,
+    )
+    .unwrap()
 }
 
 fn row<'a>(rows: &'a [StudyRow], pattern: &str, scheme: &str) -> &'a StudyRow {

@@ -28,6 +28,8 @@ pub struct ApiError {
     pub kind: &'static str,
     pub detail: String,
     pub field: Option<String>,
+    /// Sent as `Retry-After` (429: a full queue).
+    pub retry_after_s: Option<u64>,
 }
 
 impl ApiError {
@@ -37,6 +39,15 @@ impl ApiError {
             kind,
             detail: detail.into(),
             field: None,
+            retry_after_s: None,
+        }
+    }
+
+    /// 429: come back in `retry_after_s` seconds.
+    pub fn too_many(detail: impl Into<String>, retry_after_s: u64) -> Self {
+        Self {
+            retry_after_s: Some(retry_after_s),
+            ..Self::new(StatusCode::TOO_MANY_REQUESTS, "queue-full", detail)
         }
     }
 
@@ -99,12 +110,18 @@ impl ApiError {
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let body = serde_json::to_vec(&self.problem()).expect("a problem serialises");
-        (
+        let mut response = (
             self.status,
             [(header::CONTENT_TYPE, "application/problem+json")],
             body,
         )
-            .into_response()
+            .into_response();
+        if let Some(s) = self.retry_after_s {
+            response
+                .headers_mut()
+                .insert(header::RETRY_AFTER, header::HeaderValue::from(s));
+        }
+        response
     }
 }
 

@@ -168,6 +168,7 @@ impl From<crate::pairs::PairError> for DiagnoseError {
     fn from(e: crate::pairs::PairError) -> Self {
         use crate::pairs::PairError;
         match e {
+            PairError::Cancelled => DiagnoseError::Cancelled,
             PairError::Image(e) => DiagnoseError::Image(e),
             PairError::SizeMismatch {
                 run,

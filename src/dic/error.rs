@@ -29,6 +29,9 @@ pub enum DicError {
         width: usize,
         height: usize,
     },
+    /// The caller's [`super::Watch::cancelled`] said stop; nothing of the field is returned.
+    #[error("cancelled")]
+    Cancelled,
     #[error("the mask is {mask_w}x{mask_h} but the images are {width}x{height}")]
     MaskSize {
         mask_w: usize,

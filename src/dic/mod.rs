@@ -33,7 +33,7 @@ pub use bootstrap::{
     BlockBootstrap, BLOCK_PER_CORRELATION_LENGTH, BOOTSTRAP_REPLICATES, MIN_BLOCKS,
 };
 pub use bspline::{BSplineImage, Interpolation};
-pub use engine::{analyze, PreparedReference, Progress};
+pub use engine::{analyze, PreparedReference, Progress, Watch};
 pub use error::DicError;
 pub use fft_guess::global_offset;
 pub use grid::PoiGrid;

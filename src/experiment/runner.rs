@@ -553,6 +553,7 @@ fn analyse(
             );
             !sink.cancelled()
         },
+        &|| sink.cancelled(),
         &draw_maps,
     )
     .map_err(|e| match e {

@@ -16,21 +16,41 @@ pub enum StudyError {
     Dataset(#[from] DatasetError),
     /// A frame unreadable, a pair of two sizes, a reduction or correlation that failed.
     #[error(transparent)]
-    Pair(#[from] PairError),
+    Pair(PairError),
     #[error("cancelled")]
     Cancelled,
 }
 
+impl From<PairError> for StudyError {
+    fn from(e: PairError) -> Self {
+        match e {
+            PairError::Cancelled => StudyError::Cancelled,
+            other => StudyError::Pair(other),
+        }
+    }
+}
+
 /// Runs the study over every run of a dataset in `dir`. `progress(done, total)` after each pair;
-/// it returns whether to go on (false stops with [`StudyError::Cancelled`]).
+/// it returns whether to go on (false stops with [`StudyError::Cancelled`]). `cancelled` is asked
+/// while a pair is correlated (from its threads, before every point): `true` stops it within a
+/// point, with [`StudyError::Cancelled`].
 pub fn analyze_dataset(
     dir: &Path,
     manifest: &Manifest,
     schemes: &[Scheme],
     dic: &DicSettings,
     progress: &(dyn Fn(usize, usize) -> bool + Sync),
+    cancelled: &(dyn Fn() -> bool + Sync),
 ) -> Result<Vec<StudyRow>, StudyError> {
-    analyze_dataset_with(dir, manifest, schemes, dic, progress, &|_, _, _| {})
+    analyze_dataset_with(
+        dir,
+        manifest,
+        schemes,
+        dic,
+        progress,
+        cancelled,
+        &|_, _, _| {},
+    )
 }
 
 /// What [`analyze_dataset_with`] shows each full DIC result to (the run, the scheme, the fields),
@@ -49,6 +69,7 @@ pub fn analyze_dataset_with(
     schemes: &[Scheme],
     dic: &DicSettings,
     progress: &(dyn Fn(usize, usize) -> bool + Sync),
+    cancelled: &(dyn Fn() -> bool + Sync),
     on_result: &ResultHook<'_>,
 ) -> Result<Vec<StudyRow>, StudyError> {
     let total: usize = manifest
@@ -75,6 +96,7 @@ pub fn analyze_dataset_with(
         rows: Vec::with_capacity(total),
         total,
         progress,
+        cancelled,
         on_result,
         pending,
         twins: Vec::new(),
@@ -89,6 +111,7 @@ struct Study<'a> {
     rows: Vec<StudyRow>,
     total: usize,
     progress: &'a (dyn Fn(usize, usize) -> bool + Sync),
+    cancelled: &'a (dyn Fn() -> bool + Sync),
     on_result: &'a ResultHook<'a>,
     /// Twin ids with the number of hardware runs still to use them.
     pending: Vec<(String, usize)>,
@@ -128,6 +151,10 @@ impl Study<'_> {
 
 impl PairVisitor for Study<'_> {
     type Error = StudyError;
+
+    fn cancelled(&self) -> bool {
+        (self.cancelled)()
+    }
 
     fn result(
         &mut self,

@@ -48,6 +48,8 @@ pub struct DaemonConfig {
     #[serde(default)]
     pub uploads: UploadLimits,
     #[serde(default)]
+    pub jobs: JobLimits,
+    #[serde(default)]
     pub sweeps: SweepLimits,
     pub bench: BenchConfig,
     pub camera: CameraConfig,
@@ -138,6 +140,28 @@ impl UploadLimits {
         crate::dataset::FrameLimits {
             max_pixels: self.max_frame_pixels,
             max_runs: self.max_runs,
+        }
+    }
+}
+
+/// How much work the job lanes take: a bound on one analysis, checked when it is submitted (a
+/// 422 naming the field to change), and on the jobs waiting per lane (429 with `Retry-After`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct JobLimits {
+    /// Most subset pixels one IC-GN iteration of an analysis visits, summed over its runs and
+    /// schemes (points × subset²); an analysis usually takes 3–6 iterations a point.
+    pub max_analysis_subset_pixels: u64,
+    /// Most jobs waiting (queued, not yet running) per lane.
+    pub max_queued_per_lane: usize,
+}
+
+impl Default for JobLimits {
+    fn default() -> Self {
+        Self {
+            // ≈ 20 min of two cores; the paper's study is ≈ 10⁸.
+            max_analysis_subset_pixels: 100_000_000_000,
+            max_queued_per_lane: 256,
         }
     }
 }

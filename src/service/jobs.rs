@@ -10,8 +10,8 @@ use crate::store::{DatasetId, Event, RunId, RunKind, RunRecord, RunStatus, RunSt
 use serde_json::Value;
 use std::collections::HashMap;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{mpsc, Arc, Mutex};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{mpsc, Arc, Mutex, OnceLock};
 use std::time::Duration;
 use tokio::sync::broadcast;
 use tokio_util::sync::CancellationToken;
@@ -74,9 +74,20 @@ struct Queued {
     work: Work,
 }
 
+/// A run's live event channel, made by its first subscriber: 3,000 queued jobs once took a
+/// 256-slot channel each up front (+113 MB) that nobody listened to.
+type LiveEvents = Arc<OnceLock<broadcast::Sender<Event>>>;
+
+/// Sends `event` to a run's subscribers, if it has any.
+fn send_live(events: &LiveEvents, event: Event) {
+    if let Some(tx) = events.get() {
+        let _ = tx.send(event);
+    }
+}
+
 struct Live {
     cancel: CancellationToken,
-    events: broadcast::Sender<Event>,
+    events: LiveEvents,
     /// Set when the work has returned: a run still not terminal then is one whose end could not
     /// be written yet (a full disk), which cancel ends itself.
     work_done: Arc<AtomicBool>,
@@ -86,7 +97,7 @@ struct Live {
 pub struct JobContext {
     pub run_id: RunId,
     store: Arc<RunStore>,
-    events: broadcast::Sender<Event>,
+    events: LiveEvents,
     cancel: CancellationToken,
 }
 
@@ -107,9 +118,7 @@ impl RunSink for JobContext {
             .store
             .append_event(&self.run_id, kind, progress, message, data)
         {
-            Ok(e) => {
-                let _ = self.events.send(e);
-            }
+            Ok(e) => send_live(&self.events, e),
             Err(err) => tracing::warn!(run = %self.run_id, "event not stored: {err}"),
         }
     }
@@ -125,31 +134,62 @@ impl RunSink for JobContext {
     }
 }
 
-pub struct Jobs {
+/// A lane's queue is full: the job was not queued.
+#[derive(Debug, thiserror::Error)]
+pub enum QueueError {
+    #[error("{queued} jobs are waiting on the {lane:?} lane, its limit (jobs.max_queued_per_lane): try again later")]
+    Full { lane: Lane, queued: usize },
+    #[error(transparent)]
+    Store(#[from] StoreError),
+}
+
+/// What every worker shares with [`Jobs`].
+#[derive(Clone)]
+struct Shared {
     store: Arc<RunStore>,
     live: Arc<Mutex<HashMap<RunId, Live>>>,
     kept: KeptResults,
+    /// Set when the server begins to stop: no job starts after it.
+    stopping: Arc<AtomicBool>,
+}
+
+pub struct Jobs {
+    shared: Shared,
     lanes: Mutex<HashMap<Lane, mpsc::Sender<Queued>>>,
+    /// Jobs sent to each lane and not yet taken by its worker.
+    waiting: HashMap<Lane, Arc<AtomicUsize>>,
+    max_waiting: usize,
     workers: Mutex<Vec<(Lane, std::thread::JoinHandle<()>)>>,
 }
 
 impl Jobs {
+    /// Lanes with no limit on waiting jobs (a process that submits its own, `ffdic reproduce`).
     pub fn start(store: Arc<RunStore>) -> Arc<Self> {
+        Self::with_queue_limit(store, usize::MAX)
+    }
+
+    /// Lanes on which at most `max_waiting` jobs wait each ([`QueueError::Full`] beyond).
+    pub fn with_queue_limit(store: Arc<RunStore>, max_waiting: usize) -> Arc<Self> {
+        const LANES: [Lane; 2] = [Lane::Bench, Lane::Compute];
         let jobs = Arc::new(Self {
-            store,
-            live: Arc::new(Mutex::new(HashMap::new())),
-            kept: Arc::new(Mutex::new(None)),
+            shared: Shared {
+                store,
+                live: Arc::new(Mutex::new(HashMap::new())),
+                kept: Arc::new(Mutex::new(None)),
+                stopping: Arc::new(AtomicBool::new(false)),
+            },
             lanes: Mutex::new(HashMap::new()),
+            waiting: LANES.iter().map(|&l| (l, Arc::default())).collect(),
+            max_waiting,
             workers: Mutex::new(Vec::new()),
         });
-        for lane in [Lane::Bench, Lane::Compute] {
+        for lane in LANES {
             let (tx, rx) = mpsc::channel::<Queued>();
-            let store = jobs.store.clone();
-            let live = jobs.live.clone();
-            let kept = jobs.kept.clone();
+            let shared = jobs.shared.clone();
+            let waiting = jobs.waiting[&lane].clone();
             let handle = std::thread::Builder::new()
                 .name(format!("jobs-{lane:?}").to_lowercase())
-                .spawn(move || worker(rx, store, live, kept))
+                .spawn(move || worker(rx, shared, waiting))
                 .expect("spawn a job worker");
             jobs.lanes.lock().expect("lanes").insert(lane, tx);
             jobs.workers.lock().expect("workers").push((lane, handle));
@@ -158,14 +198,15 @@ impl Jobs {
     }
 
     pub fn store(&self) -> &Arc<RunStore> {
-        &self.store
+        &self.shared.store
     }
 
     /// From now on, keeps every successful job's typed result until [`Jobs::take_result`]
     /// takes it: for a caller in this process that waits for its jobs (`ffdic reproduce`); a
     /// daemon does not keep them (nobody would take them).
     pub fn keep_results(&self) {
-        self.kept
+        self.shared
+            .kept
             .lock()
             .expect("kept results")
             .get_or_insert_with(HashMap::new);
@@ -173,7 +214,12 @@ impl Jobs {
 
     /// The typed result of run `id`, once it has succeeded (with [`Jobs::keep_results`]).
     pub fn take_result(&self, id: &RunId) -> Option<JobResult> {
-        self.kept.lock().expect("kept results").as_mut()?.remove(id)
+        self.shared
+            .kept
+            .lock()
+            .expect("kept results")
+            .as_mut()?
+            .remove(id)
     }
 
     /// Lanes whose worker has ended although the server still takes work: `/health` reports
@@ -193,7 +239,8 @@ impl Jobs {
     }
 
     /// Queues `work` as a new run, or returns the run an earlier request with the same
-    /// idempotency key made (`false`: nothing new was queued).
+    /// idempotency key made (`false`: nothing new was queued). Refused, with nothing written,
+    /// when `lane` already has its limit of jobs waiting.
     pub fn submit(
         &self,
         kind: RunKind,
@@ -202,19 +249,34 @@ impl Jobs {
         idempotency_key: Option<&str>,
         dataset_id: Option<DatasetId>,
         work: Work,
-    ) -> Result<(RunRecord, bool), StoreError> {
-        let (record, created) =
-            self.store
-                .create_run(kind, request, idempotency_key, dataset_id)?;
+    ) -> Result<(RunRecord, bool), QueueError> {
+        let waiting = &self.waiting[&lane];
+        // Reserved before the run is written, so concurrent submissions cannot pass the limit.
+        let before = waiting.fetch_add(1, Ordering::SeqCst);
+        if before >= self.max_waiting {
+            waiting.fetch_sub(1, Ordering::SeqCst);
+            return Err(QueueError::Full {
+                lane,
+                queued: before,
+            });
+        }
+        let store = &self.shared.store;
+        let (record, created) = match store.create_run(kind, request, idempotency_key, dataset_id) {
+            Ok(made) => made,
+            Err(e) => {
+                waiting.fetch_sub(1, Ordering::SeqCst);
+                return Err(e.into());
+            }
+        };
         if !created {
+            waiting.fetch_sub(1, Ordering::SeqCst);
             return Ok((record, false));
         }
-        let (events, _) = broadcast::channel(256);
-        self.live.lock().expect("live").insert(
+        self.shared.live.lock().expect("live").insert(
             record.id.clone(),
             Live {
                 cancel: CancellationToken::new(),
-                events,
+                events: LiveEvents::default(),
                 work_done: Arc::new(AtomicBool::new(false)),
             },
         );
@@ -232,31 +294,34 @@ impl Jobs {
             })
             .unwrap_or(false);
         if !sent {
-            let _ = self.store.set_status(
+            waiting.fetch_sub(1, Ordering::SeqCst);
+            let _ = store.set_status(
                 &record.id,
                 RunStatus::Failed,
                 "the server is shutting down and takes no more work",
             );
         }
-        Ok((self.store.get(&record.id)?, true))
+        Ok((store.get(&record.id)?, true))
     }
 
-    /// Live events of a run still queued or running (`None` once it has ended).
+    /// Live events of a run still queued or running (`None` once it has ended); the run's
+    /// channel is made by its first subscriber.
     pub fn subscribe(&self, id: &RunId) -> Option<broadcast::Receiver<Event>> {
-        self.live
-            .lock()
-            .expect("live")
-            .get(id)
-            .map(|l| l.events.subscribe())
+        self.shared.live.lock().expect("live").get(id).map(|l| {
+            l.events
+                .get_or_init(|| broadcast::channel(LIVE_EVENTS).0)
+                .subscribe()
+        })
     }
 
     /// Asks a run to stop. A queued run is cancelled at once; a running one at its next check.
     pub fn cancel(&self, id: &RunId) -> Result<RunRecord, StoreError> {
-        let record = self.store.get(id)?;
+        let store = &self.shared.store;
+        let record = store.get(id)?;
         if record.status.is_terminal() {
             return Err(StoreError::Finished(id.clone()));
         }
-        let work_done = match self.live.lock().expect("live").get(id) {
+        let work_done = match self.shared.live.lock().expect("live").get(id) {
             Some(live) => {
                 live.cancel.cancel();
                 live.work_done.load(Ordering::SeqCst)
@@ -266,46 +331,47 @@ impl Jobs {
         };
         if record.status == RunStatus::Running && work_done {
             // Nothing will check the token any more: end the run here, or say why not.
-            let r = self.store.set_status(
+            let r = store.set_status(
                 id,
                 RunStatus::Cancelled,
                 "cancelled after its work had ended (its end could not be recorded)",
             )?;
-            self.publish_terminal(id);
+            self.shared.publish_last(id);
             return Ok(r);
         }
         if record.status == RunStatus::Queued {
-            let r =
-                self.store
-                    .set_status(id, RunStatus::Cancelled, "cancelled before it started")?;
-            self.publish_terminal(id);
+            let r = store.set_status(id, RunStatus::Cancelled, "cancelled before it started")?;
+            self.shared.publish_last(id);
             return Ok(r);
         }
-        self.store.get(id)
-    }
-
-    fn publish_terminal(&self, id: &RunId) {
-        publish_last(&self.store, &self.live, id);
+        store.get(id)
     }
 
     /// Stops taking work and cancels every queued and running run (the running ones at their
-    /// next check). Returns at once: what comes first when the daemon is asked to stop.
+    /// next check): no job starts after this is called, the tokens are cancelled first (in
+    /// memory), then the queued runs are written as cancelled in one batch. Returns at once:
+    /// what comes first when the daemon is asked to stop.
     pub fn cancel_all(&self) {
+        self.shared.stopping.store(true, Ordering::SeqCst);
         self.lanes.lock().expect("lanes").clear();
-        let ids: Vec<RunId> = self.live.lock().expect("live").keys().cloned().collect();
-        for id in ids {
-            if let Ok(r) = self.store.get(&id) {
-                if r.status == RunStatus::Queued {
-                    let _ = self.store.set_status(
-                        &id,
-                        RunStatus::Cancelled,
-                        "cancelled: the server shut down",
-                    );
-                }
-            }
-            if let Some(l) = self.live.lock().expect("live").get(&id) {
+        let ids: Vec<RunId> = {
+            let live = self.shared.live.lock().expect("live");
+            for l in live.values() {
                 l.cancel.cancel();
             }
+            live.keys().cloned().collect()
+        };
+        match self.shared.store.end_queued(
+            &ids,
+            RunStatus::Cancelled,
+            "cancelled: the server shut down",
+        ) {
+            Ok(ended) => {
+                for id in &ended {
+                    self.shared.publish_last(id);
+                }
+            }
+            Err(e) => tracing::warn!("cannot record the queued runs as cancelled: {e}"),
         }
     }
 
@@ -324,24 +390,31 @@ impl Jobs {
     }
 }
 
-/// Sends the run's last stored event to live subscribers and forgets the run.
-fn publish_last(store: &RunStore, live: &Mutex<HashMap<RunId, Live>>, id: &RunId) {
-    let entry = live.lock().expect("live").remove(id);
-    if let (Some(l), Ok(events)) = (entry, store.events(id, None)) {
-        if let Some(last) = events.last() {
-            let _ = l.events.send(last.clone());
+/// Capacity of a run's live channel: a subscriber that falls this far behind re-reads the log.
+const LIVE_EVENTS: usize = 256;
+
+impl Shared {
+    /// Sends the run's last stored event to live subscribers (if it has any) and forgets the
+    /// run.
+    fn publish_last(&self, id: &RunId) {
+        let entry = self.live.lock().expect("live").remove(id);
+        let Some(tx) = entry.as_ref().and_then(|l| l.events.get()) else {
+            return;
+        };
+        if let Ok(events) = self.store.events(id, None) {
+            if let Some(last) = events.last() {
+                let _ = tx.send(last.clone());
+            }
         }
     }
 }
 
-fn worker(
-    rx: mpsc::Receiver<Queued>,
-    store: Arc<RunStore>,
-    live: Arc<Mutex<HashMap<RunId, Live>>>,
-    kept: KeptResults,
-) {
+fn worker(rx: mpsc::Receiver<Queued>, shared: Shared, waiting: Arc<AtomicUsize>) {
+    let store = &shared.store;
     while let Ok(job) = rx.recv() {
-        let Some((cancel, events, work_done)) = live
+        waiting.fetch_sub(1, Ordering::SeqCst);
+        let Some((cancel, events, work_done)) = shared
+            .live
             .lock()
             .expect("live")
             .get(&job.id)
@@ -349,24 +422,26 @@ fn worker(
         else {
             continue;
         };
-        // Cancelled while queued: already written as such.
-        if cancel.is_cancelled() {
+        // Cancelled while queued (already written as such), or the server is stopping.
+        if cancel.is_cancelled() || shared.stopping.load(Ordering::SeqCst) {
             if let Ok(r) = store.get(&job.id) {
                 if !r.status.is_terminal() {
                     let _ = store.set_status(&job.id, RunStatus::Cancelled, "cancelled");
                 }
             }
-            publish_last(&store, &live, &job.id);
+            shared.publish_last(&job.id);
             continue;
         }
         if let Err(e) = store.set_status(&job.id, RunStatus::Running, "running") {
             tracing::warn!(run = %job.id, "cannot start: {e}");
-            publish_last(&store, &live, &job.id);
+            shared.publish_last(&job.id);
             continue;
         }
-        if let Ok(events_so_far) = store.events(&job.id, None) {
-            if let Some(last) = events_so_far.last() {
-                let _ = events.send(last.clone());
+        if events.get().is_some() {
+            if let Ok(events_so_far) = store.events(&job.id, None) {
+                if let Some(last) = events_so_far.last() {
+                    send_live(&events, last.clone());
+                }
             }
         }
         let ctx = JobContext {
@@ -378,7 +453,7 @@ fn worker(
         let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| (job.work)(&ctx)));
         let (status, message) = match outcome {
             Ok(Ok(out)) => {
-                if let Some(results) = kept.lock().expect("kept results").as_mut() {
+                if let Some(results) = shared.kept.lock().expect("kept results").as_mut() {
                     results.insert(job.id.clone(), out.result);
                 }
                 (RunStatus::Succeeded, out.message)
@@ -394,12 +469,12 @@ fn worker(
         match store.set_status(&job.id, status, &message) {
             Ok(_) => {
                 tracing::info!(run = %job.id, ?status, "{message}");
-                publish_last(&store, &live, &job.id);
+                shared.publish_last(&job.id);
             }
-            Err(StoreError::Finished(_)) => publish_last(&store, &live, &job.id),
+            Err(StoreError::Finished(_)) => shared.publish_last(&job.id),
             Err(e) => {
                 tracing::warn!(run = %job.id, "cannot record the end ({status:?}): {e}");
-                record_end_when_possible(store.clone(), live.clone(), job.id, status, message);
+                record_end_when_possible(shared.clone(), job.id, status, message);
             }
         }
     }
@@ -411,13 +486,7 @@ const END_RETRY: Duration = Duration::from_millis(500);
 /// A run whose terminal write failed (a full disk, say) would otherwise stay `running` for ever:
 /// retry in the background until the store takes it — as `failed`, since the run's files may be
 /// incomplete — or until someone else (cancel) has ended it.
-fn record_end_when_possible(
-    store: Arc<RunStore>,
-    live: Arc<Mutex<HashMap<RunId, Live>>>,
-    id: RunId,
-    status: RunStatus,
-    message: String,
-) {
+fn record_end_when_possible(shared: Shared, id: RunId, status: RunStatus, message: String) {
     let spawned = std::thread::Builder::new()
         .name("jobs-end-retry".into())
         .spawn(move || {
@@ -427,14 +496,14 @@ fn record_end_when_possible(
             );
             loop {
                 std::thread::sleep(END_RETRY);
-                match store.set_status(&id, RunStatus::Failed, &message) {
+                match shared.store.set_status(&id, RunStatus::Failed, &message) {
                     Ok(_) | Err(StoreError::Finished(_)) => break,
                     Err(StoreError::NotFound(_)) => return,
                     Err(_) => continue,
                 }
             }
             tracing::info!(run = %id, "end recorded after a failed write");
-            publish_last(&store, &live, &id);
+            shared.publish_last(&id);
         });
     if let Err(e) = spawned {
         tracing::error!("cannot start the end-retry thread: {e}");

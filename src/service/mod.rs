@@ -10,12 +10,12 @@ mod sweep_job;
 mod work;
 
 pub use config::{
-    load_bench_model, BenchConfig, CameraConfig, ConfigError, DaemonConfig, HttpLimits,
+    load_bench_model, BenchConfig, CameraConfig, ConfigError, DaemonConfig, HttpLimits, JobLimits,
     MockBinning, MockReduction, StageConfig, SweepLimits, UploadLimits, DEFAULT_CONFIG_TOML,
     PAPER_BENCH_TOML,
 };
 pub use hardware::{mock_bench, open_bench, HardwareError, SwappableScene};
-pub use jobs::{JobContext, JobError, JobOutput, JobResult, Jobs, Lane, Work};
+pub use jobs::{JobContext, JobError, JobOutput, JobResult, Jobs, Lane, QueueError, Work};
 pub use models::{
     embedded_model, find_analysis_model, ModelDetail, ModelLookupError, ModelSource,
     ModelStoreError, ModelSummary, NewModel, EMBEDDED_MODELS, PAPER_BENCH_DISTORTION_TOML,
@@ -77,7 +77,7 @@ impl Service {
             hardware_schemes: hardware.camera.info().hardware_schemes.clone(),
         });
         let bench = BenchHandle::spawn(hardware, Duration::from_secs(30));
-        let jobs = Jobs::start(store.clone());
+        let jobs = Jobs::with_queue_limit(store.clone(), config.jobs.max_queued_per_lane);
         Ok((
             Self {
                 config: Arc::new(config),
@@ -131,7 +131,12 @@ impl Service {
         idempotency_key: Option<&str>,
     ) -> Result<(RunRecord, bool), SubmitError> {
         let plan = request.plan()?;
-        self.store.get_dataset(dataset)?;
+        let record = self.store.get_dataset(dataset)?;
+        plan.check_work(
+            (record.width, record.height),
+            record.runs,
+            self.config.jobs.max_analysis_subset_pixels,
+        )?;
         let work = work::analysis(self.clone(), dataset.clone(), plan);
         let body = serde_json::to_value(request).expect("a request serialises");
         Ok(self.jobs.submit(
@@ -242,4 +247,16 @@ pub enum SubmitError {
     NoStage,
     #[error(transparent)]
     Store(#[from] StoreError),
+    /// The lane's queue is full: nothing was queued.
+    #[error("{queued} jobs are waiting on the {lane:?} lane, its limit (jobs.max_queued_per_lane): try again later")]
+    QueueFull { lane: Lane, queued: usize },
+}
+
+impl From<jobs::QueueError> for SubmitError {
+    fn from(e: jobs::QueueError) -> Self {
+        match e {
+            jobs::QueueError::Full { lane, queued } => SubmitError::QueueFull { lane, queued },
+            jobs::QueueError::Store(s) => SubmitError::Store(s),
+        }
+    }
 }

@@ -55,6 +55,47 @@ impl AnalysisRequest {
     }
 }
 
+impl AnalysisPlan {
+    /// Subset pixels one IC-GN iteration visits over `runs` runs of `(width, height)` frames:
+    /// Σ over schemes of points × subset² (a capture-mode run, analysed in its own scheme only,
+    /// is counted as a full-resolution one: an upper bound).
+    pub fn subset_pixels(&self, (width, height): (usize, usize), runs: usize) -> u64 {
+        let side = self.dic.subset_px as u64;
+        let per_run: u64 = self
+            .schemes
+            .iter()
+            .filter_map(|scheme| {
+                let (w, h) = scheme.output_size(width, height).ok()?;
+                let grid = crate::dic::PoiGrid::new(&self.dic, w, h).ok()?;
+                Some((grid.nx() * grid.ny()) as u64 * side * side)
+            })
+            .sum();
+        per_run.saturating_mul(runs as u64)
+    }
+
+    /// Refuses, naming `dic.step_px`, an analysis that asks for more than `max_subset_pixels`.
+    pub fn check_work(
+        &self,
+        size: (usize, usize),
+        runs: usize,
+        max_subset_pixels: u64,
+    ) -> Result<(), FieldError> {
+        let work = self.subset_pixels(size, runs);
+        if work <= max_subset_pixels {
+            return Ok(());
+        }
+        Err(FieldError {
+            field: "dic.step_px".into(),
+            reason: format!(
+                "{runs} runs x {} schemes at subset {} px and step {} px visit {work:.3e} subset pixels per IC-GN iteration; this daemon takes at most {max_subset_pixels:.3e} (jobs.max_analysis_subset_pixels): a larger step, a smaller subset or a roi",
+                self.schemes.len(),
+                self.dic.subset_px,
+                self.dic.step_px
+            ),
+        })
+    }
+}
+
 pub fn experiment(service: Service, plan: ExperimentPlan) -> Work {
     Box::new(move |ctx: &JobContext| {
         let lease = service
@@ -123,15 +164,22 @@ pub fn analysis(service: Service, dataset: DatasetId, plan: AnalysisPlan) -> Wor
     Box::new(move |ctx: &JobContext| {
         let dir = service.store.dataset_dir(&dataset);
         let manifest = Manifest::read(&dir).map_err(JobError::failed)?;
-        let rows = analyze_dataset(&dir, &manifest, &plan.schemes, &plan.dic, &|done, total| {
-            ctx.event(
-                EventKind::PairAnalyzed,
-                done as f64 / total.max(1) as f64,
-                &format!("{done} of {total} reduced pairs correlated"),
-                json!({ "done": done, "total": total }),
-            );
-            !ctx.cancelled()
-        })
+        let rows = analyze_dataset(
+            &dir,
+            &manifest,
+            &plan.schemes,
+            &plan.dic,
+            &|done, total| {
+                ctx.event(
+                    EventKind::PairAnalyzed,
+                    done as f64 / total.max(1) as f64,
+                    &format!("{done} of {total} reduced pairs correlated"),
+                    json!({ "done": done, "total": total }),
+                );
+                !ctx.cancelled()
+            },
+            &|| ctx.cancelled(),
+        )
         .map_err(|e| match e {
             StudyError::Cancelled => JobError::Cancelled,
             other => JobError::failed(other),
@@ -331,4 +379,30 @@ pub fn diagnosis(
             result: JobResult::Diagnosis(Box::new(r)),
         })
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Issue 36's dense analysis: subset 101 px at every pixel of the whole 1280x1080
+    /// reductions, three schemes.
+    fn dense() -> AnalysisRequest {
+        serde_json::from_value(json!({"dic": {"subset_px": 101, "step_px": 1,
+            "roi": {"x": 0, "y": 0, "width": 1280, "height": 1080}}}))
+        .unwrap()
+    }
+
+    #[test]
+    fn the_work_of_a_dense_analysis_is_its_points_times_its_subset_area() {
+        let plan = dense().plan().unwrap();
+        let one = plan.subset_pixels((2560, 2160), 1);
+        // Subset centres from 50 to 1229 in x and to 1029 in y, at every pixel, in each of the
+        // three 1280x1080 reductions.
+        assert_eq!(one, 3 * 1180 * 980 * 101 * 101);
+        assert_eq!(plan.subset_pixels((2560, 2160), 3), 3 * one);
+        assert!(plan.check_work((2560, 2160), 1, one).is_ok());
+        let e = plan.check_work((2560, 2160), 3, 2 * one).unwrap_err();
+        assert_eq!(e.field, "dic.step_px");
+    }
 }

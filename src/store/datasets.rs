@@ -136,12 +136,16 @@ impl RunStore {
                 "'{DATASET_RECORD}' is the store's own file in a dataset"
             )));
         }
-        // The full-resolution frames' header (a hardware scheme's frames are smaller).
+        // The full-resolution frames' header (a hardware scheme's frames are smaller): the size
+        // when the manifest states no camera, and the bit depth.
         let first = manifest.runs.iter().find(|r| r.capture.is_none());
-        let header = tiff_header(&dir.join(&first.unwrap_or(&manifest.runs[0]).reference))?;
-        let (width, height) = match &manifest.camera {
-            Some(c) => (c.width, c.height),
-            None => (header.width, header.height),
+        let header = tiff_header(&dir.join(&first.unwrap_or(&manifest.runs[0]).reference));
+        let (width, height, bit_depth) = match (&manifest.camera, header) {
+            (Some(c), header) => (c.width, c.height, header.ok().map(|h| h.bit_depth)),
+            (None, header) => {
+                let h = header?;
+                (h.width, h.height, Some(h.bit_depth))
+            }
         };
         let name = if name.trim().is_empty() {
             manifest.name.clone()
@@ -166,7 +170,7 @@ impl RunStore {
             runs: manifest.runs.len(),
             width,
             height,
-            bit_depth: Some(header.bit_depth),
+            bit_depth,
             files,
         };
         write_json(&dir.join(DATASET_RECORD), &record)?;

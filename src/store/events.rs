@@ -11,6 +11,18 @@ pub const FILE: &str = "events.jsonl";
 
 /// Appends `event` as one line and syncs the file.
 pub fn append(path: &Path, event: &Event) -> Result<()> {
+    append_with(path, event, Sync::Now)
+}
+
+/// Whether a write is synced at once or left to one sync after a batch.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Sync {
+    Now,
+    Batched,
+}
+
+/// Appends `event` as one line, synced as `sync` says.
+pub fn append_with(path: &Path, event: &Event, sync: Sync) -> Result<()> {
     let mut line = serde_json::to_vec(event).expect("an event always serialises");
     line.push(b'\n');
     let mut file = OpenOptions::new()
@@ -30,7 +42,10 @@ pub fn append(path: &Path, event: &Event) -> Result<()> {
         }
     }
     file.write_all(&line).map_err(io(path))?;
-    file.sync_data().map_err(io(path))
+    match sync {
+        Sync::Now => file.sync_data().map_err(io(path)),
+        Sync::Batched => Ok(()),
+    }
 }
 
 /// Every event with an id above `after` (all when `None`), in file order. A missing file is an

@@ -298,4 +298,25 @@ impl ServeProcess {
     pub fn url(&self, path: &str) -> String {
         format!("{}/api/v1{path}", self.base)
     }
+
+    /// Sends SIGTERM and waits for the exit, failing the test past `limit`; the exit status
+    /// and how long it took.
+    pub fn terminate_within(&mut self, limit: Duration) -> (std::process::ExitStatus, Duration) {
+        let t0 = Instant::now();
+        let signalled = std::process::Command::new("kill")
+            .args(["-TERM", &self.child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(signalled.success());
+        loop {
+            if let Some(s) = self.child.try_wait().unwrap() {
+                return (s, t0.elapsed());
+            }
+            assert!(
+                t0.elapsed() < limit,
+                "still running {limit:?} after SIGTERM"
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
 }

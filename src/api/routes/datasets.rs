@@ -58,56 +58,9 @@ pub async fn upload(State(svc): State<Service>, mut form: Multipart) -> ApiResul
         Ok((store.stage_dataset()?, store.datasets_bytes()?))
     })
     .await??;
-    let quota_bytes = svc.config.datasets_quota_bytes;
     let mut pace = UploadPace::new(&svc.config.uploads);
-    let mut names: Vec<String> = Vec::new();
-    while let Some(mut field) = pace
-        .within(form.next_field())
-        .await?
-        .map_err(multipart_error)?
-    {
-        let name = field
-            .file_name()
-            .or(field.name())
-            .unwrap_or_default()
-            .to_string();
-        if !is_plain_file_name(&name) || name.starts_with('.') || name.len() > 128 {
-            return Err(ApiError::invalid(
-                "file",
-                format!(
-                    "'{}' is not a plain file name",
-                    name.chars().take(64).collect::<String>()
-                ),
-            ));
-        }
-        if names.contains(&name) {
-            return Err(ApiError::invalid("file", format!("'{name}' sent twice")));
-        }
-        let path = staging.path().join(&name);
-        let mut file = tokio::fs::File::create(&path)
-            .await
-            .map_err(|e| ApiError::internal("staging an upload", e))?;
-        while let Some(chunk) = pace.within(field.chunk()).await?.map_err(multipart_error)? {
-            pace.received(chunk.len());
-            // Refused as soon as it would pass the quota: the staging folder goes with it.
-            if used_bytes + pace.received_bytes > quota_bytes {
-                return Err(over_quota(used_bytes, pace.received_bytes, quota_bytes));
-            }
-            file.write_all(&chunk)
-                .await
-                .map_err(|e| ApiError::internal("staging an upload", e))?;
-        }
-        file.sync_all()
-            .await
-            .map_err(|e| ApiError::internal("staging an upload", e))?;
-        names.push(name);
-    }
-    if !names.iter().any(|n| n == "dataset.json") {
-        return Err(ApiError::invalid(
-            "dataset.json",
-            "the upload has no dataset.json part",
-        ));
-    }
+    let quota = (used_bytes, svc.config.datasets_quota_bytes);
+    let names = stage_parts(&mut form, &staging, &mut pace, quota).await?;
     // One upload's frames are checked at a time (a check holds up to two decoded frames); the
     // permit travels with the check, which outlives this future if the client leaves.
     let permit = svc
@@ -168,6 +121,65 @@ pub async fn upload(State(svc): State<Service>, mut form: Multipart) -> ApiResul
         Json(record),
     )
         .into_response())
+}
+
+/// Writes every part of the upload into `staging` as it arrives, at the upload's pace and within
+/// the datasets quota (`(used, quota)` bytes); the names of the parts.
+async fn stage_parts(
+    form: &mut Multipart,
+    staging: &crate::store::StagingDir,
+    pace: &mut UploadPace,
+    (used_bytes, quota_bytes): (u64, u64),
+) -> ApiResult<Vec<String>> {
+    let mut names: Vec<String> = Vec::new();
+    while let Some(mut field) = pace
+        .within(form.next_field())
+        .await?
+        .map_err(multipart_error)?
+    {
+        let name = field
+            .file_name()
+            .or(field.name())
+            .unwrap_or_default()
+            .to_string();
+        if !is_plain_file_name(&name) || name.starts_with('.') || name.len() > 128 {
+            return Err(ApiError::invalid(
+                "file",
+                format!(
+                    "'{}' is not a plain file name",
+                    name.chars().take(64).collect::<String>()
+                ),
+            ));
+        }
+        if names.contains(&name) {
+            return Err(ApiError::invalid("file", format!("'{name}' sent twice")));
+        }
+        let path = staging.path().join(&name);
+        let mut file = tokio::fs::File::create(&path)
+            .await
+            .map_err(|e| ApiError::internal("staging an upload", e))?;
+        while let Some(chunk) = pace.within(field.chunk()).await?.map_err(multipart_error)? {
+            pace.received(chunk.len());
+            // Refused as soon as it would pass the quota: the staging folder goes with it.
+            if used_bytes + pace.received_bytes > quota_bytes {
+                return Err(over_quota(used_bytes, pace.received_bytes, quota_bytes));
+            }
+            file.write_all(&chunk)
+                .await
+                .map_err(|e| ApiError::internal("staging an upload", e))?;
+        }
+        file.sync_all()
+            .await
+            .map_err(|e| ApiError::internal("staging an upload", e))?;
+        names.push(name);
+    }
+    if !names.iter().any(|n| n == "dataset.json") {
+        return Err(ApiError::invalid(
+            "dataset.json",
+            "the upload has no dataset.json part",
+        ));
+    }
+    Ok(names)
 }
 
 /// An upload's pace: every piece must arrive before the upload falls below
@@ -259,6 +271,7 @@ pub async fn get(
     params(("id" = String, Path, description = "Dataset id"),
            ("Idempotency-Key" = Option<String>, Header, description = "Repeat-safe submission")),
     responses((status = 202, description = "Queued as a job; Location names it", body = Object),
+              (status = 429, description = "The lane already has jobs.max_queued_per_lane jobs waiting; Retry-After says when to try again", body = Problem),
               (status = 404, body = Problem), (status = 422, body = Problem)))]
 pub async fn analyse(
     State(svc): State<Service>,
@@ -279,6 +292,7 @@ pub async fn analyse(
     params(("id" = String, Path, description = "Dataset id"),
            ("Idempotency-Key" = Option<String>, Header, description = "Repeat-safe submission")),
     responses((status = 202, description = "Queued as a job; Location names it. Its results/comparison.json and plots/*.svg hold the comparison, which the dataset's history keeps", body = Object),
+              (status = 429, description = "The lane already has jobs.max_queued_per_lane jobs waiting; Retry-After says when to try again", body = Problem),
               (status = 404, body = Problem), (status = 422, body = Problem)))]
 pub async fn compare(
     State(svc): State<Service>,
@@ -293,6 +307,7 @@ pub async fn compare(
     params(("id" = String, Path, description = "Dataset id"),
            ("Idempotency-Key" = Option<String>, Header, description = "Repeat-safe submission")),
     responses((status = 202, description = "Queued as a job; Location names it. Its results/diagnosis.json ranks the candidates; results/winner-model.toml is the model with the verdict added", body = Object),
+              (status = 429, description = "The lane already has jobs.max_queued_per_lane jobs waiting; Retry-After says when to try again", body = Problem),
               (status = 404, body = Problem), (status = 422, body = Problem)))]
 pub async fn diagnose(
     State(svc): State<Service>,

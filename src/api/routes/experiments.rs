@@ -32,12 +32,16 @@ pub fn idempotency_key(headers: &HeaderMap) -> ApiResult<Option<String>> {
     }
 }
 
+/// What a 429 asks a client to wait before submitting again: about one queued job's time.
+const RETRY_AFTER_S: u64 = 30;
+
 impl From<SubmitError> for ApiError {
     fn from(e: SubmitError) -> Self {
         match e {
             SubmitError::Field(f) => f.into(),
             SubmitError::NoStage => ApiError::unavailable(e.to_string()),
             SubmitError::Store(s) => s.into(),
+            SubmitError::QueueFull { .. } => ApiError::too_many(e.to_string(), RETRY_AFTER_S),
         }
     }
 }
@@ -55,6 +59,7 @@ pub fn accepted(record: RunRecord, created: bool, location: String) -> Response 
 #[utoipa::path(post, path = "/experiments", tag = "experiments", request_body = ExperimentRequest,
     params(("Idempotency-Key" = Option<String>, Header, description = "Repeat-safe submission")),
     responses((status = 202, description = "Queued; Location names it", body = Object),
+              (status = 429, description = "The lane already has jobs.max_queued_per_lane jobs waiting; Retry-After says when to try again", body = Problem),
               (status = 200, description = "Same Idempotency-Key: the run made before", body = Object),
               (status = 400, body = Problem), (status = 401, body = Problem),
               (status = 413, body = Problem), (status = 422, body = Problem),

@@ -16,6 +16,7 @@ use axum::Json;
 #[utoipa::path(post, path = "/sweeps", tag = "sweeps", request_body = SweepSpec,
     params(("Idempotency-Key" = Option<String>, Header, description = "Repeat-safe submission")),
     responses((status = 202, description = "Queued on the compute lane; Location names it", body = Object),
+              (status = 429, description = "The lane already has jobs.max_queued_per_lane jobs waiting; Retry-After says when to try again", body = Problem),
               (status = 200, description = "Same Idempotency-Key: the run made before", body = Object),
               (status = 400, body = Problem), (status = 401, body = Problem),
               (status = 413, body = Problem), (status = 422, body = Problem)))]
