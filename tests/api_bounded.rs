@@ -713,3 +713,51 @@ async fn sigterm_with_three_thousand_queued_jobs_exits_within_ten_seconds_and_ca
         "only the dense analysis ever started"
     );
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn eight_concurrent_uploads_store_no_more_than_the_quota() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut config = small_config(tmp.path());
+    let (reference, deformed) = (texture_tiff(320, 300, 0), texture_tiff(320, 300, 13));
+    let one_upload = (reference.len() + deformed.len()) as u64;
+    // Room for three uploads and a half.
+    config.datasets_quota_bytes = one_upload * 7 / 2;
+    let quota = config.datasets_quota_bytes;
+    let server = TestServer::start(config).await;
+    let uploads: Vec<_> = (0..8)
+        .map(|_| {
+            let f = form(vec![
+                (
+                    "dataset.json".into(),
+                    manifest(&[("r1", "ref.tif", "def.tif", 1.0)], 13.0),
+                ),
+                ("ref.tif".into(), reference.clone()),
+                ("def.tif".into(), deformed.clone()),
+            ]);
+            client().post(server.url("/datasets")).multipart(f).send()
+        })
+        .collect();
+    let statuses: Vec<u16> = futures_join(uploads)
+        .await
+        .into_iter()
+        .map(|r| r.unwrap().status().as_u16())
+        .collect();
+    let stored = server.service.store.datasets_bytes().unwrap();
+    println!("statuses {statuses:?}; stored {stored} of {quota} bytes");
+    // Issue 36: each checked the usage it saw when it began, and 2.5x the quota was stored.
+    assert!(stored <= quota, "stored {stored} > quota {quota}");
+    assert!(
+        statuses.iter().all(|s| [201, 507].contains(s)),
+        "{statuses:?}"
+    );
+    // At most three fit; which ones depends on how the eight interleave.
+    let stored_uploads = statuses.iter().filter(|&&s| s == 201).count();
+    assert!((1..=3).contains(&stored_uploads), "{statuses:?}");
+    let staged = std::fs::read_dir(tmp.path().join("datasets"))
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with('.'))
+        .count();
+    assert_eq!(staged, 0, "no staging folder left");
+    server.stop().await;
+}

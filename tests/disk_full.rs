@@ -1,6 +1,10 @@
 //! Issue 12, item 5: a run whose terminal write fails (a full disk) must not stay `running` for
 //! ever, and cancel must end it or say why it cannot. The data folder sits on a small tmpfs the
 //! test mounts (root, as in CI); the job fills the disk itself, so its end cannot be written.
+//! Issue 36: an upload that meets a full disk is 507, as every other store write, not 500.
+
+#[path = "common/daemon.rs"]
+mod daemon;
 
 use ffdic::service::{JobOutput, JobResult, Jobs, Lane};
 use ffdic::store::{RunKind, RunStatus, RunStore};
@@ -133,4 +137,47 @@ fn cancel_ends_a_running_run_that_no_worker_holds() {
     let jobs = Jobs::start(store.clone());
     let r = jobs.cancel(&run.id).unwrap();
     assert_eq!(r.status, RunStatus::Cancelled);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_upload_that_meets_a_full_disk_is_507_and_leaves_nothing() {
+    let disk = Tmpfs::mount("8m");
+    let data = disk.path().join("data");
+    let server = daemon::TestServer::start(daemon::small_config(&data)).await;
+    // Two 4 MB frames: the second cannot be staged.
+    let frame = ffdic::image::tiff_u16_bytes(2048, 1024, &vec![7u16; 2048 * 1024]).unwrap();
+    let manifest = json!({"format": "ffdic-dataset/1", "name": "full", "scale_px_per_mm": 13.0,
+        "runs": [{"id": "r1", "reference": "ref.tif", "deformed": "def.tif",
+                  "stage": {"dx_mm": 0.0, "dy_mm": 0.0}}]});
+    let part = |name: &str, bytes: Vec<u8>| {
+        reqwest::multipart::Part::bytes(bytes).file_name(name.to_string())
+    };
+    let form = reqwest::multipart::Form::new()
+        .part(
+            "dataset.json",
+            part("dataset.json", manifest.to_string().into_bytes()),
+        )
+        .part("ref.tif", part("ref.tif", frame.clone()))
+        .part("def.tif", part("def.tif", frame));
+    let r = daemon::client()
+        .post(server.url("/datasets"))
+        .multipart(form)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 507);
+    let p: serde_json::Value = r.json().await.unwrap();
+    assert!(
+        !p["detail"]
+            .as_str()
+            .unwrap()
+            .contains(&data.display().to_string()),
+        "no server path: {p}"
+    );
+    let left: Vec<_> = std::fs::read_dir(data.join("datasets"))
+        .unwrap()
+        .flatten()
+        .collect();
+    assert!(left.is_empty(), "{left:?}");
+    server.stop().await;
 }

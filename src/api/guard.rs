@@ -50,7 +50,7 @@ fn is_mutating(method: &Method) -> bool {
 }
 
 pub async fn guard(State(config): State<Arc<GuardConfig>>, req: Request, next: Next) -> Response {
-    if let Err(e) = check_host(&config, req.headers()) {
+    if let Err(e) = check_host(&config, req.version(), req.headers()) {
         return e.into_response();
     }
     if is_mutating(req.method()) {
@@ -130,10 +130,22 @@ fn host_name(authority: &str) -> String {
     host.trim_end_matches('.').to_ascii_lowercase()
 }
 
-fn check_host(config: &GuardConfig, headers: &HeaderMap) -> Result<(), ApiError> {
-    // HTTP/1.0 clients may omit Host; browsers never do, and only browsers rebind DNS.
-    let Some(value) = headers.get(header::HOST) else {
-        return Ok(());
+fn check_host(
+    config: &GuardConfig,
+    version: axum::http::Version,
+    headers: &HeaderMap,
+) -> Result<(), ApiError> {
+    // RFC 9112 §3.2: an HTTP/1.1 request without Host, or with more than one, is answered 400.
+    // HTTP/1.0 clients may omit it; browsers never do, and only browsers rebind DNS.
+    let mut hosts = headers.get_all(header::HOST).iter();
+    let (Some(value), None) = (hosts.next(), hosts.next()) else {
+        let count = headers.get_all(header::HOST).iter().count();
+        if count == 0 && version < axum::http::Version::HTTP_11 {
+            return Ok(());
+        }
+        return Err(ApiError::bad_request(format!(
+            "an HTTP/1.1 request carries exactly one Host header; this one has {count}"
+        )));
     };
     let host = value.to_str().map(host_name).unwrap_or_default();
     let allowed = host == "localhost"
@@ -264,16 +276,36 @@ mod tests {
             "10.0.0.7",
             "BENCH.lab:80",
         ] {
-            assert!(check_host(&c, &headers(&[("host", ok)])).is_ok(), "{ok}");
+            assert!(
+                check_host(&c, V11, &headers(&[("host", ok)])).is_ok(),
+                "{ok}"
+            );
         }
         for bad in [
             "evil.example:8080",
             "127.0.0.1.evil.example",
             "localhost.evil.example",
         ] {
-            let e = check_host(&c, &headers(&[("host", bad)])).unwrap_err();
+            let e = check_host(&c, V11, &headers(&[("host", bad)])).unwrap_err();
             assert_eq!(e.status, StatusCode::MISDIRECTED_REQUEST, "{bad}");
         }
+    }
+
+    const V11: axum::http::Version = axum::http::Version::HTTP_11;
+
+    /// Issue 36: a request without Host, or with two, was answered 200.
+    #[test]
+    fn an_http_1_1_request_has_exactly_one_host() {
+        let c = config();
+        let e = check_host(&c, V11, &HeaderMap::new()).unwrap_err();
+        assert_eq!(e.status, StatusCode::BAD_REQUEST);
+        let mut two = headers(&[("host", "127.0.0.1")]);
+        two.append(header::HOST, "localhost".parse().unwrap());
+        assert_eq!(
+            check_host(&c, V11, &two).unwrap_err().status,
+            StatusCode::BAD_REQUEST
+        );
+        assert!(check_host(&c, axum::http::Version::HTTP_10, &HeaderMap::new()).is_ok());
     }
 
     #[test]

@@ -69,7 +69,7 @@ pub fn parse<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
         return Err(ApiError::invalid("body", "the body must be a JSON object"));
     }
     let de = &mut serde_json::Deserializer::from_slice(bytes);
-    serde_path_to_error::deserialize(de).map_err(|e| {
+    let value = serde_path_to_error::deserialize(&mut *de).map_err(|e| {
         let path = e.path().to_string();
         let inner = e.into_inner();
         match inner.classify() {
@@ -83,7 +83,16 @@ pub fn parse<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
             }
             _ => ApiError::bad_request(format!("malformed JSON: {inner}")),
         }
-    })
+    })?;
+    // One object and nothing after it: `{"dx_mm":0.0} xyz` or two objects once passed as the
+    // first alone.
+    de.end().map_err(|e| {
+        ApiError::bad_request(format!(
+            "malformed JSON: {}",
+            strip_position(&e.to_string()).replace("trailing characters", "data after the object")
+        ))
+    })?;
+    Ok(value)
 }
 
 /// serde names an unknown field in its message (``unknown field `foo` ``); the path stops at
@@ -132,5 +141,19 @@ mod tests {
         assert_eq!(e.status.as_u16(), 400);
         let e = parse::<Body>(b" []").unwrap_err();
         assert_eq!((e.status.as_u16(), e.field.as_deref()), (422, Some("body")));
+    }
+
+    /// Issue 36: trailing data and a second object were accepted as the first object alone.
+    #[test]
+    fn one_object_and_nothing_after_it() {
+        for bad in [&br#"{"a":1} xyz"#[..], br#"{"a":1}{"a":2}"#] {
+            let e = parse::<Body>(bad).unwrap_err();
+            assert_eq!(e.status.as_u16(), 400, "{}", String::from_utf8_lossy(bad));
+            assert!(e.detail.contains("after the object"), "{}", e.detail);
+        }
+        assert!(
+            parse::<Body>(b"{\"a\":1} \n").is_ok(),
+            "trailing white space is fine"
+        );
     }
 }

@@ -135,14 +135,25 @@ pub enum ServeError {
         "refusing to listen on {0} without a token: set auth_token in the config or FFDIC_TOKEN"
     )]
     NoToken(SocketAddr),
+    #[error("the token (auth_token or FFDIC_TOKEN) has {0} characters; at least {MIN_TOKEN_CHARS} are needed (e.g. `openssl rand -hex 16`)")]
+    ShortToken(usize),
     #[error("cannot serve: {0}")]
     Io(#[from] std::io::Error),
 }
 
-/// Whether the configured address is safe to serve without a token.
+/// The shortest bearer token the daemon takes: 16 random hex characters are 64 bits.
+pub const MIN_TOKEN_CHARS: usize = 16;
+
+/// Whether the configured address is safe to serve without a token, and the token (if any)
+/// long enough to be one.
 pub fn check_bind(addr: SocketAddr, token: Option<&str>) -> Result<(), ServeError> {
     if !addr.ip().is_loopback() && token.is_none() {
         return Err(ServeError::NoToken(addr));
+    }
+    if let Some(t) = token {
+        if t.chars().count() < MIN_TOKEN_CHARS {
+            return Err(ServeError::ShortToken(t.chars().count()));
+        }
     }
     Ok(())
 }
@@ -159,4 +170,28 @@ pub async fn run(
     tracing::info!("listening on http://{addr}");
     server::serve(listener, app, shutdown, limits).await?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Issue 36: tokens had no minimum length.
+    #[test]
+    fn a_short_token_is_refused_wherever_the_daemon_listens() {
+        let open: SocketAddr = "0.0.0.0:8080".parse().unwrap();
+        let local: SocketAddr = "127.0.0.1:8080".parse().unwrap();
+        assert!(matches!(
+            check_bind(open, None),
+            Err(ServeError::NoToken(_))
+        ));
+        for addr in [open, local] {
+            assert!(matches!(
+                check_bind(addr, Some("abc")),
+                Err(ServeError::ShortToken(3))
+            ));
+            assert!(check_bind(addr, Some("0123456789abcdef")).is_ok());
+        }
+        assert!(check_bind(local, None).is_ok());
+    }
 }

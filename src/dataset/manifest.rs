@@ -72,9 +72,18 @@ pub enum DotProfile {
     Disk,
 }
 
+/// The largest dot or spacing a print may state, in image px: a few dots per frame at most.
+/// Larger figures (`dot_diameter_mm` 1e6) are typing errors that the model would render at
+/// great cost.
+pub const MAX_PRINT_FEATURE_PX: f64 = 1024.0;
+/// The softest dot edge a print may state, in image px: beyond it the pattern is blurred away,
+/// and `edge_softness_mm` 65 (1,690 px at the paper's scale) made `compare` 20x slower.
+pub const MAX_EDGE_SOFTNESS_PX: f64 = 64.0;
+
 impl PatternInfo {
-    /// The first number of this entry outside its range, named.
-    fn check(&self) -> Result<(), String> {
+    /// The first number of this entry outside its range, named; sizes are held in px of the
+    /// frames (`scale_px_per_mm`).
+    fn check(&self, scale_px_per_mm: f64) -> Result<(), String> {
         let positive = [
             ("dot_diameter_mm", self.dot_diameter_mm),
             ("dot_spacing_mm", self.dot_spacing_mm),
@@ -84,6 +93,13 @@ impl PatternInfo {
                 return Err(format!(
                     "pattern {}: {name} must be positive, got {v}",
                     self.label
+                ));
+            }
+            if let Some(v) = value.filter(|v| v * scale_px_per_mm > MAX_PRINT_FEATURE_PX) {
+                return Err(format!(
+                    "pattern {}: {name} {v} is {:.0} px at {scale_px_per_mm} px/mm; at most {MAX_PRINT_FEATURE_PX} px",
+                    self.label,
+                    v * scale_px_per_mm
                 ));
             }
         }
@@ -100,6 +116,16 @@ impl PatternInfo {
             return Err(format!(
                 "pattern {}: edge_softness_mm must be at least 0, got {s}",
                 self.label
+            ));
+        }
+        if let Some(s) = self
+            .edge_softness_mm
+            .filter(|s| s * scale_px_per_mm > MAX_EDGE_SOFTNESS_PX)
+        {
+            return Err(format!(
+                "pattern {}: edge_softness_mm {s} is {:.0} px at {scale_px_per_mm} px/mm; at most {MAX_EDGE_SOFTNESS_PX} px",
+                self.label,
+                s * scale_px_per_mm
             ));
         }
         if let Some(bad) = self
@@ -268,7 +294,8 @@ impl Manifest {
             }
             self.check_capture(run)?;
             if let Some(p) = &run.pattern {
-                p.check().map_err(|e| format!("run {}: {e}", run.id))?;
+                p.check(self.scale_px_per_mm)
+                    .map_err(|e| format!("run {}: {e}", run.id))?;
             }
         }
         Ok(())
@@ -391,6 +418,18 @@ mod tests {
         bad.runs[0].pattern.as_mut().unwrap().contrast = Some(1.5);
         let err = bad.validate().unwrap_err();
         assert!(err.contains("contrast") && err.contains("b-x5mm"), "{err}");
+        // Issue 36: sizes no print has, which the model renders at great cost.
+        let mut soft = m.clone();
+        soft.runs[0].pattern.as_mut().unwrap().edge_softness_mm = Some(65.0);
+        let err = soft.validate().unwrap_err();
+        assert!(
+            err.contains("edge_softness_mm") && err.contains("1690 px"),
+            "{err}"
+        );
+        let mut huge = m.clone();
+        huge.runs[0].pattern.as_mut().unwrap().dot_diameter_mm = Some(1e6);
+        let err = huge.validate().unwrap_err();
+        assert!(err.contains("dot_diameter_mm"), "{err}");
         let unknown = text.replace(r#""poisson""#, r#""dart""#);
         let err = serde_json::from_str::<Manifest>(&unknown)
             .unwrap_err()

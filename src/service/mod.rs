@@ -53,6 +53,10 @@ pub struct Service {
     /// Upload checks (which decode every frame) run one at a time: their memory is two frames
     /// of at most `uploads.max_frame_pixels`, however many clients upload at once.
     pub frame_checks: Arc<tokio::sync::Semaphore>,
+    /// Bytes staged by the uploads in progress, all together: each upload holds the quota
+    /// against the stored datasets and every upload's bytes so far, not its own alone (eight
+    /// concurrent uploads once stored 2.5x the quota).
+    pub uploads_in_flight: Arc<std::sync::atomic::AtomicU64>,
 }
 
 impl Service {
@@ -87,6 +91,7 @@ impl Service {
                 limits,
                 shutdown: tokio_util::sync::CancellationToken::new(),
                 frame_checks: Arc::new(tokio::sync::Semaphore::new(1)),
+                uploads_in_flight: Arc::default(),
             },
             recovery,
         ))

@@ -58,14 +58,23 @@ fn tiff_header(path: &Path) -> Result<crate::image::FrameInfo> {
 }
 
 impl RunStore {
-    /// Bytes the stored datasets take (every file under `DATA/datasets`, staged uploads
-    /// included): what the datasets quota is held against.
+    /// Bytes the stored datasets take (every file under `DATA/datasets` but the staging
+    /// folders of uploads in progress, which their uploads count): what the datasets quota is
+    /// held against.
     pub fn datasets_bytes(&self) -> Result<u64> {
         fn walk(dir: &Path) -> std::io::Result<u64> {
             let mut total = 0;
             for entry in std::fs::read_dir(dir)? {
                 let entry = entry?;
                 let kind = entry.file_type()?;
+                if kind.is_dir()
+                    && entry
+                        .file_name()
+                        .to_string_lossy()
+                        .starts_with(STAGING_PREFIX)
+                {
+                    continue;
+                }
                 if kind.is_dir() {
                     total += walk(&entry.path())?;
                 } else if kind.is_file() {

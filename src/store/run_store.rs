@@ -542,8 +542,9 @@ impl RunStore {
 }
 
 /// Deletes the index and recreates it from the folders under `data_dir` (`ffdic store
-/// rebuild`). Runs are indexed as their folders say, without recovery; do not run it while a
-/// daemon has the store open.
+/// rebuild`). Runs are indexed as their folders say, without recovery. It takes the data
+/// folder's lock as a daemon does: beside a live daemon (which would go on writing to an index
+/// no longer in the folder) it is refused with [`StoreError::Locked`], naming the holder.
 pub fn rebuild_index(data_dir: impl AsRef<Path>) -> Result<RebuildReport> {
     let root = data_dir.as_ref();
     if !root.join(RUNS).is_dir() && !root.join(DATASETS).is_dir() {
@@ -552,6 +553,7 @@ pub fn rebuild_index(data_dir: impl AsRef<Path>) -> Result<RebuildReport> {
             root.display()
         )));
     }
+    let _lock = lock_data_dir(root)?;
     remove_index(root)?;
     let mut conn = index::open(&root.join(index::FILE))?;
     let found = scan(root)?;
@@ -806,5 +808,21 @@ mod tests {
             Err(StoreError::NotFound(_))
         ));
         assert!(!dir.path().join("none").exists());
+    }
+
+    /// Issue 36: `ffdic store rebuild` ran beside a live daemon, which then wrote to an index
+    /// no longer in the folder.
+    #[test]
+    fn rebuild_is_refused_while_the_store_is_open() {
+        let dir = tempfile::tempdir().unwrap();
+        let (store, _) = RunStore::open(dir.path()).unwrap();
+        let e = rebuild_index(dir.path()).unwrap_err();
+        assert!(matches!(e, StoreError::Locked { .. }), "{e}");
+        assert!(
+            dir.path().join(index::FILE).exists(),
+            "the index is untouched"
+        );
+        drop(store);
+        assert!(rebuild_index(dir.path()).is_ok());
     }
 }

@@ -59,8 +59,16 @@ pub async fn upload(State(svc): State<Service>, mut form: Multipart) -> ApiResul
     })
     .await??;
     let mut pace = UploadPace::new(&svc.config.uploads);
-    let quota = (used_bytes, svc.config.datasets_quota_bytes);
-    let names = stage_parts(&mut form, &staging, &mut pace, quota).await?;
+    let quota_bytes = svc.config.datasets_quota_bytes;
+    let mut staged = StagedBytes::new(svc.uploads_in_flight.clone());
+    let names = stage_parts(
+        &mut form,
+        &staging,
+        &mut pace,
+        &mut staged,
+        (used_bytes, quota_bytes),
+    )
+    .await?;
     // One upload's frames are checked at a time (a check holds up to two decoded frames); the
     // permit travels with the check, which outlives this future if the client leaves.
     let permit = svc
@@ -75,6 +83,7 @@ pub async fn upload(State(svc): State<Service>, mut form: Multipart) -> ApiResul
     let _abandon_on_drop = abandoned.clone().drop_guard();
     let store = svc.store.clone();
     let limits = svc.config.uploads.frames();
+    let own_bytes = staged.bytes;
     let record = blocking(move || -> ApiResult<DatasetRecord> {
         let _permit = permit;
         let manifest = Manifest::read(staging.path())
@@ -100,6 +109,12 @@ pub async fn upload(State(svc): State<Service>, mut form: Multipart) -> ApiResul
             ));
         }
         let left = || abandoned.is_cancelled();
+        // Held again at the commit, against what is stored now: checks and commits run one at
+        // a time (the permit), so the stored datasets never pass the quota together.
+        let stored = store.datasets_bytes()?;
+        if stored + own_bytes > quota_bytes {
+            return Err(over_quota(stored, own_bytes, quota_bytes));
+        }
         check_frames(staging.path(), &manifest, limits, &left).map_err(|e| {
             if matches!(e, FrameCheckError::Abandoned) {
                 tracing::info!("an upload's client left during its check: nothing kept");
@@ -129,6 +144,7 @@ async fn stage_parts(
     form: &mut Multipart,
     staging: &crate::store::StagingDir,
     pace: &mut UploadPace,
+    staged: &mut StagedBytes,
     (used_bytes, quota_bytes): (u64, u64),
 ) -> ApiResult<Vec<String>> {
     let mut names: Vec<String> = Vec::new();
@@ -155,22 +171,21 @@ async fn stage_parts(
             return Err(ApiError::invalid("file", format!("'{name}' sent twice")));
         }
         let path = staging.path().join(&name);
+        let staging_error = |e| staging_failed(&path, e);
         let mut file = tokio::fs::File::create(&path)
             .await
-            .map_err(|e| ApiError::internal("staging an upload", e))?;
+            .map_err(staging_error)?;
         while let Some(chunk) = pace.within(field.chunk()).await?.map_err(multipart_error)? {
             pace.received(chunk.len());
-            // Refused as soon as it would pass the quota: the staging folder goes with it.
-            if used_bytes + pace.received_bytes > quota_bytes {
-                return Err(over_quota(used_bytes, pace.received_bytes, quota_bytes));
+            // Refused as soon as the stored datasets and every upload in progress would pass
+            // the quota: the staging folder goes with it.
+            let all_staged = staged.add(chunk.len() as u64);
+            if used_bytes + all_staged > quota_bytes {
+                return Err(over_quota(used_bytes, all_staged, quota_bytes));
             }
-            file.write_all(&chunk)
-                .await
-                .map_err(|e| ApiError::internal("staging an upload", e))?;
+            file.write_all(&chunk).await.map_err(staging_error)?;
         }
-        file.sync_all()
-            .await
-            .map_err(|e| ApiError::internal("staging an upload", e))?;
+        file.sync_all().await.map_err(staging_error)?;
         names.push(name);
     }
     if !names.iter().any(|n| n == "dataset.json") {
@@ -237,15 +252,50 @@ impl UploadPace {
     }
 }
 
-/// 507: the stored datasets and this upload would pass `datasets_quota_bytes`.
-fn over_quota(used_bytes: u64, received_bytes: u64, quota_bytes: u64) -> ApiError {
+/// A part that could not be written: 507 on a full disk (as for every store write), else 500.
+fn staging_failed(path: &std::path::Path, source: std::io::Error) -> ApiError {
+    crate::store::StoreError::Io {
+        path: path.to_owned(),
+        source,
+    }
+    .into()
+}
+
+/// 507: the stored datasets and the uploads in progress would pass `datasets_quota_bytes`.
+fn over_quota(used_bytes: u64, staged_bytes: u64, quota_bytes: u64) -> ApiError {
     ApiError::new(
         StatusCode::INSUFFICIENT_STORAGE,
         "datasets-quota",
         format!(
-            "the stored datasets take {used_bytes} bytes of the {quota_bytes}-byte quota (datasets_quota_bytes); this upload passed it after {received_bytes} bytes: delete datasets or raise the quota"
+            "the stored datasets take {used_bytes} bytes of the {quota_bytes}-byte quota (datasets_quota_bytes); with {staged_bytes} bytes of uploads in progress this upload would pass it: raise the quota"
         ),
     )
+}
+
+/// One upload's share of [`Service::uploads_in_flight`]: added as its pieces arrive, given
+/// back when the upload ends, whichever way (its bytes are then stored or removed).
+struct StagedBytes {
+    all: std::sync::Arc<std::sync::atomic::AtomicU64>,
+    bytes: u64,
+}
+
+impl StagedBytes {
+    fn new(all: std::sync::Arc<std::sync::atomic::AtomicU64>) -> Self {
+        Self { all, bytes: 0 }
+    }
+
+    /// Counts `n` more bytes of this upload; every upload's bytes so far, together.
+    fn add(&mut self, n: u64) -> u64 {
+        self.bytes += n;
+        self.all.fetch_add(n, std::sync::atomic::Ordering::SeqCst) + n
+    }
+}
+
+impl Drop for StagedBytes {
+    fn drop(&mut self) {
+        self.all
+            .fetch_sub(self.bytes, std::sync::atomic::Ordering::SeqCst);
+    }
 }
 
 #[utoipa::path(get, path = "/datasets", tag = "datasets",
