@@ -624,6 +624,18 @@ async fn a_dense_analysis_is_cancelled_within_a_second_and_a_full_lane_answers_4
     let r = submit(&api, &one, &light).await;
     assert_eq!(r.status(), 429);
     assert!(r.headers().contains_key("retry-after"), "{:?}", r.headers());
+    // A cancelled job gives its place back at once, not when the worker skips it.
+    let cancelled = queued.remove(0);
+    let r = client()
+        .post(format!("{cancelled}/cancel"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    let r = submit(&api, &one, &light).await;
+    assert_eq!(r.status(), 202);
+    let v: Value = r.json().await.unwrap();
+    queued.push(server.url(&format!("/jobs/{}", v["id"].as_str().unwrap())));
     // Deep in the correlation of its first scheme (its preparation takes about a second).
     tokio::time::sleep(Duration::from_secs(3)).await;
     let t0 = Instant::now();

@@ -72,6 +72,24 @@ pub type Work = Box<dyn FnOnce(&JobContext) -> Result<JobOutput, JobError> + Sen
 struct Queued {
     id: RunId,
     work: Work,
+    waiting: WaitingSlot,
+}
+
+/// A queued job's place in its lane's count of waiting jobs, given back once: by the worker
+/// that takes the job, or by a cancel before that (a cancelled job then no longer holds a slot
+/// while it waits to be skipped).
+#[derive(Clone)]
+struct WaitingSlot {
+    count: Arc<AtomicUsize>,
+    given_back: Arc<AtomicBool>,
+}
+
+impl WaitingSlot {
+    fn give_back(&self) {
+        if !self.given_back.swap(true, Ordering::SeqCst) {
+            self.count.fetch_sub(1, Ordering::SeqCst);
+        }
+    }
 }
 
 /// A run's live event channel, made by its first subscriber: 3,000 queued jobs once took a
@@ -91,6 +109,7 @@ struct Live {
     /// Set when the work has returned: a run still not terminal then is one whose end could not
     /// be written yet (a full disk), which cancel ends itself.
     work_done: Arc<AtomicBool>,
+    waiting: WaitingSlot,
 }
 
 /// The context a job runs in; also the experiment runner's [`RunSink`].
@@ -186,10 +205,9 @@ impl Jobs {
         for lane in LANES {
             let (tx, rx) = mpsc::channel::<Queued>();
             let shared = jobs.shared.clone();
-            let waiting = jobs.waiting[&lane].clone();
             let handle = std::thread::Builder::new()
                 .name(format!("jobs-{lane:?}").to_lowercase())
-                .spawn(move || worker(rx, shared, waiting))
+                .spawn(move || worker(rx, shared))
                 .expect("spawn a job worker");
             jobs.lanes.lock().expect("lanes").insert(lane, tx);
             jobs.workers.lock().expect("workers").push((lane, handle));
@@ -272,12 +290,17 @@ impl Jobs {
             waiting.fetch_sub(1, Ordering::SeqCst);
             return Ok((record, false));
         }
+        let slot = WaitingSlot {
+            count: waiting.clone(),
+            given_back: Arc::default(),
+        };
         self.shared.live.lock().expect("live").insert(
             record.id.clone(),
             Live {
                 cancel: CancellationToken::new(),
                 events: LiveEvents::default(),
                 work_done: Arc::new(AtomicBool::new(false)),
+                waiting: slot.clone(),
             },
         );
         let sent = self
@@ -289,12 +312,13 @@ impl Jobs {
                 tx.send(Queued {
                     id: record.id.clone(),
                     work,
+                    waiting: slot.clone(),
                 })
                 .is_ok()
             })
             .unwrap_or(false);
         if !sent {
-            waiting.fetch_sub(1, Ordering::SeqCst);
+            slot.give_back();
             let _ = store.set_status(
                 &record.id,
                 RunStatus::Failed,
@@ -324,6 +348,9 @@ impl Jobs {
         let work_done = match self.shared.live.lock().expect("live").get(id) {
             Some(live) => {
                 live.cancel.cancel();
+                if record.status == RunStatus::Queued {
+                    live.waiting.give_back();
+                }
                 live.work_done.load(Ordering::SeqCst)
             }
             // Not queued or running here: a run of another process's lifetime, left behind.
@@ -409,10 +436,10 @@ impl Shared {
     }
 }
 
-fn worker(rx: mpsc::Receiver<Queued>, shared: Shared, waiting: Arc<AtomicUsize>) {
+fn worker(rx: mpsc::Receiver<Queued>, shared: Shared) {
     let store = &shared.store;
     while let Ok(job) = rx.recv() {
-        waiting.fetch_sub(1, Ordering::SeqCst);
+        job.waiting.give_back();
         let Some((cancel, events, work_done)) = shared
             .live
             .lock()
