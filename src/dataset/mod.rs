@@ -12,7 +12,7 @@ pub use capture::sensor_readout;
 pub use frame_check::{check_frames, CheckedFrames, FrameCheckError, FrameLimits};
 pub use manifest::{
     is_plain_file_name, CameraInfo, DatasetError, DotProfile, Manifest, PatternInfo, Run,
-    StageMove, FORMAT,
+    StageMove, FORMAT, MAX_EDGE_SOFTNESS_PX, MAX_PRINT_FEATURE_PX,
 };
 pub use move_check::{
     check_stated_move, measure_move, MeasuredMove, MoveContradiction, MAX_RATIO, MIN_DIFFERENCE_PX,

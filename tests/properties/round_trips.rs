@@ -1,7 +1,10 @@
 //! 4. Round trips: a model through its TOML file, a dataset manifest through `dataset.json`.
 
 use super::config;
-use ffdic::dataset::{CameraInfo, DotProfile, Manifest, PatternInfo, Run, StageMove};
+use ffdic::dataset::{
+    CameraInfo, DotProfile, Manifest, PatternInfo, Run, StageMove, MAX_EDGE_SOFTNESS_PX,
+    MAX_PRINT_FEATURE_PX,
+};
 use ffdic::model::effects::{
     FillFactor, FixedPattern, IlluminationChange, LensDistortion, MotionBlur, PsfBlur,
     Quantization, Rotation, Scale, SensorNoise, StageError, StageMisalignment, Vignetting,
@@ -265,6 +268,15 @@ fn manifest(
                 let mut m = Manifest::new(&name, scale_px_per_mm);
                 m.camera = camera;
                 m.stage_repeatability_um = stage_repeatability_um;
+                // Sizes no print has at this scale are refused by `validate`: left out.
+                let mut runs = runs;
+                for p in runs.iter_mut().filter_map(|r| r.pattern.as_mut()) {
+                    let fits = |mm: &f64, max_px: f64| mm * scale_px_per_mm <= max_px;
+                    p.dot_diameter_mm = p.dot_diameter_mm.filter(|d| fits(d, MAX_PRINT_FEATURE_PX));
+                    p.dot_spacing_mm = p.dot_spacing_mm.filter(|d| fits(d, MAX_PRINT_FEATURE_PX));
+                    p.edge_softness_mm =
+                        p.edge_softness_mm.filter(|s| fits(s, MAX_EDGE_SOFTNESS_PX));
+                }
                 m.runs = runs;
                 m.extra = extra;
                 m
