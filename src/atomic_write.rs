@@ -5,9 +5,23 @@
 use std::io::Write;
 use std::path::Path;
 
+/// Whether a write is synced at once or left to one sync of the file system after a batch
+/// ([`sync_file_system`]): three thousand synced writes took 30 s.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Sync {
+    Now,
+    Batched,
+}
+
 /// Writes `bytes` to a hidden temporary file beside `path`, syncs it and renames it into place,
 /// so a crash never leaves a half-written file under the final name.
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    write_atomically_as(path, bytes, Sync::Now)
+}
+
+/// As [`write_atomically`], synced as `sync` says: unsynced, the file is whole under its final
+/// name yet only as durable as the next sync of its file system.
+pub fn write_atomically_as(path: &Path, bytes: &[u8], sync: Sync) -> std::io::Result<()> {
     let name = path.file_name().ok_or_else(|| {
         std::io::Error::new(std::io::ErrorKind::InvalidInput, "path has no file name")
     })?;
@@ -15,24 +29,11 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     let result = (|| {
         let mut file = std::fs::File::create(&tmp)?;
         file.write_all(bytes)?;
-        file.sync_all()?;
+        if sync == Sync::Now {
+            file.sync_all()?;
+        }
         std::fs::rename(&tmp, path)
     })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
-}
-
-/// As [`write_atomically`] but not synced: whole under its final name, yet only as durable as
-/// the next sync of its file system. For batches that sync once after many files
-/// ([`sync_file_system`]): three thousand synced writes took 30 s.
-pub fn write_atomically_unsynced(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let name = path.file_name().ok_or_else(|| {
-        std::io::Error::new(std::io::ErrorKind::InvalidInput, "path has no file name")
-    })?;
-    let tmp = path.with_file_name(format!(".{}.tmp", name.to_string_lossy()));
-    let result = std::fs::write(&tmp, bytes).and_then(|()| std::fs::rename(&tmp, path));
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }

@@ -100,6 +100,26 @@ fn manifest(runs: &[(&str, &str, &str, f64)], scale_px_per_mm: f64) -> Vec<u8> {
     .into_bytes()
 }
 
+/// `runs` runs over one pair of frames (`ref.tif`, `def.tif`), each stating a move of `dx_mm`
+/// at 13 px/mm.
+fn pair_form(
+    reference: &[u8],
+    deformed: &[u8],
+    runs: usize,
+    dx_mm: f64,
+) -> reqwest::multipart::Form {
+    let ids: Vec<String> = (0..runs).map(|k| format!("r{k}")).collect();
+    let rows: Vec<(&str, &str, &str, f64)> = ids
+        .iter()
+        .map(|id| (id.as_str(), "ref.tif", "def.tif", dx_mm))
+        .collect();
+    form(vec![
+        ("dataset.json".into(), manifest(&rows, 13.0)),
+        ("ref.tif".into(), reference.to_vec()),
+        ("def.tif".into(), deformed.to_vec()),
+    ])
+}
+
 fn form(parts: Vec<(String, Vec<u8>)>) -> reqwest::multipart::Form {
     parts
         .into_iter()
@@ -171,18 +191,7 @@ async fn a_manifest_past_the_run_cap_is_refused_naming_runs_and_many_runs_over_o
     let tmp = tempfile::tempdir().unwrap();
     let server = TestServer::start(small_config(tmp.path())).await;
     let (reference, deformed) = (texture_tiff(96, 80, 0), texture_tiff(96, 80, 13));
-    let upload = |runs: usize| {
-        let ids: Vec<String> = (0..runs).map(|k| format!("r{k}")).collect();
-        let rows: Vec<(&str, &str, &str, f64)> = ids
-            .iter()
-            .map(|id| (id.as_str(), "ref.tif", "def.tif", 1.0))
-            .collect();
-        form(vec![
-            ("dataset.json".into(), manifest(&rows, 13.0)),
-            ("ref.tif".into(), reference.clone()),
-            ("def.tif".into(), deformed.clone()),
-        ])
-    };
+    let upload = |runs: usize| pair_form(&reference, &deformed, runs, 1.0);
     // Issue 36's 2,000 runs over one pair.
     let r = client()
         .post(server.url("/datasets"))
@@ -310,7 +319,10 @@ async fn clients_that_never_read_hold_neither_every_slot_nor_their_own_for_long(
     }
     // Past the write stall timeout every stalled response has been cut short.
     tokio::time::sleep(Duration::from_millis(2_500)).await;
-    let got: Vec<usize> = futures_lite(held.into_iter().map(drain)).await;
+    let mut got = Vec::new();
+    for stream in held {
+        got.push(drain(stream).await);
+    }
     let cut = got.iter().filter(|&&n| n < frame_bytes).count();
     assert_eq!(
         cut,
@@ -319,17 +331,6 @@ async fn clients_that_never_read_hold_neither_every_slot_nor_their_own_for_long(
     );
     assert_health_within(&server.url(""), Duration::from_secs(1)).await;
     server.stop().await;
-}
-
-/// Awaits the futures one after another (they are independent reads of closed sockets).
-async fn futures_lite<F: std::future::Future<Output = usize>>(
-    futures: impl Iterator<Item = F>,
-) -> Vec<usize> {
-    let mut out = Vec::new();
-    for f in futures {
-        out.push(f.await);
-    }
-    out
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -424,14 +425,7 @@ async fn a_check_whose_client_left_stops_and_keeps_nothing() {
         );
         tokio::time::sleep(Duration::from_millis(100)).await;
     }
-    let listed: Vec<Value> = client()
-        .get(server.url("/datasets"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let listed: Vec<Value> = get_json(&server.url("/datasets")).await;
     assert!(listed.is_empty(), "{listed:?}");
     server.stop().await;
 }
@@ -489,14 +483,7 @@ async fn within_an_address_space_budget_bombs_large_uploads_and_slow_readers_lea
     let (a, b) = (texture_tiff(4096, 4096, 0), texture_tiff(4096, 4096, 26));
     let uploads: Vec<_> = (0..3)
         .map(|_| {
-            let f = form(vec![
-                (
-                    "dataset.json".into(),
-                    manifest(&[("r1", "ref.tif", "def.tif", 2.0)], 13.0),
-                ),
-                ("ref.tif".into(), a.clone()),
-                ("def.tif".into(), b.clone()),
-            ]);
+            let f = pair_form(&a, &b, 1, 2.0);
             client().post(server.url("/datasets")).multipart(f).send()
         })
         .collect();
@@ -516,7 +503,7 @@ async fn within_an_address_space_budget_bombs_large_uploads_and_slow_readers_lea
     assert!(health.await.unwrap() >= 100);
     drop(readers);
     assert_health_within(&api, Duration::from_secs(1)).await;
-    let status = std::fs::read_to_string(format!("/proc/{}/status", daemon_pid(&server))).unwrap();
+    let status = std::fs::read_to_string(format!("/proc/{}/status", server.child.id())).unwrap();
     for line in status
         .lines()
         .filter(|l| l.starts_with("VmHWM") || l.starts_with("VmPeak"))
@@ -530,11 +517,6 @@ async fn within_an_address_space_budget_bombs_large_uploads_and_slow_readers_lea
     );
     server.child.kill().unwrap();
     server.child.wait().unwrap();
-}
-
-/// The daemon's pid: the wrapper (`prlimit … --`) execs it, so it is the child's.
-fn daemon_pid(server: &ServeProcess) -> u32 {
-    server.child.id()
 }
 
 async fn futures_join<F>(futures: Vec<F>) -> Vec<F::Output>
@@ -554,16 +536,7 @@ where
 /// Uploads one pair of `w`x`h` textured frames (moved 13 px = 1 mm at 13 px/mm) as a dataset of
 /// `runs` runs over it; its id.
 async fn upload_pair(api: &str, (w, h): (usize, usize), runs: usize) -> String {
-    let ids: Vec<String> = (0..runs).map(|k| format!("r{k}")).collect();
-    let rows: Vec<(&str, &str, &str, f64)> = ids
-        .iter()
-        .map(|id| (id.as_str(), "ref.tif", "def.tif", 1.0))
-        .collect();
-    let f = form(vec![
-        ("dataset.json".into(), manifest(&rows, 13.0)),
-        ("ref.tif".into(), texture_tiff(w, h, 0)),
-        ("def.tif".into(), texture_tiff(w, h, 13)),
-    ]);
+    let f = pair_form(&texture_tiff(w, h, 0), &texture_tiff(w, h, 13), runs, 1.0);
     let r = client()
         .post(format!("{api}/datasets"))
         .multipart(f)
@@ -738,14 +711,7 @@ async fn eight_concurrent_uploads_store_no_more_than_the_quota() {
     let server = TestServer::start(config).await;
     let uploads: Vec<_> = (0..8)
         .map(|_| {
-            let f = form(vec![
-                (
-                    "dataset.json".into(),
-                    manifest(&[("r1", "ref.tif", "def.tif", 1.0)], 13.0),
-                ),
-                ("ref.tif".into(), reference.clone()),
-                ("def.tif".into(), deformed.clone()),
-            ]);
+            let f = pair_form(&reference, &deformed, 1, 1.0);
             client().post(server.url("/datasets")).multipart(f).send()
         })
         .collect();

@@ -53,7 +53,9 @@ pub fn decode_tiff_within(
         path: path.to_owned(),
         kind,
     };
-    if let Ok((w, h)) = Decoder::new(Cursor::new(bytes)).and_then(|mut d| d.dimensions()) {
+    // One look at the header: the size, refused before a pixel is decoded, and the colour type.
+    let mut probe = Decoder::new(Cursor::new(bytes));
+    if let Some((w, h)) = probe.as_mut().ok().and_then(|d| d.dimensions().ok()) {
         let (width, height) = (w as usize, h as usize);
         if width.saturating_mul(height) > max_pixels {
             return Err(ImageError::TooLarge {
@@ -64,9 +66,9 @@ pub fn decode_tiff_within(
             });
         }
     }
+    let colortype = probe.and_then(|mut d| d.colortype());
     let limits = decoder_limits(max_pixels);
     let open = |b| open_limited(b, &limits);
-    let colortype = Decoder::new(Cursor::new(bytes)).and_then(|mut d| d.colortype());
     match colortype {
         Ok(ColorType::Gray(8 | 16 | 32)) => {
             let mut decoder = open(bytes).map_err(decode_err)?;

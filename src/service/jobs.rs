@@ -269,30 +269,27 @@ impl Jobs {
         work: Work,
     ) -> Result<(RunRecord, bool), QueueError> {
         let waiting = &self.waiting[&lane];
-        // Reserved before the run is written, so concurrent submissions cannot pass the limit.
+        // Reserved before the run is written, so concurrent submissions cannot pass the limit;
+        // given back on every way out but a queued job's.
         let before = waiting.fetch_add(1, Ordering::SeqCst);
+        let slot = WaitingSlot {
+            count: waiting.clone(),
+            given_back: Arc::default(),
+        };
         if before >= self.max_waiting {
-            waiting.fetch_sub(1, Ordering::SeqCst);
+            slot.give_back();
             return Err(QueueError::Full {
                 lane,
                 queued: before,
             });
         }
         let store = &self.shared.store;
-        let (record, created) = match store.create_run(kind, request, idempotency_key, dataset_id) {
-            Ok(made) => made,
-            Err(e) => {
-                waiting.fetch_sub(1, Ordering::SeqCst);
-                return Err(e.into());
+        let record = match store.create_run(kind, request, idempotency_key, dataset_id) {
+            Ok((record, true)) => record,
+            other => {
+                slot.give_back();
+                return Ok(other?);
             }
-        };
-        if !created {
-            waiting.fetch_sub(1, Ordering::SeqCst);
-            return Ok((record, false));
-        }
-        let slot = WaitingSlot {
-            count: waiting.clone(),
-            given_back: Arc::default(),
         };
         self.shared.live.lock().expect("live").insert(
             record.id.clone(),

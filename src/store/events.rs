@@ -3,6 +3,7 @@
 
 use super::error::{io, Result, StoreError};
 use super::record::Event;
+use crate::atomic_write::Sync;
 use std::fs::OpenOptions;
 use std::io::{Read, Seek, SeekFrom, Write};
 use std::path::Path;
@@ -12,13 +13,6 @@ pub const FILE: &str = "events.jsonl";
 /// Appends `event` as one line and syncs the file.
 pub fn append(path: &Path, event: &Event) -> Result<()> {
     append_with(path, event, Sync::Now)
-}
-
-/// Whether a write is synced at once or left to one sync after a batch.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Sync {
-    Now,
-    Batched,
 }
 
 /// Appends `event` as one line, synced as `sync` says.

@@ -2,7 +2,7 @@
 
 use super::error::{io, Result, StoreError};
 use super::paths::safe_relative_path;
-use crate::atomic_write::write_atomically;
+use crate::atomic_write::{write_atomically_as, Sync};
 use serde::{de::DeserializeOwned, Serialize};
 use std::path::Path;
 
@@ -28,9 +28,14 @@ pub fn read_json<T: DeserializeOwned>(path: &Path) -> Result<Option<T>> {
 
 /// Writes `value` as pretty JSON, atomically (temporary file, fsync, rename).
 pub fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
+    write_json_as(path, value, Sync::Now)
+}
+
+/// As [`write_json`], synced as `sync` says (a batch syncs once after).
+pub fn write_json_as<T: Serialize>(path: &Path, value: &T, sync: Sync) -> Result<()> {
     let mut text = serde_json::to_vec_pretty(value).expect("store records always serialise");
     text.push(b'\n');
-    write_atomically(path, &text).map_err(io(path))
+    write_atomically_as(path, &text, sync).map_err(io(path))
 }
 
 /// Syncs a folder, so the renames and creations inside it survive a power cut.

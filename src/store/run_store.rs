@@ -7,11 +7,12 @@
 
 use super::error::{io, Result, StoreError};
 use super::events;
-use super::files::{read_json, remove_dir, sync_dir, visible_subdirs, write_json};
+use super::files::{read_json, remove_dir, sync_dir, visible_subdirs, write_json, write_json_as};
 use super::ids::{DatasetId, RunId};
 use super::index;
 use super::paths::safe_relative_path;
 use super::record::{now_rfc3339, DatasetRecord, Event, RunKind, RunRecord, RunStatus};
+use crate::atomic_write::Sync;
 use crate::run_event::EventKind;
 use rusqlite::Connection;
 use serde_json::{json, Value};
@@ -261,7 +262,7 @@ impl RunStore {
     /// (`started`, `succeeded`, `failed` or `cancelled`). After a terminal status nothing more can
     /// be written to the run: its terminal event is its last.
     pub fn set_status(&self, id: &RunId, next: RunStatus, message: &str) -> Result<RunRecord> {
-        let rec = self.transition(id, next, message, events::Sync::Now)?;
+        let rec = self.transition(id, next, message, Sync::Now)?;
         if let Err(e) = index::upsert_run(&self.db(), &rec) {
             tracing::warn!(run = %rec.id, "index not updated: {e}");
         }
@@ -280,7 +281,7 @@ impl RunStore {
                 Ok(r) if r.status == RunStatus::Queued => {}
                 _ => continue,
             }
-            match self.transition(id, next, message, events::Sync::Batched) {
+            match self.transition(id, next, message, Sync::Batched) {
                 Ok(rec) => ended.push(rec),
                 Err(StoreError::Finished(_) | StoreError::Transition { .. }) => {}
                 Err(e) => return Err(e),
@@ -308,7 +309,7 @@ impl RunStore {
         id: &RunId,
         next: RunStatus,
         message: &str,
-        sync: events::Sync,
+        sync: Sync,
     ) -> Result<RunRecord> {
         let slot = self.slot(id);
         let mut slot = lock(&slot);
@@ -347,15 +348,7 @@ impl RunStore {
             &now,
             sync,
         )?;
-        let path = self.run_dir(&rec.id).join(RUN_FILE);
-        match sync {
-            events::Sync::Now => write_json(&path, &rec)?,
-            events::Sync::Batched => {
-                let mut text = serde_json::to_vec_pretty(&rec).expect("a run record serialises");
-                text.push(b'\n');
-                crate::atomic_write::write_atomically_unsynced(&path, &text).map_err(io(&path))?;
-            }
-        }
+        write_json_as(&self.run_dir(&rec.id).join(RUN_FILE), &rec, sync)?;
         if next.is_terminal() {
             drop(slot);
             self.forget_slot(id);
@@ -425,7 +418,7 @@ impl RunStore {
             message,
             data,
             &now_rfc3339(),
-            events::Sync::Now,
+            Sync::Now,
         )
     }
 
@@ -464,7 +457,6 @@ impl RunStore {
         Ok(path)
     }
 
-    /// The bytes of `rel` inside run `id`'s folder; `NotFound` when there is no such file.
     /// A file of run `id` opened for reading, and its length: for serving it piece by piece (a
     /// client that reads slowly then holds a piece of it, not the whole file).
     pub fn open_file(&self, id: &RunId, rel: &str) -> Result<(std::fs::File, u64)> {
@@ -485,15 +477,16 @@ impl RunStore {
         Ok((file, meta.len()))
     }
 
+    /// The bytes of `rel` inside run `id`'s folder; `NotFound` when there is no such file.
     pub fn read_file(&self, id: &RunId, rel: &str) -> Result<Vec<u8>> {
-        let path = self.run_dir(id).join(safe_relative_path(rel)?);
-        match std::fs::read(&path) {
-            Ok(bytes) => Ok(bytes),
-            Err(e) if matches!(e.kind(), std::io::ErrorKind::NotFound) || path.is_dir() => Err(
-                StoreError::NotFound(format!("run {id} has no file '{rel}'")),
-            ),
-            Err(e) => Err(StoreError::Io { path, source: e }),
-        }
+        use std::io::Read;
+        let (mut file, len) = self.open_file(id, rel)?;
+        let mut bytes = Vec::with_capacity(len as usize);
+        file.read_to_end(&mut bytes).map_err(|e| StoreError::Io {
+            path: self.run_dir(id).join(rel),
+            source: e,
+        })?;
+        Ok(bytes)
     }
 
     /// Builds and appends an event; the caller holds the run's lock.
@@ -507,7 +500,7 @@ impl RunStore {
         message: &str,
         data: Value,
         at: &str,
-        sync: events::Sync,
+        sync: Sync,
     ) -> Result<Event> {
         let path = self.run_dir(&rec.id).join(events::FILE);
         let last = match slot.last_event {

@@ -58,17 +58,9 @@ pub async fn upload(State(svc): State<Service>, mut form: Multipart) -> ApiResul
         Ok((store.stage_dataset()?, store.datasets_bytes()?))
     })
     .await??;
-    let mut pace = UploadPace::new(&svc.config.uploads);
+    let mut pace = UploadPace::new(&svc.config.uploads, svc.uploads_in_flight.clone());
     let quota_bytes = svc.config.datasets_quota_bytes;
-    let mut staged = StagedBytes::new(svc.uploads_in_flight.clone());
-    let names = stage_parts(
-        &mut form,
-        &staging,
-        &mut pace,
-        &mut staged,
-        (used_bytes, quota_bytes),
-    )
-    .await?;
+    let names = stage_parts(&mut form, &staging, &mut pace, (used_bytes, quota_bytes)).await?;
     // One upload's frames are checked at a time (a check holds up to two decoded frames); the
     // permit travels with the check, which outlives this future if the client leaves.
     let permit = svc
@@ -83,7 +75,7 @@ pub async fn upload(State(svc): State<Service>, mut form: Multipart) -> ApiResul
     let _abandon_on_drop = abandoned.clone().drop_guard();
     let store = svc.store.clone();
     let limits = svc.config.uploads.frames();
-    let own_bytes = staged.bytes;
+    let own_bytes = pace.received_bytes;
     let record = blocking(move || -> ApiResult<DatasetRecord> {
         let _permit = permit;
         let manifest = Manifest::read(staging.path())
@@ -144,7 +136,6 @@ async fn stage_parts(
     form: &mut Multipart,
     staging: &crate::store::StagingDir,
     pace: &mut UploadPace,
-    staged: &mut StagedBytes,
     (used_bytes, quota_bytes): (u64, u64),
 ) -> ApiResult<Vec<String>> {
     let mut names: Vec<String> = Vec::new();
@@ -176,10 +167,9 @@ async fn stage_parts(
             .await
             .map_err(staging_error)?;
         while let Some(chunk) = pace.within(field.chunk()).await?.map_err(multipart_error)? {
-            pace.received(chunk.len());
             // Refused as soon as the stored datasets and every upload in progress would pass
             // the quota: the staging folder goes with it.
-            let all_staged = staged.add(chunk.len() as u64);
+            let all_staged = pace.received(chunk.len());
             if used_bytes + all_staged > quota_bytes {
                 return Err(over_quota(used_bytes, all_staged, quota_bytes));
             }
@@ -204,24 +194,35 @@ async fn stage_parts(
 struct UploadPace {
     started: tokio::time::Instant,
     received_bytes: u64,
+    /// Every upload's bytes so far ([`Service::uploads_in_flight`]): this one's are added as
+    /// they arrive and given back when it ends, whichever way (they are then stored or removed).
+    all_in_flight: std::sync::Arc<std::sync::atomic::AtomicU64>,
     min_bytes_per_s: u64,
     grace: std::time::Duration,
     deadline: std::time::Duration,
 }
 
 impl UploadPace {
-    fn new(limits: &crate::service::UploadLimits) -> Self {
+    fn new(
+        limits: &crate::service::UploadLimits,
+        all_in_flight: std::sync::Arc<std::sync::atomic::AtomicU64>,
+    ) -> Self {
         Self {
             started: tokio::time::Instant::now(),
             received_bytes: 0,
+            all_in_flight,
             min_bytes_per_s: limits.min_bytes_per_s.max(1),
             grace: std::time::Duration::from_millis(limits.grace_ms),
             deadline: std::time::Duration::from_millis(limits.deadline_ms),
         }
     }
 
-    fn received(&mut self, bytes: usize) {
+    /// Counts `bytes` more of this upload; every upload's bytes so far, together.
+    fn received(&mut self, bytes: usize) -> u64 {
         self.received_bytes += bytes as u64;
+        self.all_in_flight
+            .fetch_add(bytes as u64, std::sync::atomic::Ordering::SeqCst)
+            + bytes as u64
     }
 
     /// When the next piece is due: the bytes so far cover the pace until then.
@@ -272,29 +273,11 @@ fn over_quota(used_bytes: u64, staged_bytes: u64, quota_bytes: u64) -> ApiError 
     )
 }
 
-/// One upload's share of [`Service::uploads_in_flight`]: added as its pieces arrive, given
-/// back when the upload ends, whichever way (its bytes are then stored or removed).
-struct StagedBytes {
-    all: std::sync::Arc<std::sync::atomic::AtomicU64>,
-    bytes: u64,
-}
-
-impl StagedBytes {
-    fn new(all: std::sync::Arc<std::sync::atomic::AtomicU64>) -> Self {
-        Self { all, bytes: 0 }
-    }
-
-    /// Counts `n` more bytes of this upload; every upload's bytes so far, together.
-    fn add(&mut self, n: u64) -> u64 {
-        self.bytes += n;
-        self.all.fetch_add(n, std::sync::atomic::Ordering::SeqCst) + n
-    }
-}
-
-impl Drop for StagedBytes {
+impl Drop for UploadPace {
+    /// This upload's bytes leave the uploads in flight (they are stored now, or removed).
     fn drop(&mut self) {
-        self.all
-            .fetch_sub(self.bytes, std::sync::atomic::Ordering::SeqCst);
+        self.all_in_flight
+            .fetch_sub(self.received_bytes, std::sync::atomic::Ordering::SeqCst);
     }
 }
 
