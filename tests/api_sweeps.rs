@@ -176,6 +176,20 @@ async fn bad_sweeps_are_refused_naming_the_field_and_queue_nothing() {
             with("/axes/dot_diameter_px", json!([0.1])),
             "dot_diameter_px",
         ),
+        // Issue 36: sub-pixel dots were accepted and every task failed at once.
+        (
+            with("/axes/dot_diameter_px", json!([0.5])),
+            "dot_diameter_px",
+        ),
+        (
+            {
+                let mut s = smoke_spec();
+                s["axes"]["patterns"] = json!(["a"]);
+                s["camera"]["scale_px_per_mm"] = json!(0.5);
+                s
+            },
+            "patterns",
+        ),
         (with("/axes/subpixel_x", json!([2.0])), "subpixel_x"),
         (with("/axes/schemes", json!(["ff12"])), "schemes"),
         (with("/dic/subset_px", json!(30)), "dic"),

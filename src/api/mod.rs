@@ -6,6 +6,7 @@ mod auth;
 mod guard;
 mod json;
 mod openapi;
+mod page;
 mod problem;
 mod request_schemas;
 mod routes;
@@ -117,15 +118,16 @@ fn cors_layer(origins: &[String]) -> Option<CorsLayer> {
     Some(
         CorsLayer::new()
             .allow_origin(AllowOrigin::list(origins))
-            .allow_methods([Method::GET, Method::POST, Method::PATCH])
+            .allow_methods([Method::GET, Method::POST, Method::PATCH, Method::DELETE])
             .allow_headers([
                 axum::http::header::CONTENT_TYPE,
                 axum::http::header::AUTHORIZATION,
                 HeaderName::from_static("idempotency-key"),
                 HeaderName::from_static("last-event-id"),
             ])
-            // A created job or dataset is named by Location; a page must be able to read it.
-            .expose_headers([axum::http::header::LOCATION]),
+            // A created job or dataset is named by Location, a list's next page by Link; a page must
+            // be able to read both.
+            .expose_headers([axum::http::header::LOCATION, axum::http::header::LINK]),
     )
 }
 

@@ -184,6 +184,12 @@ impl From<StoreError> for ApiError {
             StoreError::Finished(_) | StoreError::Transition { .. } | StoreError::Conflict(..) => {
                 Self::conflict(e.to_string())
             }
+            StoreError::InUse(_) => Self::new(StatusCode::CONFLICT, "in-use", e.to_string()),
+            StoreError::QuotaFull { .. } => Self::new(
+                StatusCode::INSUFFICIENT_STORAGE,
+                "quota-full",
+                e.to_string(),
+            ),
             StoreError::Dataset(_) => Self::new(
                 StatusCode::UNPROCESSABLE_ENTITY,
                 "invalid-dataset",

@@ -119,6 +119,30 @@ pub struct ExperimentPlan {
     pub seed: u64,
 }
 
+impl ExperimentPlan {
+    /// Frames the plan captures: each pattern and repeat takes a reference, its static frames
+    /// and one frame per move, at full resolution and in each hardware scheme.
+    pub fn frame_count(&self) -> usize {
+        frame_count(
+            self.static_frames,
+            self.moves.len(),
+            self.patterns.len(),
+            self.repeats,
+            self.hardware_schemes.len(),
+        )
+    }
+}
+
+fn frame_count(
+    static_frames: usize,
+    moves: usize,
+    patterns: usize,
+    repeats: usize,
+    hardware_schemes: usize,
+) -> usize {
+    (1 + static_frames + moves) * patterns * repeats * (1 + hardware_schemes)
+}
+
 /// Limits that keep one request from occupying the bench for days.
 pub const MAX_MOVES: usize = 200;
 /// Frames one experiment may capture (patterns × repeats × (reference, static frames, moves)).
@@ -158,10 +182,13 @@ impl ExperimentRequest {
             ));
         }
         let (schemes, hardware_schemes) = self.check_schemes(limits)?;
-        let frames = (1 + self.static_frames + moves.len())
-            * patterns.len()
-            * self.repeats
-            * (1 + hardware_schemes.len());
+        let frames = frame_count(
+            self.static_frames,
+            moves.len(),
+            patterns.len(),
+            self.repeats,
+            hardware_schemes.len(),
+        );
         if frames > MAX_FRAMES {
             return Err(field_error(
                 // The hardware schemes are to blame when the frames would fit without them.

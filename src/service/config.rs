@@ -36,6 +36,14 @@ pub struct DaemonConfig {
     /// refused (507) before anything is kept.
     #[serde(default = "default_datasets_quota_bytes")]
     pub datasets_quota_bytes: u64,
+    /// Most bytes all run folders may take together (experiments' frames, sweeps' results,
+    /// every run's files): an experiment whose frames would pass it is refused (507) when
+    /// submitted, and a run's write that would pass it fails the run.
+    #[serde(default = "default_runs_quota_bytes")]
+    pub runs_quota_bytes: u64,
+    /// Which ended runs are kept: deleted by age and count at start and after every job.
+    #[serde(default)]
+    pub retention: crate::store::Retention,
     /// Host names (besides loopback names and IP literals) this daemon answers to; any other
     /// `Host` header is refused, so a DNS-rebinding page cannot reach it.
     #[serde(default)]
@@ -66,6 +74,10 @@ fn default_max_upload_bytes() -> usize {
 
 fn default_datasets_quota_bytes() -> u64 {
     50 * 1024 * 1024 * 1024
+}
+
+fn default_runs_quota_bytes() -> u64 {
+    100 * 1024 * 1024 * 1024
 }
 
 /// Timeouts and limits of the HTTP server, so neither a slow nor a silent client can hold the

@@ -170,7 +170,12 @@ struct Shared {
     kept: KeptResults,
     /// Set when the server begins to stop: no job starts after it.
     stopping: Arc<AtomicBool>,
+    /// Called by a lane's worker after each job it ran has ended (the store's retention).
+    after_each: Arc<OnceLock<AfterEachJob>>,
 }
+
+/// What a lane's worker does after each job it ran (see [`Jobs::after_each_job`]).
+pub type AfterEachJob = Box<dyn Fn() + Send + Sync>;
 
 pub struct Jobs {
     shared: Shared,
@@ -196,6 +201,7 @@ impl Jobs {
                 live: Arc::new(Mutex::new(HashMap::new())),
                 kept: Arc::new(Mutex::new(None)),
                 stopping: Arc::new(AtomicBool::new(false)),
+                after_each: Arc::default(),
             },
             lanes: Mutex::new(HashMap::new()),
             waiting: LANES.iter().map(|&l| (l, Arc::default())).collect(),
@@ -217,6 +223,13 @@ impl Jobs {
 
     pub fn store(&self) -> &Arc<RunStore> {
         &self.shared.store
+    }
+
+    /// Has each lane's worker call `f` after every job it ran has ended (once set, for good).
+    pub fn after_each_job(&self, f: AfterEachJob) {
+        if self.shared.after_each.set(f).is_err() {
+            tracing::warn!("after_each_job set twice: the first stays");
+        }
     }
 
     /// From now on, keeps every successful job's typed result until [`Jobs::take_result`]
@@ -500,6 +513,9 @@ fn worker(rx: mpsc::Receiver<Queued>, shared: Shared) {
                 tracing::warn!(run = %job.id, "cannot record the end ({status:?}): {e}");
                 record_end_when_possible(shared.clone(), job.id, status, message);
             }
+        }
+        if let Some(after) = shared.after_each.get() {
+            after();
         }
     }
 }

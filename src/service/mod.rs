@@ -26,7 +26,7 @@ pub use work::{AnalysisRequest, CompareRequest};
 use crate::experiment::{
     BenchHandle, BenchHardware, BenchLimits, BenchTimeouts, ExperimentRequest, EXPOSURE_US,
 };
-use crate::store::{DatasetId, RecoveryReport, RunRecord, RunStore, StoreError};
+use crate::store::{DatasetId, RecoveryReport, Retention, RunRecord, RunStore, StoreError};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -57,7 +57,13 @@ pub struct Service {
     /// against the stored datasets and every upload's bytes so far, not its own alone (eight
     /// concurrent uploads once stored 2.5x the quota).
     pub uploads_in_flight: Arc<std::sync::atomic::AtomicU64>,
+    /// Bytes of one full-resolution 16-bit frame of the camera as written (TIFF): what an
+    /// experiment's frames are estimated from when it is submitted.
+    pub frame_bytes: u64,
 }
+
+/// A 16-bit TIFF's bytes beyond its pixels (header, one strip's tags), at most.
+const TIFF_OVERHEAD_BYTES: u64 = 4096;
 
 impl Service {
     /// Opens the store (recovering runs a crash left unfinished), starts the bench actor on
@@ -67,7 +73,9 @@ impl Service {
         hardware: BenchHardware,
     ) -> Result<(Self, RecoveryReport), ServiceError> {
         let (store, recovery) = RunStore::open(&config.data_dir)?;
+        store.set_runs_quota(config.runs_quota_bytes);
         let store = Arc::new(store);
+        apply_retention(&store, &config.retention);
         let limits = Arc::new(BenchLimits {
             scale_px_per_mm: config.bench.scale_px_per_mm,
             target_field_mm: hardware.targets.as_ref().map(|t| t.field_mm()),
@@ -80,8 +88,15 @@ impl Service {
                 .unwrap_or(EXPOSURE_US),
             hardware_schemes: hardware.camera.info().hardware_schemes.clone(),
         });
+        let info = hardware.camera.info();
+        let frame_bytes =
+            2 * u64::from(info.sensor_width) * u64::from(info.sensor_height) + TIFF_OVERHEAD_BYTES;
         let bench = BenchHandle::spawn(hardware, Duration::from_secs(30));
         let jobs = Jobs::with_queue_limit(store.clone(), config.jobs.max_queued_per_lane);
+        if !config.retention.keeps_everything() {
+            let (store, retention) = (store.clone(), config.retention.clone());
+            jobs.after_each_job(Box::new(move || apply_retention(&store, &retention)));
+        }
         Ok((
             Self {
                 config: Arc::new(config),
@@ -92,6 +107,7 @@ impl Service {
                 shutdown: tokio_util::sync::CancellationToken::new(),
                 frame_checks: Arc::new(tokio::sync::Semaphore::new(1)),
                 uploads_in_flight: Arc::default(),
+                frame_bytes,
             },
             recovery,
         ))
@@ -106,6 +122,31 @@ impl Service {
         }
     }
 
+    /// `QuotaFull` when the files under `folder` would take the stored datasets, with the
+    /// uploads in progress, past `datasets_quota_bytes`: an experiment's frames are registered
+    /// as a dataset only within the quota uploads are held to.
+    pub fn check_datasets_room(&self, folder: &std::path::Path) -> Result<(), StoreError> {
+        let needed_bytes = crate::store::folder_bytes(folder).map_err(|source| StoreError::Io {
+            path: folder.into(),
+            source,
+        })?;
+        let used_bytes = self.store.datasets_bytes()?
+            + self
+                .uploads_in_flight
+                .load(std::sync::atomic::Ordering::SeqCst);
+        let quota_bytes = self.config.datasets_quota_bytes;
+        if used_bytes.saturating_add(needed_bytes) > quota_bytes {
+            return Err(StoreError::QuotaFull {
+                what: "the stored datasets",
+                setting: "datasets_quota_bytes",
+                used_bytes,
+                quota_bytes,
+                needed_bytes,
+            });
+        }
+        Ok(())
+    }
+
     /// Queues an experiment on the bench lane (validated first: a bad request queues nothing).
     pub fn submit_experiment(
         &self,
@@ -116,6 +157,10 @@ impl Service {
         if !self.limits.has_stage() {
             return Err(SubmitError::NoStage);
         }
+        // Every frame at full resolution (the hardware schemes' are smaller): an upper bound.
+        // The run's writes are held to the quota as well; this refuses before the bench moves.
+        self.store
+            .check_runs_room(plan.frame_count() as u64 * self.frame_bytes)?;
         let work = work::experiment(self.clone(), plan);
         let body = serde_json::to_value(request).expect("a request serialises");
         Ok(self.jobs.submit(
@@ -241,6 +286,20 @@ impl Service {
         self.begin_stop();
         self.jobs.join_workers(grace);
         let _ = self.bench.stop_stage(crate::experiment::Owner::Direct);
+    }
+}
+
+/// Deletes the ended runs `retention` does not keep (at start and after every job), logging
+/// what went.
+fn apply_retention(store: &RunStore, retention: &Retention) {
+    match store.prune(retention, std::time::SystemTime::now()) {
+        Ok(p) if p.runs.is_empty() => {}
+        Ok(p) => tracing::info!(
+            runs = p.runs.len(),
+            bytes = p.bytes,
+            "retention deleted ended runs ({retention:?})"
+        ),
+        Err(e) => tracing::warn!("retention not applied: {e}"),
     }
 }
 

@@ -226,6 +226,15 @@ impl Service {
             saved == ModelSaved::Created,
         ))
     }
+
+    /// Deletes stored model `name` (`Reserved` for an embedded one; the store's `InUse` while a
+    /// queued or running run names it). Its name stays its text's: see `ModelFolder::retire`.
+    pub fn delete_model(&self, name: &str) -> Result<(), ModelStoreError> {
+        if embedded_model(name).is_some() {
+            return Err(ModelStoreError::Reserved(name.to_string()));
+        }
+        Ok(self.store.delete_model(name)?)
+    }
 }
 
 fn parse(text: &str) -> Result<ModelConfig, ModelStoreError> {

@@ -115,6 +115,9 @@ pub fn experiment(service: Service, plan: ExperimentPlan) -> Work {
             other => JobError::failed(other),
         })?;
         drop(lease);
+        service
+            .check_datasets_room(&outcome.frames_dir)
+            .map_err(JobError::failed)?;
         // The frames are also a dataset of their own, so compare and diagnose read captured and
         // imported measurements alike.
         let dataset = ctx

@@ -10,6 +10,7 @@ use super::index;
 use super::paths::safe_relative_path;
 use super::record::{now_rfc3339, DatasetRecord, DatasetSource};
 use super::run_store::{RunStore, DATASETS, DATASET_RECORD, STAGING_PREFIX};
+use super::usage::tree_bytes;
 use crate::dataset::{DatasetError, Manifest};
 use std::path::{Path, PathBuf};
 
@@ -62,33 +63,9 @@ impl RunStore {
     /// folders of uploads in progress, which their uploads count): what the datasets quota is
     /// held against.
     pub fn datasets_bytes(&self) -> Result<u64> {
-        fn walk(dir: &Path) -> std::io::Result<u64> {
-            let mut total = 0;
-            for entry in std::fs::read_dir(dir)? {
-                let entry = entry?;
-                let kind = entry.file_type()?;
-                if kind.is_dir()
-                    && entry
-                        .file_name()
-                        .to_string_lossy()
-                        .starts_with(STAGING_PREFIX)
-                {
-                    continue;
-                }
-                if kind.is_dir() {
-                    total += walk(&entry.path())?;
-                } else if kind.is_file() {
-                    total += entry.metadata()?.len();
-                }
-            }
-            Ok(total)
-        }
         let dir = self.data_dir().join(DATASETS);
-        match walk(&dir) {
-            Ok(n) => Ok(n),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(0),
-            Err(e) => Err(io(dir)(e)),
-        }
+        let in_progress = |name: &str| name.starts_with(STAGING_PREFIX);
+        tree_bytes(&dir, &in_progress).map_err(io(dir))
     }
 
     /// A fresh, empty staging folder for a dataset being uploaded or imported.
@@ -238,7 +215,16 @@ impl RunStore {
 
     /// Every stored dataset, newest first.
     pub fn list_datasets(&self) -> Result<Vec<DatasetRecord>> {
-        index::list_datasets(&self.db())
+        index::list_datasets(&self.db(), usize::MAX, None)
+    }
+
+    /// A page of [`RunStore::list_datasets`]: at most `limit` after `after`.
+    pub fn list_datasets_page(
+        &self,
+        limit: usize,
+        after: Option<&index::PageAfter>,
+    ) -> Result<Vec<DatasetRecord>> {
+        index::list_datasets(&self.db(), limit, after)
     }
 }
 

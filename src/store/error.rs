@@ -5,7 +5,8 @@ use std::path::PathBuf;
 
 /// What can go wrong in the run store. The HTTP layer maps these to status codes, so each variant
 /// is one kind of cause: a caller mistake (`BadId`, `BadPath`, `NotFound`, `Finished`,
-/// `Transition`, `Conflict`, `Dataset`) or the machine (`Io`, `Sqlite`, `Corrupt`).
+/// `Transition`, `Conflict`, `InUse`, `Dataset`), a limit (`QuotaFull`) or the machine (`Io`,
+/// `Sqlite`, `Corrupt`).
 #[derive(Debug, thiserror::Error)]
 pub enum StoreError {
     #[error("cannot access {path}: {source}")]
@@ -32,6 +33,19 @@ pub enum StoreError {
     Dataset(#[from] DatasetError),
     #[error("conflict: {0}")]
     Conflict(String),
+    /// What a caller asked to delete is still used: a run not yet ended, a dataset or a model a
+    /// queued or running run names. Nothing was deleted.
+    #[error("{0}")]
+    InUse(String),
+    /// A write that would take `what` past its quota; nothing was written.
+    #[error("{what} take {used_bytes} bytes of the {quota_bytes}-byte quota ({setting}); {needed_bytes} more bytes would pass it: delete finished runs, set a retention or raise the quota")]
+    QuotaFull {
+        what: &'static str,
+        setting: &'static str,
+        used_bytes: u64,
+        quota_bytes: u64,
+        needed_bytes: u64,
+    },
     /// An event a caller may not write: a status change (`queued`, `started`, a terminal kind),
     /// which only `set_status` writes (the terminal one seals the run).
     #[error("bad event: {0}")]

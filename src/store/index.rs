@@ -2,7 +2,7 @@
 //! record whole (JSON) plus the columns queries need, and is rebuilt from the folders at will.
 
 use super::error::{Result, StoreError};
-use super::ids::RunId;
+use super::ids::{DatasetId, RunId};
 use super::record::{DatasetRecord, RunKind, RunRecord, RunStatus};
 use rusqlite::{params, Connection, OptionalExtension};
 use std::path::Path;
@@ -105,24 +105,91 @@ fn decode<T: serde::de::DeserializeOwned>(text: &str) -> Result<T> {
     })
 }
 
-/// Runs newest first, optionally of one status and kind, at most `limit`.
+/// Where a page of a newest-first list begins: after the item with this `created_at` and `id`
+/// (the last one of the page before). Deleting items between two pages moves nothing.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PageAfter {
+    pub created_at: String,
+    pub id: String,
+}
+
+/// Runs newest first, optionally of one status and kind, at most `limit`, beginning after
+/// `after`.
 pub fn list_runs(
     conn: &Connection,
     status: Option<RunStatus>,
     kind: Option<RunKind>,
     limit: usize,
+    after: Option<&PageAfter>,
 ) -> Result<Vec<RunRecord>> {
     let limit = i64::try_from(limit).unwrap_or(i64::MAX);
     let mut stmt = conn.prepare_cached(
         "SELECT record FROM runs
          WHERE (?1 IS NULL OR status = ?1) AND (?2 IS NULL OR kind = ?2)
+           AND (?4 IS NULL OR created_at < ?4 OR (created_at = ?4 AND id < ?5))
          ORDER BY created_at DESC, id DESC LIMIT ?3",
     )?;
     let rows = stmt.query_map(
-        params![status.map(|s| s.as_str()), kind.map(|k| k.as_str()), limit],
+        params![
+            status.map(|s| s.as_str()),
+            kind.map(|k| k.as_str()),
+            limit,
+            after.map(|a| a.created_at.as_str()),
+            after.map(|a| a.id.as_str())
+        ],
         |r| r.get::<_, String>(0),
     )?;
     rows.map(|text| decode(&text?)).collect()
+}
+
+/// The statuses of runs not yet ended, as the index writes them.
+fn unended() -> String {
+    let words: Vec<&str> = RunStatus::ALL
+        .into_iter()
+        .filter(|s| !s.is_terminal())
+        .map(RunStatus::as_str)
+        .collect();
+    serde_json::to_string(&words).expect("a list of words serialises")
+}
+
+/// Runs not yet ended (queued or running) whose record has `value` at the JSON `path`
+/// (`$.dataset_id`, `$.request.model`): what a deletion must wait for.
+pub fn unended_runs_naming(conn: &Connection, path: &str, value: &str) -> Result<Vec<RunId>> {
+    let mut stmt = conn.prepare_cached(
+        "SELECT id FROM runs
+         WHERE status IN (SELECT value FROM json_each(?1)) AND json_extract(record, ?2) = ?3
+         ORDER BY created_at, id",
+    )?;
+    let rows = stmt.query_map(params![unended(), path, value], |r| r.get::<_, String>(0))?;
+    rows.map(|id| id?.parse()).collect()
+}
+
+/// Ended runs, newest first, with the time each ended (`finished_at`; its creation time when
+/// the record has none): what a retention policy chooses from.
+pub fn ended_runs(conn: &Connection) -> Result<Vec<(RunId, String)>> {
+    let mut stmt = conn.prepare_cached(
+        "SELECT id, coalesce(json_extract(record, '$.finished_at'), created_at) FROM runs
+         WHERE status NOT IN (SELECT value FROM json_each(?1))
+         ORDER BY created_at DESC, id DESC",
+    )?;
+    let rows = stmt.query_map(params![unended()], |r| {
+        Ok((r.get::<_, String>(0)?, r.get::<_, String>(1)?))
+    })?;
+    rows.map(|row| {
+        let (id, ended_at) = row?;
+        Ok((id.parse()?, ended_at))
+    })
+    .collect()
+}
+
+pub fn delete_run(conn: &Connection, id: &RunId) -> Result<()> {
+    conn.execute("DELETE FROM runs WHERE id = ?1", params![id.as_str()])?;
+    Ok(())
+}
+
+pub fn delete_dataset(conn: &Connection, id: &DatasetId) -> Result<()> {
+    conn.execute("DELETE FROM datasets WHERE id = ?1", params![id.as_str()])?;
+    Ok(())
 }
 
 /// Runs of `kinds` that name dataset `dataset`, newest first, at most `limit`. The dataset id
@@ -163,10 +230,25 @@ pub fn find_by_key(conn: &Connection, kind: RunKind, key: &str) -> Result<Option
     }
 }
 
-/// Datasets newest first.
-pub fn list_datasets(conn: &Connection) -> Result<Vec<DatasetRecord>> {
-    let mut stmt =
-        conn.prepare_cached("SELECT record FROM datasets ORDER BY created_at DESC, id DESC")?;
-    let rows = stmt.query_map([], |r| r.get::<_, String>(0))?;
+/// Datasets newest first, at most `limit`, beginning after `after`.
+pub fn list_datasets(
+    conn: &Connection,
+    limit: usize,
+    after: Option<&PageAfter>,
+) -> Result<Vec<DatasetRecord>> {
+    let limit = i64::try_from(limit).unwrap_or(i64::MAX);
+    let mut stmt = conn.prepare_cached(
+        "SELECT record FROM datasets
+         WHERE ?2 IS NULL OR created_at < ?2 OR (created_at = ?2 AND id < ?3)
+         ORDER BY created_at DESC, id DESC LIMIT ?1",
+    )?;
+    let rows = stmt.query_map(
+        params![
+            limit,
+            after.map(|a| a.created_at.as_str()),
+            after.map(|a| a.id.as_str())
+        ],
+        |r| r.get::<_, String>(0),
+    )?;
     rows.map(|text| decode(&text?)).collect()
 }

@@ -24,14 +24,19 @@ mod index;
 mod models;
 mod paths;
 mod record;
+mod removal;
 mod run_store;
+mod usage;
 
 pub use datasets::StagingDir;
 pub use error::{Result, StoreError};
 pub use ids::{DatasetId, RunId, MAX_ID_LEN};
+pub use index::PageAfter;
 pub use models::{is_model_name, ModelFolder, ModelSaved, MAX_MODEL_NAME_LEN};
 pub use paths::{safe_relative_path, MAX_COMPONENT_LEN, MAX_DEPTH};
 pub use record::{now_rfc3339, DatasetRecord, DatasetSource, Event, RunKind, RunRecord, RunStatus};
+pub use removal::{Pruned, Retention};
 pub use run_store::{
     rebuild_index, RebuildReport, RecoveryReport, RunStore, MAX_IDEMPOTENCY_KEY_LEN,
 };
+pub use usage::folder_bytes;

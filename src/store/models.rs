@@ -31,6 +31,9 @@ pub enum ModelSaved {
 
 /// The models folder of a data folder (`DATA/models`), usable without opening the run store —
 /// a command line reads models there while a daemon holds the store.
+/// The sub-folder of deleted models' texts.
+const RETIRED: &str = ".retired";
+
 pub struct ModelFolder {
     dir: PathBuf,
 }
@@ -62,6 +65,15 @@ impl ModelFolder {
     /// under a stored name is a `Conflict` (names are versions: choose a new one).
     pub fn save(&self, name: &str, toml_text: &str) -> Result<ModelSaved> {
         let path = self.path(name)?;
+        let retired = self.retired_path(name)?;
+        if let Ok(earlier) = std::fs::read_to_string(&retired) {
+            if earlier != toml_text {
+                return Err(StoreError::Conflict(format!(
+                    "a different model named '{name}' was stored and deleted; names are \
+                     versions, give this one a new name"
+                )));
+            }
+        }
         if let Ok(existing) = std::fs::read_to_string(&path) {
             return if existing == toml_text {
                 Ok(ModelSaved::AlreadyThere)
@@ -79,6 +91,34 @@ impl ModelFolder {
         std::fs::create_dir_all(&self.dir).map_err(io)?;
         write_atomically(&path, toml_text.as_bytes()).map_err(io)?;
         Ok(ModelSaved::Created)
+    }
+
+    /// Where deleted model `name` is kept: out of the list, but its name stays taken by its text
+    /// (a diagnosis's history names models; a name never means two models).
+    fn retired_path(&self, name: &str) -> Result<PathBuf> {
+        let path = self.path(name)?;
+        Ok(self
+            .dir
+            .join(RETIRED)
+            .join(path.file_name().expect("a model path names a file")))
+    }
+
+    /// Takes stored model `name` out of the list (`NotFound` when there is none). Its text is
+    /// kept aside: the same text saved again brings it back, another text under its name is a
+    /// `Conflict`.
+    pub fn retire(&self, name: &str) -> Result<()> {
+        let path = self.path(name)?;
+        if !path.is_file() {
+            return Err(StoreError::NotFound(format!("model '{name}'")));
+        }
+        let retired = self.retired_path(name)?;
+        let folder = self.dir.join(RETIRED);
+        std::fs::create_dir_all(&folder).map_err(|source| StoreError::Io {
+            path: folder.clone(),
+            source,
+        })?;
+        std::fs::rename(&path, &retired).map_err(|source| StoreError::Io { path, source })?;
+        super::files::sync_dir(&self.dir)
     }
 
     /// The TOML text of stored model `name`.
@@ -128,6 +168,12 @@ impl RunStore {
     /// [`ModelFolder::read`] in this store's data folder.
     pub fn read_model(&self, name: &str) -> Result<String> {
         self.models().read(name)
+    }
+
+    /// [`ModelFolder::retire`] in this store's data folder, refused (`InUse`) while a queued or
+    /// running run names the model.
+    pub fn delete_model(&self, name: &str) -> Result<()> {
+        self.unless_model_in_use(name, || self.models().retire(name))
     }
 
     /// [`ModelFolder::list`] in this store's data folder.

@@ -9,9 +9,10 @@ use super::error::{io, Result, StoreError};
 use super::events;
 use super::files::{read_json, remove_dir, sync_dir, visible_subdirs, write_json, write_json_as};
 use super::ids::{DatasetId, RunId};
-use super::index;
+use super::index::{self, PageAfter};
 use super::paths::safe_relative_path;
 use super::record::{now_rfc3339, DatasetRecord, Event, RunKind, RunRecord, RunStatus};
+use super::usage::{tree_bytes, RunsUsage};
 use crate::atomic_write::Sync;
 use crate::run_event::EventKind;
 use rusqlite::Connection;
@@ -26,6 +27,9 @@ pub(crate) const RUN_FILE: &str = "run.json";
 pub(crate) const DATASET_RECORD: &str = "record.json";
 /// Prefix of a run folder being created; renamed to the id once complete.
 const NEW_RUN_PREFIX: &str = ".new-";
+/// Prefix of a run or dataset folder being deleted: renamed out of sight first, then removed
+/// (what a crash leaves of it is removed at the next open).
+pub(crate) const DELETING_PREFIX: &str = ".deleting-";
 /// The data folder's lock file (see `lock_data_dir`).
 const LOCK_FILE: &str = ".lock";
 pub(crate) const STAGING_PREFIX: &str = ".staging-";
@@ -58,9 +62,12 @@ pub struct RebuildReport {
 }
 
 #[derive(Default)]
-struct RunSlot {
+pub(crate) struct RunSlot {
     /// The id of the run's last event, once known.
     last_event: Option<u64>,
+    /// Bytes this process reserved for the run's files (`write_file`): when the run ends its
+    /// folder is measured and the run folders' count corrected by the difference.
+    written_bytes: u64,
 }
 
 /// Runs and datasets under one data folder. `Send + Sync`: share it in an `Arc`.
@@ -68,11 +75,12 @@ pub struct RunStore {
     root: PathBuf,
     db: Mutex<Connection>,
     slots: Mutex<HashMap<RunId, Arc<Mutex<RunSlot>>>>,
+    pub(crate) runs_usage: RunsUsage,
     /// The exclusive lock on `DATA/.lock`, held as long as the store is open.
     _lock: std::fs::File,
 }
 
-fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+pub(crate) fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     // Every change is a whole-file replacement or one appended line, so a panic elsewhere leaves
     // nothing half-done behind the lock.
     m.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
@@ -93,8 +101,16 @@ impl RunStore {
         // Before anything is recovered: recovery fails the runs it finds unfinished, which are
         // another live daemon's runs if one holds the folder.
         let lock = lock_data_dir(&root)?;
-        remove_leftovers(&root.join(RUNS), NEW_RUN_PREFIX)?;
-        remove_leftovers(&root.join(DATASETS), STAGING_PREFIX)?;
+        for (folder, prefix) in [
+            (RUNS, NEW_RUN_PREFIX),
+            (RUNS, DELETING_PREFIX),
+            (DATASETS, STAGING_PREFIX),
+            (DATASETS, DELETING_PREFIX),
+        ] {
+            remove_leftovers(&root.join(folder), prefix)?;
+        }
+        let runs_dir = root.join(RUNS);
+        let runs_bytes = tree_bytes(&runs_dir, &|_| false).map_err(io(&runs_dir))?;
         let mut conn = open_index(&root)?;
         let found = scan(&root)?;
         let mut report = RecoveryReport {
@@ -112,6 +128,7 @@ impl RunStore {
             root,
             db: Mutex::new(conn),
             slots: Mutex::new(HashMap::new()),
+            runs_usage: RunsUsage::new(runs_bytes),
             _lock: lock,
         };
         Ok((store, report))
@@ -136,12 +153,12 @@ impl RunStore {
         lock(&self.db)
     }
 
-    fn slot(&self, id: &RunId) -> Arc<Mutex<RunSlot>> {
+    pub(crate) fn slot(&self, id: &RunId) -> Arc<Mutex<RunSlot>> {
         lock(&self.slots).entry(id.clone()).or_default().clone()
     }
 
     /// Forgets the lock of an ended run; a later caller gets a fresh one and finds it sealed.
-    fn forget_slot(&self, id: &RunId) {
+    pub(crate) fn forget_slot(&self, id: &RunId) {
         lock(&self.slots).remove(id);
     }
 
@@ -165,6 +182,13 @@ impl RunStore {
         }
         // The index lock is held throughout, so two requests with one key make one run.
         let mut db = self.db();
+        // Checked under the index lock, as a deletion is: a dataset cannot go between this
+        // check and the run that names it.
+        if let Some(d) = &dataset_id {
+            if !self.dataset_dir(d).join(DATASET_RECORD).is_file() {
+                return Err(StoreError::NotFound(format!("dataset {d}")));
+            }
+        }
         if let Some(k) = key {
             if let Some(id) = index::find_by_key(&db, kind, k)? {
                 let existing = self.get(&id)?;
@@ -243,7 +267,19 @@ impl RunStore {
         kind: Option<RunKind>,
         limit: usize,
     ) -> Result<Vec<RunRecord>> {
-        index::list_runs(&self.db(), status, kind, limit)
+        index::list_runs(&self.db(), status, kind, limit, None)
+    }
+
+    /// A page of [`RunStore::list`]: at most `limit` runs after `after` (the last of the page
+    /// before; `None`: the first page).
+    pub fn list_page(
+        &self,
+        status: Option<RunStatus>,
+        kind: Option<RunKind>,
+        limit: usize,
+        after: Option<&PageAfter>,
+    ) -> Result<Vec<RunRecord>> {
+        index::list_runs(&self.db(), status, kind, limit, after)
     }
 
     /// Runs of `kinds` made for dataset `dataset` (comparisons and diagnoses of it, say), newest
@@ -350,6 +386,7 @@ impl RunStore {
         )?;
         write_json_as(&self.run_dir(&rec.id).join(RUN_FILE), &rec, sync)?;
         if next.is_terminal() {
+            self.count_ended_run(id, slot.written_bytes);
             drop(slot);
             self.forget_slot(id);
         }
@@ -440,16 +477,23 @@ impl RunStore {
             return Err(StoreError::BadPath(format!("'{rel}' belongs to the store")));
         }
         let slot = self.slot(id);
-        let _slot = lock(&slot);
+        let mut slot = lock(&slot);
         let mut rec = self.get(id)?;
         if rec.status.is_terminal() {
             return Err(StoreError::Finished(id.clone()));
         }
         let path = self.run_dir(id).join(&rel_path);
-        if let Some(parent) = path.parent() {
-            std::fs::create_dir_all(parent).map_err(io(parent))?;
+        let len = bytes.len() as u64;
+        self.runs_usage.reserve(len)?;
+        let written = path
+            .parent()
+            .map_or(Ok(()), std::fs::create_dir_all)
+            .and_then(|()| crate::atomic_write::write_atomically(&path, bytes));
+        if let Err(e) = written {
+            self.runs_usage.adjust(-(len as i64));
+            return Err(io(&path)(e));
         }
-        crate::atomic_write::write_atomically(&path, bytes).map_err(io(&path))?;
+        slot.written_bytes += len;
         if !rec.result_files.iter().any(|f| f == rel) {
             rec.result_files.push(rel.to_string());
             self.save(&rec)?;
@@ -766,6 +810,11 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let (store, _) = RunStore::open(dir.path()).unwrap();
         let (a, b) = (DatasetId::generate(), DatasetId::generate());
+        // A run may name only a stored dataset: their records, as a commit leaves them.
+        for d in [&a, &b] {
+            std::fs::create_dir_all(store.dataset_dir(d)).unwrap();
+            std::fs::write(store.dataset_dir(d).join(DATASET_RECORD), "{}").unwrap();
+        }
         let mut made = Vec::new();
         for (kind, ds) in [
             (RunKind::Comparison, Some(a.clone())),

@@ -1,5 +1,6 @@
 //! A sweep as a user writes it (TOML): the sensor, the axes, the model and the DIC settings.
 
+use super::task::REFERENCE_BLOCK_PX;
 use crate::dic::DicSettings;
 use crate::experiment::FieldError;
 use crate::model::{Camera, SpecklePattern};
@@ -250,14 +251,15 @@ impl SweepSpec {
         if self.prints().is_empty() {
             return bad("axes", "give dot_diameter_px or patterns".into());
         }
+        let (d_lo, d_hi) = DOT_DIAMETER_PX;
         if let Some(d) = axes
             .dot_diameter_px
             .iter()
-            .find(|d| !(d.is_finite() && (0.5..=100.0).contains(*d)))
+            .find(|d| !(d.is_finite() && (d_lo..=d_hi).contains(*d)))
         {
             return bad(
                 "axes.dot_diameter_px",
-                format!("{d} is not in [0.5, 100] px"),
+                format!("{d} is not in [{d_lo}, {d_hi}] px"),
             );
         }
         if let Some(p) = axes
@@ -266,6 +268,21 @@ impl SweepSpec {
             .find(|p| SpecklePattern::preset(p).is_none())
         {
             return bad("axes.patterns", format!("unknown preset '{p}' (a, b or c)"));
+        }
+        // A preset is in mm: at a small scale its dots fall below a pixel.
+        for label in &axes.patterns {
+            let print = PrintAxis::Pattern(label.clone())
+                .pattern(self.camera.scale_px_per_mm, REFERENCE_BLOCK_PX);
+            let d = print.dot_diameter_mm * self.camera.scale_px_per_mm / REFERENCE_BLOCK_PX;
+            if d.is_finite() && d < d_lo {
+                return bad(
+                    "axes.patterns",
+                    format!(
+                        "preset '{label}' has dots of {d:.2} px at {} px/mm (2x2-reduced px); at least {d_lo} px: a larger camera.scale_px_per_mm",
+                        self.camera.scale_px_per_mm
+                    ),
+                );
+            }
         }
         crate::experiment::check_schemes(&axes.schemes).map_err(|e| FieldError {
             field: format!("axes.{}", e.field),
@@ -300,6 +317,11 @@ impl SweepSpec {
         within("subpixel_y", &axes.subpixel_y, -1.0, 1.0)
     }
 }
+
+/// The dot diameters a sweep takes, px of the 2x2-reduced image: below one pixel the renderer
+/// makes no speckle the DIC can follow (0.5 px dots gave 0 valid points of 36, 1 px gave 30:
+/// every task of such a sweep failed), above 100 px a subset holds no pattern.
+pub const DOT_DIAMETER_PX: (f64, f64) = (1.0, 100.0);
 
 fn bad(field: &str, reason: String) -> Result<(), FieldError> {
     Err(FieldError {

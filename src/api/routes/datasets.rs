@@ -8,6 +8,7 @@
 use super::blocking;
 use super::experiments::{accepted, idempotency_key};
 use crate::api::json::ApiJson;
+use crate::api::page;
 use crate::api::problem::{ApiError, ApiResult, Problem};
 use crate::dataset::{check_frames, is_plain_file_name, FrameCheckError, Manifest};
 use crate::diagnose::{read_history, HistoryEntry};
@@ -268,7 +269,7 @@ fn over_quota(used_bytes: u64, staged_bytes: u64, quota_bytes: u64) -> ApiError 
         StatusCode::INSUFFICIENT_STORAGE,
         "datasets-quota",
         format!(
-            "the stored datasets take {used_bytes} bytes of the {quota_bytes}-byte quota (datasets_quota_bytes); with {staged_bytes} bytes of uploads in progress this upload would pass it: raise the quota"
+            "the stored datasets take {used_bytes} bytes of the {quota_bytes}-byte quota (datasets_quota_bytes); with {staged_bytes} bytes of uploads in progress this upload would pass it: delete datasets (DELETE /api/v1/datasets/{{id}}) or raise the quota"
         ),
     )
 }
@@ -281,11 +282,33 @@ impl Drop for UploadPace {
     }
 }
 
-#[utoipa::path(get, path = "/datasets", tag = "datasets",
-    responses((status = 200, body = Vec<Object>)))]
-pub async fn list(State(svc): State<Service>) -> ApiResult<Json<Vec<DatasetRecord>>> {
+#[derive(Debug, serde::Deserialize, utoipa::IntoParams)]
+#[serde(deny_unknown_fields)]
+pub struct DatasetListQuery {
+    /// At most this many, newest first (default 50, at most 1000).
+    #[param(minimum = 1, maximum = 1000)]
+    pub limit: Option<u32>,
+    /// Where the page begins: the cursor a full page's `Link: <…>; rel="next"` carries.
+    pub after: Option<String>,
+}
+
+#[utoipa::path(get, path = "/datasets", tag = "datasets", params(DatasetListQuery),
+    responses((status = 200, description = "Newest first; a full page has a `Link` header (rel=\"next\") to the next one", body = Vec<Object>),
+              (status = 422, body = Problem)))]
+pub async fn list(
+    State(svc): State<Service>,
+    axum::extract::Query(q): axum::extract::Query<DatasetListQuery>,
+) -> ApiResult<Response> {
+    let limit = page::limit(q.limit)?;
+    let after = page::after(q.after.as_deref())?;
     let store = svc.store.clone();
-    Ok(Json(blocking(move || store.list_datasets()).await??))
+    let datasets = blocking(move || store.list_datasets_page(limit, after.as_ref())).await??;
+    Ok(page::page(
+        datasets,
+        limit,
+        |after| format!("/api/v1/datasets?limit={limit}&after={after}"),
+        |d: &DatasetRecord| (d.created_at.as_str(), d.id.as_str()),
+    ))
 }
 
 #[utoipa::path(get, path = "/datasets/{id}", tag = "datasets",
@@ -298,6 +321,18 @@ pub async fn get(
     let id = dataset_id(&id)?;
     let store = svc.store.clone();
     Ok(Json(blocking(move || store.get_dataset(&id)).await??))
+}
+
+#[utoipa::path(delete, path = "/datasets/{id}", tag = "datasets",
+    params(("id" = String, Path, description = "Dataset id")),
+    responses((status = 204, description = "Deleted: its frames and record (ended runs that analysed it keep their results)"),
+              (status = 404, body = Problem),
+              (status = 409, description = "A queued or running run names it", body = Problem)))]
+pub async fn delete(State(svc): State<Service>, Path(id): Path<String>) -> ApiResult<StatusCode> {
+    let id = dataset_id(&id)?;
+    let store = svc.store.clone();
+    blocking(move || store.delete_dataset(&id)).await??;
+    Ok(StatusCode::NO_CONTENT)
 }
 
 #[utoipa::path(post, path = "/datasets/{id}/analyses", tag = "datasets", request_body = AnalysisRequest,

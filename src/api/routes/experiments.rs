@@ -2,6 +2,7 @@
 
 use super::jobs::{cancel, file, load, run_id};
 use crate::api::json::ApiJson;
+use crate::api::page;
 use crate::api::problem::{ApiError, ApiResult, Problem};
 use crate::api::sse::{self, SseResponse};
 use crate::experiment::ExperimentRequest;
@@ -86,23 +87,24 @@ pub struct ListQuery {
     /// At most this many, newest first (default 50, at most 1000).
     #[param(minimum = 1, maximum = 1000)]
     pub limit: Option<u32>,
+    /// Where the page begins: the cursor a full page's `Link: <…>; rel="next"` carries.
+    pub after: Option<String>,
 }
 
 #[utoipa::path(get, path = "/experiments", tag = "experiments", params(ListQuery),
-    responses((status = 200, body = Vec<Object>), (status = 422, body = Problem)))]
-pub async fn list(
-    State(svc): State<Service>,
-    Query(q): Query<ListQuery>,
-) -> ApiResult<Json<Vec<RunRecord>>> {
-    list_runs(&svc, RunKind::Experiment, &q).await
+    responses((status = 200, description = "Newest first; a full page has a `Link` header (rel=\"next\") to the next one", body = Vec<Object>),
+              (status = 422, body = Problem)))]
+pub async fn list(State(svc): State<Service>, Query(q): Query<ListQuery>) -> ApiResult<Response> {
+    list_runs(&svc, RunKind::Experiment, "/api/v1/experiments", &q).await
 }
 
-/// The runs of `kind`, newest first, filtered and limited as `q` asks.
+/// A page of the runs of `kind` (listed at `path`), newest first, filtered as `q` asks.
 pub async fn list_runs(
     svc: &Service,
     kind: RunKind,
+    path: &'static str,
     q: &ListQuery,
-) -> ApiResult<Json<Vec<RunRecord>>> {
+) -> ApiResult<Response> {
     let status = match q.status.as_deref() {
         None => None,
         Some(s) => Some(
@@ -111,13 +113,18 @@ pub async fn list_runs(
             })?,
         ),
     };
-    let limit = q.limit.unwrap_or(50) as usize;
-    if !(1..=1000).contains(&limit) {
-        return Err(ApiError::invalid("limit", "1 to 1000"));
-    }
+    let limit = page::limit(q.limit)?;
+    let after = page::after(q.after.as_deref())?;
     let store = svc.store.clone();
-    let runs = super::blocking(move || store.list(status, Some(kind), limit)).await??;
-    Ok(Json(runs))
+    let runs = super::blocking(move || store.list_page(status, Some(kind), limit, after.as_ref()))
+        .await??;
+    let status = status.map_or(String::new(), |s| format!("&status={s}"));
+    Ok(page::page(
+        runs,
+        limit,
+        |after| format!("{path}?limit={limit}{status}&after={after}"),
+        |r: &RunRecord| (r.created_at.as_str(), r.id.as_str()),
+    ))
 }
 
 #[utoipa::path(get, path = "/experiments/{id}", tag = "experiments",

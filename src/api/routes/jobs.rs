@@ -7,7 +7,7 @@ use crate::api::sse::{self, SseResponse};
 use crate::service::Service;
 use crate::store::{RunId, RunKind, RunRecord, StoreError};
 use axum::extract::{Path, State};
-use axum::http::{header, HeaderMap};
+use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::Json;
 
@@ -47,6 +47,16 @@ pub async fn cancel(
         }
         Err(e) => Err(e.into()),
     }
+}
+
+/// Deletes ended run `id` (of `kind` when one is given): 204, or 409 while it is queued or
+/// running.
+pub async fn delete(svc: &Service, id: &RunId, kind: Option<RunKind>) -> ApiResult<StatusCode> {
+    load(svc, id, kind).await?;
+    let store = svc.store.clone();
+    let key = id.clone();
+    blocking(move || store.delete_run(&key)).await??;
+    Ok(StatusCode::NO_CONTENT)
 }
 
 /// The piece a served file is read and sent in.
@@ -108,6 +118,18 @@ pub async fn get_job(
     Path(id): Path<String>,
 ) -> ApiResult<Json<RunRecord>> {
     Ok(Json(load(&svc, &run_id(&id)?, None).await?))
+}
+
+#[utoipa::path(delete, path = "/jobs/{id}", tag = "jobs",
+    params(("id" = String, Path, description = "Run id")),
+    responses((status = 204, description = "Deleted with its folder (a dataset an experiment registered stays)"),
+              (status = 404, body = Problem),
+              (status = 409, description = "Queued or running: cancel it first", body = Problem)))]
+pub async fn delete_job(
+    State(svc): State<Service>,
+    Path(id): Path<String>,
+) -> ApiResult<StatusCode> {
+    delete(&svc, &run_id(&id)?, None).await
 }
 
 #[utoipa::path(post, path = "/jobs/{id}/cancel", tag = "jobs",

@@ -62,3 +62,18 @@ pub async fn add(
     let location = format!("/api/v1/models/{}", detail.summary.name);
     Ok((status, [(header::LOCATION, location)], Json(detail)).into_response())
 }
+
+#[utoipa::path(delete, path = "/models/{name}", tag = "models",
+    params(("name" = String, Path, description = "Model name", pattern = r"^[A-Za-z0-9_+.\-]{1,96}$")),
+    responses((status = 204, description = "Deleted: out of the list; its name stays its text's (the same text may be added again, another may not)"),
+              (status = 404, body = Problem),
+              (status = 409, description = "An embedded model, or one a queued or running run names", body = Problem)))]
+pub async fn delete(State(svc): State<Service>, Path(name): Path<String>) -> ApiResult<StatusCode> {
+    blocking(move || svc.delete_model(&name))
+        .await?
+        .map_err(|e| match e {
+            ModelStoreError::Invalid(m) => ApiError::not_found(m),
+            other => other.into(),
+        })?;
+    Ok(StatusCode::NO_CONTENT)
+}

@@ -34,12 +34,10 @@ pub async fn create(
 }
 
 #[utoipa::path(get, path = "/sweeps", tag = "sweeps", params(ListQuery),
-    responses((status = 200, body = Vec<Object>), (status = 422, body = Problem)))]
-pub async fn list(
-    State(svc): State<Service>,
-    Query(q): Query<ListQuery>,
-) -> ApiResult<Json<Vec<RunRecord>>> {
-    super::experiments::list_runs(&svc, RunKind::Sweep, &q).await
+    responses((status = 200, description = "Newest first; a full page has a `Link` header (rel=\"next\") to the next one", body = Vec<Object>),
+              (status = 422, body = Problem)))]
+pub async fn list(State(svc): State<Service>, Query(q): Query<ListQuery>) -> ApiResult<Response> {
+    super::experiments::list_runs(&svc, RunKind::Sweep, "/api/v1/sweeps", &q).await
 }
 
 #[utoipa::path(get, path = "/sweeps/{id}", tag = "sweeps",

@@ -136,7 +136,7 @@ async function showResults(r) {
   // The run names the dataset its frames became (runs stored before that field: look it up).
   const ds = r.dataset_id
     ? { id: r.dataset_id }
-    : (await api("/datasets").catch(() => [])).find((d) => d.source === `experiment:${id}`);
+    : (await api("/datasets?limit=1000").catch(() => [])).find((d) => d.source === `experiment:${id}`);
   clear($("#downloads"),
     el("ul", { class: "links" },
       link(`${API}${base}/results.csv`, "study.csv (CSV)"),

@@ -338,7 +338,7 @@ $("#sweep-form").addEventListener("submit", async (ev) => {
 
 async function loadDatasets() {
   try {
-    const list = await api("/datasets");
+    const list = await api("/datasets?limit=1000");
     const rows = list.map((d) => {
       const m = /^experiment:(.+)$/.exec(d.source || "");
       return el("tr", { "data-id": d.id },
