@@ -729,3 +729,73 @@ async fn a_malformed_last_event_id_is_refused_and_an_impossible_model_name_is_ab
     .await;
     server.stop().await;
 }
+
+/// Sends `request` as raw bytes and reads the whole answer (the server closes after it).
+async fn raw(base: &str, request: &[u8]) -> String {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let addr = base.trim_start_matches("http://");
+    let mut stream = tokio::net::TcpStream::connect(addr).await.unwrap();
+    stream.write_all(request).await.unwrap();
+    let mut answer = Vec::new();
+    let read = stream.read_to_end(&mut answer);
+    tokio::time::timeout(std::time::Duration::from_secs(10), read)
+        .await
+        .expect("the server answers and closes")
+        .unwrap();
+    String::from_utf8_lossy(&answer).into_owned()
+}
+
+/// Issue 36 (7): hyper's own 400/414/431 went out with empty bodies, and a 100 KB header was
+/// taken.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn requests_hyper_cannot_parse_get_problem_documents_and_large_headers_are_refused() {
+    let f = Fixture::start().await;
+    let head = "GET /api/v1/health HTTP/1.1\r\nHost: localhost\r\n";
+    let many: String = (0..200).map(|i| format!("X-{i}: 1\r\n")).collect();
+    let cases = [
+        (
+            format!(
+                "{head}X-Big: {}\r\nConnection: close\r\n\r\n",
+                "a".repeat(100_000)
+            ),
+            431,
+        ),
+        (
+            format!(
+                "{head}X-Mid: {}\r\nConnection: close\r\n\r\n",
+                "a".repeat(9_000)
+            ),
+            431,
+        ),
+        (format!("{head}{many}Connection: close\r\n\r\n"), 431),
+        (
+            format!(
+                "GET /api/v1/{} HTTP/1.1\r\nHost: localhost\r\n\r\n",
+                "a".repeat(70_000)
+            ),
+            414,
+        ),
+        (format!("{head}Bad Header\r\n\r\n"), 400),
+        ("GARBAGE\r\n\r\n".to_string(), 400),
+    ];
+    for (request, status) in cases {
+        let answer = raw(&f.server.base, request.as_bytes()).await;
+        let (head, body) = answer.split_once("\r\n\r\n").expect("a whole answer");
+        assert!(head.starts_with(&format!("HTTP/1.1 {status} ")), "{head}");
+        assert!(
+            head.contains("content-type: application/problem+json"),
+            "{head}"
+        );
+        let problem: Value = serde_json::from_str(body).unwrap_or_else(|e| panic!("{e}: {body}"));
+        assert_eq!(problem["status"], status, "{problem}");
+    }
+    // A browser's head (a few KB of cookies) still passes.
+    let cookies = format!(
+        "{head}Cookie: {}\r\nConnection: close\r\n\r\n",
+        "c".repeat(4_000)
+    );
+    assert!(raw(&f.server.base, cookies.as_bytes())
+        .await
+        .starts_with("HTTP/1.1 200 "));
+    f.server.stop().await;
+}

@@ -50,6 +50,9 @@ fn is_mutating(method: &Method) -> bool {
 }
 
 pub async fn guard(State(config): State<Arc<GuardConfig>>, req: Request, next: Next) -> Response {
+    if let Err(e) = check_header_size(req.headers()) {
+        return e.into_response();
+    }
     if let Err(e) = check_host(&config, req.version(), req.headers()) {
         return e.into_response();
     }
@@ -97,6 +100,36 @@ pub async fn guard(State(config): State<Arc<GuardConfig>>, req: Request, next: N
         }
     };
     as_problem(response).await
+}
+
+/// The longest header field (name and value) and all of them together a request may send: a
+/// browser's largest (cookies) stay under 8 KiB; hyper took a single 100 KB header.
+pub const MAX_HEADER_FIELD_BYTES: usize = 8 * 1024;
+pub const MAX_HEADERS_BYTES: usize = 32 * 1024;
+
+/// 431 for a header field or a head over [`MAX_HEADER_FIELD_BYTES`] / [`MAX_HEADERS_BYTES`].
+fn check_header_size(headers: &HeaderMap) -> Result<(), ApiError> {
+    let mut total = 0;
+    for (name, value) in headers {
+        let field = name.as_str().len() + value.len();
+        total += field;
+        if field > MAX_HEADER_FIELD_BYTES || total > MAX_HEADERS_BYTES {
+            let detail = if field > MAX_HEADER_FIELD_BYTES {
+                format!(
+                    "header '{}' has {field} bytes; at most {MAX_HEADER_FIELD_BYTES} a field",
+                    name.as_str().chars().take(64).collect::<String>()
+                )
+            } else {
+                format!("the headers pass {MAX_HEADERS_BYTES} bytes together")
+            };
+            return Err(ApiError::new(
+                StatusCode::REQUEST_HEADER_FIELDS_TOO_LARGE,
+                "headers-too-large",
+                detail,
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// An over-limit body up to this size is read and dropped before the 413 (see [`guard`]).

@@ -7,6 +7,7 @@ mod guard;
 mod json;
 mod openapi;
 mod page;
+mod parse_errors;
 mod problem;
 mod request_schemas;
 mod routes;

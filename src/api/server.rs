@@ -7,6 +7,7 @@
 //! that waits on a client who stopped reading fails after `write_stall_timeout_ms`, and shutdown
 //! drains the open requests for a bounded time, then leaves.
 
+use super::parse_errors::ProblemBodies;
 use super::stall_guard::StallGuarded;
 use crate::service::HttpLimits;
 use axum::Router;
@@ -72,7 +73,7 @@ pub async fn serve(
         };
         let _ = stream.set_nodelay(true);
         let service = TowerToHyperService::new(app.clone());
-        let io = TokioIo::new(StallGuarded::new(stream, write_stall));
+        let io = TokioIo::new(StallGuarded::new(ProblemBodies::new(stream), write_stall));
         let connection = graceful.watch(http.serve_connection(io, service));
         tokio::spawn(async move {
             // A timed-out or reset connection is the client's business, not an error of ours.
