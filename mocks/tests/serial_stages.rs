@@ -270,6 +270,46 @@ fn open_stage_picks_the_protocol_from_toml() {
     );
 }
 
+/// Issue 36 (7): a port that was pulled was never opened again. Here the configured path is a
+/// link (as udev's /dev/serial/by-id names are) that a second simulator takes over.
+#[test]
+fn a_pulled_port_is_opened_again_once_it_is_back() {
+    let dir = std::env::temp_dir().join(format!("ffdic-reopen-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let link = dir.join("stage-port");
+    let _ = std::fs::remove_file(&link);
+    let mut first = StageSim::spawn(sim_config(SimProtocol::Zaber, false), None).unwrap();
+    std::os::unix::fs::symlink(first.path(), &link).unwrap();
+    let config = StageConfig::Zaber(ZaberConfig {
+        port: link.display().to_string(),
+        timeout_ms: REPLY_TIMEOUT_MS,
+        ..ZaberConfig::default()
+    });
+    let mut stage = open_stage(&config).unwrap();
+    stage.home(WAIT).unwrap();
+    assert!(stage.position().is_ok());
+    first.disconnect();
+    // Gone: every call says so, and trying again does not hang.
+    for _ in 0..2 {
+        let r = stage.position();
+        assert!(matches!(r, Err(HwError::Disconnected(_))), "{r:?}");
+    }
+    // Plugged in again (a new pty behind the same name): the next call reopens it.
+    let second = StageSim::spawn(sim_config(SimProtocol::Zaber, false), None).unwrap();
+    std::fs::remove_file(&link).unwrap();
+    std::os::unix::fs::symlink(second.path(), &link).unwrap();
+    stage.home(WAIT).unwrap();
+    stage.move_absolute(at(3.0, 0.0)).unwrap();
+    assert_near(
+        stage.wait_settled(WAIT).unwrap(),
+        3.0,
+        0.0,
+        "after reopening",
+    );
+    assert!((second.position_mm().0 - 3.0).abs() < TOLERANCE_MM);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn opening_a_missing_port_or_a_silent_controller_fails_typed() {
     let missing = StageConfig::Smc100(Smc100Config {

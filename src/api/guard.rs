@@ -11,7 +11,10 @@
 //!   of a connection reset.
 //! - A request other than an SSE stream or an upload is answered within the request timeout.
 //! - Every error leaves as `application/problem+json`, the framework's own (404, 405, 413,
-//!   415, a bad path or query) included.
+//!   415, a bad path or query) included; a handler's own JSON document for an error status
+//!   (`/health`'s 503, naming what stopped) stays as it is. hyper's answers to requests it
+//!   cannot parse are rewritten on the connection (`parse_errors.rs`); a header field over
+//!   8 KiB or a head over 32 KiB is 431.
 
 use super::problem::ApiError;
 use axum::body::Body;
@@ -237,11 +240,16 @@ fn check_same_site(config: &GuardConfig, headers: &HeaderMap) -> Result<(), ApiE
 /// into one, keeping its status and headers such as `Allow`.
 async fn as_problem(response: Response) -> Response {
     let status = response.status();
-    let is_problem = response
+    // A problem already, or a handler's own JSON document for that status (`/health`'s 503
+    // names what stopped): left as it is. The framework's errors are plain text.
+    let is_document = response
         .headers()
         .get(header::CONTENT_TYPE)
-        .is_some_and(|v| v.as_bytes().starts_with(b"application/problem+json"));
-    if !(status.is_client_error() || status.is_server_error()) || is_problem {
+        .is_some_and(|v| {
+            let v = v.as_bytes();
+            v.starts_with(b"application/problem+json") || v.starts_with(b"application/json")
+        });
+    if !(status.is_client_error() || status.is_server_error()) || is_document {
         return response;
     }
     let (mut parts, body) = response.into_parts();

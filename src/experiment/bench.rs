@@ -149,6 +149,8 @@ pub struct BenchHandle {
     holder: Arc<Mutex<Option<String>>>,
     /// False once the actor thread has ended (for whatever reason): `/health` reports it.
     alive: Arc<AtomicBool>,
+    /// False while the stage's last answer was `Disconnected`: `/health` reports it.
+    stage_link: Arc<AtomicBool>,
     /// How long a caller waits for the actor before giving up (it may be inside a long capture).
     reply_timeout: Duration,
 }
@@ -176,17 +178,20 @@ impl BenchHandle {
         let actor_holder = holder.clone();
         let alive = Arc::new(AtomicBool::new(true));
         let flag = AliveFlag(alive.clone());
+        let stage_link = Arc::new(AtomicBool::new(true));
+        let actor_link = stage_link.clone();
         std::thread::Builder::new()
             .name("bench-actor".into())
             .spawn(move || {
                 let _flag = flag;
-                Actor::new(hardware, actor_holder).serve(rx)
+                Actor::new(hardware, actor_holder, actor_link).serve(rx)
             })
             .expect("spawn the bench actor thread");
         Self {
             tx,
             holder,
             alive,
+            stage_link,
             reply_timeout,
         }
     }
@@ -194,6 +199,12 @@ impl BenchHandle {
     /// Whether the actor thread still runs.
     pub fn is_alive(&self) -> bool {
         self.alive.load(Ordering::SeqCst)
+    }
+
+    /// Whether the stage answered its last call (false after a `Disconnected`: unplugged or
+    /// powered off; true again once it answers). No I/O: `/health` asks it every second.
+    pub fn stage_connected(&self) -> bool {
+        self.stage_link.load(Ordering::SeqCst)
     }
 
     /// Takes the bench for `run_id`; direct control gets `Busy` until the lease is dropped.
@@ -356,15 +367,21 @@ struct Actor {
     hw: BenchHardware,
     holder: Arc<Mutex<Option<String>>>,
     homed: bool,
+    stage_link: Arc<AtomicBool>,
     target: Option<String>,
 }
 
 impl Actor {
-    fn new(hw: BenchHardware, holder: Arc<Mutex<Option<String>>>) -> Self {
+    fn new(
+        hw: BenchHardware,
+        holder: Arc<Mutex<Option<String>>>,
+        stage_link: Arc<AtomicBool>,
+    ) -> Self {
         Self {
             hw,
             holder,
             homed: false,
+            stage_link,
             target: None,
         }
     }
@@ -420,8 +437,21 @@ impl Actor {
         let _ = reply.send(result);
     }
 
-    fn stage(&mut self) -> Result<&mut Box<dyn Stage>, BenchError> {
-        self.hw.stage.as_mut().ok_or(BenchError::NoStage)
+    /// One call to the stage. A `Disconnected` answer marks the stage lost and unhomed (a
+    /// controller that comes back, reopened by its driver, has lost its reference: `GET /stage`
+    /// kept `homed: true` for an unplugged stage); any other answer marks it there.
+    fn on_stage<T>(
+        &mut self,
+        call: impl FnOnce(&mut dyn Stage) -> Result<T, HwError>,
+    ) -> Result<T, BenchError> {
+        let stage = self.hw.stage.as_mut().ok_or(BenchError::NoStage)?;
+        let result = call(stage.as_mut());
+        let lost = matches!(result, Err(HwError::Disconnected(_)));
+        self.stage_link.store(!lost, Ordering::SeqCst);
+        if lost {
+            self.homed = false;
+        }
+        Ok(result?)
     }
 
     fn run(&mut self, owner: &Owner, command: Command) {
@@ -439,7 +469,7 @@ impl Actor {
                 Ok(a.hw.camera.acquire(count, timeout)?)
             }),
             Command::Home { timeout, reply } => self.answer(owner, Change, reply, |a| {
-                a.stage()?.home(timeout)?;
+                a.on_stage(|s| s.home(timeout))?;
                 a.homed = true;
                 Ok(())
             }),
@@ -448,9 +478,10 @@ impl Actor {
                 settle_timeout,
                 reply,
             } => self.answer(owner, Change, reply, |a| {
-                let stage = a.stage()?;
-                stage.move_absolute(target)?;
-                Ok(stage.wait_settled(settle_timeout)?)
+                a.on_stage(|s| {
+                    s.move_absolute(target)?;
+                    s.wait_settled(settle_timeout)
+                })
             }),
             Command::MoveBy {
                 dx_mm,
@@ -458,12 +489,13 @@ impl Actor {
                 settle_timeout,
                 reply,
             } => self.answer(owner, Change, reply, |a| {
-                let stage = a.stage()?;
-                stage.move_relative(dx_mm, dy_mm)?;
-                Ok(stage.wait_settled(settle_timeout)?)
+                a.on_stage(|s| {
+                    s.move_relative(dx_mm, dy_mm)?;
+                    s.wait_settled(settle_timeout)
+                })
             }),
             Command::StopStage(reply) => {
-                self.answer(owner, Stop, reply, |a| Ok(a.stage()?.stop()?))
+                self.answer(owner, Stop, reply, |a| a.on_stage(|s| s.stop()))
             }
             Command::Mount {
                 label,
@@ -480,19 +512,24 @@ impl Actor {
     }
 
     fn status(&mut self) -> BenchStatus {
-        let homed = self.homed;
-        let stage = self.hw.stage.as_mut().map(|s| {
-            let (position, error) = match s.position() {
-                Ok(p) => (Some(p), None),
-                Err(e) => (None, Some(e.to_string())),
-            };
-            StageStatus {
-                info: s.info().clone(),
-                position,
-                homed,
-                error,
-            }
-        });
+        let stage = self
+            .hw
+            .stage
+            .as_ref()
+            .map(|s| s.info().clone())
+            .map(|info| {
+                let (position, error) = match self.on_stage(|s| s.position()) {
+                    Ok(p) => (Some(p), None),
+                    Err(e) => (None, Some(e.to_string())),
+                };
+                StageStatus {
+                    info,
+                    position,
+                    // Read after the position: a stage found unplugged is no longer homed.
+                    homed: self.homed,
+                    error,
+                }
+            });
         BenchStatus {
             camera: CameraStatus {
                 info: self.hw.camera.info().clone(),

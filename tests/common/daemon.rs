@@ -61,6 +61,20 @@ pub fn small_request(moves: usize) -> Value {
     })
 }
 
+/// The mock bench `config` describes (its camera on the paper's bench model).
+pub fn small_bench(config: &DaemonConfig) -> ffdic::experiment::BenchHardware {
+    let geometry = config.mock_geometry().unwrap();
+    let truth = ffdic::service::load_bench_model("paper-bench").unwrap();
+    mock_bench(
+        geometry,
+        truth,
+        config.mock_reduction().unwrap_or_default(),
+        25.0,
+        Duration::from_millis(10),
+    )
+    .unwrap()
+}
+
 pub struct TestServer {
     pub base: String,
     pub service: Service,
@@ -70,16 +84,15 @@ pub struct TestServer {
 impl TestServer {
     /// Starts the service and the router on 127.0.0.1:0 (call inside a multi-thread runtime).
     pub async fn start(config: DaemonConfig) -> Self {
-        let geometry = config.mock_geometry().unwrap();
-        let truth = ffdic::service::load_bench_model("paper-bench").unwrap();
-        let hardware = mock_bench(
-            geometry,
-            truth,
-            config.mock_reduction().unwrap_or_default(),
-            25.0,
-            Duration::from_millis(10),
-        )
-        .unwrap();
+        let hardware = small_bench(&config);
+        Self::start_on(config, hardware).await
+    }
+
+    /// Starts the service on `hardware` (the small mock bench, altered by the test).
+    pub async fn start_on(
+        config: DaemonConfig,
+        hardware: ffdic::experiment::BenchHardware,
+    ) -> Self {
         let (service, _) = Service::start(config, hardware).unwrap();
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let base = format!("http://{}", listener.local_addr().unwrap());

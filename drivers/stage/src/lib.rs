@@ -3,13 +3,14 @@
 //! daemon picks one from its TOML config through [`StageConfig`] and [`open_stage`].
 //!
 //! Layout: `config.rs` (serde configs, units in names), `open.rs` (port settings, entry point),
-//! `transport.rs` (reads with deadlines, I/O errors mapped to [`ffdic_hw::HwError`]), `travel.rs`
+//! `reopen.rs` (a lost port opened again at the next call), `transport.rs` (reads with deadlines, I/O errors mapped to [`ffdic_hw::HwError`]), `travel.rs`
 //! (limits and unit conversion) and one folder per protocol: `protocol.rs` holds the pure
 //! encoding and parsing (unit tested), `mod.rs` the driver.
 
 mod apt;
 mod config;
 mod open;
+mod reopen;
 mod smc100;
 mod transport;
 mod travel;
@@ -19,6 +20,7 @@ pub use apt::protocol as apt_protocol;
 pub use apt::AptStage;
 pub use config::{AptConfig, Smc100Config, StageConfig, ZaberConfig};
 pub use open::{open_port, open_stage};
+pub use reopen::ReopeningStage;
 pub use smc100::protocol as smc100_protocol;
 pub use smc100::Smc100Stage;
 pub use zaber::protocol as zaber_protocol;

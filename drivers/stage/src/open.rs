@@ -24,8 +24,14 @@ pub fn open_port(
         .map_err(|e| HwError::Disconnected(format!("cannot open {path}: {e}")))
 }
 
-/// Opens the stage the config describes and checks that its controller answers.
+/// Opens the stage the config describes and checks that its controller answers; a port lost
+/// later is opened again at the next call ([`crate::ReopeningStage`]).
 pub fn open_stage(config: &StageConfig) -> HwResult<Box<dyn Stage>> {
+    Ok(Box::new(crate::ReopeningStage::open(config)?))
+}
+
+/// The protocol's driver on a freshly opened port.
+pub(crate) fn open_driver(config: &StageConfig) -> HwResult<Box<dyn Stage>> {
     Ok(match config {
         StageConfig::Smc100(c) => Box::new(Smc100Stage::open(c)?),
         StageConfig::Zaber(c) => Box::new(ZaberStage::open(c)?),

@@ -15,7 +15,8 @@ pub struct Health {
     /// `ok`, or `degraded` when a part of the daemon has stopped (then the status is 503).
     pub status: &'static str,
     pub version: &'static str,
-    /// What has stopped: `bench` (the actor owning camera and stage), `lane:bench`,
+    /// What has stopped: `bench` (the actor owning camera and stage), `stage` (its last call
+    /// found it disconnected; its port is opened again at the next call), `lane:bench`,
     /// `lane:compute` (the job workers). Empty when all is well.
     pub stopped: Vec<String>,
 }
@@ -27,6 +28,9 @@ pub async fn health(State(svc): State<Service>) -> (StatusCode, Json<Health>) {
     let mut stopped: Vec<String> = Vec::new();
     if !svc.bench.is_alive() {
         stopped.push("bench".into());
+    }
+    if svc.limits.has_stage() && !svc.bench.stage_connected() {
+        stopped.push("stage".into());
     }
     for lane in svc.jobs.dead_lanes() {
         stopped.push(format!("lane:{}", format!("{lane:?}").to_lowercase()));
