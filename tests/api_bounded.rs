@@ -611,21 +611,7 @@ async fn a_dense_analysis_is_cancelled_within_a_second_and_a_full_lane_answers_4
     queued.push(server.url(&format!("/jobs/{}", v["id"].as_str().unwrap())));
     // Deep in the correlation of its first scheme (its preparation takes about a second).
     tokio::time::sleep(Duration::from_secs(3)).await;
-    let t0 = Instant::now();
-    let r = client()
-        .post(format!("{dense_url}/cancel"))
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(r.status(), 200);
-    let ended = loop {
-        let r: Value = get_json(&dense_url).await;
-        if r["status"] != "running" {
-            break r;
-        }
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    };
-    let took = t0.elapsed();
+    let (ended, took) = cancel_and_time(&dense_url).await.expect("still running");
     println!("dense analysis cancelled in {} ms", took.as_millis());
     assert_eq!(ended["status"], "cancelled", "{ended}");
     // Issue 36: it ignored cancel for more than 166 s.
@@ -633,6 +619,89 @@ async fn a_dense_analysis_is_cancelled_within_a_second_and_a_full_lane_answers_4
     for url in queued {
         assert_eq!(wait_terminal(&url).await["status"], "succeeded");
     }
+    server.stop().await;
+}
+
+/// Cancels the running job at `url`: its record once no longer running and how long that took
+/// from the request; `None` when it had already ended.
+async fn cancel_and_time(url: &str) -> Option<(Value, Duration)> {
+    let t0 = Instant::now();
+    let r = client().post(format!("{url}/cancel")).send().await.unwrap();
+    if r.status() == 409 {
+        return None;
+    }
+    assert_eq!(r.status(), 200);
+    loop {
+        let r: Value = get_json(url).await;
+        if r["status"] != "running" {
+            return Some((r, t0.elapsed()));
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
+/// Issue 36 (3): a diagnosis was watched only between its steps (a comparison renders and
+/// correlates every run, a candidate fit takes seconds). Cancelled at several moments of its
+/// work on a 1280x1080 dataset of the mock bench: each ends `cancelled` within a second.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_diagnosis_is_cancelled_within_a_second_wherever_it_is() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut config = small_config(tmp.path());
+    // The paper's bench at half its sensor: a dataset of two moves made by the mock bench.
+    config.bench.scale_px_per_mm = 26.0;
+    if let ffdic::service::CameraConfig::Mock { width, height, .. } = &mut config.camera {
+        (*width, *height) = (1280, 1080);
+    }
+    let server = TestServer::start(config).await;
+    let api = server.url("");
+    let mut request = daemon::small_request(2);
+    request["schemes"] = json!(["ff100"]);
+    request["dic"] = json!({"subset_px": 31, "step_px": 40, "strain_window": 3});
+    let r = client()
+        .post(format!("{api}/experiments"))
+        .json(&request)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let run: Value = r.json().await.unwrap();
+    let run = wait_terminal(&server.url(&format!("/jobs/{}", run["id"].as_str().unwrap()))).await;
+    assert_eq!(run["status"], "succeeded", "{run}");
+    let big = run["dataset_id"].as_str().unwrap().to_string();
+    let mut latencies_ms = Vec::new();
+    for delay_ms in [200u64, 900, 1_600, 2_300, 3_000, 3_700, 4_400] {
+        let r = client()
+            .post(format!("{api}/datasets/{big}/diagnoses"))
+            .json(&json!({"model": "baseline"}))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 202);
+        let job: Value = r.json().await.unwrap();
+        let url = server.url(&format!("/jobs/{}", job["id"].as_str().unwrap()));
+        daemon::wait_until(&url, |r| r["status"] == "running").await;
+        tokio::time::sleep(Duration::from_millis(delay_ms)).await;
+        let Some((ended, took)) = cancel_and_time(&url).await else {
+            let ended: Value = get_json(&url).await;
+            println!("diagnosis had ended before {delay_ms} ms: {ended}");
+            continue;
+        };
+        println!(
+            "diagnosis cancelled {delay_ms} ms in: after {} ms ({})",
+            took.as_millis(),
+            ended["message"]
+        );
+        assert_eq!(ended["status"], "cancelled", "{ended}");
+        latencies_ms.push(took.as_millis());
+        assert!(
+            took < Duration::from_secs(1),
+            "cancelled {delay_ms} ms in, after {took:?}"
+        );
+    }
+    assert!(
+        !latencies_ms.is_empty(),
+        "every diagnosis ended before its cancel"
+    );
     server.stop().await;
 }
 

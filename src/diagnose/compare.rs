@@ -27,7 +27,7 @@ use super::stage::{fit_stage, StageObservation};
 use super::{CompareOptions, DiagnoseError, Progress};
 use crate::dataset::check_stated_move;
 use crate::dataset::{Manifest, Run};
-use crate::dic::{DicResult, PreparedReference};
+use crate::dic::{DicError, DicResult, PreparedReference, Watch};
 use crate::image::{read_tiff, Image};
 use crate::model::{ModelConfig, Placement};
 use crate::pairs::{correlate_pairs, PairVisitor, RunPair};
@@ -223,6 +223,11 @@ impl PairVisitor for MeasuredPairs<'_> {
         self.moved_crops.push(crop);
         self.dic.push(Vec::new());
         Ok(())
+    }
+
+    /// Asked before every point: the counts so far again (see [`Progress`]).
+    fn cancelled(&self) -> bool {
+        !(self.progress)(self.done, self.total)
     }
 
     fn result(
@@ -608,10 +613,15 @@ pub fn compare_with_scene(
     let runs = &meas.manifest.runs;
     let total = runs.len() * opts.schemes.len();
     let done = AtomicUsize::new(0);
+    let go_on = || progress(done.load(Ordering::Relaxed), total);
+    let cancelled = || !go_on();
     let mut model_dic: Vec<Option<Vec<DicResult>>> = vec![None; runs.len()];
     let mut images = Vec::new();
     let mut moved_images: Vec<Option<ImageComparison>> = vec![None; runs.len()];
     for pi in 0..meas.labels.len() {
+        if !go_on() {
+            return Err(DiagnoseError::Cancelled);
+        }
         let reference = scene.render(pi, (0.0, 0.0), false, 0, None);
         let crop = centre_crop(&reference, STATS_CROP_PX);
         let repeat = meas.repeat_crops[pi]
@@ -635,6 +645,9 @@ pub fn compare_with_scene(
             .enumerate()
             .filter(|(ri, _)| meas.pattern_of_run[*ri] == pi)
         {
+            if !go_on() {
+                return Err(DiagnoseError::Cancelled);
+            }
             let moved = scene.render(
                 pi,
                 nominal.landed_command(ri, (run.stage.dx_mm, run.stage.dy_mm)),
@@ -653,10 +666,14 @@ pub fn compare_with_scene(
             let mut per_scheme = Vec::new();
             for (s, prep) in opts.schemes.iter().zip(&prepared) {
                 let d = reduce(&moved, s)?;
-                per_scheme.push(
-                    prep.correlate(&d, None)
-                        .map_err(|e| dic_error(&run.id, s, e))?,
-                );
+                let watch = Watch {
+                    progress: None,
+                    cancelled: Some(&cancelled),
+                };
+                per_scheme.push(prep.correlate_watched(&d, watch).map_err(|e| match e {
+                    DicError::Cancelled => DiagnoseError::Cancelled,
+                    other => dic_error(&run.id, s, other),
+                })?);
                 let n = done.fetch_add(1, Ordering::Relaxed) + 1;
                 if !progress(n, total) {
                     return Err(DiagnoseError::Cancelled);

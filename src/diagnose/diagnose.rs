@@ -210,16 +210,17 @@ fn fit_candidate(
     before: &Comparison,
     model: &Effects,
     id: EffectId,
+    stop: &dyn Fn() -> bool,
 ) -> Option<ImageFit> {
     use EffectId::*;
     match id {
         Rotation | Scale | LensDistortion => geometric_candidate(meas, before, model, id),
-        PsfBlur => Some(fit_psf_blur(meas, before, model)),
-        FillFactor => Some(fit_fill_factor(meas, before, model)),
+        PsfBlur => Some(fit_psf_blur(meas, before, model, stop)),
+        FillFactor => Some(fit_fill_factor(meas, before, model, stop)),
         SensorNoise => fit_sensor_noise(meas, before, model),
         Vignetting => fit_vignetting(meas, before, model),
         IlluminationChange => fit_illumination_change(meas, before, model),
-        MotionBlur => fit_motion_blur(meas, before, model),
+        MotionBlur => fit_motion_blur(meas, before, model, stop),
         StageError => super::stage::fit_stage_error(before, model),
         // Always part of the nominal experiment (fitted) or known (the frames' ADC), or not
         // identifiable from speckle frames: never a candidate.
@@ -444,7 +445,7 @@ pub fn diagnose_prepared(
 ) -> Result<Diagnosis, DiagnoseError> {
     let before = match before {
         Some(b) => b,
-        None => compare_prepared(meas, model, &|_, _| true)?,
+        None => compare_prepared(meas, model, &|_, _| progress(0, 1))?,
     };
     let design = design_of(&meas.manifest, meas.width);
     let (fit_ids, not_identifiable) = candidates_to_fit(model, &design);
@@ -458,7 +459,9 @@ pub fn diagnose_prepared(
             Err(DiagnoseError::Cancelled)
         }
     };
-    let by_seed = discrepancy_by_seed(meas, model, &before, &tick)?;
+    // Asks, without a step done, whether to go on: inside each comparison, before every point.
+    let ask = |_: usize, _: usize| progress(done.load(Ordering::Relaxed), total);
+    let by_seed = discrepancy_by_seed(meas, model, &before, &tick, &ask)?;
     let seed_sd = {
         let n = by_seed.len() as f64;
         let m = by_seed.iter().sum::<f64>() / n;
@@ -479,9 +482,9 @@ pub fn diagnose_prepared(
         small_moves: design.largest_move_fraction < VIGNETTING_MOVE_FRACTION,
         dic: &meas.options.dic,
     };
-    let (mut candidates, mut models) = fit_candidates(meas, model, &judge, &fit_ids, &tick)?;
+    let (mut candidates, mut models) = fit_candidates(meas, model, &judge, &fit_ids, &tick, &ask)?;
     candidates.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
-    let winner = render_winner(meas, &judge, &mut candidates, &mut models)?;
+    let winner = render_winner(meas, &judge, &mut candidates, &mut models, &ask)?;
     candidates.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
     let mut by_drop: Vec<&Candidate> = candidates.iter().collect();
     by_drop.sort_by(|a, b| b.drop_px.total_cmp(&a.drop_px));
@@ -542,6 +545,7 @@ fn discrepancy_by_seed(
     model: &ModelConfig,
     before: &Comparison,
     tick: &dyn Fn() -> Result<(), DiagnoseError>,
+    ask: Progress,
 ) -> Result<Vec<f64>, DiagnoseError> {
     let mut by_seed = vec![before.discrepancy_px];
     for k in 1..MODEL_SEEDS {
@@ -550,7 +554,7 @@ fn discrepancy_by_seed(
             model,
             meas.options.seed.wrapping_add(k),
             Some(&before.model.nominal),
-            &|_, _| true,
+            ask,
         )?;
         by_seed.push(c.discrepancy_px);
         tick()?;
@@ -566,12 +570,15 @@ fn fit_candidates(
     judge: &Judge<'_>,
     fit_ids: &[EffectId],
     tick: &dyn Fn() -> Result<(), DiagnoseError>,
+    ask: Progress,
 ) -> Result<(Vec<Candidate>, FittedModels), DiagnoseError> {
     let before = judge.before;
     let mut candidates = Vec::new();
     let mut models = FittedModels::new();
+    // A cancelled job's fit ends early; the tick after it reports the cancel.
+    let stop = || !ask(0, 0);
     for &id in fit_ids {
-        let Some(fit) = fit_candidate(meas, before, &model.effects, id) else {
+        let Some(fit) = fit_candidate(meas, before, &model.effects, id, &stop) else {
             tick()?;
             continue;
         };
@@ -588,7 +595,7 @@ fn fit_candidates(
         } else if let Some(predicted) = predict(meas, before, &with, &fit) {
             Some((predicted, Method::Predicted))
         } else {
-            let rendered = compare_with_scene(meas, &with, meas.options.seed, None, &|_, _| true)?;
+            let rendered = compare_with_scene(meas, &with, meas.options.seed, None, ask)?;
             Some((rendered, Method::Rendered))
         };
         candidates.push(judge.candidate(&fit, after.as_ref()));
@@ -606,6 +613,7 @@ fn render_winner(
     judge: &Judge<'_>,
     candidates: &mut [Candidate],
     models: &mut FittedModels,
+    ask: Progress,
 ) -> Result<Option<EffectId>, DiagnoseError> {
     while let Some(pos) = candidates.iter().position(|c| c.significant) {
         let effect = candidates[pos].effect;
@@ -619,7 +627,7 @@ fn render_winner(
                 with,
                 meas.options.seed,
                 Some(&judge.before.model.nominal),
-                &|_, _| true,
+                ask,
             )?,
             Method::Rendered,
         );

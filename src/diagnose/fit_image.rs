@@ -26,7 +26,7 @@ use super::bic::image_chi2;
 use super::compare::Measurement;
 use super::image_stats::{psd, ptc, FrameStats, PsdBin, STATS_CROP_PX};
 use super::nominal::Scene;
-use super::optimise::{curvature_stderr, minimise_1d, nelder_mead};
+use super::optimise::{curvature_stderr, minimise_1d, nelder_mead, unless_stopped};
 use super::results::{Comparison, ImageFit};
 use crate::model::effects::{
     FillFactor, IlluminationChange, MotionBlur, PsfBlur, SensorNoise, Vignetting,
@@ -109,7 +109,13 @@ fn map(pairs: &[(&str, f64)]) -> BTreeMap<String, f64> {
     pairs.iter().map(|(k, v)| (k.to_string(), *v)).collect()
 }
 
-pub fn fit_psf_blur(meas: &Measurement, before: &Comparison, model: &Effects) -> ImageFit {
+/// `stop`: the job was cancelled (the fit then ends early, its result meaningless).
+pub fn fit_psf_blur(
+    meas: &Measurement,
+    before: &Comparison,
+    model: &Effects,
+    stop: &dyn Fn() -> bool,
+) -> ImageFit {
     let measured: Vec<&FrameStats> = meas.reference_stats.iter().collect();
     let with = |s: f64| Effects {
         psf_blur: Some(PsfBlur {
@@ -136,6 +142,7 @@ pub fn fit_psf_blur(meas: &Measurement, before: &Comparison, model: &Effects) ->
             .map(|((m, crop), f)| super::print::spectral_shape_chi2_above(m, &crop, *f))
             .sum::<f64>()
     };
+    let obj = unless_stopped(&obj, stop);
     let sigma = minimise_1d(&|s| obj(&[s]), 0.0, 3.0, 9);
     let se = curvature_stderr(&obj, &[sigma], &[0.05], &[0.0], &[3.0])[0];
     ImageFit {
@@ -148,7 +155,13 @@ pub fn fit_psf_blur(meas: &Measurement, before: &Comparison, model: &Effects) ->
     }
 }
 
-pub fn fit_fill_factor(meas: &Measurement, before: &Comparison, model: &Effects) -> ImageFit {
+/// `stop`: as for [`fit_psf_blur`].
+pub fn fit_fill_factor(
+    meas: &Measurement,
+    before: &Comparison,
+    model: &Effects,
+    stop: &dyn Fn() -> bool,
+) -> ImageFit {
     let measured: Vec<&FrameStats> = meas.reference_stats.iter().collect();
     let with = |fx: f64, fy: f64| Effects {
         fill_factor: Some(FillFactor {
@@ -159,6 +172,7 @@ pub fn fit_fill_factor(meas: &Measurement, before: &Comparison, model: &Effects)
     };
     let obj =
         |x: &[f64]| spectra_chi2(&measured, &reference_crops(meas, before, &with(x[0], x[1])));
+    let obj = unless_stopped(&obj, stop);
     let mut best = (f64::INFINITY, [1.0, 1.0]);
     for fx in [0.3, 0.65, 1.0] {
         for fy in [0.3, 0.65, 1.0] {
@@ -413,10 +427,12 @@ pub fn fit_illumination_change(
     })
 }
 
+/// `stop`: as for [`fit_psf_blur`].
 pub fn fit_motion_blur(
     meas: &Measurement,
     before: &Comparison,
     model: &Effects,
+    stop: &dyn Fn() -> bool,
 ) -> Option<ImageFit> {
     let runs = &meas.manifest.runs;
     // The three largest moves.
@@ -495,6 +511,7 @@ pub fn fit_motion_blur(
         }
         c
     };
+    let obj = unless_stopped(&obj, stop);
     let l = minimise_1d(&|l| obj(&[l]), 0.0, 4.0, 9);
     let se = curvature_stderr(&obj, &[l], &[0.2], &[0.0], &[4.0])[0];
     Some(ImageFit {

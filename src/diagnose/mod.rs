@@ -131,7 +131,10 @@ use crate::image::ImageError;
 use crate::model::ModelError;
 use crate::reduce::{ReduceError, Scheme};
 
-/// Progress callback: (steps done, steps in all) -> go on? Returning false cancels the job.
+/// Progress callback: (steps done, steps in all) -> go on? Returning false cancels the job. It
+/// is also called again with counts it was given before, from any thread (before every DIC
+/// point of a comparison, so a cancel is seen within a point): such a call only asks, and a
+/// reporter reports only what changed.
 pub type Progress<'a> = &'a (dyn Fn(usize, usize) -> bool + Sync);
 
 #[derive(Debug, thiserror::Error)]

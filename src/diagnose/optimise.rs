@@ -1,6 +1,22 @@
 //! The optimisers of the fits: golden section (after a coarse grid), Nelder–Mead in a box, and
 //! standard errors from the curvature of χ² at the minimum (σ² = 2/∂²χ²).
 
+/// `objective`, or +∞ without evaluating it once `stop` says so: an optimisation whose job was
+/// cancelled runs its remaining steps for nothing (each one a rendering otherwise), and its
+/// caller discards the result.
+pub fn unless_stopped<'a>(
+    objective: &'a dyn Fn(&[f64]) -> f64,
+    stop: &'a dyn Fn() -> bool,
+) -> impl Fn(&[f64]) -> f64 + 'a {
+    move |x| {
+        if stop() {
+            f64::INFINITY
+        } else {
+            objective(x)
+        }
+    }
+}
+
 /// Golden-section minimum of `f` on [a, b] (`iters` steps).
 pub fn golden(f: &dyn Fn(f64) -> f64, a: f64, b: f64, iters: usize) -> f64 {
     let g = 0.618_033_988_749_895;

@@ -86,7 +86,7 @@ pub fn diagnose_rounds_prepared(
 ) -> Result<Rounds, DiagnoseError> {
     let rounds = rounds.clamp(1, MAX_ROUNDS);
     let mut current = model.clone();
-    let mut before = Some(compare_prepared(meas, &current, &|_, _| true)?);
+    let mut before = Some(compare_prepared(meas, &current, &|_, _| progress(0, 1))?);
     let mut out = Vec::new();
     let mut verdicts = Vec::new();
     let mut diagnoses: Vec<Diagnosis> = Vec::new();

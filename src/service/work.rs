@@ -258,7 +258,9 @@ fn progress_reporter<'a>(
     move |done: usize, total: usize| {
         let p = done as f64 / total.max(1) as f64;
         let mut last = last.lock().expect("progress lock");
-        if p - *last >= 0.01 || done == total {
+        // Counts already reported come again (a comparison asks before every point): only
+        // what moved on is an event.
+        if p - *last >= 0.01 || (done == total && p > *last) {
             *last = p;
             ctx.event(
                 EventKind::Progress,
