@@ -268,3 +268,56 @@ async fn a_cancelled_sweep_stops_and_keeps_what_it_finished() {
     assert_eq!(r.status(), 404);
     server.stop().await;
 }
+
+/// Issue 36 (3): a sweep was watched between its shards only, and a shard of a large sensor
+/// (two renderings and three correlations) takes seconds. Cancelled during its rendering and
+/// during its correlations, a one-shard sweep of a 4096x4096 sensor ends within a second.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_sweep_is_cancelled_within_a_second_inside_its_shard() {
+    let tmp = tempfile::tempdir().unwrap();
+    let server = TestServer::start(small_config(&tmp.path().join("data"))).await;
+    let mut spec = smoke_spec();
+    spec["camera"]["width"] = json!(4096);
+    spec["camera"]["height"] = json!(4096);
+    spec["seeds"] = json!(1);
+    spec["axes"]["dot_diameter_px"] = json!([3.0]);
+    spec["axes"]["subpixel_x"] = json!([0.0]);
+    for delay_ms in [300u64, 1_500, 3_000, 4_000] {
+        spec["name"] = json!(format!("big-{delay_ms}"));
+        let r = post(&server.url("/sweeps"), &spec).await;
+        assert_eq!(r.status(), 202);
+        let id = r.json::<Value>().await.unwrap()["id"]
+            .as_str()
+            .unwrap()
+            .to_string();
+        let url = server.url(&format!("/jobs/{id}"));
+        wait_until(&url, |r| r["status"] == "running").await;
+        tokio::time::sleep(std::time::Duration::from_millis(delay_ms)).await;
+        let t0 = std::time::Instant::now();
+        let r = client().post(format!("{url}/cancel")).send().await.unwrap();
+        if r.status() == 409 {
+            let ended: Value = client()
+                .get(&url)
+                .send()
+                .await
+                .unwrap()
+                .json()
+                .await
+                .unwrap();
+            println!(
+                "the sweep had ended before {delay_ms} ms: {}",
+                ended["message"]
+            );
+            continue;
+        }
+        let done = wait_until(&url, |r| r["status"] != "running").await;
+        let took = t0.elapsed();
+        println!(
+            "sweep cancelled {delay_ms} ms in: after {} ms",
+            took.as_millis()
+        );
+        assert_eq!(done["status"], "cancelled", "{done}");
+        assert!(took < std::time::Duration::from_secs(1), "after {took:?}");
+    }
+    server.stop().await;
+}

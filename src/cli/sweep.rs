@@ -199,9 +199,13 @@ fn run_command(
         .context("cannot start worker threads")?;
     let bar = ProgressBar::new(true, "shards");
     let started = Instant::now();
+    // Counts already shown come again (a shard asks before every point): drawn once.
+    let shown = std::sync::atomic::AtomicUsize::new(usize::MAX);
     let counts = pool.install(|| {
         run_shards(dir, &plan, &select, &|d, t| {
-            bar.update(d, t);
+            if shown.swap(d, std::sync::atomic::Ordering::Relaxed) != d {
+                bar.update(d, t);
+            }
             true
         })
     })?;

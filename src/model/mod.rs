@@ -16,6 +16,8 @@ pub use config::{ModelConfig, ModelError};
 pub use effects::{EffectId, Effects, Stage};
 pub use pattern::{Placement, SpecklePattern, TargetDot, TooManyDots, MAX_TARGET_DOTS};
 pub use readout::{BinnedValue, BinningDomain, SensorChain, SensorReadout};
-pub use render::{project, render_frame, render_frame_read_out, Camera, FrameSpec};
+pub use render::{
+    project, render_frame, render_frame_read_out, render_frame_until, Camera, FrameSpec,
+};
 pub use seed::derive_seed;
-pub use speckle::{render_dots, GaussianDot, SpeckleLayout};
+pub use speckle::{render_dots, render_dots_until, GaussianDot, SpeckleLayout};

@@ -10,7 +10,7 @@
 use super::effects::Effects;
 use super::pattern::TargetDot;
 use super::readout::{SensorChain, SensorReadout};
-use super::speckle::{render_dots, GaussianDot};
+use super::speckle::{render_dots_until, GaussianDot};
 use crate::image::Image;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -113,9 +113,21 @@ pub fn render_frame(
     dots: &[TargetDot],
     frame: &FrameSpec,
 ) -> Image {
-    let mut image = render_irradiance(camera, effects, dots, frame);
-    apply_sensor(camera, effects, frame, &mut image);
-    image
+    render_frame_until(camera, effects, dots, frame, &|| false).expect("never asked to stop")
+}
+
+/// [`render_frame`], asking `stop` as it goes (before each band of rows and each step of the
+/// chain): `None` once it said so.
+pub fn render_frame_until(
+    camera: &Camera,
+    effects: &Effects,
+    dots: &[TargetDot],
+    frame: &FrameSpec,
+    stop: &(dyn Fn() -> bool + Sync),
+) -> Option<Image> {
+    let mut image = render_irradiance(camera, effects, dots, frame, stop)?;
+    apply_sensor(camera, effects, frame, &mut image, stop);
+    (!stop()).then_some(image)
 }
 
 /// The optical image on the sensor, DN per pixel (each pixel's aperture integrated exactly),
@@ -125,7 +137,8 @@ fn render_irradiance(
     effects: &Effects,
     dots: &[TargetDot],
     frame: &FrameSpec,
-) -> Image {
+    stop: &(dyn Fn() -> bool + Sync),
+) -> Option<Image> {
     let full_scale = effects.quantization.map_or(65535.0, |q| q.max_dn());
     let background = camera.exposure_level * full_scale;
     let mag = if frame.moved {
@@ -187,14 +200,14 @@ fn render_irradiance(
                         ..*d
                     })
                     .collect();
-                let img = render_dots(w, h, &shifted, background, aperture);
+                let img = render_dots_until(w, h, &shifted, background, aperture, stop)?;
                 for (a, v) in acc.iter_mut().zip(img.data()) {
                     *a += v / k as f32;
                 }
             }
-            Image::from_vec(w, h, acc).expect("sized")
+            Some(Image::from_vec(w, h, acc).expect("sized"))
         }
-        None => render_dots(w, h, &px_dots, background, aperture),
+        None => render_dots_until(w, h, &px_dots, background, aperture, stop),
     }
 }
 
@@ -246,7 +259,15 @@ impl<'a> Radiometry<'a> {
 
 /// Radiometry and the sensor chain, per pixel at full resolution, rows in parallel with per-row
 /// seeds so the result does not depend on the thread count.
-fn apply_sensor(camera: &Camera, effects: &Effects, frame: &FrameSpec, image: &mut Image) {
+/// Radiometry, noise and the ADC on every pixel; rows left as they are once `stop` says so (the
+/// caller then discards the frame). Per-row seeds: the rows are the same whatever the threads.
+fn apply_sensor(
+    camera: &Camera,
+    effects: &Effects,
+    frame: &FrameSpec,
+    image: &mut Image,
+    stop: &(dyn Fn() -> bool + Sync),
+) {
     let radiometry = Radiometry::new(camera, effects, frame);
     let chain = SensorChain::new(effects);
     image
@@ -254,6 +275,9 @@ fn apply_sensor(camera: &Camera, effects: &Effects, frame: &FrameSpec, image: &m
         .par_chunks_mut(camera.width)
         .enumerate()
         .for_each(|(row, line)| {
+            if stop() {
+                return;
+            }
             let mut rng = SensorChain::row_rng(frame.seed, row);
             let mut fpn = Radiometry::fixed_pattern_rng(row);
             for (col, px) in line.iter_mut().enumerate() {
@@ -276,7 +300,8 @@ pub fn render_frame_read_out(
     if readout.is_full_resolution() {
         return render_frame(camera, effects, dots, frame);
     }
-    let image = render_irradiance(camera, effects, dots, frame);
+    let image =
+        render_irradiance(camera, effects, dots, frame, &|| false).expect("never asked to stop");
     let radiometry = Radiometry::new(camera, effects, frame);
     let w = camera.width;
     let mut irradiance = vec![0.0f64; image.data().len()];

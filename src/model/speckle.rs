@@ -90,8 +90,22 @@ pub fn render_dots(
     height: usize,
     dots: &[GaussianDot],
     background: f64,
-    (fx, fy): (f64, f64),
+    aperture: (f64, f64),
 ) -> Image {
+    render_dots_until(width, height, dots, background, aperture, &|| false)
+        .expect("never asked to stop")
+}
+
+/// [`render_dots`], asking `stop` before each band of rows: `None` once it said so (a frame of
+/// a large sensor takes seconds; the job that wants it may have been cancelled).
+pub fn render_dots_until(
+    width: usize,
+    height: usize,
+    dots: &[GaussianDot],
+    background: f64,
+    (fx, fy): (f64, f64),
+    stop: &(dyn Fn() -> bool + Sync),
+) -> Option<Image> {
     const BAND: usize = 32;
     // Dots reach 5σ (exp(-12.5) ≈ 4e-6 of the depth) plus half an aperture.
     let reach = |d: &GaussianDot| (5.0 * d.sigma_x_px + fx, 5.0 * d.sigma_y_px + fy);
@@ -102,6 +116,9 @@ pub fn render_dots(
     data.par_chunks_mut(BAND * width)
         .enumerate()
         .for_each(|(band, chunk)| {
+            if stop() {
+                return;
+            }
             let r0 = band * BAND;
             let rows = chunk.len() / width;
             let mut acc = vec![0.0f64; rows * width];
@@ -137,7 +154,10 @@ pub fn render_dots(
                 *o = (background - a) as f32;
             }
         });
-    Image::from_vec(width, height, data).expect("buffer sized to the image")
+    if stop() {
+        return None;
+    }
+    Some(Image::from_vec(width, height, data).expect("buffer sized to the image"))
 }
 
 /// Mean of exp(-(x-m)²/2σ²) over [c - a/2, c + a/2].

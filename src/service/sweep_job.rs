@@ -67,8 +67,12 @@ pub fn sweep(plan: Plan) -> Work {
             json!({ "tasks": tasks, "shards": shards }),
         );
         let every = shards.div_ceil(PROGRESS_EVENTS).max(1);
+        // A shard asks again, before every point, with the count already reported: one event
+        // per count reached.
+        let reported = std::sync::atomic::AtomicUsize::new(0);
         let counts = run_shards(&dir, &plan, &|_| true, &|done, total| {
-            if done > 0 && (done % every == 0 || done == total) {
+            let new = reported.fetch_max(done, std::sync::atomic::Ordering::Relaxed) < done;
+            if new && (done % every == 0 || done == total) {
                 ctx.event(
                     EventKind::ShardsRun,
                     0.95 * done as f64 / total.max(1) as f64,

@@ -78,7 +78,11 @@ pub fn run_shards(
             if stop.load(Ordering::Relaxed) {
                 return Err(SweepError::Cancelled);
             }
-            let results = run_shard(plan, shard)?;
+            // Asked again with the count reported last: a shard stops within a point.
+            let cancelled = || {
+                stop.load(Ordering::Relaxed) || !progress(finished.load(Ordering::Relaxed), total)
+            };
+            let results = run_shard(plan, shard, &cancelled)?;
             for r in &results {
                 write(
                     &result_path(dir, &r.id),

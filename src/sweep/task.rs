@@ -3,8 +3,8 @@
 
 use super::plan::{task_effects, Plan, Shard};
 use super::spec::SweepError;
-use crate::dic::PreparedReference;
-use crate::model::{project, render_frame, FrameSpec};
+use crate::dic::{DicError, PreparedReference, Watch};
+use crate::model::{project, render_frame_until, FrameSpec};
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
@@ -32,8 +32,21 @@ pub struct TaskResult {
     pub elapsed_s: f64,
 }
 
-/// Runs every task of `shard`; the results in the shard's task order.
-pub fn run_shard(plan: &Plan, shard: &Shard) -> Result<Vec<TaskResult>, SweepError> {
+/// Runs every task of `shard`; the results in the shard's task order. `cancelled` is asked
+/// before each rendering and task and before every DIC point (a shard of a large sensor
+/// takes seconds): once it says so, [`SweepError::Cancelled`].
+pub fn run_shard(
+    plan: &Plan,
+    shard: &Shard,
+    cancelled: &(dyn Fn() -> bool + Sync),
+) -> Result<Vec<TaskResult>, SweepError> {
+    let check = || {
+        if cancelled() {
+            Err(SweepError::Cancelled)
+        } else {
+            Ok(())
+        }
+    };
     let Some(first) = shard.tasks.first() else {
         return Ok(Vec::new());
     };
@@ -73,8 +86,11 @@ pub fn run_shard(plan: &Plan, shard: &Shard) -> Result<Vec<TaskResult>, SweepErr
         moved: true,
         seed: crate::model::derive_seed(first.seed, 2, 0xF2A3),
     };
-    let reference = render_frame(camera, &effects, &dots, &reference_frame);
-    let moved = render_frame(camera, &effects, &dots, &moved_frame);
+    let render = |frame: &FrameSpec| {
+        render_frame_until(camera, &effects, &dots, frame, cancelled).ok_or(SweepError::Cancelled)
+    };
+    let reference = render(&reference_frame)?;
+    let moved = render(&moved_frame)?;
     // The target point on the optical axis at the reference position, where it lands in each.
     let at_ref = project(camera, &effects, &reference_frame, 0.0, 0.0);
     let at_moved = project(camera, &effects, &moved_frame, 0.0, 0.0);
@@ -82,6 +98,7 @@ pub fn run_shard(plan: &Plan, shard: &Shard) -> Result<Vec<TaskResult>, SweepErr
 
     let mut results = Vec::with_capacity(shard.tasks.len());
     for task in &shard.tasks {
+        check()?;
         let started = Instant::now();
         let reduce = |image| {
             crate::reduce::reduce(image, &task.scheme).map_err(|e| SweepError::Task(e.to_string()))
@@ -89,9 +106,16 @@ pub fn run_shard(plan: &Plan, shard: &Shard) -> Result<Vec<TaskResult>, SweepErr
         let (r, m) = (reduce(&reference)?, reduce(&moved)?);
         let (bx, by) = (task.scheme.x.block as f64, task.scheme.y.block as f64);
         let (truth_u_px, truth_v_px) = ((at_moved.0 - at_ref.0) / bx, (at_moved.1 - at_ref.1) / by);
+        let watch = || Watch {
+            progress: None,
+            cancelled: Some(cancelled),
+        };
         let result = PreparedReference::new(&r, &spec.dic)
-            .and_then(|p| p.correlate(&m, None))
-            .map_err(|e| SweepError::Task(format!("task {}: {e}", task.id)))?;
+            .and_then(|p| p.correlate_watched(&m, watch()))
+            .map_err(|e| match e {
+                DicError::Cancelled => SweepError::Cancelled,
+                other => SweepError::Task(format!("task {}: {other}", task.id)),
+            })?;
         let s = result.summary;
         results.push(TaskResult {
             id: task.id.clone(),
