@@ -305,6 +305,26 @@ class Client:
             return None
         return json.loads(body.decode("utf-8"))
 
+    def _all_pages(
+        self, path: str, query: Mapping[str, Any], page_size: int = 1000
+    ) -> List[Dict[str, Any]]:
+        """Every item of a newest-first list, following each page's ``Link: <…>; rel="next"``."""
+        items: List[Dict[str, Any]] = []
+        next_query: Optional[Dict[str, Any]] = {**query, "limit": page_size}
+        while next_query is not None:
+            resp = self._open("GET", path, query=next_query)
+            try:
+                link = resp.headers.get("Link")
+                items.extend(json.loads(resp.read().decode("utf-8")))
+            finally:
+                resp.close()
+            next_query = None
+            if link and 'rel="next"' in link:
+                target = link.split(">", 1)[0].lstrip("<")
+                parsed = urllib.parse.urlsplit(target)
+                next_query = dict(urllib.parse.parse_qsl(parsed.query))
+        return items
+
     def _submit(self, path: str, body: Mapping[str, Any], idempotency_key: Optional[str]) -> str:
         headers = {"Idempotency-Key": idempotency_key} if idempotency_key else None
         record = self._json("POST", path, json_body=dict(body), headers=headers)
@@ -404,12 +424,25 @@ class Client:
         submitted, ``dataset_id`` (the frames as a dataset, once written) and ``result_files``."""
         return self._json("GET", f"/experiments/{_quote(run_id)}")  # type: ignore[no-any-return]
 
-    def experiments(self, status: Optional[str] = None, limit: Optional[int] = None) -> List[Dict[str, Any]]:
+    def experiments(
+        self, status: Optional[str] = None, limit: Optional[int] = None, after: Optional[str] = None
+    ) -> List[Dict[str, Any]]:
         """``GET /experiments``: experiment records, newest first; ``status`` filters (queued,
-        running, succeeded, failed, cancelled), ``limit`` caps the count (daemon default 50)."""
+        running, succeeded, failed, cancelled), ``limit`` caps the count (daemon default 50,
+        at most 1000) and ``after`` is the cursor of the page before (its ``Link`` header).
+        Every record: :meth:`all_experiments`."""
         return self._json(  # type: ignore[no-any-return]
-            "GET", "/experiments", query={"status": status, "limit": limit}
+            "GET", "/experiments", query={"status": status, "limit": limit, "after": after}
         )
+
+    def all_experiments(self, status: Optional[str] = None) -> List[Dict[str, Any]]:
+        """Every experiment record, newest first, page after page."""
+        return self._all_pages("/experiments", {"status": status})
+
+    def delete_run(self, run_id: str) -> None:
+        """``DELETE /jobs/{id}``: deletes an ended run of any kind with its folder (409 while
+        it is queued or running: cancel it first). A dataset its frames became stays."""
+        self._bytes("DELETE", f"/jobs/{_quote(run_id)}")
 
     def cancel(self, run_id: str, kind: str = "experiment") -> Dict[str, Any]:
         """``POST /experiments/{id}/cancel`` (``kind="job"``: ``/jobs/{id}/cancel``): asks the run
@@ -654,9 +687,15 @@ class Client:
         return str(record["id"])
 
     def datasets(self) -> List[Dict[str, Any]]:
-        """``GET /datasets``: every stored dataset (``id``, ``name``, ``source`` — ``upload`` or
-        ``experiment:{run id}`` —, ``runs``, ``width``/``height`` in px, ``files``)."""
-        return self._json("GET", "/datasets")  # type: ignore[no-any-return]
+        """``GET /datasets``: every stored dataset, newest first, page after page (``id``,
+        ``name``, ``source`` — ``upload`` or ``experiment:{run id}`` —, ``runs``,
+        ``width``/``height`` in px, ``files``)."""
+        return self._all_pages("/datasets", {})
+
+    def delete_dataset(self, dataset_id: str) -> None:
+        """``DELETE /datasets/{id}``: deletes a dataset's frames and record (409 while a queued
+        or running run names it). Ended runs that analysed it keep their results."""
+        self._bytes("DELETE", f"/datasets/{_quote(dataset_id)}")
 
     def dataset(self, dataset_id: str) -> Dict[str, Any]:
         """``GET /datasets/{id}``: one dataset's record (as in :meth:`datasets`)."""
@@ -731,6 +770,12 @@ class Client:
         """``GET /models``: the models a comparison can name (``name``, ``version``,
         ``description``, ``effects``, ``source``: ``embedded`` or ``stored``), baseline first."""
         return self._json("GET", "/models")  # type: ignore[no-any-return]
+
+    def delete_model(self, name: str) -> None:
+        """``DELETE /models/{name}``: takes a stored model out of the list (409 for an embedded
+        one or while a queued or running run names it). Its name stays its text's: the same
+        text may be added again, another may not."""
+        self._bytes("DELETE", f"/models/{_quote(name)}")
 
     def model(self, name: str) -> Dict[str, Any]:
         """``GET /models/{name}``: one model, with its TOML text under ``toml``."""

@@ -309,3 +309,24 @@ def test_a_design_map(client: Client) -> None:
     with pytest.raises(ProblemError) as info:
         client.start_sweep({**spec, "seeds": 0})
     assert info.value.status == 422 and info.value.field == "seeds"
+
+
+def test_lists_in_pages_and_deletion(client: Client, simulated_dataset: Path) -> None:
+    ids = [client.upload_dataset(simulated_dataset) for _ in range(2)]
+    listed = [d["id"] for d in client.datasets()]
+    assert set(ids) <= set(listed)
+    # One item a page: the pages, followed through their Link headers, are the whole list.
+    assert [d["id"] for d in client._all_pages("/datasets", {}, page_size=1)] == listed
+    client.delete_dataset(ids[0])
+    with pytest.raises(ProblemError) as e:
+        client.dataset(ids[0])
+    assert e.value.status == 404
+    assert ids[0] not in [d["id"] for d in client.datasets()]
+    client.add_model('name = "pytest-deleted"\n')
+    client.delete_model("pytest-deleted")
+    with pytest.raises(ProblemError) as e:
+        client.model("pytest-deleted")
+    assert e.value.status == 404
+    with pytest.raises(ProblemError) as e:
+        client.delete_model("baseline")
+    assert e.value.status == 409
