@@ -640,6 +640,46 @@ async fn cancel_and_time(url: &str) -> Option<(Value, Duration)> {
     }
 }
 
+/// Issue 36 (3): an averaged frame was one capture command, which no cancel could stop (64
+/// frames of the 2560x2160 mock bench take tens of seconds). Cancelled during the capture of
+/// its first frame (32 averaged), an experiment ends within a second.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_experiment_is_cancelled_within_a_second_inside_an_averaged_capture() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut config = small_config(tmp.path());
+    config.bench.scale_px_per_mm = 26.0;
+    if let ffdic::service::CameraConfig::Mock { width, height, .. } = &mut config.camera {
+        (*width, *height) = (2560, 2160);
+    }
+    let server = TestServer::start(config).await;
+    let mut request = daemon::small_request(1);
+    request["frames_averaged"] = json!(32);
+    let r = client()
+        .post(server.url("/experiments"))
+        .json(&request)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let run: Value = r.json().await.unwrap();
+    let url = server.url(&format!("/jobs/{}", run["id"].as_str().unwrap()));
+    daemon::wait_until(&url, |r| r["status"] == "running").await;
+    tokio::time::sleep(Duration::from_millis(2_500)).await;
+    let (ended, took) = cancel_and_time(&url).await.expect("still capturing");
+    println!(
+        "experiment cancelled inside its capture after {} ms",
+        took.as_millis()
+    );
+    assert_eq!(ended["status"], "cancelled", "{ended}");
+    let frames = ended["result_files"].as_array().unwrap().len();
+    assert_eq!(
+        frames, 0,
+        "cancelled before its first frame was written: {ended}"
+    );
+    assert!(took < Duration::from_secs(1), "after {took:?}");
+    server.stop().await;
+}
+
 /// Issue 36 (3): a diagnosis was watched only between its steps (a comparison renders and
 /// correlates every run, a candidate fit takes seconds). Cancelled at several moments of its
 /// work on a 1280x1080 dataset of the mock bench: each ends `cancelled` within a second.

@@ -20,6 +20,10 @@ use serde_json::{json, Value};
 use std::path::PathBuf;
 use std::time::Duration;
 
+/// How long one capture command of an averaged frame may take, about: a cancel is seen between
+/// commands.
+const CAPTURE_SLICE: Duration = Duration::from_millis(500);
+
 /// Where a run reports to and writes into.
 pub trait RunSink: Sync {
     /// A typed event for the run's log and live subscribers; `progress` in 0..=1.
@@ -447,6 +451,26 @@ impl<'a> Session<'a> {
         Ok(())
     }
 
+    /// `count` frames, in capture commands of about [`CAPTURE_SLICE`] each (the first frame
+    /// alone, to time one), the cancel asked before each: 64 averaged frames were one command
+    /// that no cancel could stop.
+    fn capture_watched(&self, count: usize) -> Result<Vec<Frame>, RunnerError> {
+        let mut frames = Vec::with_capacity(count);
+        let mut batch = 1;
+        while frames.len() < count {
+            self.check()?;
+            let n = batch.min(count - frames.len());
+            let started = std::time::Instant::now();
+            frames.extend(
+                self.bench
+                    .capture(self.owner.clone(), n, self.timeouts.frame)?,
+            );
+            let per_frame_s = started.elapsed().as_secs_f64() / n as f64;
+            batch = ((CAPTURE_SLICE.as_secs_f64() / per_frame_s.max(1e-6)) as usize).max(1);
+        }
+        Ok(frames)
+    }
+
     /// Captures the averaged frame in the current read-out `mode` and writes it.
     fn grab(
         &self,
@@ -455,12 +479,7 @@ impl<'a> Session<'a> {
         name: &str,
         mode: Option<&HardwareScheme>,
     ) -> Result<(), RunnerError> {
-        self.check()?;
-        let frames = self.bench.capture(
-            self.owner.clone(),
-            self.plan.frames_averaged,
-            self.timeouts.frame,
-        )?;
+        let frames = self.capture_watched(self.plan.frames_averaged)?;
         let (w, h, depth, data) = average(&frames)?;
         state.check_size(mode, (w, h, depth))?;
         let file = frame_file(mode, name);
