@@ -133,6 +133,9 @@ pub fn correlate_pairs<V: PairVisitor + Sync>(
             deformed: &deformed,
             bit_depth: frame.bit_depth,
         };
+        if visitor.cancelled() {
+            return Err(PairError::Cancelled.into());
+        }
         visitor.frames(&pair)?;
         for (scheme, prepared) in frame.schemes.iter().zip(&frame.prepared) {
             let moved = as_analysed(&deformed, run, scheme)?;

@@ -14,6 +14,11 @@ use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
+/// The tests that keep both cores busy or time a cancel run one at a time: a cancel's latency
+/// timed while the file's other tests render and correlate on the same two cores measures them
+/// (a diagnosis's cancel took 1.1 s in CI beside them, at most 304 ms alone).
+static HEAVY: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+
 /// A deflate-compressed 16-bit grey TIFF of `side`² zeros (`side` a multiple of 256), written
 /// by hand: every strip of 256 rows is the same zlib stream, compressed once, so the test never
 /// holds the decoded frame. 16384² is 512 MB decoded and about 0.5 MB on the wire.
@@ -435,6 +440,7 @@ const BUDGET_BYTES: u64 = 1 << 30;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn within_an_address_space_budget_bombs_large_uploads_and_slow_readers_leave_it_alive() {
+    let _heavy = HEAVY.lock().await;
     if std::process::Command::new("prlimit")
         .arg("--version")
         .output()
@@ -567,6 +573,7 @@ async fn submit(api: &str, dataset: &str, body: &Value) -> reqwest::Response {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_dense_analysis_is_cancelled_within_a_second_and_a_full_lane_answers_429() {
+    let _heavy = HEAVY.lock().await;
     let tmp = tempfile::tempdir().unwrap();
     let mut config = small_config(tmp.path());
     config.jobs.max_queued_per_lane = 2;
@@ -645,6 +652,7 @@ async fn cancel_and_time(url: &str) -> Option<(Value, Duration)> {
 /// its first frame (32 averaged), an experiment ends within a second.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_experiment_is_cancelled_within_a_second_inside_an_averaged_capture() {
+    let _heavy = HEAVY.lock().await;
     let tmp = tempfile::tempdir().unwrap();
     let mut config = small_config(tmp.path());
     config.bench.scale_px_per_mm = 26.0;
@@ -685,6 +693,7 @@ async fn an_experiment_is_cancelled_within_a_second_inside_an_averaged_capture()
 /// work on a 1280x1080 dataset of the mock bench: each ends `cancelled` within a second.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_diagnosis_is_cancelled_within_a_second_wherever_it_is() {
+    let _heavy = HEAVY.lock().await;
     let tmp = tempfile::tempdir().unwrap();
     let mut config = small_config(tmp.path());
     // The paper's bench at half its sensor: a dataset of two moves made by the mock bench.
@@ -747,6 +756,7 @@ async fn a_diagnosis_is_cancelled_within_a_second_wherever_it_is() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn sigterm_with_three_thousand_queued_jobs_exits_within_ten_seconds_and_cancels_them_all() {
+    let _heavy = HEAVY.lock().await;
     let tmp = tempfile::tempdir().unwrap();
     let data = tmp.path().join("data");
     let config = tmp.path().join("ffdic.toml");
@@ -810,6 +820,7 @@ async fn sigterm_with_three_thousand_queued_jobs_exits_within_ten_seconds_and_ca
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn eight_concurrent_uploads_store_no_more_than_the_quota() {
+    let _heavy = HEAVY.lock().await;
     let tmp = tempfile::tempdir().unwrap();
     let mut config = small_config(tmp.path());
     let (reference, deformed) = (texture_tiff(320, 300, 0), texture_tiff(320, 300, 13));

@@ -12,6 +12,11 @@ use serde_json::{json, Value};
 use std::path::Path;
 use std::process::Command;
 
+/// The tests that keep both cores busy or time a cancel run one at a time: a cancel's latency
+/// timed while the file's other tests render and correlate on the same two cores measures them
+/// (a diagnosis's cancel took 1.1 s in CI beside them, at most 304 ms alone).
+static HEAVY: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+
 /// `config/sweeps/smoke.toml` as the JSON body of `POST /sweeps`.
 fn smoke_spec() -> Value {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sweeps/smoke.toml");
@@ -52,6 +57,7 @@ fn cli_map_csv(spec: &Value, dir: &Path) -> String {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_sweep_through_the_daemon_maps_as_the_cli_does() {
+    let _heavy = HEAVY.lock().await;
     let tmp = tempfile::tempdir().unwrap();
     let server = TestServer::start(small_config(&tmp.path().join("data"))).await;
     let spec = smoke_spec();
@@ -229,6 +235,7 @@ async fn bad_sweeps_are_refused_naming_the_field_and_queue_nothing() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_cancelled_sweep_stops_and_keeps_what_it_finished() {
+    let _heavy = HEAVY.lock().await;
     let tmp = tempfile::tempdir().unwrap();
     let data = tmp.path().join("data");
     let server = TestServer::start(small_config(&data)).await;
@@ -274,6 +281,7 @@ async fn a_cancelled_sweep_stops_and_keeps_what_it_finished() {
 /// during its correlations, a one-shard sweep of a 4096x4096 sensor ends within a second.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_sweep_is_cancelled_within_a_second_inside_its_shard() {
+    let _heavy = HEAVY.lock().await;
     let tmp = tempfile::tempdir().unwrap();
     let server = TestServer::start(small_config(&tmp.path().join("data"))).await;
     let mut spec = smoke_spec();

@@ -366,6 +366,7 @@ fn calibrate_seeded(
     model: &ModelConfig,
     seed: u64,
     scene_from: Option<&Nominal>,
+    go_on: &dyn Fn() -> bool,
 ) -> Result<Nominal, DiagnoseError> {
     let mut nominal = meas.nominal.clone();
     let obs: Vec<StageObservation> = meas
@@ -398,13 +399,19 @@ fn calibrate_seeded(
         nominal.patterns.clone_from(&other.patterns);
         return Ok(nominal);
     }
+    // Each step renders crops (the print's calibration some thirty): asked before each.
+    let check = || go_on().then_some(()).ok_or(DiagnoseError::Cancelled);
     for pi in 0..nominal.patterns.len() {
+        check()?;
         match_white(meas, &mut nominal, model, pi, seed)?;
         if !nominal.patterns[pi].placement_stated {
+            check()?;
             choose_placement(meas, &mut nominal, model, pi, seed)?;
         }
         if nominal.patterns[pi].print == PrintKnowledge::Calibrated {
-            calibrate_print(meas, &mut nominal, model, pi, seed)?;
+            check()?;
+            calibrate_print(meas, &mut nominal, model, pi, seed, go_on)?;
+            check()?;
             match_white(meas, &mut nominal, model, pi, seed)?;
         }
     }
@@ -482,6 +489,7 @@ fn calibrate_print(
     model: &ModelConfig,
     pi: usize,
     seed: u64,
+    go_on: &dyn Fn() -> bool,
 ) -> Result<(), DiagnoseError> {
     let measured = &meas.reference_stats[pi];
     let start = nominal.patterns[pi].pattern.clone();
@@ -498,6 +506,9 @@ fn calibrate_print(
         }
         let sigma0 = nominal.patterns[pi].pattern.sigma_mm();
         let trial = |ln_factor: f64| -> f64 {
+            if !go_on() {
+                return f64::INFINITY;
+            }
             let mut n = nominal.clone();
             set_sigma(&mut n.patterns[pi].pattern, sigma0 * ln_factor.exp());
             match reference_crop(meas, &n, model, pi, seed) {
@@ -512,6 +523,9 @@ fn calibrate_print(
         let sigma_max = (0.6 / (2.0 * std::f64::consts::PI * rho_per_mm2 * p.contrast)).sqrt();
         let hi = (sigma_max / sigma0).clamp(0.3, 4.0);
         let best = golden(&trial, (0.25f64).ln(), hi.ln(), 12);
+        if !go_on() {
+            return Err(DiagnoseError::Cancelled);
+        }
         set_sigma(&mut nominal.patterns[pi].pattern, sigma0 * best.exp());
     }
     let crop = reference_crop(meas, nominal, model, pi, seed)?;
@@ -608,12 +622,12 @@ pub fn compare_with_scene(
     progress: Progress,
 ) -> Result<Comparison, DiagnoseError> {
     let opts = &meas.options;
-    let nominal = calibrate_seeded(meas, model, seed, scene_from)?;
-    let scene = Scene::new(&nominal, &model.effects, &meas.manifest, seed)?;
     let runs = &meas.manifest.runs;
     let total = runs.len() * opts.schemes.len();
     let done = AtomicUsize::new(0);
     let go_on = || progress(done.load(Ordering::Relaxed), total);
+    let nominal = calibrate_seeded(meas, model, seed, scene_from, &go_on)?;
+    let scene = Scene::new(&nominal, &model.effects, &meas.manifest, seed)?;
     let cancelled = || !go_on();
     let mut model_dic: Vec<Option<Vec<DicResult>>> = vec![None; runs.len()];
     let mut images = Vec::new();
