@@ -289,6 +289,9 @@ pub struct DatasetListQuery {
     #[param(minimum = 1, maximum = 1000)]
     pub limit: Option<u32>,
     /// Where the page begins: the cursor a full page's `Link: <…>; rel="next"` carries.
+    #[param(
+        pattern = r"^[0-9]{4}-[0-9]{2}-[0-9]{2}T[0-9]{2}:[0-9]{2}:[0-9]{2}\.[0-9]{3}Z_[a-z0-9][a-z0-9-]{0,63}$"
+    )]
     pub after: Option<String>,
 }
 
