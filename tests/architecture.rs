@@ -323,3 +323,105 @@ fn no_function_in_src_is_over_100_lines() {
     }
     assert!(long.is_empty(), "functions over 100 lines: {long:#?}");
 }
+
+/// The variants of `EffectId`, read from its definition.
+fn effect_variants() -> Vec<String> {
+    let text = std::fs::read_to_string(root().join("src/model/effects/id.rs")).unwrap();
+    let start = text
+        .find("pub enum EffectId {")
+        .expect("EffectId is defined");
+    let body = &text[start..text[start..].find('}').unwrap() + start];
+    body.lines()
+        .skip(1)
+        .map(|l| l.trim().trim_end_matches(',').to_string())
+        .filter(|l| !l.is_empty() && !l.starts_with("//") && !l.starts_with('#'))
+        .collect()
+}
+
+/// The `_ =>` arms of `match`es whose arms name an `EffectId` variant, in code without comments
+/// and literals: (line, arm).
+fn wildcards_on_effects(code: &str, variants: &[String]) -> Vec<usize> {
+    let bytes: Vec<char> = code.chars().collect();
+    let mut found = Vec::new();
+    let text: String = bytes.iter().collect();
+    let mut search = 0;
+    while let Some(at) = text[search..].find("match ") {
+        let at = search + at;
+        search = at + 6;
+        if at > 0 && (bytes[at - 1].is_alphanumeric() || bytes[at - 1] == '_') {
+            continue;
+        }
+        let Some(open) = text[at..].find('{').map(|o| at + o) else {
+            break;
+        };
+        // The body at depth 1: its arms' patterns and the `_ =>` among them.
+        let (mut depth, mut i, mut top) = (0i32, open, String::new());
+        let mut top_positions = Vec::new();
+        while i < bytes.len() {
+            match bytes[i] {
+                '{' | '(' | '[' => depth += 1,
+                '}' | ')' | ']' => depth -= 1,
+                _ => {}
+            }
+            if depth == 0 {
+                break;
+            }
+            if depth == 1 {
+                top.push(bytes[i]);
+                top_positions.push(i);
+            } else if depth == 2 && bytes[i] == '(' {
+                // Tuple patterns `(EffectId::X, "name")` belong to the arm.
+                top.push('(');
+                top_positions.push(i);
+            }
+            i += 1;
+        }
+        let arms_text: String = text[open..i.min(bytes.len())].to_string();
+        let names_effect = arms_text.contains("EffectId::")
+            || variants.iter().any(|v| {
+                arms_text.match_indices(v.as_str()).any(|(k, _)| {
+                    let before = arms_text[..k].chars().last();
+                    let after = arms_text[k + v.len()..].chars().next();
+                    !matches!(before, Some(c) if c.is_alphanumeric() || c == ':' || c == '_')
+                        && !matches!(after, Some(c) if c.is_alphanumeric() || c == '_' || c == ':')
+                })
+            });
+        if !names_effect {
+            continue;
+        }
+        for (k, _) in top.match_indices("_ =>") {
+            let before = top[..k].chars().last();
+            if !matches!(before, Some(c) if c.is_alphanumeric() || c == '_') {
+                let pos = top_positions[top[..k].chars().count()];
+                found.push(text[..pos].lines().count());
+            }
+        }
+    }
+    found
+}
+
+/// Issue 32: an effect is one unit the compiler walks a contributor through — no `match` that
+/// names effects ends in a wildcard that would swallow a new one.
+#[test]
+fn no_wildcard_arm_on_an_effect_in_src() {
+    let variants = effect_variants();
+    assert!(variants.len() >= 14, "{variants:?}");
+    // The counter finds what it looks for.
+    let sample = "fn f(e: EffectId) -> u8 {\n    match e {\n        EffectId::Scale => 1,\n        _ => 0,\n    }\n}\nfn g(p: P) -> u8 {\n    match p {\n        P::A => 1,\n        _ => 0,\n    }\n}\n";
+    assert_eq!(wildcards_on_effects(sample, &variants), vec![4]);
+    let tuple = "fn h(e: EffectId, n: &str) -> u8 {\n    match (e, n) {\n        (EffectId::PsfBlur, \"s\") => 1,\n        _ => 0,\n    }\n}\n";
+    assert_eq!(wildcards_on_effects(tuple, &variants).len(), 1);
+    let mut files = Vec::new();
+    rust_files(&root().join("src"), &mut files);
+    let mut found = Vec::new();
+    for file in files {
+        let code = code_only(&std::fs::read_to_string(&file).unwrap());
+        for line in wildcards_on_effects(&code, &variants) {
+            found.push(format!(
+                "{}:{line}",
+                file.strip_prefix(root()).unwrap().display()
+            ));
+        }
+    }
+    assert!(found.is_empty(), "wildcard arms on EffectId: {found:#?}");
+}

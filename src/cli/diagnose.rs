@@ -109,12 +109,32 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
     {
         s += &format!("{} outside the catalogue's range: {}\n", c.0.effect, c.1);
     }
+    s += &format!("unexplained by the model: {}\n", d.unexplained.summary);
     if let Some(a) = &d.after {
         s += &format!(
-            "with {} added: {:.5} px\n",
+            "with {} added: {:.5} px{}\n",
             verdict_name(d.verdict),
-            a.discrepancy_px
+            a.discrepancy_px,
+            d.explained_fraction.map_or(String::new(), |f| format!(
+                " ({:.0} % of the unexplained low-order field)",
+                100.0 * f
+            ))
         );
+    }
+    if let Some(left) = &d.unexplained_after {
+        s += &format!(
+            "{}left with it: {}\n",
+            if d.partial { "partial verdict: " } else { "" },
+            left.summary
+        );
+    }
+    if let Some(w) = &d.withheld {
+        s += &format!("not named: {}\n", w.reason);
+    }
+    for c in d.candidates.iter().filter(|c| Some(c.effect) == d.verdict) {
+        for note in &c.notes {
+            s += &format!("{}: {note}\n", c.effect);
+        }
     }
     for c in &d.confounded {
         s += &format!(
@@ -161,13 +181,14 @@ pub fn rounds_text(r: &Rounds) -> String {
         );
     }
     s += &format!(
-        "found: {}; final discrepancy {:.5} px\n",
+        "found: {}; final discrepancy {:.5} px\nleft unexplained: {}\n",
         if r.verdicts.is_empty() {
             "none".to_string()
         } else {
             join_effects(&r.verdicts, ", ")
         },
-        r.final_discrepancy_px
+        r.final_discrepancy_px,
+        r.final_unexplained.summary
     );
     s
 }

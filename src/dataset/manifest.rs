@@ -17,6 +17,11 @@ pub struct Manifest {
     /// position are the stage behaving as specified (see `model::effects::StageError`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stage_repeatability_um: Option<f64>,
+    /// Distance from the lens's entrance pupil to the target along the optical axis, mm: with
+    /// it a target's tilt is reported as angles, without it as angles at an assumed distance
+    /// (one translation identifies tan θ over the distance).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub working_distance_mm: Option<f64>,
     pub runs: Vec<Run>,
     /// Fields this version does not know, kept so a rewrite loses nothing.
     #[serde(flatten)]
@@ -237,6 +242,7 @@ impl Manifest {
             scale_px_per_mm,
             camera: None,
             stage_repeatability_um: None,
+            working_distance_mm: None,
             runs: Vec::new(),
             extra: Map::new(),
         }
@@ -271,6 +277,13 @@ impl Manifest {
             if !(r.is_finite() && r > 0.0) {
                 return Err(format!(
                     "stage_repeatability_um must be a positive number of µm, got {r}"
+                ));
+            }
+        }
+        if let Some(z) = self.working_distance_mm {
+            if !(z.is_finite() && z >= 1.0) {
+                return Err(format!(
+                    "working_distance_mm must be a distance of at least 1 mm, got {z}"
                 ));
             }
         }

@@ -15,6 +15,6 @@ pub use manifest::{
     StageMove, FORMAT, MAX_EDGE_SOFTNESS_PX, MAX_PRINT_FEATURE_PX,
 };
 pub use move_check::{
-    check_stated_move, measure_move, MeasuredMove, MoveContradiction, MAX_RATIO, MIN_DIFFERENCE_PX,
-    MIN_NCC,
+    check_stated_move, measure_move, MeasuredMove, MoveContradiction, MAX_RATIO, MAX_VECTOR_ERROR,
+    MIN_DIFFERENCE_PX, MIN_NCC,
 };

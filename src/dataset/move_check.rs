@@ -1,8 +1,9 @@
 //! A run's stated stage move against what its frames show: the rigid offset between reference and
 //! deformed frame by phase correlation (`dic::global_offset`), trusted only where the matched
 //! windows correlate (NCC ≥ [`MIN_NCC`]). A statement off by an order of magnitude — frames moved
-//! 0.5 mm, manifest says 0.001 mm — is refused with the measured figure before any model is
-//! fitted to it (a fit would otherwise chase a travel scale of hundreds).
+//! 0.5 mm, manifest says 0.001 mm — or in direction — the wrong sign, x and y swapped — is
+//! refused with the measured figure before any model is fitted to it (a fit would otherwise chase
+//! a travel scale of hundreds, or a misalignment of thousands of radians).
 
 use crate::dic::global_offset;
 use crate::image::{Image, Roi};
@@ -33,10 +34,18 @@ pub struct MeasuredMove {
     pub ncc: f64,
 }
 
-/// The stated and the measured move disagree by an order of magnitude.
+/// A stated move within this fraction of its length (plus [`MIN_DIFFERENCE_PX`]) of the measured
+/// one is a stage's travel error, misalignment and landing; beyond it, a sign, an axis or a unit
+/// stated wrong (a move stated with the wrong sign differs by twice its length, with x and y
+/// swapped by √2 of it).
+pub const MAX_VECTOR_ERROR: f64 = 0.25;
+
+/// The stated and the measured move disagree by an order of magnitude, or in direction.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[error(
-    "the frames show a move of {measured_px:.1} px ({measured_mm:.4} mm at {scale_px_per_mm} px/mm), the manifest says {stated_mm:.4} mm ({stated_px:.2} px): check the run's stage move and the dataset's scale"
+    "the frames show a move of {measured_px:.1} px, ({:.1}, {:.1}) px = ({:.4}, {:.4}) mm at {scale_px_per_mm} px/mm; the manifest says ({:.4}, {:.4}) mm = ({:.1}, {:.1}) px: check the run's stage move (its sign, its axes, its units) and the dataset's scale",
+    measured_xy_px.0, measured_xy_px.1, measured_xy_px.0 / scale_px_per_mm, measured_xy_px.1 / scale_px_per_mm,
+    stated_xy_mm.0, stated_xy_mm.1, stated_xy_mm.0 * scale_px_per_mm, stated_xy_mm.1 * scale_px_per_mm
 )]
 pub struct MoveContradiction {
     pub measured_px: f64,
@@ -44,6 +53,10 @@ pub struct MoveContradiction {
     pub stated_px: f64,
     pub stated_mm: f64,
     pub scale_px_per_mm: f64,
+    /// The measured offset, px (x, y).
+    pub measured_xy_px: (f64, f64),
+    /// The stated move, mm (x, y).
+    pub stated_xy_mm: (f64, f64),
 }
 
 /// The rigid offset between `reference` and `deformed`, searched up to `max_motion_px`; `None`
@@ -131,13 +144,19 @@ pub fn check_stated_move(
         measured_px.max(stated_px).max(1.0),
         measured_px.min(stated_px).max(1.0),
     );
-    if hi / lo > MAX_RATIO && (measured_px - stated_px).abs() > MIN_DIFFERENCE_PX {
+    let stated_xy_px = (dx_mm * scale_px_per_mm, dy_mm * scale_px_per_mm);
+    let apart = (m.measured_px.0 - stated_xy_px.0).hypot(m.measured_px.1 - stated_xy_px.1);
+    let magnitude = hi / lo > MAX_RATIO && (measured_px - stated_px).abs() > MIN_DIFFERENCE_PX;
+    let direction = apart > MIN_DIFFERENCE_PX + MAX_VECTOR_ERROR * stated_px.max(measured_px);
+    if magnitude || direction {
         return Err(MoveContradiction {
             measured_px,
             measured_mm: measured_px / scale_px_per_mm,
             stated_px,
             stated_mm,
             scale_px_per_mm,
+            measured_xy_px: m.measured_px,
+            stated_xy_mm: (dx_mm, dy_mm),
         });
     }
     Ok(Some(m))
@@ -228,6 +247,21 @@ mod tests {
         let (big, same) = sized_pair(1200, 1100, 0, 0);
         let e = check_stated_move(&big, &same, (3000.0 / 26.0, 0.0), 26.0).unwrap_err();
         assert!(e.measured_px < 5.0, "{e}");
+    }
+
+    /// Issue 32: a move stated with the wrong sign or with x and y swapped has the right size
+    /// and was once absorbed (misalignment −3378.7 rad, travel scale 0.0, landings of 5 mm).
+    #[test]
+    fn a_move_stated_with_the_wrong_sign_or_axes_is_refused() {
+        let (a, b) = pair(40, 3);
+        let stated = (40.0 / 26.0, 3.0 / 26.0);
+        assert!(check_stated_move(&a, &b, stated, 26.0).is_ok());
+        let e = check_stated_move(&a, &b, (-stated.0, stated.1), 26.0).unwrap_err();
+        assert_eq!(e.measured_xy_px, (40.0, 3.0));
+        assert!(e.to_string().contains("(40.0, 3.0) px"), "{e}");
+        assert!(check_stated_move(&a, &b, (stated.1, stated.0), 26.0).is_err());
+        // A stage 10 % short with a 2 px landing is a stage, not a mislabel.
+        assert!(check_stated_move(&a, &b, (0.9 * stated.0, stated.1 + 2.0 / 26.0), 26.0).is_ok());
     }
 
     #[test]

@@ -14,10 +14,11 @@
 //! false). Effects the dataset cannot reveal are listed with the runs to add, not fitted; pairs
 //! that explain the same residual are named with the run that would separate them.
 
-use super::basis::{geometric_basis, GeometricParam};
+use super::basis::geometric_basis;
 use super::bic::{chi2, delta_bic, image_change, SIGNIFICANT_DELTA_BIC};
 use super::compare::{compare_prepared, compare_with_scene, load_measurement, Measurement};
-use super::fit_geometric::{fit_geometric, FieldSample};
+use super::fit_geometric::FieldSample;
+use super::fit_geometric_effect::{fit_geometric_effect, GeometricSetting};
 use super::fit_image::{
     fit_fill_factor, fit_illumination_change, fit_motion_blur, fit_psf_blur, fit_sensor_noise,
     fit_vignetting,
@@ -26,8 +27,8 @@ use super::identifiability::{design_of, separating_run, DatasetDesign};
 pub use super::identifiability::{Confounded, NotIdentifiable};
 use super::print::PrintKnowledge;
 use super::results::{Comparison, ImageFit, ModelInfo};
+use super::unexplained::{model_scatter, unexplained, Unexplained};
 use super::{CompareOptions, DiagnoseError, Progress};
-use crate::model::effects::{LensDistortion, Rotation, Scale};
 use crate::model::{EffectId, Effects, ModelConfig};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -51,6 +52,13 @@ pub struct Candidate {
     pub method: Method,
     /// Each criterion a verdict needs, and whether this candidate meets it.
     pub criteria: Criteria,
+    /// Quantities that follow from the parameters (a tilt's working distance, a distortion's
+    /// equivalent centre).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub derived: BTreeMap<String, f64>,
+    /// What the fit left out and why, and how to read the parameters.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
 }
 
 /// What a candidate's effect shows in.
@@ -71,9 +79,8 @@ impl Evidence {
         match effect {
             Vignetting | IlluminationChange | SensorNoise | FixedPattern => Evidence::Image,
             PsfBlur | FillFactor | MotionBlur => Evidence::Either,
-            StageMisalignment | StageError | Rotation | Scale | LensDistortion | Quantization => {
-                Evidence::Displacement
-            }
+            StageMisalignment | StageError | Rotation | Scale | LensDistortion | TargetTilt
+            | Quantization => Evidence::Displacement,
         }
     }
 }
@@ -122,6 +129,21 @@ pub struct Diagnosis {
     pub verdict: Option<EffectId>,
     pub confounded: Vec<Confounded>,
     pub not_identifiable: Vec<NotIdentifiable>,
+    /// What the model as given leaves unexplained.
+    pub unexplained: Unexplained,
+    /// What is left with the verdict added (none when the verdict is `none`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unexplained_after: Option<Unexplained>,
+    /// The share of the model's unexplained low-order field that the verdict explains (from the
+    /// field test's F: (F before − F after)/(F before − 1)), when both were measured.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub explained_fraction: Option<f64>,
+    /// The verdict explains only part of what the model lacks: something significant is left.
+    pub partial: bool,
+    /// The nearest catalogue effect when it explains too little of the structure to be named: no
+    /// verdict, and this says what it would have explained.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub withheld: Option<Withheld>,
     /// The model with the winner added (none when the verdict is `none`).
     #[serde(skip)]
     pub winner_model: Option<ModelConfig>,
@@ -132,6 +154,19 @@ pub struct Diagnosis {
     #[serde(skip)]
     pub after: Option<Comparison>,
 }
+
+/// A significant candidate not named because the structure it explains is a small part of what
+/// remains, and no other catalogue effect explains the rest: the signature is not its own.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Withheld {
+    pub effect: EffectId,
+    pub explained_fraction: f64,
+    pub reason: String,
+}
+
+/// The least share of the unexplained field a verdict must explain when nothing in the catalogue
+/// explains the rest.
+pub const MIN_EXPLAINED_FRACTION: f64 = 0.9;
 
 /// Reads the dataset in `dir` and diagnoses `model` against it.
 pub fn diagnose(
@@ -144,29 +179,14 @@ pub fn diagnose(
     diagnose_prepared(&meas, model, None, progress)
 }
 
-fn geometric_fit_effects(model: &Effects, param: GeometricParam, value: f64) -> Effects {
-    let mut e = model.clone();
-    match param {
-        GeometricParam::Rotation => e.rotation = Some(Rotation { angle_rad: value }),
-        GeometricParam::Scale => e.scale = Some(Scale { ds: value }),
-        GeometricParam::DistortionK1 => e.lens_distortion = Some(LensDistortion::radial(value)),
-        GeometricParam::TravelScale | GeometricParam::Misalignment => {}
-    }
-    e
-}
-
+/// The field differences of the model's comparison, per run and scheme, as the geometric fits
+/// read them, with what else they need; and a geometric effect fitted on them.
 fn geometric_candidate(
     meas: &Measurement,
     before: &Comparison,
     model: &Effects,
     id: EffectId,
 ) -> Option<ImageFit> {
-    let param = match id {
-        EffectId::Rotation => GeometricParam::Rotation,
-        EffectId::Scale => GeometricParam::Scale,
-        EffectId::LensDistortion => GeometricParam::DistortionK1,
-        _ => return None,
-    };
     let camera = before.model.nominal.camera(0);
     let centre = camera.centre();
     let r0 = camera.half_diagonal_px();
@@ -190,19 +210,13 @@ fn geometric_candidate(
             })
         })
         .collect();
-    let fit = fit_geometric(&samples, param)?;
-    let (effect, name) = param.effect_and_name();
-    Some(ImageFit {
-        effect,
-        params: [(name.to_string(), fit.value)].into_iter().collect(),
-        stderr: [(name.to_string(), fit.stderr)]
-            .into_iter()
-            .filter(|(_, se)| se.is_finite())
-            .collect(),
-        effects: geometric_fit_effects(model, param, fit.value),
-        k: 1,
-        beyond_null: fit.value.abs() > 2.0 * fit.stderr,
-    })
+    let setting = GeometricSetting {
+        scale_px_per_mm: camera.scale_px_per_mm,
+        working_distance_mm: meas.manifest.working_distance_mm,
+        r0,
+        observations: before.chi2.observations,
+    };
+    fit_geometric_effect(&samples, &setting, model, id)
 }
 
 fn fit_candidate(
@@ -214,7 +228,9 @@ fn fit_candidate(
 ) -> Option<ImageFit> {
     use EffectId::*;
     match id {
-        Rotation | Scale | LensDistortion => geometric_candidate(meas, before, model, id),
+        Rotation | Scale | LensDistortion | TargetTilt => {
+            geometric_candidate(meas, before, model, id)
+        }
         PsfBlur => Some(fit_psf_blur(meas, before, model, stop)),
         FillFactor => Some(fit_fill_factor(meas, before, model, stop)),
         SensorNoise => fit_sensor_noise(meas, before, model),
@@ -237,11 +253,13 @@ pub const MODEL_SEEDS: u64 = 2;
 /// has not found the effect's value, only that the catalogue's range does not hold it.
 fn bound_of(effect: EffectId, param: &str) -> Option<(f64, f64)> {
     // (bound, range width)
-    match (effect, param) {
-        (EffectId::PsfBlur, "sigma_px") => Some((3.0, 3.0)),
-        (EffectId::FillFactor, "fx" | "fy") => Some((0.05, 0.95)),
-        (EffectId::MotionBlur, "length_px") => Some((4.0, 4.0)),
-        _ => None,
+    use EffectId::*;
+    match effect {
+        PsfBlur => (param == "sigma_px").then_some((3.0, 3.0)),
+        FillFactor => matches!(param, "fx" | "fy").then_some((0.05, 0.95)),
+        MotionBlur => (param == "length_px").then_some((4.0, 4.0)),
+        StageMisalignment | StageError | Rotation | Scale | LensDistortion | TargetTilt
+        | SensorNoise | FixedPattern | Quantization | Vignetting | IlluminationChange => None,
     }
 }
 
@@ -373,6 +391,8 @@ impl Judge<'_> {
             recomputed: method != Method::Unchanged,
             method,
             criteria,
+            derived: fit.geometric.derived.clone(),
+            notes: fit.geometric.notes.clone(),
         }
     }
 }
@@ -392,26 +412,22 @@ fn predict(
         return None;
     }
     let mut nominal = before.model.nominal.clone();
-    let param = match fit.effect {
-        EffectId::Rotation => Some(GeometricParam::Rotation),
-        EffectId::Scale => Some(GeometricParam::Scale),
-        EffectId::LensDistortion => Some(GeometricParam::DistortionK1),
-        EffectId::StageError => None,
-        _ => return None,
-    };
     let mut dic = before.model_dic.clone();
-    match param {
-        Some(param) => {
-            let value = *fit.params.values().next()?;
-            let camera = nominal.camera(0);
-            let (cx, cy) = camera.centre();
-            let r0 = camera.half_diagonal_px();
-            for (ri, run) in meas.manifest.runs.iter().enumerate() {
-                let t = nominal.actual_move_px(ri, (run.stage.dx_mm, run.stage.dy_mm));
-                for (si, scheme) in meas.options.schemes.iter().enumerate() {
-                    let (bx, by) = (scheme.x.block as f64, scheme.y.block as f64);
-                    for p in dic[ri][si].points.iter_mut() {
-                        let (fx, fy) = scheme.to_full(p.x, p.y);
+    if fit.effect == EffectId::StageError {
+        let e = with.effects.stage_error?;
+        nominal.stage.repeatability_um = Some(e.repeatability_um);
+        nominal.stage.source = super::stage_landing::RepeatabilitySource::Model;
+    } else if !fit.geometric.field.is_empty() {
+        let camera = nominal.camera(0);
+        let (cx, cy) = camera.centre();
+        let r0 = camera.half_diagonal_px();
+        for (ri, run) in meas.manifest.runs.iter().enumerate() {
+            let t = nominal.actual_move_px(ri, (run.stage.dx_mm, run.stage.dy_mm));
+            for (si, scheme) in meas.options.schemes.iter().enumerate() {
+                let (bx, by) = (scheme.x.block as f64, scheme.y.block as f64);
+                for p in dic[ri][si].points.iter_mut() {
+                    let (fx, fy) = scheme.to_full(p.x, p.y);
+                    for &(param, value) in &fit.geometric.field {
                         let (bu, bv) = geometric_basis(param, (fx - cx, fy - cy), (t[0], t[1]), r0);
                         p.u += value * bu / bx;
                         p.v += value * bv / by;
@@ -419,11 +435,8 @@ fn predict(
                 }
             }
         }
-        None => {
-            let e = with.effects.stage_error?;
-            nominal.stage.repeatability_um = Some(e.repeatability_um);
-            nominal.stage.source = super::stage_landing::RepeatabilitySource::Model;
-        }
+    } else {
+        return None;
     }
     Some(super::compare::assemble(
         meas,
@@ -461,7 +474,7 @@ pub fn diagnose_prepared(
     };
     // Asks, without a step done, whether to go on: inside each comparison, before every point.
     let ask = |_: usize, _: usize| progress(done.load(Ordering::Relaxed), total);
-    let by_seed = discrepancy_by_seed(meas, model, &before, &tick, &ask)?;
+    let (by_seed, w0) = discrepancy_by_seed(meas, model, &before, &tick, &ask)?;
     let seed_sd = {
         let n = by_seed.len() as f64;
         let m = by_seed.iter().sum::<f64>() / n;
@@ -489,14 +502,16 @@ pub fn diagnose_prepared(
     let mut by_drop: Vec<&Candidate> = candidates.iter().collect();
     by_drop.sort_by(|a, b| b.drop_px.total_cmp(&a.drop_px));
     let ranking_by_drop = by_drop.iter().map(|c| c.effect).collect();
-    let confounded = confounded_pairs(&design, &candidates, winner, print_calibrated);
-    let (winner_model, after) = match winner {
-        Some(w) => {
-            let (_, m, a) = models.remove(&w).expect("fitted");
-            (Some(m), a)
-        }
-        None => (None, None),
-    };
+    let left = settle(
+        meas,
+        model,
+        winner,
+        &mut models,
+        &before,
+        w0,
+        (se_before, seed_sd),
+    );
+    let confounded = confounded_pairs(&design, &candidates, left.winner, print_calibrated);
     Ok(Diagnosis {
         model: before.model.clone(),
         discrepancy_px: before.discrepancy_px,
@@ -504,13 +519,129 @@ pub fn diagnose_prepared(
         discrepancy_by_seed_px: by_seed,
         candidates,
         ranking_by_drop,
-        verdict: winner,
+        verdict: left.winner,
         confounded,
         not_identifiable,
-        winner_model,
+        partial: left.after.as_ref().is_some_and(|a| a.significant),
+        explained_fraction: left.explained_fraction,
+        unexplained: left.before,
+        unexplained_after: left.after,
+        withheld: left.withheld,
+        winner_model: left.winner_model,
         before: Some(before),
-        after,
+        after: left.after_comparison,
     })
+}
+
+/// The verdict held against what it leaves (module doc of `unexplained`).
+struct Settled {
+    winner: Option<EffectId>,
+    winner_model: Option<ModelConfig>,
+    after_comparison: Option<Comparison>,
+    before: Unexplained,
+    after: Option<Unexplained>,
+    explained_fraction: Option<f64>,
+    withheld: Option<Withheld>,
+}
+
+/// What the model and the model with the winner leave unexplained; the winner withheld when it
+/// explains less than [`MIN_EXPLAINED_FRACTION`] of a significant residual and no other
+/// catalogue effect explains the rest. `se` is the model's discrepancy SE and the seed scatter.
+fn settle(
+    meas: &Measurement,
+    model: &ModelConfig,
+    winner: Option<EffectId>,
+    models: &mut FittedModels,
+    before: &Comparison,
+    w0: Option<f64>,
+    (se_before, seed_sd): (f64, f64),
+) -> Settled {
+    let infl = super::bic::inflation(&meas.options.dic);
+    let schemes = &meas.options.schemes;
+    let left_before = unexplained(before, schemes, w0, se_before, infl);
+    let (winner_model, after) = match winner.and_then(|w| models.remove(&w)) {
+        Some((_, m, a)) => (Some(m), a),
+        None => (None, None),
+    };
+    let left_after = after.as_ref().map(|a| {
+        let se = a.discrepancy_se_px.max(seed_sd);
+        unexplained(a, schemes, w0, se, infl)
+    });
+    let explained_fraction = left_after.as_ref().and_then(|a| explained(&left_before, a));
+    let settled = Settled {
+        winner,
+        winner_model,
+        after_comparison: after,
+        before: left_before,
+        after: left_after,
+        explained_fraction,
+        withheld: None,
+    };
+    let (Some(w), Some(left), Some(fraction), Some(after)) = (
+        winner,
+        &settled.after,
+        explained_fraction,
+        &settled.after_comparison,
+    ) else {
+        return settled;
+    };
+    if !(left.significant
+        && fraction < MIN_EXPLAINED_FRACTION
+        && !rest_is_in_catalogue(meas, after, model, w, w0))
+    {
+        return settled;
+    }
+    Settled {
+        winner: None,
+        winner_model: None,
+        after_comparison: None,
+        after: None,
+        explained_fraction: None,
+        withheld: Some(Withheld {
+            effect: w,
+            explained_fraction: fraction,
+            reason: format!(
+                "{w} explains {:.0} % of the low-order field the model leaves, and no catalogue effect explains the rest: its signature is not what the data show (see unexplained)",
+                100.0 * fraction
+            ),
+        }),
+        ..settled
+    }
+}
+
+/// The share of the model's excess low-order field (F above 1) that is gone after the verdict.
+fn explained(before: &Unexplained, after: &Unexplained) -> Option<f64> {
+    let (fb, fa) = (before.field_f?, after.field_f?);
+    (fb > 1.0).then(|| ((fb - fa) / (fb - 1.0)).clamp(0.0, 1.0))
+}
+
+/// Whether another geometric catalogue effect, fitted on what the winner leaves, explains at
+/// least half of it: then the winner is one of several effects (the next round finds the next),
+/// not the nearest name for something outside the catalogue.
+fn rest_is_in_catalogue(
+    meas: &Measurement,
+    after: &Comparison,
+    model: &ModelConfig,
+    winner: EffectId,
+    w0: Option<f64>,
+) -> bool {
+    let infl = super::bic::inflation(&meas.options.dic);
+    let floor = w0.unwrap_or(0.0);
+    let excess = super::unexplained::field_w(after, infl) - floor;
+    EffectId::ALL
+        .into_iter()
+        .filter(|id| *id != winner && !model.effects.has(*id))
+        .filter_map(|id| geometric_candidate(meas, after, &model.effects, id))
+        .filter(|fit| fit.beyond_null)
+        .any(|fit| {
+            let with = ModelConfig {
+                name: String::new(),
+                description: String::new(),
+                effects: fit.effects.clone(),
+            };
+            predict(meas, after, &with, &fit)
+                .is_some_and(|c| super::unexplained::field_w(&c, infl) - floor < 0.5 * excess)
+        })
 }
 
 /// Per fitted candidate: its fit, the model with it, and that model's comparison (none when the
@@ -539,15 +670,18 @@ fn candidates_to_fit(
 }
 
 /// The discrepancy with each of the `MODEL_SEEDS` model seeds (the first is `before`'s): its
-/// scatter is part of the discrepancy's standard error.
+/// scatter is part of the discrepancy's standard error. Also the model's own scatter of the
+/// low-order field between the first two renderings ([`model_scatter`]).
 fn discrepancy_by_seed(
     meas: &Measurement,
     model: &ModelConfig,
     before: &Comparison,
     tick: &dyn Fn() -> Result<(), DiagnoseError>,
     ask: Progress,
-) -> Result<Vec<f64>, DiagnoseError> {
+) -> Result<(Vec<f64>, Option<f64>), DiagnoseError> {
     let mut by_seed = vec![before.discrepancy_px];
+    let mut w0 = None;
+    let infl = super::bic::inflation(&meas.options.dic);
     for k in 1..MODEL_SEEDS {
         let c = compare_with_scene(
             meas,
@@ -557,9 +691,12 @@ fn discrepancy_by_seed(
             ask,
         )?;
         by_seed.push(c.discrepancy_px);
+        if k == 1 {
+            w0 = model_scatter(before, &c, infl);
+        }
         tick()?;
     }
-    Ok(by_seed)
+    Ok((by_seed, w0))
 }
 
 /// Fits each candidate, predicts (or, failing that, renders) the comparison of the model with

@@ -31,91 +31,190 @@ pub struct FieldSample<'a> {
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct GeometricFit {
-    pub param: GeometricParam,
-    pub value: f64,
-    pub stderr: f64,
-    /// Wald statistic (value/stderr)²: the χ² the candidate explains beyond the nuisances.
+    pub params: Vec<GeometricParam>,
+    pub values: Vec<f64>,
+    pub stderr: Vec<f64>,
+    /// Correlation of the estimates (from the normal matrix), row-major k×k.
+    pub correlation: Vec<f64>,
+    /// Wald statistic βᵀ C⁻¹ β: the χ² the candidate explains beyond the nuisances.
     pub chi2_drop: f64,
 }
 
-/// Weighted sums of one run and scheme, centred on its own means (the per-run constant offsets
-/// are nuisances: sub-pixel bias, travel, misalignment).
-fn centred_sums(s: &FieldSample, param: GeometricParam) -> Option<(f64, f64)> {
+/// The weighted normal matrix N (k×k) and right-hand side r of one run and scheme, each basis
+/// column and the data centred on their own means (the per-run constant offsets are nuisances:
+/// sub-pixel bias, travel, misalignment).
+struct Sums {
+    n: Vec<f64>,
+    r: Vec<f64>,
+    inflation: f64,
+    pattern: usize,
+    run: usize,
+}
+
+fn centred_sums(s: &FieldSample, params: &[GeometricParam]) -> Option<Sums> {
     if !(s.var.0 > 0.0 && s.var.1 > 0.0) || s.points.len() < 3 {
         return None;
     }
+    let k = params.len();
     let (bx, by) = (s.scheme.x.block as f64, s.scheme.y.block as f64);
-    let rows: Vec<((f64, f64), (f64, f64))> = s
+    // Per point: k basis values in u, k in v, then du, dv.
+    let rows: Vec<(Vec<f64>, Vec<f64>, f64, f64)> = s
         .points
         .iter()
         .map(|p| {
             let (fx, fy) = s.scheme.to_full(p.x, p.y);
-            let (u, v) =
-                geometric_basis(param, (fx - s.centre.0, fy - s.centre.1), s.move_px, s.r0);
-            ((u / bx, v / by), (p.du, p.dv))
+            let rel = (fx - s.centre.0, fy - s.centre.1);
+            let (bu, bv): (Vec<f64>, Vec<f64>) = params
+                .iter()
+                .map(|&q| {
+                    let (u, v) = geometric_basis(q, rel, s.move_px, s.r0);
+                    (u / bx, v / by)
+                })
+                .unzip();
+            (bu, bv, p.du, p.dv)
         })
         .collect();
-    let n = rows.len() as f64;
-    type Row = ((f64, f64), (f64, f64));
-    let mean = |f: &dyn Fn(&Row) -> f64| rows.iter().map(f).sum::<f64>() / n;
-    let (mbu, mbv, mdu, mdv) = (
-        mean(&|r| r.0 .0),
-        mean(&|r| r.0 .1),
-        mean(&|r| r.1 .0),
-        mean(&|r| r.1 .1),
-    );
-    let (mut bb, mut bd) = (0.0, 0.0);
-    for ((bu, bv), (du, dv)) in &rows {
-        let (bu, bv, du, dv) = (bu - mbu, bv - mbv, du - mdu, dv - mdv);
-        bb += bu * bu / s.var.0 + bv * bv / s.var.1;
-        bd += bu * du / s.var.0 + bv * dv / s.var.1;
+    let count = rows.len() as f64;
+    let mut mean_u = vec![0.0; k];
+    let mut mean_v = vec![0.0; k];
+    let (mut mdu, mut mdv) = (0.0, 0.0);
+    for (bu, bv, du, dv) in &rows {
+        for j in 0..k {
+            mean_u[j] += bu[j] / count;
+            mean_v[j] += bv[j] / count;
+        }
+        mdu += du / count;
+        mdv += dv / count;
     }
-    (bb > 0.0).then_some((bb, bd))
+    let mut n = vec![0.0; k * k];
+    let mut r = vec![0.0; k];
+    for (bu, bv, du, dv) in &rows {
+        let (du, dv) = (du - mdu, dv - mdv);
+        for i in 0..k {
+            let (ui, vi) = (bu[i] - mean_u[i], bv[i] - mean_v[i]);
+            r[i] += ui * du / s.var.0 + vi * dv / s.var.1;
+            for j in 0..k {
+                let (uj, vj) = (bu[j] - mean_u[j], bv[j] - mean_v[j]);
+                n[i * k + j] += ui * uj / s.var.0 + vi * vj / s.var.1;
+            }
+        }
+    }
+    (0..k).all(|j| n[j * k + j] > 0.0).then_some(Sums {
+        n,
+        r,
+        inflation: s.inflation.max(1.0),
+        pattern: s.pattern,
+        run: s.run,
+    })
 }
 
-/// Fits one candidate parameter on the field differences with every run's and scheme's constant
-/// offsets removed (Frisch–Waugh: equivalent to fitting them as nuisances). The standard error is
-/// the largest of the least-squares one (inflated for correlated points), the one that counts the
-/// frames the analyses share, and, with three or more runs and schemes, the scatter of the
-/// per-run estimates about their weighted mean: a real effect is the same in every run, a speckle
-/// realisation's systematic error is not.
-pub fn fit_geometric(samples: &[FieldSample], param: GeometricParam) -> Option<GeometricFit> {
-    let sums: Vec<(f64, f64, f64, usize, usize)> = samples
-        .iter()
-        .filter_map(|s| {
-            centred_sums(s, param).map(|(bb, bd)| (bb, bd, s.inflation.max(1.0), s.pattern, s.run))
-        })
-        .collect();
-    let bb: f64 = sums.iter().map(|s| s.0).sum();
-    let bd: f64 = sums.iter().map(|s| s.1).sum();
-    if !(bb > 0.0) {
+/// The inverse of a small symmetric positive-definite matrix, None when singular.
+fn invert(n: &[f64], k: usize) -> Option<Vec<f64>> {
+    let m = nalgebra::DMatrix::from_row_slice(k, k, n);
+    let scale = (0..k).map(|i| m[(i, i)]).fold(0.0, f64::max);
+    // Scale rows and columns to unit diagonal first: the parameters differ by many decades.
+    let d: Vec<f64> = (0..k).map(|i| m[(i, i)].sqrt()).collect();
+    if !(scale > 0.0) || d.iter().any(|x| !(*x > 0.0)) {
         return None;
     }
-    let inflation = sums.iter().map(|s| s.2).fold(1.0, f64::max);
-    let value = bd / bb;
-    // Half of a field difference's noise comes from the reference frames (shared by every run of
-    // a pattern), half from the moved frames (shared by every scheme of a run): for similar basis
-    // fields the variance of the estimate is ½·c·[Σ_runs(Σ√bb)² + Σ_patterns(Σ√bb)²]/(Σbb)².
-    type Sums = (f64, f64, f64, usize, usize);
+    let unit = nalgebra::DMatrix::from_fn(k, k, |i, j| m[(i, j)] / (d[i] * d[j]));
+    let chol = unit.cholesky()?;
+    let l = chol.l_dirty();
+    if !(0..k).all(|i| l[(i, i)] * l[(i, i)] > 1e-12) {
+        return None;
+    }
+    let inv = chol.inverse();
+    Some(
+        (0..k * k)
+            .map(|x| inv[(x / k, x % k)] / (d[x / k] * d[x % k]))
+            .collect(),
+    )
+}
+
+/// Fits candidate parameters jointly on the field differences with every run's and scheme's
+/// constant offsets removed (Frisch–Waugh: equivalent to fitting them as nuisances). Each
+/// parameter's variance is the least-squares one (inflated for correlated points), raised by
+/// the factor that counting the frames the analyses share gives and, with three or more runs and
+/// schemes, by the scatter of the per-run estimates about the joint value: a real effect is the
+/// same in every run, a speckle realisation's systematic error is not. None when the basis
+/// fields cannot be told apart by these runs (a singular normal matrix).
+pub fn fit_geometric(samples: &[FieldSample], params: &[GeometricParam]) -> Option<GeometricFit> {
+    let k = params.len();
+    let sums: Vec<Sums> = samples
+        .iter()
+        .filter_map(|s| centred_sums(s, params))
+        .collect();
+    if sums.is_empty() {
+        return None;
+    }
+    let mut n = vec![0.0; k * k];
+    let mut r = vec![0.0; k];
+    for s in &sums {
+        n.iter_mut().zip(&s.n).for_each(|(a, b)| *a += b);
+        r.iter_mut().zip(&s.r).for_each(|(a, b)| *a += b);
+    }
+    let inv = invert(&n, k)?;
+    let values: Vec<f64> = (0..k)
+        .map(|i| (0..k).map(|j| inv[i * k + j] * r[j]).sum())
+        .collect();
+    let inflation = sums.iter().map(|s| s.inflation).fold(1.0, f64::max);
+    let factors: Vec<f64> = (0..k)
+        .map(|j| variance_factor(&sums, &values, j, k, inflation))
+        .collect();
+    let var: Vec<f64> = (0..k)
+        .map(|j| inflation * inv[j * k + j] * factors[j])
+        .collect();
+    let correlation: Vec<f64> = (0..k * k)
+        .map(|x| inv[x] / (inv[(x / k) * k + x / k] * inv[(x % k) * k + x % k]).sqrt())
+        .collect();
+    // βᵀ C⁻¹ β with C = inflation·N⁻¹ scaled per parameter by its factor.
+    let scaled: Vec<f64> = (0..k).map(|j| values[j] / factors[j].sqrt()).collect();
+    let chi2_drop = (0..k)
+        .map(|i| {
+            (0..k)
+                .map(|j| scaled[i] * n[i * k + j] * scaled[j])
+                .sum::<f64>()
+        })
+        .sum::<f64>()
+        / inflation;
+    Some(GeometricFit {
+        params: params.to_vec(),
+        values,
+        stderr: var.iter().map(|v| v.sqrt()).collect(),
+        correlation,
+        chi2_drop,
+    })
+}
+
+/// The factor (≥ 1) by which parameter j's least-squares variance grows: half of a field
+/// difference's noise comes from the reference frames (shared by every run of a pattern), half
+/// from the moved frames (shared by every scheme of a run), which for similar basis fields gives
+/// ½·c·[Σ_runs(Σ√N_jj)² + Σ_patterns(Σ√N_jj)²]/(ΣN_jj)²; and the scatter of the per-run
+/// estimates (the others held at their joint values) about the joint value.
+fn variance_factor(sums: &[Sums], values: &[f64], j: usize, k: usize, inflation: f64) -> f64 {
+    let njj: f64 = sums.iter().map(|s| s.n[j * k + j]).sum();
     let grouped = |key: &dyn Fn(&Sums) -> usize| -> f64 {
         let mut acc: std::collections::BTreeMap<usize, f64> = Default::default();
-        for s in &sums {
-            *acc.entry(key(s)).or_default() += s.0.sqrt();
+        for s in sums {
+            *acc.entry(key(s)).or_default() += s.n[j * k + j].sqrt();
         }
         acc.values().map(|x| x * x).sum()
     };
-    let shared = 0.5 * inflation * (grouped(&|s| s.4) + grouped(&|s| s.3)) / (bb * bb);
-    let mut var = (inflation / bb).max(shared);
+    let shared = 0.5 * (grouped(&|s| s.run) + grouped(&|s| s.pattern)) / njj;
+    let mut factor = shared.max(1.0);
     if sums.len() >= 3 {
-        // Per-run estimates β_r = bd_r/bb_r with weights bb_r.
-        let chi: f64 = sums.iter().map(|s| s.0 * (s.1 / s.0 - value).powi(2)).sum();
-        let between = chi / ((sums.len() - 1) as f64 * bb);
-        var = var.max(between);
+        let chi: f64 = sums
+            .iter()
+            .map(|s| {
+                let others: f64 = (0..k)
+                    .filter(|&l| l != j)
+                    .map(|l| s.n[j * k + l] * values[l])
+                    .sum();
+                let own = (s.r[j] - others) / s.n[j * k + j];
+                s.n[j * k + j] * (own - values[j]).powi(2)
+            })
+            .sum();
+        factor = factor.max(chi / ((sums.len() - 1) as f64 * inflation));
     }
-    Some(GeometricFit {
-        param,
-        value,
-        stderr: var.sqrt(),
-        chi2_drop: value * value / var,
-    })
+    factor
 }

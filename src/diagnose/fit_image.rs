@@ -146,6 +146,7 @@ pub fn fit_psf_blur(
     let sigma = minimise_1d(&|s| obj(&[s]), 0.0, 3.0, 9);
     let se = curvature_stderr(&obj, &[sigma], &[0.05], &[0.0], &[3.0])[0];
     ImageFit {
+        geometric: Default::default(),
         effect: EffectId::PsfBlur,
         params: map(&[("sigma_px", sigma)]),
         stderr: map(&[("sigma_px", se)]),
@@ -186,6 +187,7 @@ pub fn fit_fill_factor(
     let x = nelder_mead(&obj, &best.1, &[0.12, 0.12], &lo, &hi, 40);
     let se = curvature_stderr(&obj, &x, &[0.04, 0.04], &lo, &hi);
     ImageFit {
+        geometric: Default::default(),
         effect: EffectId::FillFactor,
         params: map(&[("fx", x[0]), ("fy", x[1])]),
         stderr: map(&[("fx", se[0]), ("fy", se[1])]),
@@ -292,6 +294,7 @@ pub fn fit_sensor_noise(
     let se_read =
         ((se_b / (2.0 * sb * a_fit)).powi(2) + (sb * se_a / (a_fit * a_fit)).powi(2)).sqrt();
     Some(ImageFit {
+        geometric: Default::default(),
         effect: EffectId::SensorNoise,
         params: map(&[
             ("gain", gain),
@@ -358,6 +361,7 @@ pub fn fit_vignetting(
     let existing = model.vignetting.map_or(0.0, |x| x.v);
     let _ = meas;
     Some(ImageFit {
+        geometric: Default::default(),
         effect: EffectId::Vignetting,
         params: map(&[("v", v + existing)]),
         stderr: map(&[("v", se_v)]),
@@ -415,6 +419,7 @@ pub fn fit_illumination_change(
     se_o = se_o.max(se_g * mean_ref);
     let _ = meas;
     Some(ImageFit {
+        geometric: Default::default(),
         effect: EffectId::IlluminationChange,
         params: map(&[("gain", g), ("offset", o)]),
         stderr: map(&[("gain", se_g), ("offset", se_o)]),
@@ -515,6 +520,7 @@ pub fn fit_motion_blur(
     let l = minimise_1d(&|l| obj(&[l]), 0.0, 4.0, 9);
     let se = curvature_stderr(&obj, &[l], &[0.2], &[0.0], &[4.0])[0];
     Some(ImageFit {
+        geometric: Default::default(),
         effect: EffectId::MotionBlur,
         params: map(&[("length_px", l), ("angle_rad", angle)]),
         stderr: map(&[("length_px", se)]),

@@ -12,7 +12,7 @@
 //!   in y are measured: the aperture's bias against the sub-pixel fraction differs per axis.
 //! - `sensor_noise` needs static repeat frames: noise against mean from a single speckle frame is
 //!   entangled with the speckle itself.
-//! - `rotation`, `scale`, `illumination_change`, `motion_blur` need a moved run.
+//! - `rotation`, `scale`, `target_tilt`, `illumination_change`, `motion_blur` need a moved run.
 //! - `fixed_pattern` needs flat-field and dark frames, which `ffdic-dataset/1` has no run for.
 
 use crate::dataset::Manifest;
@@ -130,7 +130,9 @@ impl DatasetDesign {
         };
         let moved = "a translation of the target (any run with a stage move)";
         match effect {
-            Rotation | Scale | IlluminationChange | MotionBlur if self.moved_runs == 0 => {
+            Rotation | Scale | TargetTilt | IlluminationChange | MotionBlur
+                if self.moved_runs == 0 =>
+            {
                 no("no run moves the target", moved)
             }
             LensDistortion if self.largest_move_fraction < 0.02 => no(
@@ -153,7 +155,9 @@ impl DatasetDesign {
                 "PRNU/DSNU need uniform illumination; speckle frames cannot tell a pixel's gain from the pattern",
                 "flat-field frames of a uniform white target at several exposures and dark frames (lens capped)",
             ),
-            _ => None,
+            Rotation | Scale | TargetTilt | IlluminationChange | MotionBlur | LensDistortion
+            | PsfBlur | SensorNoise | StageError | StageMisalignment | FillFactor | Quantization
+            | Vignetting => None,
         }
     }
 
@@ -191,6 +195,9 @@ impl DatasetDesign {
     }
 }
 
+/// What separates a tilt from the other affine fields that grow with the move.
+pub const TILT_SEPARATION: &str = "translations along both x and y, of two sizes each: a tilt's strain is twice as large along the move as across it (εxx ≈ 2 εyy for an x move), decentring distortion's three times, and a scale change does not grow with the move";
+
 /// Two effects as a confounded pair's names.
 pub fn pair(a: EffectId, b: EffectId) -> [String; 2] {
     [a.as_str().into(), b.as_str().into()]
@@ -206,6 +213,11 @@ pub fn separating_run(a: EffectId, b: EffectId) -> String {
         STEP_SERIES.into()
     } else if pair(Rotation, LensDistortion) || pair(Rotation, Scale) {
         "translations along x and along y".into()
+    } else if pair(TargetTilt, LensDistortion)
+        || pair(TargetTilt, Scale)
+        || pair(TargetTilt, Rotation)
+    {
+        TILT_SEPARATION.into()
     } else {
         "runs that change one of the two effects alone (see the effects' signatures in ARCHITECTURE.md)"
             .into()

@@ -88,6 +88,7 @@ pub mod compare;
 mod diagnose;
 mod discrepancy;
 mod fit_geometric;
+mod fit_geometric_effect;
 mod fit_image;
 mod floor_read_out;
 mod history;
@@ -96,11 +97,14 @@ mod image_stats;
 pub mod nominal;
 mod optimise;
 pub mod print;
+mod residual_shape;
 mod residuals;
 mod results;
 pub mod rounds;
 pub mod stage;
 mod stage_landing;
+mod unexplained;
+mod unexplained_words;
 
 pub use basis::{geometric_basis, GeometricParam};
 pub use bic::{delta_bic, SIGNIFICANT_DELTA_BIC};
@@ -117,6 +121,7 @@ pub use identifiability::{design_of, Confounded, DatasetDesign, NotIdentifiable}
 pub use image_stats::{noise_variance, FrameStats, MeanMap, PsdBin, PtcPoint};
 pub use nominal::{Nominal, BASELINE_TOML};
 pub use print::{PrintCalibration, PrintKnowledge};
+pub use residual_shape::{ImageMismatch, RunShape, Shape};
 pub use residuals::ResidualMap;
 pub use results::{
     Chi2, Comparison, DiscrepancyParts, HardwareComparison, HardwareRunComparison, ImageComparison,
@@ -124,6 +129,7 @@ pub use results::{
 };
 pub use rounds::{diagnose_rounds, diagnose_rounds_prepared, Round, Rounds, MAX_ROUNDS};
 pub use stage_landing::{RepeatabilitySource, StageLanding};
+pub use unexplained::{Unexplained, FALSE_ALARM_RATE as UNEXPLAINED_FALSE_ALARM_RATE};
 
 use crate::dataset::DatasetError;
 use crate::dic::{DicError, DicSettings};

@@ -172,4 +172,15 @@ pub struct ImageFit {
     pub effects: Effects,
     pub k: usize,
     pub beyond_null: bool,
+    /// For a geometric effect, its basis terms and what follows from them.
+    pub geometric: GeometricTerms,
+}
+
+/// A geometric candidate's fitted basis terms (to predict its comparison without rendering),
+/// quantities derived from them, and notes on the terms left out.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct GeometricTerms {
+    pub field: Vec<(super::basis::GeometricParam, f64)>,
+    pub derived: BTreeMap<String, f64>,
+    pub notes: Vec<String>,
 }

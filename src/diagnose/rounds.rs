@@ -1,10 +1,11 @@
 //! Several effects at once: diagnose, add the winner, diagnose again, until the verdict is `none`
-//! or the rounds run out. Each round starts from the comparison the previous one made with its
+//! or the rounds run out; what the final model leaves unexplained is reported either way. Each round starts from the comparison the previous one made with its
 //! winner added, so the fall of the discrepancy is a chain of comparisons on the same
 //! measurement.
 
 use super::compare::{compare_prepared, load_measurement, Measurement};
 use super::diagnose::{diagnose_prepared, Diagnosis};
+use super::unexplained::Unexplained;
 use super::{CompareOptions, DiagnoseError, Progress};
 use crate::model::EffectId;
 use crate::model::ModelConfig;
@@ -31,6 +32,10 @@ pub struct Round {
     /// With the verdict added (none when the verdict is `none`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub after_px: Option<f64>,
+    /// The model entering the round leaves something significant unexplained.
+    pub unexplained: bool,
+    /// The verdict explains only part of it.
+    pub partial: bool,
 }
 
 /// Every round; `diagnoses[k]` is round k's full diagnosis.
@@ -41,6 +46,9 @@ pub struct Rounds {
     pub verdicts: Vec<EffectId>,
     /// The discrepancy of the final model (every verdict added), px.
     pub final_discrepancy_px: f64,
+    /// What the final model leaves unexplained: never `none` silently over a significant
+    /// residual.
+    pub final_unexplained: Unexplained,
     /// The model with every verdict added.
     #[serde(skip)]
     pub final_model: ModelConfig,
@@ -101,6 +109,8 @@ pub fn diagnose_rounds_prepared(
             discrepancy_px: d.discrepancy_px,
             discrepancy_se_px: d.discrepancy_se_px,
             after_px: d.after.as_ref().map(|a| a.discrepancy_px),
+            unexplained: d.unexplained.significant,
+            partial: d.partial,
         });
         let next = d.winner_model.clone();
         before = d.after.clone();
@@ -118,10 +128,15 @@ pub fn diagnose_rounds_prepared(
         .last()
         .and_then(|r| r.after_px)
         .unwrap_or(last.discrepancy_px);
+    let final_unexplained = match (&last.verdict, &last.unexplained_after) {
+        (Some(_), Some(after)) => after.clone(),
+        _ => last.unexplained.clone(),
+    };
     Ok(Rounds {
         rounds: out,
         verdicts,
         final_discrepancy_px,
+        final_unexplained,
         final_model: current,
         diagnoses,
     })

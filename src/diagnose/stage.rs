@@ -208,6 +208,7 @@ pub fn fit_stage_error(
         .observed_repeatability_um(nominal.scale_px_per_mm)?;
     let param = |v: f64| [("repeatability_um".to_string(), v)].into_iter().collect();
     Some(super::results::ImageFit {
+        geometric: Default::default(),
         effect: crate::model::EffectId::StageError,
         params: param(sigma_um),
         stderr: param(se_um),

@@ -100,6 +100,18 @@ impl ModelConfig {
                 return bad("psf_blur sigma_px must be >= 0".into());
             }
         }
+        if let Some(t) = e.target_tilt {
+            let max = super::effects::MAX_TILT_RAD;
+            if !(t.angle_about_x_rad.abs() <= max && t.angle_about_y_rad.abs() <= max) {
+                return bad(format!(
+                    "target_tilt angles must lie within ±{max} rad, got {}, {}",
+                    t.angle_about_y_rad, t.angle_about_x_rad
+                ));
+            }
+            if !(t.working_distance_mm >= 1.0) {
+                return bad("target_tilt working_distance_mm must be >= 1".into());
+            }
+        }
         if let Some(m) = e.motion_blur {
             if !(m.length_px >= 0.0 && m.length_px <= 50.0) {
                 return bad("motion_blur length_px must lie in [0, 50]".into());

@@ -1,7 +1,7 @@
 //! Renders the frame a camera on the bench would deliver: scene → geometry → optics → sensor.
 //!
 //! Geometry maps every dot centre (stage move with its misalignment; for moved frames rotation
-//! and scale; lens distortion) and its size (scale px/mm, magnification, PSF added in quadrature);
+//! and scale; the target's tilt through a pinhole; lens distortion) and its size (scale px/mm, magnification, PSF added in quadrature);
 //! the sensor integrates each dot exactly over its pixels' apertures; radiometry and the sensor
 //! chain (vignetting, illumination change, PRNU/DSNU, shot and read noise, ADC) act per pixel.
 //! Distortion moves dot centres and leaves their shape to the local similarity transform: the
@@ -97,6 +97,10 @@ pub fn project(
             mag += s.ds;
         }
     }
+    if let Some(t) = effects.target_tilt {
+        (x, y, _) = t.apply(x * mag, y * mag);
+        mag = 1.0;
+    }
     let (cx, cy) = camera.centre();
     let s = camera.scale_px_per_mm * mag;
     let (px, py) = (cx + s * x, cy + s * y);
@@ -156,12 +160,22 @@ fn render_irradiance(
         .iter()
         .filter_map(|d| {
             let (x, y) = project(camera, effects, frame, d.x_mm, d.y_mm);
+            // A tilted target's dots shrink with their depth (isotropically here: the
+            // anisotropy is of the order of the angle times the dot size over the distance).
+            let depth = effects.target_tilt.map_or(1.0, |t| {
+                let (mx, my) = effects
+                    .stage_misalignment
+                    .map_or((frame.stage_dx_mm, frame.stage_dy_mm), |m| {
+                        m.actual_move(frame.stage_dx_mm, frame.stage_dy_mm)
+                    });
+                t.apply(d.x_mm + mx, d.y_mm + my).2
+            });
             let inside = x > -margin - 60.0
                 && y > -margin - 60.0
                 && x < w as f64 + margin + 60.0
                 && y < h as f64 + margin + 60.0;
             inside.then(|| {
-                let sigma_print = d.sigma_mm * camera.scale_px_per_mm * mag;
+                let sigma_print = d.sigma_mm * camera.scale_px_per_mm * mag * depth;
                 let sigma = sigma_print.hypot(psf);
                 // The lens spreads a dot's darkening, it does not add to it: the convolution
                 // keeps the dot's volume depth·2πσ², so the depth falls as σ² grows.

@@ -4,6 +4,14 @@
 //! The generator runs in a virtual environment under `target/independent-venv`, made on first use
 //! from `tests/independent/requirements.txt` (numpy and tifffile from PyPI).
 
+#![allow(dead_code)]
+
+use ffdic::diagnose::{
+    diagnose_rounds_prepared, load_measurement, CompareOptions, Rounds, BASELINE_TOML,
+};
+use ffdic::dic::DicSettings;
+use ffdic::model::ModelConfig;
+use ffdic::reduce::{AxisScheme, Scheme};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -155,4 +163,113 @@ pub fn bench(name: &str, draw: &mut Draw, sharp: bool) -> Value {
         "stated_repeatability_um": 20.0,
         "effects": {}
     })
+}
+
+/// The baseline model, the analysis and the diagnosis the independent tests run.
+pub fn baseline() -> ModelConfig {
+    ModelConfig::from_toml(BASELINE_TOML, Path::new("config/models/baseline.toml")).unwrap()
+}
+
+pub fn options() -> CompareOptions {
+    let one = AxisScheme {
+        block: 1,
+        first: 0,
+        active: 1,
+    };
+    CompareOptions {
+        dic: DicSettings::default(),
+        schemes: vec![Scheme::new("native", one, one).unwrap()],
+        seed: 0x5EED,
+    }
+}
+
+/// Generates `spec`, diagnoses the baseline against it for up to `rounds` rounds; returns the
+/// rounds and the truth.
+pub fn diagnose(spec: &Value, rounds: usize) -> (Rounds, Value) {
+    let root = tempfile::tempdir().unwrap();
+    let dir = root.path().join("dataset");
+    let truth = generate(spec, &dir);
+    let meas = load_measurement(&dir, &options(), &|_, _| true).unwrap();
+    let r = diagnose_rounds_prepared(&meas, &baseline(), rounds, &|_, _| true).unwrap();
+    report(spec["name"].as_str().unwrap_or("?"), &r);
+    (r, truth)
+}
+
+pub fn report(name: &str, r: &Rounds) {
+    println!("== {name}: verdicts {:?}", r.verdicts);
+    for round in &r.rounds {
+        println!(
+            "   {} ± {} px -> {} {:?} ± {:?} -> {:?}",
+            round.discrepancy_px,
+            round.discrepancy_se_px,
+            ffdic::model::effects::verdict_name(round.verdict),
+            round.params,
+            round.stderr,
+            round.after_px
+        );
+    }
+    for (k, d) in r.diagnoses.iter().enumerate() {
+        let u = &d.unexplained;
+        println!(
+            "   round {k}: unexplained {} F {:?} (threshold {:?}) ratio {:.2}; after: {:?} F {:?}; explained {:?} partial {} withheld {:?}",
+            u.significant,
+            u.field_f,
+            u.field_f_threshold,
+            u.ratio,
+            d.unexplained_after.as_ref().map(|a| a.significant),
+            d.unexplained_after.as_ref().and_then(|a| a.field_f),
+            d.explained_fraction,
+            d.partial,
+            d.withheld.as_ref().map(|w| (w.effect, w.explained_fraction)),
+        );
+        println!("     {}", u.summary);
+        if let Some(a) = &d.unexplained_after {
+            println!("     after: {}", a.summary);
+        }
+        if std::env::var_os("FFDIC_SHOW_SHAPES").is_some() {
+            for r in &d.before.as_ref().expect("kept").runs {
+                println!(
+                    "     {} {}: rigid {:.5} field {:.5} std {:.5} random meas {:?} model {:?}",
+                    r.id,
+                    r.scheme,
+                    r.rigid_px,
+                    r.field_px,
+                    r.std_px,
+                    r.measured.random_px,
+                    r.model.random_px
+                );
+            }
+            for s in u
+                .shape
+                .runs
+                .iter()
+                .chain(d.unexplained_after.iter().flat_map(|a| a.shape.runs.iter()))
+            {
+                println!(
+                    "     {} move {:?}: exx {:.2e} eyy {:.2e} shear {:.2e} rot {:.2e} se {:.1e} quad {:.5}",
+                    s.run, s.move_px, s.exx, s.eyy, s.shear, s.rotation, s.se[0], s.quadratic_px
+                );
+            }
+        }
+    }
+    let d = &r.diagnoses[0];
+    for c in d.candidates.iter().filter(|c| c.delta_bic < -10.0) {
+        println!(
+            "   {:<20} dBIC {:>12.1} drop {:+.5} ± {:.5} img {:.1} ± {:.1} sig {} {:?}",
+            c.effect,
+            c.delta_bic,
+            c.criteria.drop_px,
+            c.criteria.drop_se_px,
+            c.criteria.image_chi2_drop,
+            c.criteria.image_chi2_se,
+            c.significant,
+            c.params
+        );
+        for note in &c.notes {
+            println!("      note: {note}");
+        }
+        if !c.derived.is_empty() {
+            println!("      derived: {:?}", c.derived);
+        }
+    }
 }

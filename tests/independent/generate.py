@@ -99,6 +99,34 @@ PATTERN_DEFAULTS = {
     "edge_softness_mm": 0.0,
 }
 
+# Keys added after the first release. They are NOT written into the effective spec unless the
+# user gives them, so a spec without them produces byte-identical files (dataset.json included,
+# whose generator.spec is the effective spec). Read them with opt_top / opt_effect.
+OPTIONAL_TOP = {
+    "working_distance_mm": 300.0,     # Z: pupil → where the optical axis meets the target plane
+    "state_working_distance": False,  # true: dataset.json gets "working_distance_mm"
+}
+OPTIONAL_EFFECTS = {
+    "tilt_about_y_rad": 0.0,          # θy: +x side of the target farther from the camera for θy > 0
+    "tilt_about_x_rad": 0.0,          # θx: +y side of the target farther from the camera for θx > 0
+    "k2_norm": 0.0,                   # Brown–Conrady, normalised by r0 (half diagonal)
+    "p1_norm": 0.0,
+    "p2_norm": 0.0,
+    "distortion_centre_px": [0.0, 0.0],  # distortion centre relative to the optical axis (px)
+    "target_bow_per_mm": 0.0,         # κ: depth offset κ|P|²/2 (mm) of a bowed target
+}
+
+
+def opt_top(spec: dict, key: str):
+    v = spec.get(key)
+    return OPTIONAL_TOP[key] if v is None else v
+
+
+def opt_effect(spec: dict, key: str):
+    v = spec["effects"].get(key)
+    return OPTIONAL_EFFECTS[key] if v is None else v
+
+
 _ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
 _PER_MOVE_OVERRIDES = ("rotation_rad", "scale_ds", "illumination_gain")
 
@@ -223,6 +251,22 @@ def _validate(spec: dict) -> None:
         raise SpecError("effects.vignetting_v must lie in [0, 1)")
     if float(eff["scale_ds"]) <= -0.5:
         raise SpecError("effects.scale_ds too negative")
+    Z = opt_top(spec, "working_distance_mm")
+    if isinstance(Z, bool) or not isinstance(Z, (int, float)) or not (math.isfinite(Z) and Z > 0):
+        raise SpecError("working_distance_mm must be a positive number (mm)")
+    if not isinstance(opt_top(spec, "state_working_distance"), bool):
+        raise SpecError("state_working_distance must be true or false")
+    for k in ("tilt_about_y_rad", "tilt_about_x_rad", "k2_norm", "p1_norm", "p2_norm", "target_bow_per_mm"):
+        v = opt_effect(spec, k)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise SpecError(f"effects.{k} must be a finite number")
+    for k in ("tilt_about_y_rad", "tilt_about_x_rad"):
+        if abs(float(opt_effect(spec, k))) >= math.radians(60):
+            raise SpecError(f"effects.{k} must lie within ±60° (radians)")
+    c = opt_effect(spec, "distortion_centre_px")
+    if (not isinstance(c, (list, tuple)) or len(c) != 2
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in c)):
+        raise SpecError("effects.distortion_centre_px must be [dx, dy] (px, relative to the optical axis)")
     st = spec["stage"]
     if len(st["constant_offset_px"]) != 2:
         raise SpecError("stage.constant_offset_px must be [dx, dy]")
@@ -346,6 +390,17 @@ def rot(theta: float) -> np.ndarray:
     return np.array([[c, -s], [s, c]])
 
 
+def tilt_matrix(theta_x: float, theta_y: float) -> np.ndarray:
+    """Ry(θy)·Rx(θx) with Rx(θ) = [[1,0,0],[0,cos θ,−sin θ],[0,sin θ,cos θ]] (the +y side of the target
+    goes farther from the camera for θx > 0) and Ry(θ) = [[cos θ,0,−sin θ],[0,1,0],[sin θ,0,cos θ]]
+    (the +x side goes farther for θy > 0). Camera frame: x right, y down, z along the view."""
+    cx, sx = math.cos(theta_x), math.sin(theta_x)
+    cy, sy = math.cos(theta_y), math.sin(theta_y)
+    Rx = np.array([[1.0, 0.0, 0.0], [0.0, cx, -sx], [0.0, sx, cx]])
+    Ry = np.array([[cy, 0.0, -sy], [0.0, 1.0, 0.0], [sy, 0.0, cy]])
+    return Ry @ Rx
+
+
 class Camera:
     def __init__(self, spec: dict):
         self.W = int(spec["width"])
@@ -358,15 +413,61 @@ class Camera:
         self.psf = float(eff["psf_sigma_px"])
         self.vig = float(eff["vignetting_v"])
         self.fx, self.fy = (float(v) for v in eff["fill_factor"])
+        # general Brown–Conrady (normalised by r0) about a centre offset from the axis
+        self.k1n = self.k1 * self.r0 ** 2
+        self.k2n = float(opt_effect(spec, "k2_norm"))
+        self.p1n = float(opt_effect(spec, "p1_norm"))
+        self.p2n = float(opt_effect(spec, "p2_norm"))
+        self.dcentre = np.array([float(v) for v in opt_effect(spec, "distortion_centre_px")])
+        # only k1 about the axis: the original code paths (byte-identical output)
+        self.general_distortion = bool(self.k2n != 0 or self.p1n != 0 or self.p2n != 0
+                                       or np.any(self.dcentre != 0))
+        # pinhole perspective of a tilted and/or bowed target
+        self.Z = float(opt_top(spec, "working_distance_mm"))
+        self.theta_x = float(opt_effect(spec, "tilt_about_x_rad"))
+        self.theta_y = float(opt_effect(spec, "tilt_about_y_rad"))
+        self.bow = float(opt_effect(spec, "target_bow_per_mm"))
+        self.R3 = tilt_matrix(self.theta_x, self.theta_y)
+        self.perspective_on = bool(self.theta_x != 0 or self.theta_y != 0 or self.bow != 0)
         # the distortion must be monotonic over the frame (no fold-over): for k1 < 0, r(1 + k1 r²)
         # peaks at r = 1/sqrt(−3 k1) with the value (2/3)/sqrt(−3 k1)
         if self.k1 < 0 and 1.05 * self.r0 >= (2.0 / 3.0) / math.sqrt(-3.0 * self.k1):
             raise SpecError("k1 too strongly negative: the distortion folds over inside the frame")
+        if self.general_distortion:
+            self._check_fold_over()
+
+    # ---- lens distortion --------------------------------------------------------------------
+
+    def _brown(self, v: np.ndarray):
+        """v: (..., 2) undistorted offsets from the distortion centre (px). Returns the distortion
+        r0·(dxn, dyn) (px) and its Jacobian d(x_d)/d(x) = I + ∂(dxn, dyn)/∂qn, (..., 2, 2)."""
+        q = v / self.r0
+        qx, qy = q[..., 0], q[..., 1]
+        r2 = qx * qx + qy * qy
+        k1, k2, p1, p2 = self.k1n, self.k2n, self.p1n, self.p2n
+        radial = k1 * r2 + k2 * r2 * r2
+        drad = 2.0 * (k1 + 2.0 * k2 * r2)  # ∂radial/∂qx = qx·drad
+        dxn = qx * radial + 2.0 * p1 * qx * qy + p2 * (r2 + 2.0 * qx * qx)
+        dyn = qy * radial + p1 * (r2 + 2.0 * qy * qy) + 2.0 * p2 * qx * qy
+        J = np.empty(q.shape + (2,))
+        J[..., 0, 0] = 1.0 + radial + qx * qx * drad + 2.0 * p1 * qy + 6.0 * p2 * qx
+        J[..., 0, 1] = qx * qy * drad + 2.0 * p1 * qx + 2.0 * p2 * qy
+        J[..., 1, 0] = qx * qy * drad + 2.0 * p1 * qx + 2.0 * p2 * qy
+        J[..., 1, 1] = 1.0 + radial + qy * qy * drad + 6.0 * p1 * qy + 2.0 * p2 * qx
+        return self.r0 * np.stack([dxn, dyn], axis=-1), J
 
     def distort(self, u: np.ndarray) -> np.ndarray:
         """u: (..., 2) undistorted offsets from the axis (px) → distorted offsets."""
+        if self.general_distortion:
+            return u + self._brown(u - self.dcentre)[0]
         r2 = (u * u).sum(axis=-1, keepdims=True)
         return u * (1.0 + self.k1 * r2)
+
+    def distort_with_det(self, u: np.ndarray):
+        """Distorted offsets and det of the distortion's Jacobian (general model)."""
+        D, J = self._brown(u - self.dcentre)
+        det = J[..., 0, 0] * J[..., 1, 1] - J[..., 0, 1] * J[..., 1, 0]
+        return u + D, det
 
     def _undistort_radius(self, rd: np.ndarray) -> np.ndarray:
         ru = rd.astype(float).copy()
@@ -375,11 +476,104 @@ class Camera:
             ru = ru - f / (1 + 3 * self.k1 * ru * ru)
         return ru
 
+    def _undistort_general(self, ud: np.ndarray, check: bool = True) -> np.ndarray:
+        """Newton on x + r0·D((x − e)/r0) = x_d (analytic 2x2 Jacobian), to |step| < 1e-10 px."""
+        ud = np.asarray(ud, float)
+        u = ud.copy()
+        for _ in range(100):
+            D, J = self._brown(u - self.dcentre)
+            F = u + D - ud
+            step = np.linalg.solve(J, F[..., None])[..., 0]
+            u = u - step
+            if float(np.abs(step).max(initial=0.0)) < 1e-10:
+                break
+        else:
+            if check:
+                raise SpecError("the lens distortion cannot be inverted over the frame (fold-over?)")
+        return u
+
     def undistort(self, ud: np.ndarray) -> np.ndarray:
+        if self.general_distortion:
+            return self._undistort_general(ud)
         rd = np.sqrt((ud * ud).sum(axis=-1))
         ru = self._undistort_radius(rd)
         fac = np.where(rd > 0, ru / np.where(rd > 0, rd, 1.0), 1.0)
         return ud * fac[..., None]
+
+    def _check_fold_over(self):
+        """Refuse a distortion whose Jacobian determinant is ≤ 0.2 anywhere on a 41x41 grid of the
+        frame (border included, 5 % beyond it), at the undistorted points of those image points."""
+        n = 41
+        xs = np.linspace(-0.5 - 0.05 * self.W, self.W - 0.5 + 0.05 * self.W, n)
+        ys = np.linspace(-0.5 - 0.05 * self.H, self.H - 0.5 + 0.05 * self.H, n)
+        X, Y = np.meshgrid(xs, ys)
+        ud = np.stack([X.ravel(), Y.ravel()], axis=1) - self.axis
+        try:
+            uu = self._undistort_general(ud)
+        except (SpecError, np.linalg.LinAlgError):
+            raise SpecError("the lens distortion folds over inside the frame (no inverse)") from None
+        back, det = self.distort_with_det(uu)
+        if not np.all(np.isfinite(det)) or float(det.min()) <= 0.2 or float(np.abs(back - ud).max()) > 1e-6:
+            raise SpecError(f"the lens distortion folds over inside the frame (min Jacobian determinant "
+                            f"{float(np.nanmin(det)):.3g} <= 0.2)")
+
+    # ---- perspective of a tilted / bowed target ----------------------------------------------
+
+    def perspective(self, q: np.ndarray, P: np.ndarray, Minv: np.ndarray, jacobian: bool = True):
+        """q: (n, 2) in-plane target points (mm) of a frame, P: (n, 2) their print coordinates (mm)
+        for the bow, Minv = M⁻¹ (dP/dq). World W = Ry·Rx·(qx, qy, 0) + (0, 0, Z + κ|P|²/2); image
+        offset u' = scale·Z·(Wx/Wz, Wy/Wz) (px). Returns u', Wz and the Jacobian d(u'/scale)/dq."""
+        R = self.R3
+        Wx = R[0, 0] * q[:, 0] + R[0, 1] * q[:, 1]
+        Wy = R[1, 0] * q[:, 0] + R[1, 1] * q[:, 1]
+        Wz = R[2, 0] * q[:, 0] + R[2, 1] * q[:, 1] + self.Z
+        if self.bow != 0:
+            Wz = Wz + 0.5 * self.bow * (P * P).sum(axis=1)
+        f = self.Z / Wz
+        u2 = self.scale * np.stack([f * Wx, f * Wy], axis=1)
+        if not jacobian:
+            return u2, Wz, None
+        dWz = np.tile(R[2, :2], (q.shape[0], 1))
+        if self.bow != 0:
+            dWz = dWz + self.bow * (P @ Minv)  # ∂z/∂q_j = κ Σ_i P_i (M⁻¹)_ij
+        J = np.empty((q.shape[0], 2, 2))
+        for row, Wc in ((0, Wx), (1, Wy)):
+            for j in range(2):
+                J[:, row, j] = f * (R[row, j] - Wc / Wz * dWz[:, j])
+        return u2, Wz, J
+
+    def unproject(self, u2: np.ndarray, fr: "Frame") -> np.ndarray:
+        """Inverse of the perspective for frame fr: undistorted image offsets u' (px) → in-plane
+        offsets u = scale·q (px). Flat target: exact ray–plane intersection; with a bow, Newton
+        iterations from there (analytic Jacobian) to 1e-9 px."""
+        R = self.R3
+        n = R[:, 2]  # the plane's normal
+        ray = np.stack([u2[:, 0] / (self.scale * self.Z), u2[:, 1] / (self.scale * self.Z),
+                        np.ones(u2.shape[0])], axis=1)
+        den = ray @ n
+        if np.any(den * n[2] <= 0):
+            raise SpecError("the tilted target is not in front of the camera over the whole frame")
+        t = self.Z * n[2] / den
+        Wrel = t[:, None] * ray - np.array([0.0, 0.0, self.Z])
+        q = Wrel @ R[:, :2]  # in-plane coordinates: Rᵀ(W − Z e_z), first two
+        if self.bow != 0:
+            Minv = np.linalg.inv(fr.M)
+            for _ in range(100):
+                P = q @ Minv.T - fr.d / self.scale
+                got, Wz, J = self.perspective(q, P, Minv)
+                res = got - u2
+                if float(np.abs(res).max(initial=0.0)) < 1e-9:
+                    break
+                q = q - np.linalg.solve(self.scale * J, res[..., None])[..., 0]
+            else:
+                raise SpecError("cannot invert the bowed target's projection (bow too strong?)")
+            if np.any(Wz <= 0):
+                raise SpecError("the bowed target is not in front of the camera over the whole frame")
+        return self.scale * q
+
+    def tilt_first_order(self):
+        """a = tan θy/(Z·scale), b = tan θx/(Z·scale) (1/px): first-order perspective coefficients."""
+        return (math.tan(self.theta_y) / (self.Z * self.scale), math.tan(self.theta_x) / (self.Z * self.scale))
 
     def vignetting(self) -> np.ndarray:
         if self.vig == 0:
@@ -838,10 +1032,26 @@ def render_irradiance(cam: Camera, pr: Print, fr: Frame, render: dict):
     t0 = time.perf_counter()
     P = np.stack([pr.x, pr.y], axis=1)
     u = fr.print_to_undistorted(P, cam.scale)
-    r2 = (u * u).sum(axis=1)
-    xy = cam.axis + u * (1.0 + cam.k1 * r2)[:, None]
-    # local magnification of the distortion: radial 1+3k1r², tangential 1+k1r²; geometric mean
-    mag = np.sqrt(np.maximum((1 + 3 * cam.k1 * r2) * (1 + cam.k1 * r2), 1e-6))
+    mag_p = None
+    if cam.perspective_on:
+        # tilted / bowed target through the pinhole; the dot's areal magnification sqrt(det J)
+        Minv = np.linalg.inv(fr.M)
+        u, Wz, Jt = cam.perspective(u / cam.scale, P, Minv)
+        if np.any(Wz <= 0):
+            raise SpecError("part of the target lies behind the camera")
+        mag_p = np.sqrt(np.maximum(Jt[:, 0, 0] * Jt[:, 1, 1] - Jt[:, 0, 1] * Jt[:, 1, 0], 1e-12))
+    if cam.general_distortion:
+        # Brown–Conrady: the dot's local (areal) magnification sqrt(det J) of the distortion
+        ud, det = cam.distort_with_det(u)
+        xy = cam.axis + ud
+        mag = np.sqrt(np.maximum(det, 1e-6))
+    else:
+        r2 = (u * u).sum(axis=1)
+        xy = cam.axis + u * (1.0 + cam.k1 * r2)[:, None]
+        # local magnification of the distortion: radial 1+3k1r², tangential 1+k1r²; geometric mean
+        mag = np.sqrt(np.maximum((1 + 3 * cam.k1 * r2) * (1 + cam.k1 * r2), 1e-6))
+    if mag_p is not None:
+        mag = mag * mag_p
     lin = cam.scale * fr.lin * mag  # px per mm locally
     wsig = float(render["window_sigmas"])
     if pr.profile == "gaussian":
@@ -1073,11 +1283,37 @@ def _field_bounds(cam: Camera, frames, margin_px):
     lo = np.array([np.inf, np.inf])
     hi = -lo
     for fr in frames:
-        P = fr.undistorted_to_print(uu, cam.scale)
+        if cam.perspective_on:
+            P = fr.undistorted_to_print(cam.unproject(uu, fr), cam.scale)
+        else:
+            P = fr.undistorted_to_print(uu, cam.scale)
         lo = np.minimum(lo, P.min(axis=0))
         hi = np.maximum(hi, P.max(axis=0))
     m = margin_px / cam.scale
     return lo[0] - m, hi[0] + m, lo[1] - m, hi[1] + m, (lo[0], hi[0], lo[1], hi[1])
+
+
+def _perspective_mag_max(cam: Camera, frames) -> float:
+    """Largest local linear magnification of the tilt/bow (sqrt det J) at the frame border, ≥ 1."""
+    if not cam.perspective_on:
+        return 1.0
+    W, H = cam.W, cam.H
+    n = 50
+    xs = np.linspace(-0.5, W - 0.5, n)
+    ys = np.linspace(-0.5, H - 0.5, n)
+    border = np.concatenate([
+        np.stack([xs, np.full(n, -0.5)], 1), np.stack([xs, np.full(n, H - 0.5)], 1),
+        np.stack([np.full(n, -0.5), ys], 1), np.stack([np.full(n, W - 0.5), ys], 1)])
+    uu = cam.undistort(border - cam.axis)
+    best = 1.0
+    for fr in frames:
+        u = cam.unproject(uu, fr)
+        Minv = np.linalg.inv(fr.M)
+        P = fr.undistorted_to_print(u, cam.scale)
+        _, _, J = cam.perspective(u / cam.scale, P, Minv)
+        det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
+        best = max(best, float(np.sqrt(np.maximum(det, 0.0)).max()))
+    return best
 
 
 # --------------------------------------------------------------------------------------------
@@ -1155,6 +1391,8 @@ def generate(spec: dict, out_dir, overwrite: bool | None = None, quiet: bool = T
         # margin: the widest dot reach in px, generous for magnification and distortion
         dmax = float(pat["dot_diameter_mm"]) * (1 + 3 * float(pat["diameter_cv"]))
         lin_max = cam.scale * max([1.0] + [f.lin for f in dframes]) * 1.1
+        if cam.perspective_on:
+            lin_max *= _perspective_mag_max(cam, [ref] + dframes)
         sig_px = lin_max * math.hypot(dmax / FWHM_PER_SIGMA, float(pat["edge_softness_mm"]))
         sig_px = math.hypot(sig_px, cam.psf)
         margin = float(render["window_sigmas"]) * sig_px + 0.5 * dmax * lin_max + 4
@@ -1230,6 +1468,8 @@ def generate(spec: dict, out_dir, overwrite: bool | None = None, quiet: bool = T
     }
     if spec.get("stated_repeatability_um") is not None:
         manifest["stage_repeatability_um"] = float(spec["stated_repeatability_um"])
+    if opt_top(spec, "state_working_distance"):
+        manifest["working_distance_mm"] = cam.Z
     manifest["generator"] = {"name": GENERATOR_NAME, "spec": spec}
     manifest["runs"] = manifest_runs
     with open(out_dir / "dataset.json", "w") as fh:
@@ -1256,8 +1496,15 @@ def generate(spec: dict, out_dir, overwrite: bool | None = None, quiet: bool = T
             "optical_axis_px": cam.axis.tolist(),
             "r0_half_diagonal_px": cam.r0,
             "rotation_sign": "positive angle turns +x toward +y (clockwise on screen, y down); R = [[cos,-sin],[sin,cos]]",
-            "print_to_image": "u = M (scale*P_mm + d_px) (undistorted offset from the axis; M = I, d = 0 for the reference); "
-                              "x = axis + u (1 + k1_per_px2 |u|^2)",
+            "print_to_image": "u = M (scale*P_mm + d_px) (in-plane offset from the axis, px; M = I, d = 0 for the "
+                              "reference); q = u/scale (mm); W = Ry(tilt_about_y_rad) Rx(tilt_about_x_rad) (qx, qy, 0) "
+                              "+ (0, 0, Z + target_bow_per_mm |P_mm|^2/2); u' = scale Z (Wx/Wz, Wy/Wz) (undistorted "
+                              "offset, px; u' = u without tilt and bow); x = axis + u' + r0 (dxn, dyn) (Brown-Conrady "
+                              "about e = axis + distortion_centre_px, qn = (axis + u' - e)/r0; for k1 alone about "
+                              "the axis: x = axis + u' (1 + k1_per_px2 |u'|^2))",
+            "tilt_rotations": "Rx(t) = [[1,0,0],[0,cos t,-sin t],[0,sin t,cos t]] (+y side of the target farther "
+                              "for t > 0); Ry(t) = [[cos t,0,-sin t],[0,1,0],[sin t,0,cos t]] (+x side farther "
+                              "for t > 0); camera frame x right, y down, z along the view",
             "print_origin": "print coordinate (0, 0) mm images onto the optical axis in the reference frame",
             "hardware_read_out": "per axis a block of binning*decimation sensor pixels per output pixel; the "
                                  "first `binning` pixels of the block binned (decimation keeps the first pixel); "
@@ -1271,6 +1518,31 @@ def generate(spec: dict, out_dir, overwrite: bool | None = None, quiet: bool = T
             "psf_sigma_px": cam.psf, "vignetting_v": cam.vig, "fill_factor": [cam.fx, cam.fy],
             "illumination_gain": float(eff["illumination_gain"]),
             "vignetting_model": "E *= 1 - v r^2 / r0^2, r from the axis at the pixel centre, r0 = half diagonal",
+            "k2_norm": cam.k2n, "k2_per_px4": cam.k2n / cam.r0 ** 4,
+            "p1_norm": cam.p1n, "p2_norm": cam.p2n,
+            "p1_per_px": cam.p1n / cam.r0, "p2_per_px": cam.p2n / cam.r0,
+            "distortion_centre_px": cam.dcentre.tolist(),
+            "distortion_centre_abs_px": (cam.axis + cam.dcentre).tolist(),
+            "distortion_model": "Brown-Conrady on absolute image positions x (px): e = axis + distortion_centre_px, "
+                                "qn = (x - e)/r0, r^2 = |qn|^2, radial = k1_norm r^2 + k2_norm r^4, "
+                                "dxn = qn_x radial + 2 p1 qn_x qn_y + p2 (r^2 + 2 qn_x^2), "
+                                "dyn = qn_y radial + p1 (r^2 + 2 qn_y^2) + 2 p2 qn_x qn_y, x_d = x + r0 (dxn, dyn). "
+                                "Per px (v = x - e in px): dx = v_x (k1_per_px2 |v|^2 + k2_per_px4 |v|^4) "
+                                "+ 2 p1_per_px v_x v_y + p2_per_px (|v|^2 + 2 v_x^2), likewise dy",
+            "tilt_about_y_rad": cam.theta_y, "tilt_about_x_rad": cam.theta_x,
+            "working_distance_mm": cam.Z,
+            "tilt_a_per_px": cam.tilt_first_order()[0], "tilt_b_per_px": cam.tilt_first_order()[1],
+            "tilt_model": "pinhole: W = Ry(tilt_about_y_rad) Rx(tilt_about_x_rad) (q, 0) + (0, 0, Z), "
+                          "u' = scale Z (Wx, Wy)/Wz; to first order, a translation t (px) of the target in its "
+                          "plane changes the displacement at image offset p (px from the axis) by "
+                          "-a (2 px tx + tx^2, px ty + py tx + tx ty) - b (px ty + py tx + tx ty, 2 py ty + ty^2), "
+                          "a = tan(tilt_about_y_rad)/(Z scale), b = tan(tilt_about_x_rad)/(Z scale) (1/px)",
+            "target_bow_per_mm": cam.bow,
+            "bow_model": "depth offset z(P) = target_bow_per_mm |P|^2/2 (mm) along the camera's z, P the print "
+                         "coordinate (moves with the print; apex at print (0, 0)); W = Ry Rx (q, 0) + (0, 0, Z + z(P)). "
+                         "Not in ffdic's catalogue on purpose",
+            "dot_shape_under_tilt_and_distortion": "each dot rendered isotropic with the local areal magnification "
+                                                   "sqrt(det J) of the tilt/bow and of the distortion (approximation)",
         },
         "noise": _noise_prediction(spec),
         "stated_repeatability_um": spec.get("stated_repeatability_um"),

@@ -550,6 +550,201 @@ def check_geometry(tmp):
           f"a point 150 px right of the axis moves by {np.round(right, 3).tolist()} + b")
 
 
+# --- tilt, Brown–Conrady decentring, bow, byte identity (own formulas, own inverse) --------------
+
+def _subsets(W, H, t, half=48, pad=12):
+    """3x3 subset centres spread over the frame such that the subset and its moved twin (by t px)
+    both lie inside the frame."""
+    tx, ty = (int(math.ceil(abs(v))) for v in t)
+    xs = np.linspace(half + pad + (tx if t[0] < 0 else 0), W - half - pad - (tx if t[0] > 0 else 0), 3)
+    ys = np.linspace(half + pad + (ty if t[1] < 0 else 0), H - half - pad - (ty if t[1] > 0 else 0), 3)
+    return [(int(round(x)), int(round(y))) for y in ys for x in xs]
+
+
+def _tilt_pair(tmp, name, eff, move_mm):
+    spec = _spec(width=640, height=540, noise=False, working_distance_mm=300.0,
+                 effects=dict(eff, psf_sigma_px=0.5), repeats=0,
+                 moves=[{"id": "m", "dx_mm": move_mm[0], "dy_mm": move_mm[1]}])
+    d = Path(tmp) / name
+    truth = G.generate(spec, d)
+    return truth, read(d, "a_ref.tif"), read(d, "a_m.tif")
+
+
+def check_tilt(tmp):
+    """A tilted target (pinhole, Z = 300 mm), a 5 mm move in the target's plane: local shifts vs the
+    first-order formula u = t − a(2 px tx + tx², px ty + py tx + tx ty) − b(px ty + py tx + tx ty,
+    2 py ty + ty²), a = tan θy/(Z·scale), b = tan θx/(Z·scale), plus the O(θ²) foreshortening
+    (cos θ − 1)·t along the tilted axis that this formula leaves out (−0.0099 px for 65 px at 1°)."""
+    th = math.radians(1.0)
+    for label, eff, move in (("θy = 1°, 5 mm x move", {"tilt_about_y_rad": th}, (5.0, 0.0)),
+                             ("θx = 1°, 5 mm y move", {"tilt_about_x_rad": th}, (0.0, 5.0))):
+        truth, ref, mov = _tilt_pair(tmp, "tilt_" + ("y" if "θy" in label else "x"), eff, move)
+        e = truth["effects"]
+        a, b = e["tilt_a_per_px"], e["tilt_b_per_px"]
+        Z, scale = 300.0, 13.0
+        ok_ab = (abs(a - math.tan(e["tilt_about_y_rad"]) / (Z * scale)) < 1e-18
+                 and abs(b - math.tan(e["tilt_about_x_rad"]) / (Z * scale)) < 1e-18)
+        tx, ty = truth["runs"][0]["actual_move_px"]
+        ax, ay = truth["conventions"]["optical_axis_px"]
+        fx_ = math.cos(e["tilt_about_y_rad"]) - 1.0
+        fy_ = math.cos(e["tilt_about_x_rad"]) - 1.0
+
+        def first_order(x, y, fore=True):
+            px, py = x - ax, y - ay
+            ux = tx - a * (2 * px * tx + tx * tx) - b * (px * ty + py * tx + tx * ty)
+            uy = ty - a * (px * ty + py * tx + tx * ty) - b * (2 * py * ty + ty * ty)
+            if fore:
+                ux, uy = ux + fx_ * tx, uy + fy_ * ty
+            return ux, uy
+
+        worst, worst_raw, span = 0.0, 0.0, 0.0
+        subsets = _subsets(640, 540, (tx, ty))
+        for cx, cy in subsets:
+            meas, exp = measure_local_shift(ref, mov, cx, cy, first_order)
+            _, exp_raw = measure_local_shift(ref, mov, cx, cy, lambda x, y: first_order(x, y, False))
+            worst = max(worst, np.abs(meas - exp).max())
+            worst_raw = max(worst_raw, np.abs(meas - exp_raw).max())
+            span = max(span, np.abs(meas - np.array([tx, ty])).max())
+        check(f"tilt {label}: local shifts vs first-order formula (+ foreshortening)", worst < 0.003 and ok_ab,
+              f"max |measured − formula| = {worst:.4f} px at {len(subsets)} subsets (limit 0.003); "
+              f"without the (cos θ − 1)·t term {worst_raw:.4f} px; tilt effect up to {span:.3f} px; "
+              f"a = {a:.4e}, b = {b:.4e} /px")
+
+
+def _bc_forward(x, e, r0, k1, k2, p1, p2):
+    """Brown–Conrady from the definition: absolute px → distorted absolute px."""
+    qx, qy = (x[..., 0] - e[0]) / r0, (x[..., 1] - e[1]) / r0
+    r2 = qx * qx + qy * qy
+    rad = k1 * r2 + k2 * r2 * r2
+    dx = qx * rad + 2 * p1 * qx * qy + p2 * (r2 + 2 * qx * qx)
+    dy = qy * rad + p1 * (r2 + 2 * qy * qy) + 2 * p2 * qx * qy
+    return x + r0 * np.stack([dx, dy], axis=-1)
+
+
+def _bc_inverse(xd, *args):
+    """Own inverse: fixed-point x ← x_d − (distort(x) − x) (a contraction for mild distortion)."""
+    x = np.array(xd, float)
+    for _ in range(500):
+        nx = xd - (_bc_forward(x, *args) - x)
+        if np.abs(nx - x).max() < 1e-12:
+            return nx
+        x = nx
+    return x
+
+
+def check_decentring(tmp):
+    """k2, p1, p2 and a decentred distortion centre on a moved pair: local shifts vs the exact mapping
+    difference distort(undistort(x) + t) − x, with our own forward model and fixed-point inverse."""
+    W, H = 640, 540
+    dist = {"k1_norm": -0.004, "k2_norm": 0.01, "p1_norm": 0.001, "p2_norm": -0.0015,
+            "distortion_centre_px": [15.0, -10.0]}
+    spec = _spec(width=W, height=H, noise=False, effects=dict(dist, psf_sigma_px=0.5), repeats=0,
+                 moves=[{"id": "m", "dx_mm": 2.0, "dy_mm": -1.5}])
+    d = Path(tmp) / "decentring"
+    truth = G.generate(spec, d)
+    ref, mov = read(d, "a_ref.tif"), read(d, "a_m.tif")
+    e = truth["effects"]
+    axis = np.array(truth["conventions"]["optical_axis_px"])
+    r0 = 0.5 * math.hypot(W, H)
+    args = (axis + np.array(dist["distortion_centre_px"]), r0, dist["k1_norm"], dist["k2_norm"],
+            dist["p1_norm"], dist["p2_norm"])
+    t = np.array(truth["runs"][0]["actual_move_px"])
+    ok_truth = (abs(e["k2_per_px4"] * r0 ** 4 - 0.01) < 1e-15 and abs(e["p1_per_px"] * r0 - 0.001) < 1e-15
+                and e["distortion_centre_abs_px"] == args[0].tolist())
+
+    def field(x, y):
+        xd = np.stack([x, y], axis=-1)
+        xu = _bc_inverse(xd, *args)
+        out = _bc_forward(xu + t, *args) - xd
+        return out[..., 0], out[..., 1]
+
+    worst, span = 0.0, 0.0
+    subsets = _subsets(W, H, t)
+    for cx, cy in subsets:
+        meas, exp = measure_local_shift(ref, mov, cx, cy, field)
+        worst = max(worst, np.abs(meas - exp).max())
+        span = max(span, np.abs(meas - t).max())
+    # the generator's own inverse (used for the print's bounds) to 1e-9 px
+    cam = G.Camera(G.effective_spec(spec))
+    pts = np.random.default_rng(3).uniform([-0.5, -0.5], [W - 0.5, H - 0.5], (4000, 2))
+    inv_err = np.abs(cam.distort(cam.undistort(pts - axis)) - (pts - axis)).max()
+    own_err = np.abs(cam.distort(cam.undistort(pts - axis)) + axis - _bc_forward(
+        _bc_inverse(pts, *args), *args)).max()
+    fwd_err = np.abs(cam.distort(pts - axis) + axis - _bc_forward(pts, *args)).max()
+    check("Brown–Conrady k2, p1, p2, decentred: local shifts vs exact mapping difference",
+          worst < 0.005 and inv_err < 1e-9 and fwd_err < 1e-9 and ok_truth,
+          f"max |measured − model| = {worst:.4f} px at {len(subsets)} subsets (limit 0.005); distortion "
+          f"changes the move by up to {span:.3f} px; generator forward vs definition {fwd_err:.1e} px, "
+          f"its inverse round trip {inv_err:.1e} px ({own_err:.1e})")
+
+
+def check_bow(tmp):
+    """A bowed target (κ = 1e-3 /mm, apex moving with the print), no tilt: local shifts vs our own
+    closed form (ref: |P| from the quadratic ρ'(Z + κρ²/2) = scale·Z·ρ; moved: scale·Z·(P + t/scale)/(Z + κ|P|²/2))."""
+    kappa, Z, scale = 1e-3, 300.0, 13.0
+    spec = _spec(width=640, height=540, noise=False, working_distance_mm=Z, state_working_distance=True,
+                 effects={"target_bow_per_mm": kappa, "psf_sigma_px": 0.5}, repeats=0,
+                 moves=[{"id": "m", "dx_mm": 5.0, "dy_mm": 0.0}])
+    d = Path(tmp) / "bow"
+    truth = G.generate(spec, d)
+    ref, mov = read(d, "a_ref.tif"), read(d, "a_m.tif")
+    ax, ay = truth["conventions"]["optical_axis_px"]
+    t = np.array(truth["runs"][0]["actual_move_px"])
+
+    def field(x, y):
+        px, py = x - ax, y - ay
+        rho_img = np.hypot(px, py)
+        rho = 2 * rho_img * Z / (scale * Z + np.sqrt((scale * Z) ** 2 - 2 * rho_img ** 2 * kappa * Z))
+        f = np.where(rho_img > 0, rho / np.where(rho_img > 0, rho_img, 1), 1 / scale)
+        Px, Py = px * f, py * f
+        den = Z + 0.5 * kappa * (Px * Px + Py * Py)
+        return scale * Z * (Px + t[0] / scale) / den - px, scale * Z * (Py + t[1] / scale) / den - py
+
+    worst, span = 0.0, 0.0
+    subsets = _subsets(640, 540, t)
+    for cx, cy in subsets:
+        meas, exp = measure_local_shift(ref, mov, cx, cy, field)
+        worst = max(worst, np.abs(meas - exp).max())
+        span = max(span, np.abs(meas - t).max())
+    man = json.loads((d / "dataset.json").read_text())
+    ok = man.get("working_distance_mm") == Z and truth["effects"]["target_bow_per_mm"] == kappa
+    check("bowed target (κ = 1e-3 /mm, not in ffdic's catalogue): local shifts vs own closed form",
+          worst < 0.005 and ok,
+          f"max |measured − model| = {worst:.4f} px at {len(subsets)} subsets (limit 0.005); bow changes the "
+          f"move by up to {span:.3f} px; manifest working_distance_mm = {man.get('working_distance_mm')}")
+
+
+# sha256 over (name, bytes) of the TIFFs and dataset.json of BYTE_IDENTITY_SPEC, computed with
+# generate.py as it was before the tilt / Brown–Conrady / bow keys were added.
+BYTE_IDENTITY_SPEC = {
+    "name": "byte-identity", "seed": 19, "width": 200, "height": 160, "scale_px_per_mm": 13.0,
+    "patterns": [{"label": "g", "profile": "gaussian", "dot_diameter_mm": 0.3, "dot_spacing_mm": 0.5,
+                  "contrast": 0.6},
+                 {"label": "k", "profile": "disk", "dot_diameter_mm": 0.25, "dot_spacing_mm": 0.4,
+                  "contrast": 0.8, "edge_softness_mm": 0.01}],
+    "moves": [{"id": "m", "dx_mm": 1.3, "dy_mm": -0.7, "rotation_rad": 0.003, "scale_ds": 0.001}],
+    "step_series": [{"id": "s", "dx_step_mm": 0.0077, "dy_step_mm": 0.0, "count": 1}],
+    "repeats": 1, "stated_repeatability_um": 20.0,
+    "stage": {"constant_offset_px": [0.0, 0.4], "repeatability_um": 3.0},
+    "effects": {"k1_norm": -0.004, "psf_sigma_px": 0.6, "vignetting_v": 0.3, "fill_factor": [0.9, 0.8]},
+    "render": {"overlap_samples": 2000}}
+BYTE_IDENTITY_SHA256 = "c19ca7d46d50f6c0f12fdf4572a14d9c58c7298f68fb0e362da115074bd04fe5"
+
+
+def check_byte_identity(tmp):
+    d = Path(tmp) / "byte_identity"
+    G.generate(BYTE_IDENTITY_SPEC, d)
+    h = hashlib.sha256()
+    for n in sorted(os.listdir(d)):
+        if n.endswith(".tif") or n == "dataset.json":
+            h.update(n.encode())
+            h.update((d / n).read_bytes())
+    got = h.hexdigest()
+    check("old-style spec (k1 only) byte-identical to the generator before tilt/Brown–Conrady/bow",
+          got == BYTE_IDENTITY_SHA256, f"sha256 of 8 TIFFs + dataset.json {got[:16]}… "
+          f"(expected {BYTE_IDENTITY_SHA256[:16]}…)")
+
+
 def check_illumination_gain(tmp):
     spec = _spec(width=160, height=128, noise=False, effects={"illumination_gain": 0.97, "vignetting_v": 0.2},
                  moves=[{"id": "z", "dx_mm": 0.0, "dy_mm": 0.0}, {"id": "g", "dx_mm": 0.0, "dy_mm": 0.0,
@@ -673,7 +868,8 @@ def main():
         truth = check_pure_moves(tmp)
         check_stage_formula(truth)
         print(f"    ({time.perf_counter() - t:.1f} s)", flush=True)
-        for fn in (check_intensity, check_noise, check_vignetting, check_geometry):
+        for fn in (check_intensity, check_noise, check_vignetting, check_geometry, check_tilt, check_decentring,
+                   check_bow, check_byte_identity):
             t = time.perf_counter()
             fn(tmp)
             print(f"    ({time.perf_counter() - t:.1f} s)", flush=True)

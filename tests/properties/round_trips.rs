@@ -7,7 +7,8 @@ use ffdic::dataset::{
 };
 use ffdic::model::effects::{
     FillFactor, FixedPattern, IlluminationChange, LensDistortion, MotionBlur, PsfBlur,
-    Quantization, Rotation, Scale, SensorNoise, StageError, StageMisalignment, Vignetting,
+    Quantization, Rotation, Scale, SensorNoise, StageError, StageMisalignment, TargetTilt,
+    Vignetting,
 };
 use ffdic::model::{Effects, ModelConfig, Placement};
 use ffdic_hw::{schemes_for, BinningDomain, BinningMode, HardwareScheme, ReductionCaps};
@@ -70,6 +71,13 @@ fn effects() -> impl Strategy<Value = Effects> {
             }),
         ),
         of(non_negative().prop_map(|sigma_px| PsfBlur { sigma_px })),
+        of((-0.3f64..0.3, -0.3f64..0.3, 1.0f64..1e4).prop_map(
+            |(angle_about_y_rad, angle_about_x_rad, working_distance_mm)| TargetTilt {
+                angle_about_y_rad,
+                angle_about_x_rad,
+                working_distance_mm,
+            },
+        )),
     );
     let sensor = (
         of((unit(), unit()).prop_map(|(fx, fy)| FillFactor { fx, fy })),
@@ -98,6 +106,7 @@ fn effects() -> impl Strategy<Value = Effects> {
         scale: g.3,
         lens_distortion: g.4,
         psf_blur: g.5,
+        target_tilt: g.6,
         fill_factor: s.0,
         sensor_noise: s.1,
         fixed_pattern: s.2,

@@ -186,6 +186,19 @@ function paramText(c) {
 
 let lastDiagnosis = null;
 
+// What the final model leaves unexplained (issue 32): never a silent "none" over a residual.
+function showUnexplained(d) {
+  const left = d.final_unexplained || d.unexplained_after || d.unexplained;
+  const box = $("#unexplained");
+  if (!left) { clear(box, []); return; }
+  box.dataset.significant = String(left.significant);
+  const items = [el("h3", {}, left.significant ? "Left unexplained" : "Nothing significant left")];
+  items.push(el("p", { class: "small" }, left.summary));
+  if (d.withheld) items.push(el("p", { class: "small" }, `Not named: ${d.withheld.reason}`));
+  if (d.partial) items.push(el("p", { class: "small" }, `The verdict is partial: it explains ${Math.round(100 * (d.explained_fraction || 0))} % of the model's unexplained low-order field.`));
+  clear(box, items);
+}
+
 async function showDiagnosis(job, body) {
   const d = await api(`/jobs/${job.id}/files/results/diagnosis.json`);
   lastDiagnosis = { job, d, body };
@@ -218,6 +231,7 @@ async function showDiagnosis(job, body) {
     notes.push(el("li", {}, `${n.effect} cannot be identified from this dataset: ${n.reason}; add ${n.runs_to_add}`));
   }
   clear($("#identifiability"), notes.length ? [el("h3", {}, "What this dataset cannot tell apart"), el("ul", {}, notes)] : []);
+  showUnexplained(d);
   const add = $("#add-winner");
   const hasWinner = d.verdict !== "none" && (job.result_files || []).includes("results/winner-model.toml");
   add.classList.toggle("hidden", !hasWinner);

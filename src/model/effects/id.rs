@@ -26,6 +26,7 @@ pub enum EffectId {
     Rotation,
     Scale,
     LensDistortion,
+    TargetTilt,
     PsfBlur,
     FillFactor,
     SensorNoise,
@@ -38,12 +39,13 @@ pub enum EffectId {
 
 impl EffectId {
     /// Every effect, in vocabulary order (the order of `Effects`' fields).
-    pub const ALL: [EffectId; 13] = [
+    pub const ALL: [EffectId; 14] = [
         EffectId::StageMisalignment,
         EffectId::StageError,
         EffectId::Rotation,
         EffectId::Scale,
         EffectId::LensDistortion,
+        EffectId::TargetTilt,
         EffectId::PsfBlur,
         EffectId::FillFactor,
         EffectId::SensorNoise,
@@ -61,6 +63,7 @@ impl EffectId {
             EffectId::Rotation => "rotation",
             EffectId::Scale => "scale",
             EffectId::LensDistortion => "lens_distortion",
+            EffectId::TargetTilt => "target_tilt",
             EffectId::PsfBlur => "psf_blur",
             EffectId::FillFactor => "fill_factor",
             EffectId::SensorNoise => "sensor_noise",
@@ -76,7 +79,9 @@ impl EffectId {
     pub fn stage(self) -> Stage {
         use EffectId::*;
         match self {
-            StageMisalignment | StageError | Rotation | Scale | LensDistortion => Stage::Geometry,
+            StageMisalignment | StageError | Rotation | Scale | LensDistortion | TargetTilt => {
+                Stage::Geometry
+            }
             PsfBlur | MotionBlur => Stage::Optics,
             FillFactor | SensorNoise | FixedPattern | Quantization => Stage::Sensor,
             Vignetting | IlluminationChange => Stage::Radiometry,

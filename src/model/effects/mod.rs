@@ -15,6 +15,7 @@ mod scale;
 mod sensor_noise;
 mod stage_error;
 mod stage_misalignment;
+mod target_tilt;
 mod vignetting;
 
 pub use fill_factor::FillFactor;
@@ -29,6 +30,7 @@ pub use scale::Scale;
 pub use sensor_noise::SensorNoise;
 pub use stage_error::StageError;
 pub use stage_misalignment::StageMisalignment;
+pub use target_tilt::{TargetTilt, MAX_TILT_RAD};
 pub use vignetting::Vignetting;
 
 pub use id::{join as join_effects, verdict_name, verdict_serde, EffectId, Stage};
@@ -49,6 +51,8 @@ pub struct Effects {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub lens_distortion: Option<LensDistortion>,
     #[serde(skip_serializing_if = "Option::is_none")]
+    pub target_tilt: Option<TargetTilt>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub psf_blur: Option<PsfBlur>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fill_factor: Option<FillFactor>,
@@ -67,27 +71,31 @@ pub struct Effects {
 }
 
 impl Effects {
+    /// Whether the model holds `effect`: one arm per effect, so a new one cannot be forgotten.
+    pub fn has(&self, effect: EffectId) -> bool {
+        match effect {
+            EffectId::StageMisalignment => self.stage_misalignment.is_some(),
+            EffectId::StageError => self.stage_error.is_some(),
+            EffectId::Rotation => self.rotation.is_some(),
+            EffectId::Scale => self.scale.is_some(),
+            EffectId::LensDistortion => self.lens_distortion.is_some(),
+            EffectId::TargetTilt => self.target_tilt.is_some(),
+            EffectId::PsfBlur => self.psf_blur.is_some(),
+            EffectId::FillFactor => self.fill_factor.is_some(),
+            EffectId::SensorNoise => self.sensor_noise.is_some(),
+            EffectId::FixedPattern => self.fixed_pattern.is_some(),
+            EffectId::Quantization => self.quantization.is_some(),
+            EffectId::Vignetting => self.vignetting.is_some(),
+            EffectId::IlluminationChange => self.illumination_change.is_some(),
+            EffectId::MotionBlur => self.motion_blur.is_some(),
+        }
+    }
+
     /// The enabled effects, in vocabulary order.
     pub fn enabled(&self) -> Vec<EffectId> {
-        let on = [
-            self.stage_misalignment.is_some(),
-            self.stage_error.is_some(),
-            self.rotation.is_some(),
-            self.scale.is_some(),
-            self.lens_distortion.is_some(),
-            self.psf_blur.is_some(),
-            self.fill_factor.is_some(),
-            self.sensor_noise.is_some(),
-            self.fixed_pattern.is_some(),
-            self.quantization.is_some(),
-            self.vignetting.is_some(),
-            self.illumination_change.is_some(),
-            self.motion_blur.is_some(),
-        ];
         EffectId::ALL
             .into_iter()
-            .zip(on)
-            .filter_map(|(id, on)| on.then_some(id))
+            .filter(|id| self.has(*id))
             .collect()
     }
 }

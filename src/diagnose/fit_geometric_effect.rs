@@ -1,0 +1,272 @@
+//! The geometric candidates (rotation, scale, lens distortion, target tilt): which basis fields
+//! each frees ([`super::basis`]), the joint fit of them ([`super::fit_geometric`]) on the field
+//! differences of the model's comparison, and the fitted effect as the model writes it.
+//!
+//! Lens distortion starts from k1 and adds the decentring terms p1, p2, then k2, each only when
+//! the runs identify it and its Wald χ² pays the BIC's price (ln n per parameter): a term the
+//! data do not ask for would only spend the candidate's evidence. A distortion centre off the
+//! image centre shows as p1, p2 (see `basis`): both are reported, the centre as derived.
+
+use super::basis::GeometricParam;
+use super::fit_geometric::{fit_geometric, FieldSample, GeometricFit};
+use super::results::{GeometricTerms, ImageFit};
+use crate::model::effects::{LensDistortion, Rotation, Scale, TargetTilt};
+use crate::model::{EffectId, Effects};
+use std::collections::BTreeMap;
+
+/// The working distance a tilt's angles are written at when the dataset states none: one
+/// translation identifies only tan θ / Z.
+pub const ASSUMED_WORKING_DISTANCE_MM: f64 = 1000.0;
+
+/// What the geometric fits need beyond the field samples.
+pub struct GeometricSetting {
+    pub scale_px_per_mm: f64,
+    pub working_distance_mm: Option<f64>,
+    /// Half diagonal, full-resolution px (distortion's normalising radius).
+    pub r0: f64,
+    /// Points compared: the BIC's n.
+    pub observations: usize,
+}
+
+/// How an effect's basis fields are fitted.
+pub enum Terms {
+    /// All together.
+    Joint(&'static [GeometricParam]),
+    /// The first group, then each further group when the runs identify it and its Wald χ² pays
+    /// the BIC's price.
+    Nested(&'static [&'static [GeometricParam]]),
+}
+
+/// The geometric effects: those whose signature is a displacement field of known form.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Geometric {
+    Rotation,
+    Scale,
+    LensDistortion,
+    TargetTilt,
+}
+
+impl Geometric {
+    /// The effect as a geometric one; None for an effect that changes the images rather than
+    /// where things are, or that the nominal experiment always fits.
+    pub fn of(effect: EffectId) -> Option<Geometric> {
+        match effect {
+            EffectId::Rotation => Some(Geometric::Rotation),
+            EffectId::Scale => Some(Geometric::Scale),
+            EffectId::LensDistortion => Some(Geometric::LensDistortion),
+            EffectId::TargetTilt => Some(Geometric::TargetTilt),
+            EffectId::StageMisalignment
+            | EffectId::StageError
+            | EffectId::PsfBlur
+            | EffectId::FillFactor
+            | EffectId::SensorNoise
+            | EffectId::FixedPattern
+            | EffectId::Quantization
+            | EffectId::Vignetting
+            | EffectId::IlluminationChange
+            | EffectId::MotionBlur => None,
+        }
+    }
+
+    /// The basis fields it frees, and how they are fitted.
+    pub fn terms(self) -> Terms {
+        use GeometricParam as P;
+        match self {
+            Geometric::Rotation => Terms::Joint(&[P::Rotation]),
+            Geometric::Scale => Terms::Joint(&[P::Scale]),
+            Geometric::LensDistortion => Terms::Nested(&[
+                &[P::DistortionK1],
+                &[P::DistortionP1, P::DistortionP2],
+                &[P::DistortionK2],
+            ]),
+            Geometric::TargetTilt => Terms::Joint(&[P::TiltSlopeY, P::TiltSlopeX]),
+        }
+    }
+}
+
+/// Fits a geometric effect; None for other effects or when the runs identify none of its terms.
+pub fn fit_geometric_effect(
+    samples: &[FieldSample],
+    setting: &GeometricSetting,
+    model: &Effects,
+    effect: EffectId,
+) -> Option<ImageFit> {
+    let geometric = Geometric::of(effect)?;
+    let (fit, left_out) = match geometric.terms() {
+        Terms::Joint(params) => (fit_geometric(samples, params)?, Vec::new()),
+        Terms::Nested(groups) => fit_nested(samples, setting, groups)?,
+    };
+    Some(write_fit(
+        &fit,
+        setting,
+        model,
+        (effect, geometric),
+        &left_out,
+    ))
+}
+
+/// The first group, then each further one kept when identifiable and worth its price.
+fn fit_nested(
+    samples: &[FieldSample],
+    setting: &GeometricSetting,
+    groups: &[&[GeometricParam]],
+) -> Option<(GeometricFit, Vec<String>)> {
+    let price = (setting.observations.max(2) as f64).ln();
+    let mut fit = fit_geometric(samples, groups.first()?)?;
+    let mut left_out = Vec::new();
+    for extra in &groups[1..] {
+        let mut params = fit.params.clone();
+        params.extend_from_slice(extra);
+        let names = extra
+            .iter()
+            .map(|p| p.effect_and_name().1)
+            .collect::<Vec<_>>()
+            .join(", ");
+        match fit_geometric(samples, &params) {
+            Some(wider) if wider.chi2_drop - fit.chi2_drop > price * extra.len() as f64 => {
+                fit = wider;
+            }
+            Some(_) => left_out.push(format!("{names}: not needed by the data")),
+            None => left_out.push(format!(
+                "{names}: not identifiable apart from the other terms with these runs (translations of several sizes and along both axes separate them)"
+            )),
+        }
+    }
+    Some((fit, left_out))
+}
+
+fn value_of(fit: &GeometricFit, p: GeometricParam) -> (f64, f64) {
+    fit.params
+        .iter()
+        .position(|q| *q == p)
+        .map_or((0.0, 0.0), |i| (fit.values[i], fit.stderr[i]))
+}
+
+/// A geometric fit as the model writes it.
+#[derive(Default)]
+struct Written {
+    params: BTreeMap<String, f64>,
+    stderr: BTreeMap<String, f64>,
+    derived: BTreeMap<String, f64>,
+    notes: Vec<String>,
+}
+
+impl Written {
+    fn param(&mut self, name: &str, value: f64, se: f64) {
+        self.params.insert(name.into(), value);
+        self.stderr.insert(name.into(), se);
+    }
+}
+
+/// A tilt from its slopes, its angles at the stated (or assumed) working distance.
+fn write_tilt(fit: &GeometricFit, setting: &GeometricSetting, out: &mut Written) -> TargetTilt {
+    let (a, sa) = value_of(fit, GeometricParam::TiltSlopeY);
+    let (b, sb) = value_of(fit, GeometricParam::TiltSlopeX);
+    let z = setting
+        .working_distance_mm
+        .unwrap_or(ASSUMED_WORKING_DISTANCE_MM);
+    let tilt = TargetTilt::from_slopes(a, b, z, setting.scale_px_per_mm);
+    let k = z * setting.scale_px_per_mm;
+    out.param("angle_about_y_rad", tilt.angle_about_y_rad, sa * k);
+    out.param("angle_about_x_rad", tilt.angle_about_x_rad, sb * k);
+    out.derived.insert("working_distance_mm".into(), z);
+    out.derived.insert(
+        "tan_about_y_per_m".into(),
+        a * setting.scale_px_per_mm * 1e3,
+    );
+    out.derived.insert(
+        "tan_about_x_per_m".into(),
+        b * setting.scale_px_per_mm * 1e3,
+    );
+    if setting.working_distance_mm.is_none() {
+        out.notes.push(format!(
+            "the dataset states no working_distance_mm: the angles are those at an assumed {z} mm (a translation identifies tan θ over the distance: tan_about_*_per_m)"
+        ));
+    }
+    tilt
+}
+
+/// Brown–Conrady terms as fitted, and the centre p1, p2 stand for.
+fn write_distortion(
+    fit: &GeometricFit,
+    setting: &GeometricSetting,
+    out: &mut Written,
+) -> LensDistortion {
+    use GeometricParam as P;
+    let d = LensDistortion {
+        k1: value_of(fit, P::DistortionK1).0,
+        k2: value_of(fit, P::DistortionK2).0,
+        p1: value_of(fit, P::DistortionP1).0,
+        p2: value_of(fit, P::DistortionP2).0,
+        ..LensDistortion::radial(0.0)
+    };
+    for ((p, v), se) in fit.params.iter().zip(&fit.values).zip(&fit.stderr) {
+        out.param(p.effect_and_name().1, *v, *se);
+    }
+    let (k1, k1_se) = value_of(fit, P::DistortionK1);
+    if fit.params.contains(&P::DistortionP1) && k1.abs() > 2.0 * k1_se {
+        // p2 = −k1·cx/r0, p1 = −k1·cy/r0 to first order (`basis`).
+        out.derived
+            .insert("centre_dx_px".into(), -d.p2 * setting.r0 / k1);
+        out.derived
+            .insert("centre_dy_px".into(), -d.p1 * setting.r0 / k1);
+        out.notes.push("p1, p2 are also what radial distortion about a centre off the image centre gives (centre_dx_px, centre_dy_px): translations cannot tell the two apart".into());
+    }
+    d
+}
+
+/// The fit as the model's effect: parameters in the model's units, their standard errors, what
+/// follows from them, and the model with it.
+fn write_fit(
+    fit: &GeometricFit,
+    setting: &GeometricSetting,
+    model: &Effects,
+    (effect, geometric): (EffectId, Geometric),
+    left_out: &[String],
+) -> ImageFit {
+    let mut out = Written {
+        notes: left_out.to_vec(),
+        ..Written::default()
+    };
+    let mut effects = model.clone();
+    let beyond_null = fit
+        .values
+        .iter()
+        .zip(&fit.stderr)
+        .any(|(v, se)| v.abs() > 2.0 * se);
+    let (v, se) = (fit.values[0], fit.stderr[0]);
+    match geometric {
+        Geometric::TargetTilt => effects.target_tilt = Some(write_tilt(fit, setting, &mut out)),
+        Geometric::LensDistortion => {
+            effects.lens_distortion = Some(write_distortion(fit, setting, &mut out))
+        }
+        Geometric::Rotation => {
+            out.param("angle_rad", v, se);
+            effects.rotation = Some(Rotation { angle_rad: v });
+        }
+        Geometric::Scale => {
+            out.param("ds", v, se);
+            effects.scale = Some(Scale { ds: v });
+        }
+    }
+    let Written {
+        params,
+        mut stderr,
+        derived,
+        notes,
+    } = out;
+    stderr.retain(|_, se: &mut f64| se.is_finite());
+    ImageFit {
+        effect,
+        params,
+        stderr,
+        effects,
+        k: fit.params.len(),
+        beyond_null,
+        geometric: GeometricTerms {
+            field: fit.params.iter().copied().zip(fit.values.clone()).collect(),
+            derived,
+            notes,
+        },
+    }
+}

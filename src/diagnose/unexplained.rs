@@ -1,0 +1,276 @@
+//! Lack of fit as a finding of its own: what a comparison leaves unexplained, whether it exceeds
+//! what the noise and the model's own scatter predict, and what it looks like.
+//!
+//! **The field test.** Per run and scheme the field difference d = measured − model is fitted
+//! with a quadratic surface per component (1, x, y, x², xy, y²); the ten non-constant terms'
+//! Wald statistic W = (RSS about the mean − RSS about the surface)/(σ²·c) (σ² the residual
+//! variance, c the covariance inflation of overlapping subsets) is what the model leaves in the
+//! low orders. Under a right model that is noise plus the DIC's systematic error on one speckle
+//! realisation — the same on the model's side as on the measured one. So the reference is the
+//! same statistic of the difference between two renderings of the model with different seeds
+//! (W₀, on the same points): both have the variance of twice one side's noise and realisation
+//! error. F = W/W₀ is compared with F(K, K) (K = 10 per run and scheme, times the share of
+//! independent analyses when runs share frames, `bic::shared_fraction`) at the stated false-alarm
+//! rate through Paulson's normal approximation (Paulson, Ann. Math. Stat. 13 (1942)); W and W₀
+//! share the model's first rendering, which narrows their ratio's scatter, so the test errs on the
+//! quiet side.
+//!
+//! **The rigid test.** The debiased rigid part of the discrepancy (landings beyond the stage's
+//! envelope, a bias the model lacks; RMS over runs) against z·SE at the same rate: a right model
+//! scatters about zero. The field part is the field test's (its debiasing counts the noise, not
+//! the model's own scatter, which the field test does); both are reported as `systematic_px`. The random part (the
+//! difference of the two sides' random errors) is reported as a ratio beside the tests and not
+//! judged: it is the print's and the noise's, which a model with a nominal print only
+//! approximates (see `random_error_ratio`). W₀ is scaled to the measured side's error level for
+//! the same reason (`side_ratio`).
+//!
+//! **The shape** ([`super::residual_shape`]): what the residual looks like, per run.
+
+use super::discrepancy::CommonPoint;
+use super::residual_shape::{centre_and_span, shape_of, surface, Shape};
+use super::results::{Comparison, RunComparison};
+use crate::reduce::Scheme;
+use serde::{Deserialize, Serialize};
+
+/// The false-alarm rate of both tests.
+pub const FALSE_ALARM_RATE: f64 = 0.01;
+/// The one-sided normal quantile of [`FALSE_ALARM_RATE`].
+const Z_FALSE_ALARM: f64 = 2.326;
+/// Non-constant terms of the quadratic surfaces of one run and scheme (5 per component).
+const TERMS_PER_SAMPLE: f64 = 10.0;
+
+/// What a comparison leaves unexplained.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Unexplained {
+    /// Either test (the low-order field, the rigid part) exceeds its threshold at
+    /// [`FALSE_ALARM_RATE`].
+    pub significant: bool,
+    pub false_alarm_rate: f64,
+    /// The comparison's discrepancy, px.
+    pub discrepancy_px: f64,
+    /// Its systematic parts (rigid and field, RMS over runs and schemes), px: what the test
+    /// judges.
+    pub systematic_px: f64,
+    /// What a right model's rigid part stays below at the false-alarm rate: z·SE (the SE of the
+    /// whole discrepancy, which errs on the quiet side), px.
+    pub expected_px: f64,
+    /// systematic / expected.
+    pub ratio: f64,
+    /// The measured random error over the model's (RMS over runs and both components): the
+    /// print and the noise as the model draws them. Reported beside the tests, not judged by
+    /// them: a print the model only approximates (hard disks against its Gaussian dots) gives
+    /// a ratio far from 1 with nothing missing from the geometry.
+    pub random_error_ratio: f64,
+    /// The field test: F = W/W₀ and its threshold; absent without a second rendering.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub field_f: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub field_f_threshold: Option<f64>,
+    pub shape: Shape,
+    /// The finding in words.
+    pub summary: String,
+}
+
+/// The field statistic of one run and scheme's points (d per component given by `value`).
+struct FieldStat {
+    /// Σ W over the samples.
+    w: f64,
+    samples: usize,
+}
+
+/// W of one run and scheme for the differences `d` at `points` (analysed px).
+fn sample_w(
+    points: &[(f64, f64)],
+    du: &[f64],
+    dv: &[f64],
+    var: (f64, f64),
+    infl: f64,
+) -> Option<f64> {
+    if !(var.0 > 0.0 && var.1 > 0.0) {
+        return None;
+    }
+    let (c, s) = centre_and_span(points);
+    let (_, ru) = surface(points, du, c, s)?;
+    let (_, rv) = surface(points, dv, c, s)?;
+    Some((ru / var.0 + rv / var.1) / infl)
+}
+
+/// The field statistic W of a comparison (summed over its runs and schemes).
+pub fn field_w(cmp: &Comparison, infl: f64) -> f64 {
+    field_stat(cmp, infl).w
+}
+
+fn field_stat(cmp: &Comparison, infl: f64) -> FieldStat {
+    let mut stat = FieldStat { w: 0.0, samples: 0 };
+    for r in &cmp.runs {
+        let pts: Vec<(f64, f64)> = r.detail.common.iter().map(|p| (p.x, p.y)).collect();
+        let du: Vec<f64> = r.detail.common.iter().map(|p| p.du).collect();
+        let dv: Vec<f64> = r.detail.common.iter().map(|p| p.dv).collect();
+        if let Some(w) = sample_w(&pts, &du, &dv, r.detail.residual_var_px2, infl) {
+            stat.w += w;
+            stat.samples += 1;
+        }
+    }
+    stat
+}
+
+/// The reference statistic W₀: the difference between two renderings of the model (their field
+/// differences against the same measurement, subtracted at the points both hold).
+pub fn model_scatter(first: &Comparison, second: &Comparison, infl: f64) -> Option<f64> {
+    let mut w0 = 0.0;
+    let mut samples = 0;
+    for (a, b) in first.runs.iter().zip(&second.runs) {
+        if a.id != b.id || a.scheme != b.scheme {
+            continue;
+        }
+        let by_index: std::collections::HashMap<usize, &CommonPoint> =
+            b.detail.common.iter().map(|p| (p.index, p)).collect();
+        let (mut pts, mut du, mut dv) = (Vec::new(), Vec::new(), Vec::new());
+        for p in &a.detail.common {
+            if let Some(q) = by_index.get(&p.index) {
+                pts.push((p.x, p.y));
+                du.push(p.du - q.du);
+                dv.push(p.dv - q.dv);
+            }
+        }
+        if let Some(w) = sample_w(&pts, &du, &dv, a.detail.residual_var_px2, infl) {
+            w0 += w * side_ratio(a);
+            samples += 1;
+        }
+    }
+    (samples > 0 && w0 > 0.0).then_some(w0)
+}
+
+/// (σm² + σo²)/(2σo²) of a run: the measured side's errors against the model's. W holds one of
+/// each side, W₀ two of the model's; where the measured print gives larger errors than the
+/// model's (a print the model only approximates), W₀ is scaled up to the measured side's level
+/// so that the test asks about the low-order field, not about the random error, which
+/// `random_error_ratio` reports.
+fn side_ratio(r: &RunComparison) -> f64 {
+    let m = r.measured.random_px[0].powi(2) + r.measured.random_px[1].powi(2);
+    let o = r.model.random_px[0].powi(2) + r.model.random_px[1].powi(2);
+    if o > 0.0 && m.is_finite() {
+        ((m + o) / (2.0 * o)).max(0.5)
+    } else {
+        1.0
+    }
+}
+
+/// The upper quantile of F(d1, d2) at [`FALSE_ALARM_RATE`], by Paulson's approximation solved
+/// for F (bisection on the monotone z(F)).
+fn f_threshold(d1: f64, d2: f64) -> f64 {
+    let z = |f: f64| {
+        let (a, b) = (2.0 / (9.0 * d1), 2.0 / (9.0 * d2));
+        let c = f.cbrt();
+        ((1.0 - b) * c - (1.0 - a)) / (a + c * c * b).sqrt()
+    };
+    let (mut lo, mut hi) = (1.0, 100.0);
+    for _ in 0..100 {
+        let mid = 0.5 * (lo + hi);
+        if z(mid) < Z_FALSE_ALARM {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+/// What `cmp` leaves unexplained; `w0` is the model's own scatter ([`model_scatter`]) when two
+/// renderings were made, `se_px` the discrepancy's standard error.
+pub fn unexplained(
+    cmp: &Comparison,
+    schemes: &[Scheme],
+    w0: Option<f64>,
+    se_px: f64,
+    infl: f64,
+) -> Unexplained {
+    let stat = field_stat(cmp, infl);
+    // The analyses share frames (every run of a pattern its reference): their low-order fields
+    // are correlated, and the statistic holds N_eff/N of the independent terms it sums.
+    let k = (TERMS_PER_SAMPLE * stat.samples as f64 * super::bic::shared_fraction(&cmp.runs))
+        .max(TERMS_PER_SAMPLE);
+    let (field_f, field_f_threshold) = match w0 {
+        Some(w0) if stat.samples > 0 => (Some(stat.w / w0), Some(f_threshold(k, k))),
+        _ => (None, None),
+    };
+    let expected_px = Z_FALSE_ALARM * se_px;
+    let field_significant = matches!((field_f, field_f_threshold), (Some(f), Some(t)) if f > t);
+    let systematic_px = systematic(cmp);
+    let discrepancy_significant = rigid(cmp) > expected_px;
+    let random_error_ratio = random_ratio(cmp);
+    let shape = shape_of(cmp, schemes, infl);
+    let significant = field_significant || discrepancy_significant;
+    let summary = super::unexplained_words::summary(
+        significant,
+        FALSE_ALARM_RATE,
+        systematic_px,
+        expected_px,
+        random_error_ratio,
+        &shape,
+    );
+    Unexplained {
+        significant,
+        false_alarm_rate: FALSE_ALARM_RATE,
+        discrepancy_px: cmp.discrepancy_px,
+        systematic_px,
+        expected_px,
+        ratio: if expected_px > 0.0 {
+            systematic_px / expected_px
+        } else {
+            f64::INFINITY
+        },
+        random_error_ratio,
+        field_f,
+        field_f_threshold,
+        shape,
+        summary,
+    }
+}
+
+/// The systematic parts of the discrepancy: √(rigid² + field²), RMS over runs and schemes.
+fn systematic(cmp: &Comparison) -> f64 {
+    let n = cmp.runs.len().max(1) as f64;
+    (cmp.runs
+        .iter()
+        .map(|r| r.rigid_px.powi(2) + r.field_px.powi(2))
+        .sum::<f64>()
+        / n)
+        .sqrt()
+}
+
+/// The rigid part (RMS over runs and schemes): landings and biases the field test does not see.
+fn rigid(cmp: &Comparison) -> f64 {
+    let n = cmp.runs.len().max(1) as f64;
+    (cmp.runs.iter().map(|r| r.rigid_px.powi(2)).sum::<f64>() / n).sqrt()
+}
+
+/// RMS of the measured random error over RMS of the model's.
+fn random_ratio(cmp: &Comparison) -> f64 {
+    let rms = |side: &dyn Fn(&RunComparison) -> [f64; 2]| {
+        cmp.runs
+            .iter()
+            .map(|r| side(r).iter().map(|x| x * x).sum::<f64>())
+            .sum::<f64>()
+    };
+    let (m, o) = (rms(&|r| r.measured.random_px), rms(&|r| r.model.random_px));
+    if o > 0.0 {
+        (m / o).sqrt()
+    } else {
+        f64::NAN
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_f_threshold_matches_tabulated_quantiles() {
+        // F(0.99; 10, 10) = 4.85, F(0.99; 60, 60) = 1.84, F(0.99; 120, 120) = 1.53 (tables).
+        for (d, q) in [(10.0, 4.85), (60.0, 1.84), (120.0, 1.53)] {
+            let t = f_threshold(d, d);
+            assert!((t - q).abs() < 0.05 * q, "F({d}, {d}) = {t}, table {q}");
+        }
+    }
+}

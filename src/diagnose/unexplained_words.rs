@@ -1,0 +1,201 @@
+//! What a comparison leaves unexplained (`super::unexplained`) in words a user reads: what remains, in which run, how it
+//! grows, and which physical effects leave that signature (a hint, never a verdict).
+
+use super::residual_shape::{RunShape, Shape};
+
+/// A strain component counts when it is more than three standard errors from zero.
+fn clear(value: f64, se: f64) -> bool {
+    value.abs() > 3.0 * se
+}
+
+/// The run whose affine part is most significant.
+fn strongest(shape: &Shape) -> Option<&RunShape> {
+    let score = |r: &RunShape| {
+        [r.exx, r.eyy, r.shear, r.rotation]
+            .iter()
+            .zip(r.se)
+            .map(|(v, se)| if se > 0.0 { (v / se).powi(2) } else { 0.0 })
+            .sum::<f64>()
+    };
+    shape
+        .runs
+        .iter()
+        .filter(|r| r.move_px[0].hypot(r.move_px[1]) > 0.0)
+        .max_by(|a, b| score(a).total_cmp(&score(b)))
+}
+
+/// The affine part of one run in words, with what leaves such a signature.
+fn describe(r: &RunShape) -> Option<String> {
+    let [se_xx, se_yy, se_shear, se_rot] = r.se;
+    let (exx, eyy) = (clear(r.exx, se_xx), clear(r.eyy, se_yy));
+    let mut parts = Vec::new();
+    if exx || eyy {
+        let iso = (r.exx - r.eyy).abs() < 3.0 * se_xx.hypot(se_yy);
+        parts.push(if iso {
+            format!(
+                "an isotropic strain of {:.2e} (a magnification change)",
+                0.5 * (r.exx + r.eyy)
+            )
+        } else {
+            format!(
+                "an anisotropic strain of {:.2e} in x and {:.2e} in y",
+                r.exx, r.eyy
+            )
+        });
+    }
+    if clear(r.shear, se_shear) {
+        parts.push(format!("a shear of {:.2e}", r.shear));
+    }
+    if clear(r.rotation, se_rot) {
+        parts.push(format!("a rotation of {:.2e} rad", r.rotation));
+    }
+    if parts.is_empty() {
+        return None;
+    }
+    let mut text = format!(
+        "{} remains in run {} (move {:.1}, {:.1} px)",
+        parts.join(", "),
+        r.run,
+        r.move_px[0],
+        r.move_px[1]
+    );
+    if let Some(hint) = hint(r) {
+        text += &format!(": {hint}");
+    }
+    Some(text)
+}
+
+/// Which effects leave this signature along the run's move: the ratio of the strain across the
+/// move to the strain along it is 1/2 for a tilt about the other axis, 1/3 for decentring
+/// distortion (or radial distortion about a centre off the image centre), 1 for a scale change.
+fn hint(r: &RunShape) -> Option<String> {
+    let along_x = r.move_px[0].abs() >= r.move_px[1].abs();
+    let (along, across, se) = if along_x {
+        (r.exx, r.eyy, r.se[0])
+    } else {
+        (r.eyy, r.exx, r.se[1])
+    };
+    if !clear(along, se) {
+        return None;
+    }
+    let ratio = across / along;
+    let axis = if along_x { "vertical" } else { "horizontal" };
+    let near = |x: f64| (ratio - x).abs() < 0.12;
+    let what = if near(0.5) {
+        format!("consistent with a target tilted about the image's {axis} axis (target_tilt)")
+    } else if near(1.0 / 3.0) {
+        "consistent with decentring lens distortion or radial distortion about a centre off the image centre (lens_distortion p1, p2)".to_string()
+    } else if near(1.0) {
+        "consistent with a magnification change (scale)".to_string()
+    } else {
+        return Some(format!(
+            "the strain across the move is {ratio:.2} of the strain along it, which no catalogue effect gives (a tilt 0.5, decentring 0.33, scale 1)"
+        ));
+    };
+    Some(format!(
+        "the strain across the move is {ratio:.2} of the strain along it, {what}"
+    ))
+}
+
+/// The whole finding in one paragraph.
+pub fn summary(
+    significant: bool,
+    false_alarm_rate: f64,
+    systematic_px: f64,
+    expected_px: f64,
+    random_error_ratio: f64,
+    shape: &Shape,
+) -> String {
+    let rate = 100.0 * false_alarm_rate;
+    let random = if (random_error_ratio - 1.0).abs() > 0.1 {
+        format!(
+            " The measured random error is {random_error_ratio:.2} times the model's: the print (its gradients and contrast under the frames' noise) is not what the model draws."
+        )
+    } else {
+        String::new()
+    };
+    if !significant {
+        return format!(
+            "What remains is consistent with noise and the model's own scatter (systematic discrepancy {systematic_px:.5} px; a right model stays below {expected_px:.5} px at a {rate:.0} % false-alarm rate, and its low-order field is no larger than between two renderings of the model).{random}"
+        );
+    }
+    let mut text = format!(
+        "Something the model lacks remains (systematic discrepancy {systematic_px:.5} px against {expected_px:.5} px a right model stays below at a {rate:.0} % false-alarm rate, or a low-order field larger than between two renderings of the model)."
+    );
+    if let Some(words) = strongest(shape).and_then(describe) {
+        text += &format!(" {}", capitalise(&words));
+        text += match shape.grows_with_move {
+            Some(true) => "; it grows with the move.",
+            Some(false) => "; it does not grow with the move.",
+            None => ".",
+        };
+    }
+    let quad = shape
+        .runs
+        .iter()
+        .map(|r| r.quadratic_px)
+        .fold(0.0, f64::max);
+    if quad > 0.0 {
+        text += &format!(
+            " The quadratic part beyond the affine one reaches {quad:.4} px RMS in one run."
+        );
+    }
+    text += &random;
+    if !shape.image.is_empty() {
+        let kinds: Vec<String> = shape
+            .image
+            .iter()
+            .map(|m| format!("{} (χ²/n {:.1})", m.kind, m.chi2_per_observation))
+            .collect();
+        text += &format!(
+            " Image statistics the model does not match: {}.",
+            kinds.join(", ")
+        );
+    }
+    text
+}
+
+fn capitalise(s: &str) -> String {
+    let mut c = s.chars();
+    c.next()
+        .map(|f| f.to_uppercase().collect::<String>() + c.as_str())
+        .unwrap_or_default()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run(exx: f64, eyy: f64, move_px: [f64; 2]) -> RunShape {
+        RunShape {
+            run: "x5mm".into(),
+            pattern: "a".into(),
+            move_px,
+            exx,
+            eyy,
+            shear: 0.0,
+            rotation: 0.0,
+            se: [1e-6; 4],
+            quadratic_px: 0.0,
+        }
+    }
+
+    #[test]
+    fn a_tilts_signature_is_named_as_a_hint() {
+        let r = run(-2.5e-4, -1.25e-4, [130.0, 0.0]);
+        let text = describe(&r).unwrap();
+        assert!(
+            text.contains("anisotropic") && text.contains("target_tilt"),
+            "{text}"
+        );
+        let d = run(-3e-4, -1e-4, [130.0, 0.0]);
+        assert!(describe(&d).unwrap().contains("decentring"));
+        let y = run(-1.25e-4, -2.5e-4, [0.0, 130.0]);
+        assert!(describe(&y).unwrap().contains("horizontal"));
+    }
+
+    #[test]
+    fn nothing_clear_has_no_words() {
+        assert_eq!(describe(&run(1e-6, -2e-6, [130.0, 0.0])), None);
+    }
+}
