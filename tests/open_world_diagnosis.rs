@@ -174,6 +174,12 @@ fn a_bowed_target_is_outside_the_catalogue_and_left_unexplained() {
         d.withheld
     );
     assert!(d.unexplained.significant, "{}", d.unexplained.summary);
+    // Its shape described: a field beyond affine, which grows with the move.
+    assert!(
+        d.unexplained.summary.contains("beyond affine"),
+        "{}",
+        d.unexplained.summary
+    );
     assert!(!d.unexplained.shape.runs.is_empty());
 }
 
@@ -234,4 +240,54 @@ fn a_manifest_that_states_its_moves_wrong_is_refused() {
             "{what}: {text}"
         );
     }
+}
+
+/// The bench with x moves only (5 and 2.5 mm, a step series in x).
+fn x_only(spec: &mut Value) {
+    spec["moves"] = json!([{"id": "x5mm", "dx_mm": 5.0, "dy_mm": 0.0},
+                           {"id": "x2mm", "dx_mm": 2.5, "dy_mm": 0.0}]);
+    spec["step_series"] =
+        json!([{"id": "xs", "dx_step_mm": 0.0077, "dy_step_mm": 0.0, "count": 3}]);
+}
+
+/// Whether the diagnosis reports `a` and `b` confounded.
+fn confounded(d: &Diagnosis, a: &str, b: &str) -> Option<String> {
+    d.confounded
+        .iter()
+        .find(|c| c.effects.contains(&a.to_string()) && c.effects.contains(&b.to_string()))
+        .map(|c| c.separate_with.clone())
+}
+
+/// Under x moves only a tilt about the vertical axis and decentring distortion leave affine
+/// fields that differ only in the ratio of the strain across the move to the strain along it
+/// (1/2 against 1/3): the tilt is named, or reported as confounded with decentring naming the
+/// runs that separate them (moves along y). With those runs added (the same draw, the test
+/// bench's y moves and y step series), it is named and the confound is gone.
+#[test]
+fn a_tilt_confounded_under_x_moves_is_resolved_by_a_y_move() {
+    let build = |with_y: bool| {
+        let mut draw = Draw::new(3211);
+        let mut spec = bench("x-only-tilt", &mut draw, false);
+        if !with_y {
+            x_only(&mut spec);
+        }
+        spec["effects"] = json!({"tilt_about_y_rad": 0.012});
+        spec
+    };
+    let (r, _) = diagnose(&build(false), 1);
+    let d = &r.diagnoses[0];
+    let x_only_confound = confounded(d, "target_tilt", "lens_distortion");
+    println!(
+        "x moves only: {} {x_only_confound:?}",
+        verdict_name(d.verdict)
+    );
+    assert_eq!(verdict_name(d.verdict), "target_tilt");
+    if let Some(runs) = &x_only_confound {
+        assert!(runs.contains("along both x and y"), "{runs}");
+    }
+    let (r, _) = diagnose(&build(true), 1);
+    let d = &r.diagnoses[0];
+    assert_eq!(verdict_name(d.verdict), "target_tilt");
+    assert_eq!(confounded(d, "target_tilt", "lens_distortion"), None);
+    falls_3x(&r);
 }

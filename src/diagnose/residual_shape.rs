@@ -36,6 +36,8 @@ pub struct RunShape {
     pub se: [f64; 4],
     /// RMS of the quadratic part beyond the affine one, full-resolution px.
     pub quadratic_px: f64,
+    /// RMS of the affine part (less its constant) over the same points, full-resolution px.
+    pub affine_px: f64,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -107,9 +109,19 @@ pub fn surface(
     Some((out, (rss0 - rss).max(0.0)))
 }
 
-/// Affine part of one run and scheme in full-resolution px: [∂u/∂x, ∂u/∂y, ∂v/∂x, ∂v/∂y], their
-/// variances, and the RMS of the quadratic part.
-fn affine_of(r: &RunComparison, scheme: &Scheme, infl: f64) -> Option<([f64; 4], [f64; 4], f64)> {
+/// One run and scheme's field difference split by order.
+struct Orders {
+    /// [∂u/∂x, ∂u/∂y, ∂v/∂x, ∂v/∂y], full-resolution px per px.
+    grad: [f64; 4],
+    var: [f64; 4],
+    /// RMS over the points of the quadratic and of the (non-constant) affine part, px.
+    quadratic_px: f64,
+    affine_px: f64,
+}
+
+/// Affine part of one run and scheme in full-resolution px, its variances, and the RMS of the
+/// quadratic and the affine parts.
+fn affine_of(r: &RunComparison, scheme: &Scheme, infl: f64) -> Option<Orders> {
     let (bx, by) = (scheme.x.block as f64, scheme.y.block as f64);
     let pts: Vec<(f64, f64)> = r
         .detail
@@ -136,16 +148,20 @@ fn affine_of(r: &RunComparison, scheme: &Scheme, infl: f64) -> Option<([f64; 4],
         r.detail.residual_var_px2.1 * by * by * infl,
     );
     let var = [vu / sxx, vu / syy, vv / sxx, vv / syy];
-    let quad = |co: &[f64; 6]| {
+    let rms = |co: &[f64; 6], terms: &dyn Fn(&[f64; 6], f64, f64) -> f64| {
         pts.iter()
-            .map(|p| {
-                let (a, b) = ((p.0 - c.0) / s, (p.1 - c.1) / s);
-                (co[3] * a * a + co[4] * a * b + co[5] * b * b).powi(2)
-            })
+            .map(|p| terms(co, (p.0 - c.0) / s, (p.1 - c.1) / s).powi(2))
             .sum::<f64>()
             / n
     };
-    Some((grad, var, (quad(&cu) + quad(&cv)).sqrt()))
+    let quadratic = |co: &[f64; 6], a: f64, b: f64| co[3] * a * a + co[4] * a * b + co[5] * b * b;
+    let affine = |co: &[f64; 6], a: f64, b: f64| co[1] * a + co[2] * b;
+    Some(Orders {
+        grad,
+        var,
+        quadratic_px: (rms(&cu, &quadratic) + rms(&cv, &quadratic)).sqrt(),
+        affine_px: (rms(&cu, &affine) + rms(&cv, &affine)).sqrt(),
+    })
 }
 
 pub fn shape_of(cmp: &Comparison, schemes: &[Scheme], infl: f64) -> Shape {
@@ -158,13 +174,19 @@ pub fn shape_of(cmp: &Comparison, schemes: &[Scheme], infl: f64) -> Shape {
     }
     for id in ids {
         // Pool the run's schemes, weighted by their inverse variances.
-        let (mut num, mut den, mut quad, mut count) = ([0.0; 4], [0.0; 4], 0.0, 0.0);
+        let (mut num, mut den, mut quad, mut lin, mut count) = ([0.0; 4], [0.0; 4], 0.0, 0.0, 0.0);
         let mut first: Option<&RunComparison> = None;
         for r in cmp.runs.iter().filter(|r| r.id == id) {
             let Some(scheme) = schemes.iter().find(|s| s.name == r.scheme) else {
                 continue;
             };
-            let Some((g, v, q)) = affine_of(r, scheme, infl) else {
+            let Some(Orders {
+                grad: g,
+                var: v,
+                quadratic_px,
+                affine_px,
+            }) = affine_of(r, scheme, infl)
+            else {
                 continue;
             };
             first.get_or_insert(r);
@@ -174,7 +196,8 @@ pub fn shape_of(cmp: &Comparison, schemes: &[Scheme], infl: f64) -> Shape {
                     den[i] += 1.0 / v[i];
                 }
             }
-            quad += q;
+            quad += quadratic_px;
+            lin += affine_px;
             count += 1.0;
         }
         let Some(r) = first else { continue };
@@ -206,6 +229,7 @@ pub fn shape_of(cmp: &Comparison, schemes: &[Scheme], infl: f64) -> Shape {
                 0.5 * (v[1] + v[2]).sqrt(),
             ],
             quadratic_px: quad / count,
+            affine_px: lin / count,
         });
     }
     let grows_with_move = grows_with_move(&runs);

@@ -67,8 +67,41 @@ pub struct Unexplained {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub field_f_threshold: Option<f64>,
     pub shape: Shape,
+    /// Fitted stage nuisances no stage produces (a travel scale beyond ±[`MAX_TRAVEL_ERROR`], a
+    /// misalignment beyond [`MAX_MISALIGNMENT_RAD`]): each makes the finding significant, since
+    /// the comparison absorbed something else into them.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub implausible_stage: Vec<String>,
     /// The finding in words.
     pub summary: String,
+}
+
+/// The largest travel-scale error a stage shows (a lead screw or encoder off by this much is
+/// broken, or the dataset's scale is wrong).
+pub const MAX_TRAVEL_ERROR: f64 = 0.1;
+/// The largest angle between the stage's axes and the sensor's a mount leaves unnoticed, rad (6°).
+pub const MAX_MISALIGNMENT_RAD: f64 = 0.1;
+
+/// What the fitted stage says that no stage does.
+fn implausible_stage(cmp: &Comparison) -> Vec<String> {
+    let n = &cmp.model.nominal;
+    let mut out = Vec::new();
+    if !((n.travel_scale - 1.0).abs() <= MAX_TRAVEL_ERROR) {
+        out.push(format!(
+            "the fitted travel scale is {:.4}: the stage moved {:.1} % {} than the manifest states, more than a stage errs (check the dataset's scale_px_per_mm and the runs' units)",
+            n.travel_scale,
+            100.0 * (n.travel_scale - 1.0).abs(),
+            if n.travel_scale > 1.0 { "further" } else { "less far" }
+        ));
+    }
+    if !(n.misalignment_rad.abs() <= MAX_MISALIGNMENT_RAD) {
+        out.push(format!(
+            "the fitted stage misalignment is {:.4} rad ({:.1}°): the moves point elsewhere than the manifest states (check the runs' axes and signs)",
+            n.misalignment_rad,
+            n.misalignment_rad.to_degrees()
+        ));
+    }
+    out
 }
 
 /// The field statistic of one run and scheme's points (d per component given by `value`).
@@ -200,7 +233,8 @@ pub fn unexplained(
     let discrepancy_significant = rigid(cmp) > expected_px;
     let random_error_ratio = random_ratio(cmp);
     let shape = shape_of(cmp, schemes, infl);
-    let significant = field_significant || discrepancy_significant;
+    let implausible_stage = implausible_stage(cmp);
+    let significant = field_significant || discrepancy_significant || !implausible_stage.is_empty();
     let summary = super::unexplained_words::summary(
         significant,
         FALSE_ALARM_RATE,
@@ -224,8 +258,20 @@ pub fn unexplained(
         field_f,
         field_f_threshold,
         shape,
-        summary,
+        summary: if implausible_stage.is_empty() {
+            summary
+        } else {
+            format!("{summary} {}.", capitalised(&implausible_stage.join("; ")))
+        },
+        implausible_stage,
     }
+}
+
+fn capitalised(s: &str) -> String {
+    let mut c = s.chars();
+    c.next()
+        .map(|f| f.to_uppercase().collect::<String>() + c.as_str())
+        .unwrap_or_default()
 }
 
 /// The systematic parts of the discrepancy: √(rigid² + field²), RMS over runs and schemes.

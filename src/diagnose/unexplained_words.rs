@@ -65,6 +65,18 @@ fn describe(r: &RunShape) -> Option<String> {
     Some(text)
 }
 
+/// A run whose field is mostly beyond affine, in words: radial distortion and a target that is
+/// not flat both leave such fields, distortion's fixed to the sensor, a bow's moving with the
+/// target.
+fn quadratic(r: &RunShape) -> Option<String> {
+    (r.quadratic_px > 2.0 * r.affine_px && r.quadratic_px > 0.0).then(|| {
+        format!(
+            "a field beyond affine (quadratic part {:.4} px RMS against an affine part of {:.4} px) remains in run {} (move {:.1}, {:.1} px): radial distortion about another centre, or a target that is not flat, leave such fields",
+            r.quadratic_px, r.affine_px, r.run, r.move_px[0], r.move_px[1]
+        )
+    })
+}
+
 /// Which effects leave this signature along the run's move: the ratio of the strain across the
 /// move to the strain along it is 1/2 for a tilt about the other axis, 1/3 for decentring
 /// distortion (or radial distortion about a centre off the image centre), 1 for a scale change.
@@ -75,7 +87,8 @@ fn hint(r: &RunShape) -> Option<String> {
     } else {
         (r.eyy, r.exx, r.se[1])
     };
-    if !clear(along, se) {
+    // The ratio is read only when the strain along the move is known to a tenth.
+    if !(along.abs() > 10.0 * se) {
         return None;
     }
     let ratio = across / along;
@@ -122,7 +135,10 @@ pub fn summary(
     let mut text = format!(
         "Something the model lacks remains (systematic discrepancy {systematic_px:.5} px against {expected_px:.5} px a right model stays below at a {rate:.0} % false-alarm rate, or a low-order field larger than between two renderings of the model)."
     );
-    if let Some(words) = strongest(shape).and_then(describe) {
+    if let Some(words) = strongest(shape)
+        .and_then(quadratic)
+        .or_else(|| strongest(shape).and_then(describe))
+    {
         text += &format!(" {}", capitalise(&words));
         text += match shape.grows_with_move {
             Some(true) => "; it grows with the move.",
@@ -177,6 +193,7 @@ mod tests {
             rotation: 0.0,
             se: [1e-6; 4],
             quadratic_px: 0.0,
+            affine_px: 0.0,
         }
     }
 
