@@ -341,26 +341,27 @@ fn effect_variants() -> Vec<String> {
 /// The `_ =>` arms of `match`es whose arms name an `EffectId` variant, in code without comments
 /// and literals: (line, arm).
 fn wildcards_on_effects(code: &str, variants: &[String]) -> Vec<usize> {
-    let bytes: Vec<char> = code.chars().collect();
+    // Byte offsets throughout: every character the scan looks at is ASCII.
+    let bytes = code.as_bytes();
     let mut found = Vec::new();
-    let text: String = bytes.iter().collect();
+    let text = code;
     let mut search = 0;
     while let Some(at) = text[search..].find("match ") {
         let at = search + at;
         search = at + 6;
-        if at > 0 && (bytes[at - 1].is_alphanumeric() || bytes[at - 1] == '_') {
+        if at > 0 && (bytes[at - 1].is_ascii_alphanumeric() || bytes[at - 1] == b'_') {
             continue;
         }
         let Some(open) = text[at..].find('{').map(|o| at + o) else {
             break;
         };
         // The body at depth 1: its arms' patterns and the `_ =>` among them.
-        let (mut depth, mut i, mut top) = (0i32, open, String::new());
+        let (mut depth, mut i, mut top) = (0i32, open, Vec::<u8>::new());
         let mut top_positions = Vec::new();
         while i < bytes.len() {
             match bytes[i] {
-                '{' | '(' | '[' => depth += 1,
-                '}' | ')' | ']' => depth -= 1,
+                b'{' | b'(' | b'[' => depth += 1,
+                b'}' | b')' | b']' => depth -= 1,
                 _ => {}
             }
             if depth == 0 {
@@ -369,13 +370,14 @@ fn wildcards_on_effects(code: &str, variants: &[String]) -> Vec<usize> {
             if depth == 1 {
                 top.push(bytes[i]);
                 top_positions.push(i);
-            } else if depth == 2 && bytes[i] == '(' {
+            } else if depth == 2 && bytes[i] == b'(' {
                 // Tuple patterns `(EffectId::X, "name")` belong to the arm.
-                top.push('(');
+                top.push(b'(');
                 top_positions.push(i);
             }
             i += 1;
         }
+        let top = String::from_utf8_lossy(&top).into_owned();
         let arms_text: String = text[open..i.min(bytes.len())].to_string();
         let names_effect = arms_text.contains("EffectId::")
             || variants.iter().any(|v| {
@@ -389,10 +391,22 @@ fn wildcards_on_effects(code: &str, variants: &[String]) -> Vec<usize> {
         if !names_effect {
             continue;
         }
-        for (k, _) in top.match_indices("_ =>") {
-            let before = top[..k].chars().last();
-            if !matches!(before, Some(c) if c.is_alphanumeric() || c == '_') {
-                let pos = top_positions[top[..k].chars().count()];
+        // `_ =>`, and a lone lowercase binding (`other =>`), swallow a new effect alike.
+        for (k, _) in top.match_indices(" =>") {
+            let word: String = top[..k]
+                .chars()
+                .rev()
+                .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                .collect::<Vec<_>>()
+                .into_iter()
+                .rev()
+                .collect();
+            let before = top[..k - word.len()].trim_end().chars().last();
+            let catch_all = !word.is_empty()
+                && word.starts_with(|c: char| c.is_ascii_lowercase() || c == '_')
+                && matches!(before, Some(',' | '{' | '}') | None);
+            if catch_all {
+                let pos = top_positions[k - word.len()];
                 found.push(text[..pos].lines().count());
             }
         }
@@ -409,6 +423,10 @@ fn no_wildcard_arm_on_an_effect_in_src() {
     // The counter finds what it looks for.
     let sample = "fn f(e: EffectId) -> u8 {\n    match e {\n        EffectId::Scale => 1,\n        _ => 0,\n    }\n}\nfn g(p: P) -> u8 {\n    match p {\n        P::A => 1,\n        _ => 0,\n    }\n}\n";
     assert_eq!(wildcards_on_effects(sample, &variants), vec![4]);
+    let binding = "fn f(e: EffectId) -> u8 {\n    match e {\n        EffectId::Scale => 1,\n        other => other as u8,\n    }\n}\n";
+    assert_eq!(wildcards_on_effects(binding, &variants), vec![4]);
+    let guarded = "fn f(e: EffectId, n: u8) -> u8 {\n    match e {\n        Rotation | Scale if n > 0 => 1,\n        EffectId::Scale => 2,\n    }\n}\n";
+    assert!(wildcards_on_effects(guarded, &variants).is_empty());
     let tuple = "fn h(e: EffectId, n: &str) -> u8 {\n    match (e, n) {\n        (EffectId::PsfBlur, \"s\") => 1,\n        _ => 0,\n    }\n}\n";
     assert_eq!(wildcards_on_effects(tuple, &variants).len(), 1);
     let mut files = Vec::new();

@@ -181,6 +181,10 @@ fn a_bowed_target_is_outside_the_catalogue_and_left_unexplained() {
         d.unexplained.summary
     );
     assert!(!d.unexplained.shape.runs.is_empty());
+    // The nearest catalogue effect is reported as withheld, and not as significant.
+    let w = d.withheld.as_ref().expect("the nearest effect withheld");
+    assert!(w.explained_fraction < 0.9, "{w:?}");
+    assert!(!candidate(d, w.effect.as_str()).significant);
 }
 
 /// The stage nuisances of an accepted comparison are a stage's: travel within 5 %, a

@@ -50,8 +50,8 @@ impl GeometricParam {
             GeometricParam::DistortionK2 => (EffectId::LensDistortion, "k2"),
             GeometricParam::DistortionP1 => (EffectId::LensDistortion, "p1"),
             GeometricParam::DistortionP2 => (EffectId::LensDistortion, "p2"),
-            GeometricParam::TiltSlopeY => (EffectId::TargetTilt, "slope_about_y_per_px"),
-            GeometricParam::TiltSlopeX => (EffectId::TargetTilt, "slope_about_x_per_px"),
+            GeometricParam::TiltSlopeY => (EffectId::TargetTilt, "tilt_slope_y"),
+            GeometricParam::TiltSlopeX => (EffectId::TargetTilt, "tilt_slope_x"),
         }
     }
 }

@@ -117,13 +117,20 @@ pub fn image_chi2_parts(m: &FrameStats, o: &FrameStats) -> [(f64, usize); IMAGE_
 /// disagreement common to all analyses a sum over N analyses counts it N times where the data
 /// hold N_eff = 1/(½Σ_runs(n_r/N)² + ½Σ_patterns(n_p/N)²) independent looks.
 pub fn shared_fraction(runs: &[RunComparison]) -> f64 {
+    shared_fraction_of(runs.iter().map(|r| (r.id.as_str(), r.pattern.as_str())))
+}
+
+/// [`shared_fraction`] of analyses given by (run id, pattern label).
+pub fn shared_fraction_of<'a>(analyses: impl Iterator<Item = (&'a str, &'a str)>) -> f64 {
     let mut per_run: std::collections::BTreeMap<&str, f64> = Default::default();
     let mut per_pattern: std::collections::BTreeMap<&str, f64> = Default::default();
-    for r in runs {
-        *per_run.entry(r.id.as_str()).or_default() += 1.0;
-        *per_pattern.entry(r.pattern.as_str()).or_default() += 1.0;
+    let mut total = 0.0;
+    for (run, pattern) in analyses {
+        *per_run.entry(run).or_default() += 1.0;
+        *per_pattern.entry(pattern).or_default() += 1.0;
+        total += 1.0;
     }
-    let total = runs.len().max(1) as f64;
+    let total = f64::max(total, 1.0);
     let conc = |m: &std::collections::BTreeMap<&str, f64>| {
         m.values().map(|k| (k / total).powi(2)).sum::<f64>()
     };

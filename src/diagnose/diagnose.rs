@@ -8,7 +8,9 @@
 //! standard errors from "no effect". The verdict is the significant candidate with the most
 //! negative ΔBIC (Schwarz's criterion decides; the drop of the discrepancy is reported beside it,
 //! because an image-level effect can be certain from the image statistics while the displacement
-//! discrepancy stays at its floor), `none` when no candidate is significant. A candidate whose parameter is within two
+//! discrepancy stays at its floor), `none` when no candidate is significant — or when the winner
+//! explains under 90 % of the model's unexplained low-order field and no other geometric effect
+//! explains the rest (`withheld`: the nearest catalogue name for something outside it). A candidate whose parameter is within two
 //! standard errors of no effect is not re-rendered: adding nothing changes nothing, so its
 //! discrepancy is the model's and its ΔBIC the bare parameter penalty k·ln n (`recomputed`
 //! false). Effects the dataset cannot reveal are listed with the runs to add, not fitted; pairs
@@ -109,6 +111,15 @@ pub struct Criteria {
     /// The effect can be told from the print (false for blur and aperture when the print is
     /// calibrated to the frames: see `Confounded`).
     pub separable_from_print: bool,
+    /// False when the verdict was withheld: the effect explains under
+    /// [`MIN_EXPLAINED_FRACTION`] of the low-order field and no geometric catalogue effect
+    /// explains the rest (the next significant candidate is not tried: it explains less).
+    #[serde(default = "yes")]
+    pub explains_its_signature: bool,
+}
+
+fn yes() -> bool {
+    true
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -369,6 +380,7 @@ impl Judge<'_> {
             within_range: range.is_none(),
             outside_range: range,
             separable_from_print,
+            explains_its_signature: true,
         };
         Candidate {
             effect: fit.effect,
@@ -511,6 +523,12 @@ pub fn diagnose_prepared(
         w0,
         (se_before, seed_sd),
     );
+    if let Some(w) = &left.withheld {
+        for c in candidates.iter_mut().filter(|c| c.effect == w.effect) {
+            c.criteria.explains_its_signature = false;
+            c.significant = false;
+        }
+    }
     let confounded = confounded_pairs(&design, &candidates, left.winner, print_calibrated);
     Ok(Diagnosis {
         model: before.model.clone(),
@@ -522,7 +540,10 @@ pub fn diagnose_prepared(
         verdict: left.winner,
         confounded,
         not_identifiable,
-        partial: left.after.as_ref().is_some_and(|a| a.significant),
+        partial: left
+            .after
+            .as_ref()
+            .is_some_and(Unexplained::field_significant),
         explained_fraction: left.explained_fraction,
         unexplained: left.before,
         unexplained_after: left.after,
@@ -585,7 +606,9 @@ fn settle(
     ) else {
         return settled;
     };
-    if !(left.significant
+    // Only the field test speaks to the verdict's signature: a rigid part or the stage's
+    // plausibility is another finding.
+    if !(left.field_significant()
         && fraction < MIN_EXPLAINED_FRACTION
         && !rest_is_in_catalogue(meas, after, model, w, w0))
     {
@@ -601,7 +624,7 @@ fn settle(
             effect: w,
             explained_fraction: fraction,
             reason: format!(
-                "{w} explains {:.0} % of the low-order field the model leaves, and no catalogue effect explains the rest: its signature is not what the data show (see unexplained)",
+                "{w} explains {:.0} % of the low-order field the model leaves, and no geometric catalogue effect explains the rest: its signature is not what the data show (see unexplained)",
                 100.0 * fraction
             ),
         }),
@@ -628,6 +651,10 @@ fn rest_is_in_catalogue(
     let infl = super::bic::inflation(&meas.options.dic);
     let floor = w0.unwrap_or(0.0);
     let excess = super::unexplained::field_w(after, infl) - floor;
+    if !(excess > 0.0) {
+        // Nothing beyond the model's own scatter is left for another effect to explain.
+        return true;
+    }
     EffectId::ALL
         .into_iter()
         .filter(|id| *id != winner && !model.effects.has(*id))
@@ -722,8 +749,15 @@ fn fit_candidates(
         let with = ModelConfig {
             name: format!("{}+{}", model.name, fit.effect),
             description: format!(
-                "{} with {} added, fitted by ffdic diagnose on dataset {}",
-                model.name, fit.effect, meas.manifest.name
+                "{} with {} added, fitted by ffdic diagnose on dataset {}{}",
+                model.name,
+                fit.effect,
+                meas.manifest.name,
+                if fit.geometric.notes.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({})", fit.geometric.notes.join("; "))
+                }
             ),
             effects: fit.effects.clone(),
         };

@@ -1,5 +1,5 @@
 //! Geometric candidates by weighted linear least squares: the difference of the displacement
-//! fields (measured − model) of every run and scheme, stacked, against the candidate's basis field,
+//! fields (measured − model) of every run and scheme, stacked, against the candidate's basis fields,
 //! with a constant offset per run and scheme as nuisance (it absorbs the stage's travel scale and
 //! misalignment, which the comparison refits anyway, and each run's sub-pixel bias). Weights are the inverse noise variance of each run's field difference; standard errors
 //! come from the inverse normal matrix, inflated by the correlation of neighbouring points whose
@@ -34,8 +34,6 @@ pub struct GeometricFit {
     pub params: Vec<GeometricParam>,
     pub values: Vec<f64>,
     pub stderr: Vec<f64>,
-    /// Correlation of the estimates (from the normal matrix), row-major k×k.
-    pub correlation: Vec<f64>,
     /// Wald statistic βᵀ C⁻¹ β: the χ² the candidate explains beyond the nuisances.
     pub chi2_drop: f64,
 }
@@ -164,9 +162,7 @@ pub fn fit_geometric(samples: &[FieldSample], params: &[GeometricParam]) -> Opti
     let var: Vec<f64> = (0..k)
         .map(|j| inflation * inv[j * k + j] * factors[j])
         .collect();
-    let correlation: Vec<f64> = (0..k * k)
-        .map(|x| inv[x] / (inv[(x / k) * k + x / k] * inv[(x % k) * k + x % k]).sqrt())
-        .collect();
+
     // βᵀ C⁻¹ β with C = inflation·N⁻¹ scaled per parameter by its factor.
     let scaled: Vec<f64> = (0..k).map(|j| values[j] / factors[j].sqrt()).collect();
     let chi2_drop = (0..k)
@@ -181,7 +177,6 @@ pub fn fit_geometric(samples: &[FieldSample], params: &[GeometricParam]) -> Opti
         params: params.to_vec(),
         values,
         stderr: var.iter().map(|v| v.sqrt()).collect(),
-        correlation,
         chi2_drop,
     })
 }

@@ -17,6 +17,9 @@ use std::collections::BTreeMap;
 /// The working distance a tilt's angles are written at when the dataset states none: one
 /// translation identifies only tan θ / Z.
 pub const ASSUMED_WORKING_DISTANCE_MM: f64 = 1000.0;
+/// The largest angle written at an assumed distance (the model renders up to
+/// `MAX_TILT_RAD`).
+const ASSUMED_MAX_ANGLE_RAD: f64 = 0.3;
 
 /// What the geometric fits need beyond the field samples.
 pub struct GeometricSetting {
@@ -162,13 +165,23 @@ impl Written {
 fn write_tilt(fit: &GeometricFit, setting: &GeometricSetting, out: &mut Written) -> TargetTilt {
     let (a, sa) = value_of(fit, GeometricParam::TiltSlopeY);
     let (b, sb) = value_of(fit, GeometricParam::TiltSlopeX);
-    let z = setting
-        .working_distance_mm
-        .unwrap_or(ASSUMED_WORKING_DISTANCE_MM);
+    // Without a stated distance, the angles are written at the assumed one, or nearer when the
+    // tilt would otherwise exceed what the model renders (the first-order field is the same).
+    let largest = a.abs().max(b.abs()) * setting.scale_px_per_mm;
+    let z = setting.working_distance_mm.unwrap_or_else(|| {
+        let fits = if largest > 0.0 {
+            ASSUMED_MAX_ANGLE_RAD.tan() / largest
+        } else {
+            f64::INFINITY
+        };
+        ASSUMED_WORKING_DISTANCE_MM.min(fits)
+    });
     let tilt = TargetTilt::from_slopes(a, b, z, setting.scale_px_per_mm);
     let k = z * setting.scale_px_per_mm;
-    out.param("angle_about_y_rad", tilt.angle_about_y_rad, sa * k);
-    out.param("angle_about_x_rad", tilt.angle_about_x_rad, sb * k);
+    // d atan(u)/du = 1/(1 + u²): the angles' standard errors from the slopes'.
+    let se = |slope: f64, se: f64| se * k / (1.0 + (slope * k).powi(2));
+    out.param("angle_about_y_rad", tilt.angle_about_y_rad, se(a, sa));
+    out.param("angle_about_x_rad", tilt.angle_about_x_rad, se(b, sb));
     out.derived.insert("working_distance_mm".into(), z);
     out.derived.insert(
         "tan_about_y_per_m".into(),
@@ -180,7 +193,7 @@ fn write_tilt(fit: &GeometricFit, setting: &GeometricSetting, out: &mut Written)
     );
     if setting.working_distance_mm.is_none() {
         out.notes.push(format!(
-            "the dataset states no working_distance_mm: the angles are those at an assumed {z} mm (a translation identifies tan θ over the distance: tan_about_*_per_m)"
+            "the dataset states no working_distance_mm: the angles are those at an assumed {z:.0} mm (a translation identifies tan θ over the distance: tan_about_*_per_m)"
         ));
     }
     tilt

@@ -37,7 +37,12 @@ pub struct RunShape {
     /// RMS of the quadratic part beyond the affine one, full-resolution px.
     pub quadratic_px: f64,
     /// RMS of the affine part (less its constant) over the same points, full-resolution px.
+    #[serde(default)]
     pub affine_px: f64,
+    /// The discrepancy's rigid part, the largest over the run's schemes, px of the analysed
+    /// images.
+    #[serde(default)]
+    pub rigid_px: f64,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -175,6 +180,12 @@ pub fn shape_of(cmp: &Comparison, schemes: &[Scheme], infl: f64) -> Shape {
     for id in ids {
         // Pool the run's schemes, weighted by their inverse variances.
         let (mut num, mut den, mut quad, mut lin, mut count) = ([0.0; 4], [0.0; 4], 0.0, 0.0, 0.0);
+        let rigid_px = cmp
+            .runs
+            .iter()
+            .filter(|r| r.id == id)
+            .map(|r| r.rigid_px)
+            .fold(0.0, f64::max);
         let mut first: Option<&RunComparison> = None;
         for r in cmp.runs.iter().filter(|r| r.id == id) {
             let Some(scheme) = schemes.iter().find(|s| s.name == r.scheme) else {
@@ -201,6 +212,10 @@ pub fn shape_of(cmp: &Comparison, schemes: &[Scheme], infl: f64) -> Shape {
             count += 1.0;
         }
         let Some(r) = first else { continue };
+        if den.iter().any(|d| !(*d > 0.0)) {
+            // A component without a noise level has no standard error: no shape to report.
+            continue;
+        }
         let g: Vec<f64> = (0..4)
             .map(|i| if den[i] > 0.0 { num[i] / den[i] } else { 0.0 })
             .collect();
@@ -230,6 +245,7 @@ pub fn shape_of(cmp: &Comparison, schemes: &[Scheme], infl: f64) -> Shape {
             ],
             quadratic_px: quad / count,
             affine_px: lin / count,
+            rigid_px,
         });
     }
     let grows_with_move = grows_with_move(&runs);

@@ -25,6 +25,12 @@ pub struct Round {
     pub verdict: Option<EffectId>,
     pub params: BTreeMap<String, f64>,
     pub stderr: BTreeMap<String, f64>,
+    /// What follows from the parameters and how to read them (a tilt's working distance,
+    /// stated or assumed).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub derived: BTreeMap<String, f64>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
     /// The model this round diagnosed.
     pub model: String,
     pub discrepancy_px: f64,
@@ -36,6 +42,9 @@ pub struct Round {
     pub unexplained: bool,
     /// The verdict explains only part of it.
     pub partial: bool,
+    /// The nearest catalogue effect, not named (see `Diagnosis::withheld`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub withheld: Option<EffectId>,
 }
 
 /// Every round; `diagnoses[k]` is round k's full diagnosis.
@@ -105,12 +114,15 @@ pub fn diagnose_rounds_prepared(
             verdict: d.verdict,
             params: winner.map(|c| c.params.clone()).unwrap_or_default(),
             stderr: winner.map(|c| c.stderr.clone()).unwrap_or_default(),
+            derived: winner.map(|c| c.derived.clone()).unwrap_or_default(),
+            notes: winner.map(|c| c.notes.clone()).unwrap_or_default(),
             model: current.name.clone(),
             discrepancy_px: d.discrepancy_px,
             discrepancy_se_px: d.discrepancy_se_px,
             after_px: d.after.as_ref().map(|a| a.discrepancy_px),
             unexplained: d.unexplained.significant,
             partial: d.partial,
+            withheld: d.withheld.as_ref().map(|w| w.effect),
         });
         let next = d.winner_model.clone();
         before = d.after.clone();

@@ -29,6 +29,7 @@
 use super::discrepancy::CommonPoint;
 use super::residual_shape::{centre_and_span, shape_of, surface, Shape};
 use super::results::{Comparison, RunComparison};
+use super::unexplained_words::Finding;
 use crate::reduce::Scheme;
 use serde::{Deserialize, Serialize};
 
@@ -54,13 +55,16 @@ pub struct Unexplained {
     /// What a right model's rigid part stays below at the false-alarm rate: z·SE (the SE of the
     /// whole discrepancy, which errs on the quiet side), px.
     pub expected_px: f64,
-    /// systematic / expected.
+    /// The rigid part over what a right model stays below (the rigid test fires above 1); 0
+    /// when nothing is expected and nothing is there.
     pub ratio: f64,
     /// The measured random error over the model's (RMS over runs and both components): the
     /// print and the noise as the model draws them. Reported beside the tests, not judged by
     /// them: a print the model only approximates (hard disks against its Gaussian dots) gives
-    /// a ratio far from 1 with nothing missing from the geometry.
-    pub random_error_ratio: f64,
+    /// a ratio far from 1 with nothing missing from the geometry. Absent when no run was
+    /// measured on both sides.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub random_error_ratio: Option<f64>,
     /// The field test: F = W/W₀ and its threshold; absent without a second rendering.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub field_f: Option<f64>,
@@ -109,6 +113,8 @@ struct FieldStat {
     /// Σ W over the samples.
     w: f64,
     samples: usize,
+    /// Share of independent analyses among those that contributed.
+    shared_fraction: f64,
 }
 
 /// W of one run and scheme for the differences `d` at `points` (analysed px).
@@ -128,13 +134,25 @@ fn sample_w(
     Some((ru / var.0 + rv / var.1) / infl)
 }
 
+impl Unexplained {
+    /// The low-order field test alone fired: what a verdict's signature is judged by.
+    pub fn field_significant(&self) -> bool {
+        matches!((self.field_f, self.field_f_threshold), (Some(f), Some(t)) if f > t)
+    }
+}
+
 /// The field statistic W of a comparison (summed over its runs and schemes).
 pub fn field_w(cmp: &Comparison, infl: f64) -> f64 {
     field_stat(cmp, infl).w
 }
 
 fn field_stat(cmp: &Comparison, infl: f64) -> FieldStat {
-    let mut stat = FieldStat { w: 0.0, samples: 0 };
+    let mut stat = FieldStat {
+        w: 0.0,
+        samples: 0,
+        shared_fraction: 1.0,
+    };
+    let mut used: Vec<(&str, &str)> = Vec::new();
     for r in &cmp.runs {
         let pts: Vec<(f64, f64)> = r.detail.common.iter().map(|p| (p.x, p.y)).collect();
         let du: Vec<f64> = r.detail.common.iter().map(|p| p.du).collect();
@@ -142,8 +160,10 @@ fn field_stat(cmp: &Comparison, infl: f64) -> FieldStat {
         if let Some(w) = sample_w(&pts, &du, &dv, r.detail.residual_var_px2, infl) {
             stat.w += w;
             stat.samples += 1;
+            used.push((r.id.as_str(), r.pattern.as_str()));
         }
     }
+    stat.shared_fraction = super::bic::shared_fraction_of(used.into_iter());
     stat
 }
 
@@ -221,8 +241,7 @@ pub fn unexplained(
     let stat = field_stat(cmp, infl);
     // The analyses share frames (every run of a pattern its reference): their low-order fields
     // are correlated, and the statistic holds N_eff/N of the independent terms it sums.
-    let k = (TERMS_PER_SAMPLE * stat.samples as f64 * super::bic::shared_fraction(&cmp.runs))
-        .max(TERMS_PER_SAMPLE);
+    let k = (TERMS_PER_SAMPLE * stat.samples as f64 * stat.shared_fraction).max(TERMS_PER_SAMPLE);
     let (field_f, field_f_threshold) = match w0 {
         Some(w0) if stat.samples > 0 => (Some(stat.w / w0), Some(f_threshold(k, k))),
         _ => (None, None),
@@ -230,19 +249,22 @@ pub fn unexplained(
     let expected_px = Z_FALSE_ALARM * se_px;
     let field_significant = matches!((field_f, field_f_threshold), (Some(f), Some(t)) if f > t);
     let systematic_px = systematic(cmp);
-    let discrepancy_significant = rigid(cmp) > expected_px;
+    let rigid_px = rigid(cmp);
+    let discrepancy_significant = rigid_px > expected_px;
     let random_error_ratio = random_ratio(cmp);
     let shape = shape_of(cmp, schemes, infl);
     let implausible_stage = implausible_stage(cmp);
     let significant = field_significant || discrepancy_significant || !implausible_stage.is_empty();
-    let summary = super::unexplained_words::summary(
+    let summary = super::unexplained_words::summary(&Finding {
         significant,
-        FALSE_ALARM_RATE,
-        systematic_px,
+        false_alarm_rate: FALSE_ALARM_RATE,
+        field: field_f.zip(field_f_threshold),
+        rigid_px,
         expected_px,
         random_error_ratio,
-        &shape,
-    );
+        implausible_stage: &implausible_stage,
+        shape: &shape,
+    });
     Unexplained {
         significant,
         false_alarm_rate: FALSE_ALARM_RATE,
@@ -250,61 +272,56 @@ pub fn unexplained(
         systematic_px,
         expected_px,
         ratio: if expected_px > 0.0 {
-            systematic_px / expected_px
+            rigid_px / expected_px
         } else {
-            f64::INFINITY
+            0.0
         },
         random_error_ratio,
         field_f,
         field_f_threshold,
         shape,
-        summary: if implausible_stage.is_empty() {
-            summary
-        } else {
-            format!("{summary} {}.", capitalised(&implausible_stage.join("; ")))
-        },
+        summary,
         implausible_stage,
     }
 }
 
-fn capitalised(s: &str) -> String {
-    let mut c = s.chars();
-    c.next()
-        .map(|f| f.to_uppercase().collect::<String>() + c.as_str())
-        .unwrap_or_default()
-}
-
 /// The systematic parts of the discrepancy: √(rigid² + field²), RMS over runs and schemes.
 fn systematic(cmp: &Comparison) -> f64 {
-    let n = cmp.runs.len().max(1) as f64;
-    (cmp.runs
-        .iter()
-        .map(|r| r.rigid_px.powi(2) + r.field_px.powi(2))
-        .sum::<f64>()
-        / n)
-        .sqrt()
+    rms(cmp.runs.iter().map(|r| r.rigid_px.hypot(r.field_px)))
+}
+
+/// RMS of the finite values (an unmeasurable run's parts are NaN); 0 with none.
+fn rms(values: impl Iterator<Item = f64>) -> f64 {
+    let (sum, n) = values
+        .filter(|v| v.is_finite())
+        .fold((0.0, 0usize), |(s, n), v| (s + v * v, n + 1));
+    if n == 0 {
+        0.0
+    } else {
+        (sum / n as f64).sqrt()
+    }
 }
 
 /// The rigid part (RMS over runs and schemes): landings and biases the field test does not see.
 fn rigid(cmp: &Comparison) -> f64 {
-    let n = cmp.runs.len().max(1) as f64;
-    (cmp.runs.iter().map(|r| r.rigid_px.powi(2)).sum::<f64>() / n).sqrt()
+    rms(cmp.runs.iter().map(|r| r.rigid_px))
 }
 
 /// RMS of the measured random error over RMS of the model's.
-fn random_ratio(cmp: &Comparison) -> f64 {
-    let rms = |side: &dyn Fn(&RunComparison) -> [f64; 2]| {
-        cmp.runs
-            .iter()
-            .map(|r| side(r).iter().map(|x| x * x).sum::<f64>())
-            .sum::<f64>()
-    };
-    let (m, o) = (rms(&|r| r.measured.random_px), rms(&|r| r.model.random_px));
-    if o > 0.0 {
-        (m / o).sqrt()
-    } else {
-        f64::NAN
-    }
+fn random_ratio(cmp: &Comparison) -> Option<f64> {
+    let both: Vec<(f64, f64)> = cmp
+        .runs
+        .iter()
+        .map(|r| {
+            let sq = |x: [f64; 2]| x[0] * x[0] + x[1] * x[1];
+            (sq(r.measured.random_px), sq(r.model.random_px))
+        })
+        .filter(|(m, o)| m.is_finite() && o.is_finite())
+        .collect();
+    let (m, o) = both
+        .iter()
+        .fold((0.0, 0.0), |(a, b), (m, o)| (a + m, b + o));
+    (o > 0.0).then(|| (m / o).sqrt())
 }
 
 #[cfg(test)]

@@ -93,14 +93,23 @@ fn hint(r: &RunShape) -> Option<String> {
     }
     let ratio = across / along;
     let axis = if along_x { "vertical" } else { "horizontal" };
-    let near = |x: f64| (ratio - x).abs() < 0.12;
-    let what = if near(0.5) {
-        format!("consistent with a target tilted about the image's {axis} axis (target_tilt)")
-    } else if near(1.0 / 3.0) {
-        "consistent with decentring lens distortion or radial distortion about a centre off the image centre (lens_distortion p1, p2)".to_string()
-    } else if near(1.0) {
-        "consistent with a magnification change (scale)".to_string()
-    } else {
+    // The nearest signature, when within 0.08 (half the gap between 1/3 and 1/2).
+    let signatures = [
+        (
+            0.5,
+            format!("consistent with a target tilted about the image's {axis} axis (target_tilt)"),
+        ),
+        (
+            1.0 / 3.0,
+            "consistent with decentring lens distortion or radial distortion about a centre off the image centre (lens_distortion p1, p2)".to_string(),
+        ),
+        (1.0, "consistent with a magnification change (scale)".to_string()),
+    ];
+    let Some((_, what)) = signatures
+        .into_iter()
+        .filter(|(r, _)| (ratio - r).abs() < 0.08)
+        .min_by(|a, b| (ratio - a.0).abs().total_cmp(&(ratio - b.0).abs()))
+    else {
         return Some(format!(
             "the strain across the move is {ratio:.2} of the strain along it, which no catalogue effect gives (a tilt 0.5, decentring 0.33, scale 1)"
         ));
@@ -110,31 +119,88 @@ fn hint(r: &RunShape) -> Option<String> {
     ))
 }
 
+/// What the tests found, for the words.
+pub struct Finding<'a> {
+    pub significant: bool,
+    pub false_alarm_rate: f64,
+    /// The field test's F and threshold, when two renderings were made.
+    pub field: Option<(f64, f64)>,
+    /// The rigid part (RMS over runs) and what a right model stays below, px.
+    pub rigid_px: f64,
+    pub expected_px: f64,
+    pub random_error_ratio: Option<f64>,
+    pub implausible_stage: &'a [String],
+    pub shape: &'a Shape,
+}
+
 /// The whole finding in one paragraph.
-pub fn summary(
-    significant: bool,
-    false_alarm_rate: f64,
-    systematic_px: f64,
-    expected_px: f64,
-    random_error_ratio: f64,
-    shape: &Shape,
-) -> String {
-    let rate = 100.0 * false_alarm_rate;
-    let random = if (random_error_ratio - 1.0).abs() > 0.1 {
+pub fn summary(f: &Finding) -> String {
+    let rate = 100.0 * f.false_alarm_rate;
+    let field_fired = f.field.is_some_and(|(v, t)| v > t);
+    let rigid_fired = f.rigid_px > f.expected_px;
+    let field = f.field.map_or(
+        "no second rendering of the model to test its low-order field against".to_string(),
+        |(v, t)| {
+            format!(
+                "its low-order field is {v:.2} times that between two renderings of the model (threshold {t:.2})"
+            )
+        },
+    );
+    let rigid = format!(
+        "its rigid part {:.5} px against {:.5} px a right model stays below",
+        f.rigid_px, f.expected_px
+    );
+    let mut text = if f.significant {
         format!(
-            " The measured random error is {random_error_ratio:.2} times the model's: the print (its gradients and contrast under the frames' noise) is not what the model draws."
+            "Something the model lacks remains ({rate:.0} % false-alarm rate): {field}; {rigid}."
         )
     } else {
-        String::new()
+        format!(
+            "What remains is consistent with noise and the model's own scatter ({rate:.0} % false-alarm rate): {field}; {rigid}."
+        )
     };
-    if !significant {
-        return format!(
-            "What remains is consistent with noise and the model's own scatter (systematic discrepancy {systematic_px:.5} px; a right model stays below {expected_px:.5} px at a {rate:.0} % false-alarm rate, and its low-order field is no larger than between two renderings of the model).{random}"
+    if field_fired {
+        text += &field_words(f.shape);
+    }
+    if rigid_fired {
+        if let Some(r) = f
+            .shape
+            .runs
+            .iter()
+            .max_by(|a, b| a.rigid_px.total_cmp(&b.rigid_px))
+        {
+            text += &format!(
+                " The largest rigid part is {:.5} px in run {}: a landing beyond the stage's stated envelope, or a sub-pixel bias the model's print does not have.",
+                r.rigid_px, r.run
+            );
+        }
+    }
+    if let Some(ratio) = f.random_error_ratio.filter(|r| (r - 1.0).abs() > 0.1) {
+        text += &format!(
+            " The measured random error is {ratio:.2} times the model's: the print (its gradients and contrast under the frames' noise) is not what the model draws."
         );
     }
-    let mut text = format!(
-        "Something the model lacks remains (systematic discrepancy {systematic_px:.5} px against {expected_px:.5} px a right model stays below at a {rate:.0} % false-alarm rate, or a low-order field larger than between two renderings of the model)."
-    );
+    if !f.implausible_stage.is_empty() {
+        text += &format!(" {}.", capitalise(&f.implausible_stage.join("; ")));
+    }
+    if !f.shape.image.is_empty() {
+        let kinds: Vec<String> = f
+            .shape
+            .image
+            .iter()
+            .map(|m| format!("{} (χ²/n {:.1})", m.kind, m.chi2_per_observation))
+            .collect();
+        text += &format!(
+            " Image statistics the model does not match: {}.",
+            kinds.join(", ")
+        );
+    }
+    text
+}
+
+/// The low-order field's shape in words: the strongest run's, and how it grows.
+fn field_words(shape: &Shape) -> String {
+    let mut text = String::new();
     if let Some(words) = strongest(shape)
         .and_then(quadratic)
         .or_else(|| strongest(shape).and_then(describe))
@@ -154,18 +220,6 @@ pub fn summary(
     if quad > 0.0 {
         text += &format!(
             " The quadratic part beyond the affine one reaches {quad:.4} px RMS in one run."
-        );
-    }
-    text += &random;
-    if !shape.image.is_empty() {
-        let kinds: Vec<String> = shape
-            .image
-            .iter()
-            .map(|m| format!("{} (χ²/n {:.1})", m.kind, m.chi2_per_observation))
-            .collect();
-        text += &format!(
-            " Image statistics the model does not match: {}.",
-            kinds.join(", ")
         );
     }
     text
@@ -194,6 +248,7 @@ mod tests {
             se: [1e-6; 4],
             quadratic_px: 0.0,
             affine_px: 0.0,
+            rigid_px: 0.0,
         }
     }
 

@@ -83,6 +83,19 @@ pub fn project(
     x_mm: f64,
     y_mm: f64,
 ) -> (f64, f64) {
+    let (x, y, _) = project_with_depth(camera, effects, frame, x_mm, y_mm);
+    (x, y)
+}
+
+/// [`project`], and the point's magnification from its depth relative to the axis's (1 without a
+/// tilt; ≤ 0 for a point at or behind the camera's plane, which no camera sees).
+pub fn project_with_depth(
+    camera: &Camera,
+    effects: &Effects,
+    frame: &FrameSpec,
+    x_mm: f64,
+    y_mm: f64,
+) -> (f64, f64, f64) {
     let (mx, my) = match effects.stage_misalignment {
         Some(m) => m.actual_move(frame.stage_dx_mm, frame.stage_dy_mm),
         None => (frame.stage_dx_mm, frame.stage_dy_mm),
@@ -97,17 +110,19 @@ pub fn project(
             mag += s.ds;
         }
     }
+    let mut depth = 1.0;
     if let Some(t) = effects.target_tilt {
-        (x, y, _) = t.apply(x * mag, y * mag);
+        (x, y, depth) = t.apply(x * mag, y * mag);
         mag = 1.0;
     }
     let (cx, cy) = camera.centre();
     let s = camera.scale_px_per_mm * mag;
     let (px, py) = (cx + s * x, cy + s * y);
-    match effects.lens_distortion {
+    let (px, py) = match effects.lens_distortion {
         Some(d) => d.distort(px, py, (cx, cy), camera.half_diagonal_px()),
         None => (px, py),
-    }
+    };
+    (px, py, depth)
 }
 
 /// Renders one frame in DN (float; the ADC rounds when `quantization` is on).
@@ -159,17 +174,13 @@ fn render_irradiance(
     let px_dots: Vec<GaussianDot> = dots
         .iter()
         .filter_map(|d| {
-            let (x, y) = project(camera, effects, frame, d.x_mm, d.y_mm);
+            let (x, y, depth) = project_with_depth(camera, effects, frame, d.x_mm, d.y_mm);
             // A tilted target's dots shrink with their depth (isotropically here: the
-            // anisotropy is of the order of the angle times the dot size over the distance).
-            let depth = effects.target_tilt.map_or(1.0, |t| {
-                let (mx, my) = effects
-                    .stage_misalignment
-                    .map_or((frame.stage_dx_mm, frame.stage_dy_mm), |m| {
-                        m.actual_move(frame.stage_dx_mm, frame.stage_dy_mm)
-                    });
-                t.apply(d.x_mm + mx, d.y_mm + my).2
-            });
+            // anisotropy is of the order of the angle times the dot size over the distance);
+            // one at or behind the camera's plane is not seen.
+            if !(depth > 0.0) {
+                return None;
+            }
             let inside = x > -margin - 60.0
                 && y > -margin - 60.0
                 && x < w as f64 + margin + 60.0
