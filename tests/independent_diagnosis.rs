@@ -14,7 +14,7 @@ mod independent;
 use ffdic::diagnose::{diagnose_rounds_prepared, load_measurement, CompareOptions, Diagnosis};
 use ffdic::dic::DicSettings;
 use ffdic::reduce::Scheme;
-use independent::{baseline, bench, diagnose, generate, options, report, Draw};
+use independent::{baseline, bench, candidate, diagnose, generate, options, report, Draw};
 use serde_json::{json, Value};
 
 /// `value` is within 5 % of `truth` or within two of its standard errors.
@@ -28,11 +28,7 @@ fn close(effect: &str, value: f64, se: f64, truth: f64) {
 }
 
 fn param(d: &Diagnosis, effect: &str, name: &str) -> (f64, f64) {
-    let c = d
-        .candidates
-        .iter()
-        .find(|c| c.effect.as_str() == effect)
-        .unwrap_or_else(|| panic!("{effect} was not fitted"));
+    let c = candidate(d, effect);
     (c.params[name], c.stderr.get(name).copied().unwrap_or(0.0))
 }
 
@@ -117,7 +113,7 @@ fn hidden_lens_distortion() {
 fn hidden_rotation() {
     let mut draw = Draw::new(2);
     let mut spec = bench("rotation", &mut draw, false);
-    let angle = draw.range(1.0e-4, 3.0e-4) * if draw.unit() < 0.5 { -1.0 } else { 1.0 };
+    let angle = draw.range(1.0e-4, 3.0e-4) * draw.sign();
     spec["effects"] = json!({"rotation_rad": angle});
     single(spec, "rotation", "angle_rad", angle);
 }
@@ -126,7 +122,7 @@ fn hidden_rotation() {
 fn hidden_scale() {
     let mut draw = Draw::new(3);
     let mut spec = bench("scale", &mut draw, true);
-    let ds = draw.range(1.0e-4, 3.0e-4) * if draw.unit() < 0.5 { -1.0 } else { 1.0 };
+    let ds = draw.range(1.0e-4, 3.0e-4) * draw.sign();
     spec["effects"] = json!({"scale_ds": ds});
     single(spec, "scale", "ds", ds);
 }

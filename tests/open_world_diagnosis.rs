@@ -9,7 +9,7 @@ mod independent;
 
 use ffdic::diagnose::{Diagnosis, Rounds};
 use ffdic::model::effects::verdict_name;
-use independent::{bench, diagnose, Draw};
+use independent::{bench, candidate, diagnose, Draw};
 use serde_json::{json, Value};
 
 /// `value` within 10 % of `truth` or two standard errors.
@@ -21,13 +21,6 @@ fn within(what: &str, value: f64, se: f64, truth: f64) {
         "{what}: fitted {value} ± {se}, truth {truth} ({:+.1} %)",
         100.0 * (value / truth - 1.0)
     );
-}
-
-fn candidate<'a>(d: &'a Diagnosis, effect: &str) -> &'a ffdic::diagnose::Candidate {
-    d.candidates
-        .iter()
-        .find(|c| c.effect.as_str() == effect)
-        .unwrap_or_else(|| panic!("{effect} was not fitted"))
 }
 
 /// The discrepancy of the first round's model against the final one: at least 3x lower.
@@ -106,20 +99,12 @@ fn hidden_distortion(name: &str, test: u64, mut effects: impl FnMut(&mut Draw) -
     r
 }
 
-fn sign(draw: &mut Draw) -> f64 {
-    if draw.unit() < 0.5 {
-        -1.0
-    } else {
-        1.0
-    }
-}
-
 #[test]
 fn decentring_distortion_is_named_with_p1_and_p2() {
     let (mut p1, mut p2) = (0.0, 0.0);
     let r = hidden_distortion("decentring", 3203, |draw| {
-        p1 = draw.range(1.0e-4, 3.0e-4) * sign(draw);
-        p2 = draw.range(1.0e-4, 3.0e-4) * sign(draw);
+        p1 = draw.range(1.0e-4, 3.0e-4) * draw.sign();
+        p2 = draw.range(1.0e-4, 3.0e-4) * draw.sign();
         json!({"p1_norm": p1, "p2_norm": p2})
     });
     let c = candidate(&r.diagnoses[0], "lens_distortion");
@@ -132,8 +117,8 @@ fn radial_distortion_about_an_off_centre_point_is_named_with_its_centre() {
     let (mut k1, mut cx, mut cy) = (0.0, 0.0, 0.0);
     let r = hidden_distortion("off-centre", 3204, |draw| {
         k1 = -draw.range(2.0e-3, 5.0e-3);
-        cx = draw.range(40.0, 70.0) * sign(draw);
-        cy = draw.range(30.0, 50.0) * sign(draw);
+        cx = draw.range(40.0, 70.0) * draw.sign();
+        cy = draw.range(30.0, 50.0) * draw.sign();
         json!({"k1_norm": k1, "distortion_centre_px": [cx, cy]})
     });
     let c = candidate(&r.diagnoses[0], "lens_distortion");
@@ -163,7 +148,7 @@ fn a_fifth_order_radial_term_is_named_as_k2() {
 fn a_bowed_target_is_outside_the_catalogue_and_left_unexplained() {
     let mut draw = Draw::new(3206);
     let mut spec = bench("bow", &mut draw, false);
-    let bow = draw.range(2.0e-4, 4.0e-4) * sign(&mut draw);
+    let bow = draw.range(2.0e-4, 4.0e-4) * draw.sign();
     spec["effects"] = json!({ "target_bow_per_mm": bow });
     let (r, _) = diagnose(&spec, 2);
     let d = &r.diagnoses[0];

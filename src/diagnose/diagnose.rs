@@ -514,15 +514,7 @@ pub fn diagnose_prepared(
     let mut by_drop: Vec<&Candidate> = candidates.iter().collect();
     by_drop.sort_by(|a, b| b.drop_px.total_cmp(&a.drop_px));
     let ranking_by_drop = by_drop.iter().map(|c| c.effect).collect();
-    let left = settle(
-        meas,
-        model,
-        winner,
-        &mut models,
-        &before,
-        w0,
-        (se_before, seed_sd),
-    );
+    let left = settle(meas, winner, &mut models, &before, w0, (se_before, seed_sd));
     if let Some(w) = &left.withheld {
         for c in candidates.iter_mut().filter(|c| c.effect == w.effect) {
             c.criteria.explains_its_signature = false;
@@ -570,7 +562,6 @@ struct Settled {
 /// catalogue effect explains the rest. `se` is the model's discrepancy SE and the seed scatter.
 fn settle(
     meas: &Measurement,
-    model: &ModelConfig,
     winner: Option<EffectId>,
     models: &mut FittedModels,
     before: &Comparison,
@@ -598,11 +589,12 @@ fn settle(
         explained_fraction,
         withheld: None,
     };
-    let (Some(w), Some(left), Some(fraction), Some(after)) = (
+    let (Some(w), Some(left), Some(fraction), Some(after), Some(with)) = (
         winner,
         &settled.after,
         explained_fraction,
         &settled.after_comparison,
+        &settled.winner_model,
     ) else {
         return settled;
     };
@@ -610,7 +602,7 @@ fn settle(
     // plausibility is another finding.
     if !(left.field_significant()
         && fraction < MIN_EXPLAINED_FRACTION
-        && !rest_is_in_catalogue(meas, after, model, w, w0))
+        && !rest_is_in_catalogue(meas, after, with, w0, infl))
     {
         return settled;
     }
@@ -638,17 +630,17 @@ fn explained(before: &Unexplained, after: &Unexplained) -> Option<f64> {
     (fb > 1.0).then(|| ((fb - fa) / (fb - 1.0)).clamp(0.0, 1.0))
 }
 
-/// Whether another geometric catalogue effect, fitted on what the winner leaves, explains at
-/// least half of it: then the winner is one of several effects (the next round finds the next),
-/// not the nearest name for something outside the catalogue.
+/// Whether another geometric catalogue effect, fitted on what the winner leaves (`after`, the
+/// comparison of `with`, the model with the winner), explains at least half of it: then the
+/// winner is one of several effects (the next round finds the next), not the nearest name for
+/// something outside the catalogue.
 fn rest_is_in_catalogue(
     meas: &Measurement,
     after: &Comparison,
-    model: &ModelConfig,
-    winner: EffectId,
+    with: &ModelConfig,
     w0: Option<f64>,
+    infl: f64,
 ) -> bool {
-    let infl = super::bic::inflation(&meas.options.dic);
     let floor = w0.unwrap_or(0.0);
     let excess = super::unexplained::field_w(after, infl) - floor;
     if !(excess > 0.0) {
@@ -657,16 +649,15 @@ fn rest_is_in_catalogue(
     }
     EffectId::ALL
         .into_iter()
-        .filter(|id| *id != winner && !model.effects.has(*id))
-        .filter_map(|id| geometric_candidate(meas, after, &model.effects, id))
+        .filter(|id| !with.effects.has(*id))
+        .filter_map(|id| geometric_candidate(meas, after, &with.effects, id))
         .filter(|fit| fit.beyond_null)
         .any(|fit| {
-            let with = ModelConfig {
-                name: String::new(),
-                description: String::new(),
+            let next = ModelConfig {
                 effects: fit.effects.clone(),
+                ..with.clone()
             };
-            predict(meas, after, &with, &fit)
+            predict(meas, after, &next, &fit)
                 .is_some_and(|c| super::unexplained::field_w(&c, infl) - floor < 0.5 * excess)
         })
 }

@@ -17,6 +17,13 @@ pub struct QuadraticFit {
     pub fitted: Vec<f64>,
     /// Residual variance, RSS / (n − 6).
     pub residual_var: f64,
+    /// The coefficients of 1, a, b, a², ab, b² with (a, b) = ((x − cx)/s, (y − cy)/s).
+    pub coefficients: [f64; QUADRATIC_TERMS],
+    /// (cx, cy, s): the points' centroid and their largest distance from it along either axis.
+    pub norm: (f64, f64, f64),
+    /// False when the layout was degenerate (one row or column of points) and a plane or a
+    /// constant was fitted instead.
+    pub full: bool,
 }
 
 fn terms(x: f64, y: f64, (cx, cy, s): (f64, f64, f64)) -> [f64; QUADRATIC_TERMS] {
@@ -70,7 +77,9 @@ pub fn quadratic_fit(xy: &[(f64, f64)], values: &[f64]) -> Option<QuadraticFit> 
         }
     }
     // A degenerate layout (one row or column of points) falls back to a plane or a constant.
-    let coef = solve_spd(&ata, &atb).or_else(|| {
+    let full = solve_spd(&ata, &atb);
+    let is_full = full.is_some();
+    let coef = full.or_else(|| {
         let k = 3;
         let a: Vec<Vec<f64>> = ata[..k].iter().map(|r| r[..k].to_vec()).collect();
         solve_spd(&a, &atb[..k]).map(|mut c| {
@@ -93,9 +102,14 @@ pub fn quadratic_fit(xy: &[(f64, f64)], values: &[f64]) -> Option<QuadraticFit> 
         .zip(values)
         .map(|(f, v)| (v - f).powi(2))
         .sum();
+    let mut coefficients = [0.0; QUADRATIC_TERMS];
+    coefficients.copy_from_slice(&coef);
     Some(QuadraticFit {
         fitted,
         residual_var: rss / (n - QUADRATIC_TERMS) as f64,
+        coefficients,
+        norm,
+        full: is_full,
     })
 }
 
@@ -288,6 +302,13 @@ mod tests {
         for (a, b) in f.fitted.iter().zip(&v) {
             assert!((a - b).abs() < 1e-9);
         }
-        assert!(f.residual_var < 1e-18);
+        assert!(f.residual_var < 1e-18 && f.full);
+        // The coefficients in the normalised coordinates give the surface anywhere.
+        let (cx, cy, s) = f.norm;
+        let (x, y) = (12.0, 31.0);
+        let t = terms(x, y, (cx, cy, s));
+        let at: f64 = t.iter().zip(&f.coefficients).map(|(a, b)| a * b).sum();
+        let truth = 0.3 + 0.01 * x - 0.02 * y + 1e-4 * x * y - 3e-4 * y * y;
+        assert!((at - truth).abs() < 1e-9, "{at} against {truth}");
     }
 }

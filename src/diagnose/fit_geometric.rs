@@ -109,10 +109,9 @@ fn centred_sums(s: &FieldSample, params: &[GeometricParam]) -> Option<Sums> {
 /// The inverse of a small symmetric positive-definite matrix, None when singular.
 fn invert(n: &[f64], k: usize) -> Option<Vec<f64>> {
     let m = nalgebra::DMatrix::from_row_slice(k, k, n);
-    let scale = (0..k).map(|i| m[(i, i)]).fold(0.0, f64::max);
     // Scale rows and columns to unit diagonal first: the parameters differ by many decades.
     let d: Vec<f64> = (0..k).map(|i| m[(i, i)].sqrt()).collect();
-    if !(scale > 0.0) || d.iter().any(|x| !(*x > 0.0)) {
+    if d.iter().any(|x| !(*x > 0.0)) {
         return None;
     }
     let unit = nalgebra::DMatrix::from_fn(k, k, |i, j| m[(i, j)] / (d[i] * d[j]));

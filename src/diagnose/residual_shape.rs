@@ -3,7 +3,7 @@
 //! quadratic part beyond it, whether the strains grow with the move, and the image statistics
 //! whose χ² is far above its count.
 
-use super::discrepancy::solve_spd;
+use super::discrepancy::{quadratic_fit, QuadraticFit};
 use super::results::{Comparison, RunComparison, IMAGE_KINDS};
 use crate::reduce::Scheme;
 use serde::{Deserialize, Serialize};
@@ -53,65 +53,22 @@ pub struct ImageMismatch {
 
 const IMAGE_KIND_NAMES: [&str; IMAGE_KINDS] = ["spectrum", "noise", "mean_map", "contrast"];
 
-/// The points' centroid and their largest distance from it along either axis: the frame the
-/// surfaces are fitted in (for conditioning).
-pub fn centre_and_span(points: &[(f64, f64)]) -> ((f64, f64), f64) {
-    let n = points.len().max(1) as f64;
-    let c = (
-        points.iter().map(|p| p.0).sum::<f64>() / n,
-        points.iter().map(|p| p.1).sum::<f64>() / n,
-    );
-    let s = points
-        .iter()
-        .map(|p| (p.0 - c.0).abs().max((p.1 - c.1).abs()))
-        .fold(1e-9, f64::max);
-    (c, s)
-}
-
-/// Coefficients of a weighted quadratic surface in coordinates scaled by `s` about `c`, and the
-/// RSS reduction over the mean.
-pub fn surface(
-    xy: &[(f64, f64)],
-    values: &[f64],
-    c: (f64, f64),
-    s: f64,
-) -> Option<([f64; 6], f64)> {
-    let n = xy.len();
-    if n < 12 {
+/// The full quadratic surface of `values` at `xy` (`discrepancy::quadratic_fit`), and the drop
+/// of the residual sum of squares from the mean to it; None with fewer than 12 points or a
+/// degenerate layout (its ten low-order terms are what the field test counts).
+pub fn surface(xy: &[(f64, f64)], values: &[f64]) -> Option<(QuadraticFit, f64)> {
+    if xy.len() < 12 {
         return None;
     }
-    let mut ata = vec![vec![0.0; 6]; 6];
-    let mut atb = vec![0.0; 6];
-    for (p, v) in xy.iter().zip(values) {
-        let (a, b) = ((p.0 - c.0) / s, (p.1 - c.1) / s);
-        let t = [1.0, a, b, a * a, a * b, b * b];
-        for i in 0..6 {
-            atb[i] += t[i] * v;
-            for j in 0..6 {
-                ata[i][j] += t[i] * t[j];
-            }
-        }
-    }
-    let coef = solve_spd(&ata, &atb)?;
-    let mean = values.iter().sum::<f64>() / n as f64;
+    let fit = quadratic_fit(xy, values).filter(|f| f.full)?;
+    let mean = values.iter().sum::<f64>() / values.len() as f64;
     let rss0: f64 = values.iter().map(|v| (v - mean).powi(2)).sum();
-    let rss: f64 = xy
+    let rss: f64 = values
         .iter()
-        .zip(values)
-        .map(|(p, v)| {
-            let (a, b) = ((p.0 - c.0) / s, (p.1 - c.1) / s);
-            let f = coef[0]
-                + coef[1] * a
-                + coef[2] * b
-                + coef[3] * a * a
-                + coef[4] * a * b
-                + coef[5] * b * b;
-            (v - f).powi(2)
-        })
+        .zip(&fit.fitted)
+        .map(|(v, f)| (v - f).powi(2))
         .sum();
-    let mut out = [0.0; 6];
-    out.copy_from_slice(&coef);
-    Some((out, (rss0 - rss).max(0.0)))
+    Some((fit, (rss0 - rss).max(0.0)))
 }
 
 /// One run and scheme's field difference split by order.
@@ -135,14 +92,14 @@ fn affine_of(r: &RunComparison, scheme: &Scheme, infl: f64) -> Option<Orders> {
         .map(|p| scheme.to_full(p.x, p.y))
         .collect();
     let n = pts.len() as f64;
-    if pts.len() < 12 {
-        return None;
-    }
-    let (c, s) = centre_and_span(&pts);
     let du: Vec<f64> = r.detail.common.iter().map(|p| p.du * bx).collect();
     let dv: Vec<f64> = r.detail.common.iter().map(|p| p.dv * by).collect();
-    let (cu, _) = surface(&pts, &du, c, s)?;
-    let (cv, _) = surface(&pts, &dv, c, s)?;
+    let (fu, _) = surface(&pts, &du)?;
+    let (fv, _) = surface(&pts, &dv)?;
+    // The same points, so the same normalisation for both components.
+    let (cx, cy, s) = fu.norm;
+    let c = (cx, cy);
+    let (cu, cv) = (fu.coefficients, fv.coefficients);
     // Gradients at the points' centre, per full-resolution px.
     let grad = [cu[1] / s, cu[2] / s, cv[1] / s, cv[2] / s];
     // Variances of a slope over the points' spread: σ²c/Σ(x−x̄)².
@@ -180,14 +137,10 @@ pub fn shape_of(cmp: &Comparison, schemes: &[Scheme], infl: f64) -> Shape {
     for id in ids {
         // Pool the run's schemes, weighted by their inverse variances.
         let (mut num, mut den, mut quad, mut lin, mut count) = ([0.0; 4], [0.0; 4], 0.0, 0.0, 0.0);
-        let rigid_px = cmp
-            .runs
-            .iter()
-            .filter(|r| r.id == id)
-            .map(|r| r.rigid_px)
-            .fold(0.0, f64::max);
+        let mut rigid_px = 0.0f64;
         let mut first: Option<&RunComparison> = None;
         for r in cmp.runs.iter().filter(|r| r.id == id) {
+            rigid_px = rigid_px.max(r.rigid_px);
             let Some(scheme) = schemes.iter().find(|s| s.name == r.scheme) else {
                 continue;
             };
@@ -216,18 +169,8 @@ pub fn shape_of(cmp: &Comparison, schemes: &[Scheme], infl: f64) -> Shape {
             // A component without a noise level has no standard error: no shape to report.
             continue;
         }
-        let g: Vec<f64> = (0..4)
-            .map(|i| if den[i] > 0.0 { num[i] / den[i] } else { 0.0 })
-            .collect();
-        let v: Vec<f64> = (0..4)
-            .map(|i| {
-                if den[i] > 0.0 {
-                    1.0 / den[i]
-                } else {
-                    f64::INFINITY
-                }
-            })
-            .collect();
+        let g: Vec<f64> = (0..4).map(|i| num[i] / den[i]).collect();
+        let v: Vec<f64> = den.iter().map(|d| 1.0 / d).collect();
         // exx = ux, eyy = vy, shear = (uy + vx)/2, rotation = (vx − uy)/2.
         runs.push(RunShape {
             run: r.id.clone(),
@@ -307,27 +250,4 @@ fn grows_with_move(runs: &[RunShape]) -> Option<bool> {
         moved.iter().map(|m| m.0 * m.1).sum::<f64>() / moved.iter().map(|m| m.0 * m.0).sum::<f64>();
     let rss_prop: f64 = moved.iter().map(|m| (m.1 - slope * m.0).powi(2)).sum();
     Some(rss_prop < rss_const)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_surface_recovers_its_coefficients() {
-        let pts: Vec<(f64, f64)> = (0..100)
-            .map(|i| ((i % 10) as f64 * 20.0, (i / 10) as f64 * 20.0))
-            .collect();
-        let v: Vec<f64> = pts
-            .iter()
-            .map(|p| 0.1 + 1e-3 * p.0 - 2e-3 * p.1 + 1e-5 * p.0 * p.1)
-            .collect();
-        let (c, drop) = surface(&pts, &v, (90.0, 90.0), 90.0).unwrap();
-        let at = |x: f64, y: f64| {
-            let (a, b) = ((x - 90.0) / 90.0, (y - 90.0) / 90.0);
-            c[0] + c[1] * a + c[2] * b + c[3] * a * a + c[4] * a * b + c[5] * b * b
-        };
-        assert!((at(40.0, 120.0) - (0.1 + 0.04 - 0.24 + 0.048)).abs() < 1e-9);
-        assert!(drop > 0.0);
-    }
 }

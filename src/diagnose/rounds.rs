@@ -1,5 +1,6 @@
 //! Several effects at once: diagnose, add the winner, diagnose again, until the verdict is `none`
-//! or the rounds run out; what the final model leaves unexplained is reported either way. Each round starts from the comparison the previous one made with its
+//! or the rounds run out; what the final model leaves unexplained is reported either way. Each
+//! round starts from the comparison the previous one made with its
 //! winner added, so the fall of the discrepancy is a chain of comparisons on the same
 //! measurement.
 
@@ -140,10 +141,11 @@ pub fn diagnose_rounds_prepared(
         .last()
         .and_then(|r| r.after_px)
         .unwrap_or(last.discrepancy_px);
-    let final_unexplained = match (&last.verdict, &last.unexplained_after) {
-        (Some(_), Some(after)) => after.clone(),
-        _ => last.unexplained.clone(),
-    };
+    // `unexplained_after` exists exactly when the last round named a verdict.
+    let final_unexplained = last
+        .unexplained_after
+        .clone()
+        .unwrap_or_else(|| last.unexplained.clone());
     Ok(Rounds {
         rounds: out,
         verdicts,

@@ -18,16 +18,16 @@
 //! **The rigid test.** The debiased rigid part of the discrepancy (landings beyond the stage's
 //! envelope, a bias the model lacks; RMS over runs) against z·SE at the same rate: a right model
 //! scatters about zero. The field part is the field test's (its debiasing counts the noise, not
-//! the model's own scatter, which the field test does); both are reported as `systematic_px`. The random part (the
-//! difference of the two sides' random errors) is reported as a ratio beside the tests and not
-//! judged: it is the print's and the noise's, which a model with a nominal print only
+//! the model's own scatter, which the field test does); both are reported as `systematic_px`.
+//! The random part (the difference of the two sides' random errors) is reported as a ratio
+//! beside the tests and not judged: it is the print's and the noise's, which a model with a nominal print only
 //! approximates (see `random_error_ratio`). W₀ is scaled to the measured side's error level for
 //! the same reason (`side_ratio`).
 //!
 //! **The shape** ([`super::residual_shape`]): what the residual looks like, per run.
 
 use super::discrepancy::CommonPoint;
-use super::residual_shape::{centre_and_span, shape_of, surface, Shape};
+use super::residual_shape::{shape_of, surface, Shape};
 use super::results::{Comparison, RunComparison};
 use super::unexplained_words::Finding;
 use crate::reduce::Scheme;
@@ -128,17 +128,21 @@ fn sample_w(
     if !(var.0 > 0.0 && var.1 > 0.0) {
         return None;
     }
-    let (c, s) = centre_and_span(points);
-    let (_, ru) = surface(points, du, c, s)?;
-    let (_, rv) = surface(points, dv, c, s)?;
+    let (_, ru) = surface(points, du)?;
+    let (_, rv) = surface(points, dv)?;
     Some((ru / var.0 + rv / var.1) / infl)
 }
 
 impl Unexplained {
     /// The low-order field test alone fired: what a verdict's signature is judged by.
     pub fn field_significant(&self) -> bool {
-        matches!((self.field_f, self.field_f_threshold), (Some(f), Some(t)) if f > t)
+        fires(self.field_f.zip(self.field_f_threshold))
     }
+}
+
+/// Whether the field test's F exceeds its threshold.
+fn fires(field: Option<(f64, f64)>) -> bool {
+    field.is_some_and(|(f, t)| f > t)
 }
 
 /// The field statistic W of a comparison (summed over its runs and schemes).
@@ -247,7 +251,8 @@ pub fn unexplained(
         _ => (None, None),
     };
     let expected_px = Z_FALSE_ALARM * se_px;
-    let field_significant = matches!((field_f, field_f_threshold), (Some(f), Some(t)) if f > t);
+    let field = field_f.zip(field_f_threshold);
+    let field_significant = fires(field);
     let systematic_px = systematic(cmp);
     let rigid_px = rigid(cmp);
     let discrepancy_significant = rigid_px > expected_px;
@@ -258,8 +263,10 @@ pub fn unexplained(
     let summary = super::unexplained_words::summary(&Finding {
         significant,
         false_alarm_rate: FALSE_ALARM_RATE,
-        field: field_f.zip(field_f_threshold),
+        field,
+        field_fired: field_significant,
         rigid_px,
+        rigid_fired: discrepancy_significant,
         expected_px,
         random_error_ratio,
         implausible_stage: &implausible_stage,

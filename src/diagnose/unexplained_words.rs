@@ -1,5 +1,6 @@
-//! What a comparison leaves unexplained (`super::unexplained`) in words a user reads: what remains, in which run, how it
-//! grows, and which physical effects leave that signature (a hint, never a verdict).
+//! What a comparison leaves unexplained (`super::unexplained`) in words a user reads: what
+//! remains, in which run, how it grows, and which physical effects leave that signature (a hint,
+//! never a verdict).
 
 use super::residual_shape::{RunShape, Shape};
 
@@ -123,10 +124,12 @@ fn hint(r: &RunShape) -> Option<String> {
 pub struct Finding<'a> {
     pub significant: bool,
     pub false_alarm_rate: f64,
-    /// The field test's F and threshold, when two renderings were made.
+    /// The field test's F and threshold, when two renderings were made, and whether it fired.
     pub field: Option<(f64, f64)>,
-    /// The rigid part (RMS over runs) and what a right model stays below, px.
+    pub field_fired: bool,
+    /// The rigid part (RMS over runs), whether it fired, and what a right model stays below, px.
     pub rigid_px: f64,
+    pub rigid_fired: bool,
     pub expected_px: f64,
     pub random_error_ratio: Option<f64>,
     pub implausible_stage: &'a [String],
@@ -136,8 +139,6 @@ pub struct Finding<'a> {
 /// The whole finding in one paragraph.
 pub fn summary(f: &Finding) -> String {
     let rate = 100.0 * f.false_alarm_rate;
-    let field_fired = f.field.is_some_and(|(v, t)| v > t);
-    let rigid_fired = f.rigid_px > f.expected_px;
     let field = f.field.map_or(
         "no second rendering of the model to test its low-order field against".to_string(),
         |(v, t)| {
@@ -159,10 +160,10 @@ pub fn summary(f: &Finding) -> String {
             "What remains is consistent with noise and the model's own scatter ({rate:.0} % false-alarm rate): {field}; {rigid}."
         )
     };
-    if field_fired {
+    if f.field_fired {
         text += &field_words(f.shape);
     }
-    if rigid_fired {
+    if f.rigid_fired {
         if let Some(r) = f
             .shape
             .runs

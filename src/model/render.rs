@@ -1,7 +1,8 @@
 //! Renders the frame a camera on the bench would deliver: scene → geometry → optics → sensor.
 //!
 //! Geometry maps every dot centre (stage move with its misalignment; for moved frames rotation
-//! and scale; the target's tilt through a pinhole; lens distortion) and its size (scale px/mm, magnification, PSF added in quadrature);
+//! and scale; the target's tilt through a pinhole; lens distortion) and its size (scale px/mm,
+//! magnification, depth, PSF added in quadrature);
 //! the sensor integrates each dot exactly over its pixels' apertures; radiometry and the sensor
 //! chain (vignetting, illumination change, PRNU/DSNU, shot and read noise, ADC) act per pixel.
 //! Distortion moves dot centres and leaves their shape to the local similarity transform: the

@@ -7,7 +7,8 @@
 #![allow(dead_code)]
 
 use ffdic::diagnose::{
-    diagnose_rounds_prepared, load_measurement, CompareOptions, Rounds, BASELINE_TOML,
+    diagnose_rounds_prepared, load_measurement, Candidate, CompareOptions, Diagnosis, Rounds,
+    BASELINE_TOML,
 };
 use ffdic::dic::DicSettings;
 use ffdic::model::ModelConfig;
@@ -115,6 +116,15 @@ impl Draw {
 
     pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
         lo + (hi - lo) * self.unit()
+    }
+
+    /// −1 or +1, evenly.
+    pub fn sign(&mut self) -> f64 {
+        if self.unit() < 0.5 {
+            -1.0
+        } else {
+            1.0
+        }
     }
 
     pub fn seed(&mut self) -> u64 {
@@ -272,4 +282,12 @@ pub fn report(name: &str, r: &Rounds) {
             println!("      derived: {:?}", c.derived);
         }
     }
+}
+
+/// The diagnosis' candidate for `effect` (the test fails when it was not fitted).
+pub fn candidate<'a>(d: &'a Diagnosis, effect: &str) -> &'a Candidate {
+    d.candidates
+        .iter()
+        .find(|c| c.effect.as_str() == effect)
+        .unwrap_or_else(|| panic!("{effect} was not fitted"))
 }
