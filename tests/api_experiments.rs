@@ -220,7 +220,9 @@ async fn cancel_queue_idempotency_and_a_held_bench() {
     let again: Value = again.json().await.unwrap();
     assert_eq!(again["id"], first["id"]);
 
-    // Direct control while the experiment holds the bench: 409.
+    // Direct control while the experiment holds the bench: 409. A run is `running` a moment
+    // before its work takes the bench; once it reports progress it holds it.
+    wait_until(&first_url, |r| r["progress"].as_f64().unwrap_or(0.0) > 0.0).await;
     let patch = c
         .patch(server.url("/camera"))
         .json(&json!({"exposure_us": 5000.0}))
@@ -238,7 +240,6 @@ async fn cancel_queue_idempotency_and_a_held_bench() {
     assert_eq!(mv.status(), 409);
 
     // Cancel the first mid-run: it ends cancelled, the stage stands still, the second runs.
-    wait_until(&first_url, |r| r["progress"].as_f64().unwrap_or(0.0) > 0.0).await;
     let cancel = c.post(format!("{first_url}/cancel")).send().await.unwrap();
     assert_eq!(cancel.status(), 200);
     let done = wait_terminal(&first_url).await;
