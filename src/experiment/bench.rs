@@ -16,7 +16,10 @@ use std::panic::AssertUnwindSafe;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
 use std::sync::{Arc, Mutex};
-use std::time::Duration;
+use std::time::{Duration, Instant};
+
+/// How often a caller waiting on the bench is asked whether it still wants the answer.
+const STOP_POLL: Duration = Duration::from_millis(50);
 
 /// Puts a speckle target in front of the camera. The mock bench swaps the scene it renders; on a
 /// real bench a person mounts the one target by hand, and there is no mount.
@@ -234,6 +237,20 @@ impl BenchHandle {
         make: impl FnOnce(Reply<T>) -> Command,
         wait: Duration,
     ) -> Result<T, BenchError> {
+        self.call_until(owner, make, wait, &|| false)
+            .map(|answer| answer.expect("never asked to stop"))
+    }
+
+    /// [`Self::call`], asking `stop` every [`STOP_POLL`] while it waits: `Ok(None)` once it said
+    /// so. The command itself runs to its end on the bench (an exposure is not cut short; the
+    /// next command queues behind it) and its answer is dropped.
+    fn call_until<T>(
+        &self,
+        owner: Owner,
+        make: impl FnOnce(Reply<T>) -> Command,
+        wait: Duration,
+        stop: &dyn Fn() -> bool,
+    ) -> Result<Option<T>, BenchError> {
         let (reply, rx) = mpsc::sync_channel(1);
         self.tx
             .send(Request {
@@ -241,12 +258,23 @@ impl BenchHandle {
                 command: make(reply),
             })
             .map_err(|_| BenchError::Stopped)?;
-        match rx.recv_timeout(wait) {
-            Ok(result) => result,
-            Err(mpsc::RecvTimeoutError::Timeout) => Err(BenchError::Unresponsive {
-                after_ms: wait.as_millis() as u64,
-            }),
-            Err(mpsc::RecvTimeoutError::Disconnected) => Err(BenchError::Stopped),
+        let deadline = Instant::now() + wait;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match rx.recv_timeout(left.min(STOP_POLL)) {
+                Ok(result) => return result.map(Some),
+                Err(mpsc::RecvTimeoutError::Timeout) if left > STOP_POLL => {
+                    if stop() {
+                        return Ok(None);
+                    }
+                }
+                Err(mpsc::RecvTimeoutError::Timeout) => {
+                    return Err(BenchError::Unresponsive {
+                        after_ms: wait.as_millis() as u64,
+                    })
+                }
+                Err(mpsc::RecvTimeoutError::Disconnected) => return Err(BenchError::Stopped),
+            }
         }
     }
 
@@ -273,8 +301,22 @@ impl BenchHandle {
         count: usize,
         timeout: Duration,
     ) -> Result<Vec<Frame>, BenchError> {
+        self.capture_until(owner, count, timeout, &|| false)
+            .map(|frames| frames.expect("never asked to stop"))
+    }
+
+    /// [`Self::capture`], no longer waited for once `stop` says so (`Ok(None)`): a cancelled
+    /// run ends while a slow frame (a 2560x2160 mock exposure takes half a second) is still
+    /// being read.
+    pub fn capture_until(
+        &self,
+        owner: Owner,
+        count: usize,
+        timeout: Duration,
+        stop: &dyn Fn() -> bool,
+    ) -> Result<Option<Vec<Frame>>, BenchError> {
         let wait = self.reply_timeout + timeout * count as u32;
-        self.call(
+        self.call_until(
             owner,
             |reply| Command::Capture {
                 count,
@@ -282,6 +324,7 @@ impl BenchHandle {
                 reply,
             },
             wait,
+            stop,
         )
     }
 
@@ -326,6 +369,20 @@ impl BenchHandle {
 
     pub fn stop_stage(&self, owner: Owner) -> Result<(), BenchError> {
         self.call(owner, Command::StopStage, self.reply_timeout)
+    }
+
+    /// Asks the actor to stop the stage next, without waiting: a run that failed or was
+    /// cancelled ends while the command before (a slow exposure) finishes; the stop still runs
+    /// before anything sent after it (the actor takes its commands in order), and a stop is
+    /// admitted whoever holds the bench.
+    pub fn stop_stage_soon(&self) -> Result<(), BenchError> {
+        let (reply, _dropped) = mpsc::sync_channel(1);
+        self.tx
+            .send(Request {
+                owner: Owner::Direct,
+                command: Command::StopStage(reply),
+            })
+            .map_err(|_| BenchError::Stopped)
     }
 
     pub fn mount(

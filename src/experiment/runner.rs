@@ -95,8 +95,9 @@ pub fn run_experiment(
 ) -> Result<ExperimentOutcome, RunnerError> {
     let result = capture_and_analyse(plan, bench, lease, scale_px_per_mm, timeouts, sink);
     if result.is_err() {
-        // Whatever happened, leave the stage standing still.
-        let _ = bench.stop_stage(Owner::Run(lease.run_id.clone()));
+        // Whatever happened, leave the stage standing still (not waited for: a cancel inside a
+        // half-second mock exposure would otherwise wait for it).
+        let _ = bench.stop_stage_soon();
     }
     result
 }
@@ -452,8 +453,8 @@ impl<'a> Session<'a> {
     }
 
     /// `count` frames, in capture commands of about [`CAPTURE_SLICE`] each (the first frame
-    /// alone, to time one), the cancel asked before each: 64 averaged frames were one command
-    /// that no cancel could stop.
+    /// alone, to time one), the cancel asked before each and while each is waited for: 64
+    /// averaged frames were one command that no cancel could stop.
     fn capture_watched(&self, count: usize) -> Result<Vec<Frame>, RunnerError> {
         let mut frames = Vec::with_capacity(count);
         let mut batch = 1;
@@ -461,10 +462,11 @@ impl<'a> Session<'a> {
             self.check()?;
             let n = batch.min(count - frames.len());
             let started = std::time::Instant::now();
-            frames.extend(
+            let stop = || self.sink.cancelled();
+            let batch_frames =
                 self.bench
-                    .capture(self.owner.clone(), n, self.timeouts.frame)?,
-            );
+                    .capture_until(self.owner.clone(), n, self.timeouts.frame, &stop)?;
+            frames.extend(batch_frames.ok_or(RunnerError::Cancelled)?);
             let per_frame_s = started.elapsed().as_secs_f64() / n as f64;
             batch = ((CAPTURE_SLICE.as_secs_f64() / per_frame_s.max(1e-6)) as usize).max(1);
         }
