@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The Python package as a user installs it, tested: a venv in target/python-venv with the pinned
 # test requirements, `pip install ./python` (maturin from PyPI builds the wheel: release profile,
-# the workspace's target dir), pytest over python/tests, then the example end to end.
+# the workspace's target dir; scripts/test-all.sh asks for the dev profile through
+# MATURIN_PEP517_ARGS), pytest over python/tests, then the example end to end.
 #
 #   python/run-tests.sh [DAEMON_BINARY]     (default: target/debug/ffdic)
 #

@@ -1,10 +1,18 @@
 #!/usr/bin/env bash
 # The whole test suite, as CI runs it. Installs what the suite needs on a fresh Debian machine
 # (as root; nothing is installed when everything is already there), then: format check, clippy
-# with every feature and target, all tests in the optimised test profile, schemathesis, a benchmark
-# build, and the Python package (wheel, pytest, example).
+# with every feature and target, all tests in the optimised test profile, schemathesis, and the
+# Python package (wheel, pytest, example).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+
+# Each phase says when it starts (seconds since the script began), and the end prints the time of
+# every phase and the slowest ten tests: where the suite's time goes, in every CI log.
+PHASES=()
+phase() {
+  PHASES+=("$SECONDS $1")
+  echo "== $1 (at ${SECONDS} s)"
+}
 
 # Debian packages the features and tests need:
 # - aravis: libaravis-dev (+ libusb-1.0-0-dev, which its -dev package forgets), and the fake
@@ -21,6 +29,7 @@ cd "$(dirname "$0")/.."
 #   localhost (its own slurm.conf, munge key and socket, free ports) and runs a sweep on it.
 # - python3-venv also holds the Python package's tests (python/run-tests.sh: maturin, numpy and
 #   pytest from PyPI into target/python-venv).
+phase "system packages, npm"
 APT_PACKAGES=(libaravis-dev libusb-1.0-0-dev aravis-tools-cli aravis-tools libclang-dev libudev-dev pkg-config iproute2 chromium python3-venv curl slurmctld slurmd munge)
 missing=()
 for pkg in "${APT_PACKAGES[@]}"; do
@@ -39,21 +48,40 @@ fi
 
 # The browser test's driver (no browser download: it uses /usr/bin/chromium).
 if [ ! -d tests/browser/node_modules ]; then
-  echo "== npm ci --prefix tests/browser"
+  echo "npm ci --prefix tests/browser"
   npm ci --prefix tests/browser --no-audit --no-fund
 fi
 
-echo "== cargo fmt --check"
+phase "cargo fmt --check"
 cargo fmt --all --check
-echo "== cargo clippy"
+phase "cargo clippy"
 cargo clippy --workspace --all-targets --all-features -- -D warnings
-echo "== cargo test"
-cargo test --all-features --workspace
-echo "== schemathesis against ffdic serve (every phase, bounded; see tests/schemathesis/)"
+phase "cargo test"
+# Each test's own time (libtest's --report-time; RUSTC_BOOTSTRAP lets the stable harness take
+# that one unstable flag, at run time only: nothing is compiled differently).
+TEST_LOG="$(mktemp "${TMPDIR:-/tmp}/ffdic-tests.XXXXXX")"
+trap 'rm -f "$TEST_LOG"' EXIT
+RUSTC_BOOTSTRAP=1 cargo test --all-features --workspace -- -Z unstable-options --report-time 2>&1 | tee "$TEST_LOG"
+phase "schemathesis against ffdic serve (every phase, bounded; see tests/schemathesis/)"
 # The daemon binary the tests just built (test profile, in the target dir cargo used).
 bash tests/schemathesis/run.sh "${CARGO_TARGET_DIR:-target}/debug/ffdic"
-echo "== benchmarks compile (they are run by hand: cargo bench)"
-cargo bench --no-run --quiet
-# After the benchmark build: the wheel's release build reuses the dependencies it compiled.
-echo "== Python package: pip install ./python in a venv, pytest, the example (see python/run-tests.sh)"
-bash python/run-tests.sh "${CARGO_TARGET_DIR:-target}/debug/ffdic"
+# The benchmarks are type-checked by clippy (--all-targets) and run by hand (cargo bench): their
+# release build (5 min here) proves nothing more.
+phase "Python package: pip install ./python in a venv, pytest, the example (see python/run-tests.sh)"
+# The wheel in the dev profile (dependencies optimised, as the test profile's, whose builds it
+# shares where their features agree; `--profile test` would build the module as a test harness),
+# instead of a release build of everything after the benchmarks'. A user's `pip install ./python`
+# builds the release profile.
+MATURIN_PEP517_ARGS="--profile dev" bash python/run-tests.sh "${CARGO_TARGET_DIR:-target}/debug/ffdic"
+
+phase "done"
+echo "== time per phase, s"
+for ((i = 0; i + 1 < ${#PHASES[@]}; i++)); do
+  read -r start name <<<"${PHASES[$i]}"
+  read -r end _ <<<"${PHASES[$((i + 1))]}"
+  printf '%6d  %s\n' "$((end - start))" "${name%% (*}"
+done
+echo "== the slowest ten tests, s (wall time of each, beside the others running in parallel)"
+# (awk reads to the end: `head` would end the pipe early, and pipefail would fail the suite.)
+sed -n 's/^test \(.*\) \.\.\. ok <\([0-9.]*\)s>$/\2 \1/p' "$TEST_LOG" | sort -rn |
+  awk 'NR <= 10 { printf "%8.1f  %s\n", $1, $2 }'
