@@ -525,7 +525,8 @@ fn compare_renders_each_capture_mode(frames: &std::path::Path) {
         ffdic::model::ModelConfig::from_toml(BASELINE_TOML, std::path::Path::new("baseline"))
             .unwrap();
     let dic = serde_json::from_value(small_request(2)["dic"].clone()).unwrap();
-    let options = CompareOptions::from_presets(&["ff100".into(), "ff25".into()], dic, 1).unwrap();
+    let options =
+        CompareOptions::from_scheme_specs(&["ff100".into(), "ff25".into()], dic, 1).unwrap();
     let cmp = compare(frames, &model, &options, &|_, _| true).unwrap();
     assert_eq!(cmp.hardware_runs_set_aside, 0);
     let hw = cmp.hardware.as_ref().expect("the hardware runs compared");

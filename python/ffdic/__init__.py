@@ -113,7 +113,9 @@ def reduce(
     """The frame with a lower fill factor synthesised from it (float32).
 
     ``scheme`` is a preset — ``"ff100"`` (2x2 binning), ``"ff50"`` (rows binned, columns
-    subsampled), ``"ff25"`` (both subsampled) — or a scheme per axis: give ``x`` and ``y`` as
+    subsampled), ``"ff25"`` (both subsampled), ``"native"`` (every pixel) — or
+    ``"BXxBY/AXxAY"`` (e.g. ``"2x2/1x2"``: 2x2 blocks whose centred 1x2 pixels are
+    light-sensitive), or a scheme per axis: give ``x`` and ``y`` as
     ``(block, first, active)`` (``active`` pixels from ``first`` in every ``block``) and
     ``scheme`` as its name, or a dict ``{"name", "x": {...}, "y": {...}}``.
     """
@@ -164,7 +166,8 @@ def compare(
 
     DIC runs on the measured frames and on the frames the model renders for the same nominal
     experiment; the discrepancy per run and scheme and in total (px). Recorded in the
-    dataset's history (``ffdic-history.jsonl``) unless ``history=False``.
+    dataset's history (``ffdic-history.jsonl``) unless ``history=False``. ``schemes`` takes the
+    names :func:`reduce` takes (``"native"`` for a camera's own resolution).
     """
     result: Dict[str, Any] = _ffdic.compare(
         dataset,

@@ -19,7 +19,7 @@ fn scheme(spec: &str) -> PyResult<Scheme> {
             .map_err(|e| value_error(format!("scheme: not a scheme description: {e}")))?;
         Scheme::new(&s.name, s.x, s.y).map_err(|e| value_error(format!("scheme: {e}")))
     } else {
-        Scheme::preset(spec).map_err(|e| value_error(format!("scheme: {e}")))
+        Scheme::parse(spec).map_err(|e| value_error(format!("scheme: {e}")))
     }
 }
 

@@ -12,7 +12,7 @@ use pyo3::exceptions::{PyOSError, PyRuntimeError};
 use pyo3::prelude::*;
 use std::path::{Path, PathBuf};
 
-/// The analysis of both sides, from the CLI's options (schemes as presets).
+/// The analysis of both sides, from the CLI's options (schemes as `Scheme::parse` reads them).
 fn options(
     schemes: Vec<String>,
     subset: Option<usize>,
@@ -28,7 +28,7 @@ fn options(
         ..d
     };
     let seed = seed.unwrap_or(CompareOptions::default().seed);
-    CompareOptions::from_presets(&schemes, dic, seed).map_err(|e| match e {
+    CompareOptions::from_scheme_specs(&schemes, dic, seed).map_err(|e| match e {
         CompareOptionsError::Dic(e) => value_error(e),
         other => value_error(format!("schemes: {other}")),
     })

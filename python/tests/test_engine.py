@@ -193,6 +193,9 @@ def test_reduce_matches_the_schemes_written_in_numpy() -> None:
         "ff100": f.reshape(32, 2, 48, 2).mean(axis=(1, 3)),
         "ff50": f.reshape(32, 2, 48, 2).mean(axis=1)[:, :, 0],
         "ff25": f[::2, ::2],
+        "native": f,
+        # 3x3 blocks, the centred pixel of each.
+        "3x3/1x1": f[:63, :96].reshape(21, 3, 32, 3)[:, 1, :, 1],
     }
     for name, want in expected.items():
         got = ffdic.reduce(frame, name)

@@ -15,7 +15,9 @@ use std::path::PathBuf;
 /// How the comparison analyses both sides (shared by compare and diagnose).
 #[derive(Debug, Args)]
 pub struct AnalysisArgs {
-    /// Reduction schemes, comma-separated presets.
+    /// Reduction schemes, comma-separated: the paper's ff100, ff50, ff25; native (every pixel,
+    /// the camera's own resolution); or BLOCKxBLOCK/APERTURE (e.g. 2x2/1x2: 2x2 blocks whose
+    /// centred 1x2 pixels are light-sensitive, as `ffdic reduce --block --aperture`).
     #[arg(long, default_value = "ff100,ff50,ff25", value_delimiter = ',')]
     pub schemes: Vec<String>,
     /// DIC subset size, px (odd).
@@ -43,7 +45,11 @@ impl AnalysisArgs {
             prefilter_sigma_px: self.prefilter_sigma,
             ..DicSettings::default()
         };
-        Ok(CompareOptions::from_presets(&self.schemes, dic, self.seed)?)
+        Ok(CompareOptions::from_scheme_specs(
+            &self.schemes,
+            dic,
+            self.seed,
+        )?)
     }
 }
 

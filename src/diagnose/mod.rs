@@ -224,17 +224,17 @@ pub enum CompareOptionsError {
 }
 
 impl CompareOptions {
-    /// Options from preset scheme names (`ff100`, `ff50`, `ff25`, any case, spaces trimmed) and
-    /// the DIC settings both sides are analysed with: what `ffdic compare` and the Python
-    /// bindings take.
-    pub fn from_presets(
+    /// Options from schemes as a person writes them (`ff100`, `ff50`, `ff25`, `native` in any
+    /// case, or `BXxBY/AXxAY`; see [`Scheme::parse`]) and the DIC settings both sides are
+    /// analysed with: what `ffdic compare` and the Python bindings take.
+    pub fn from_scheme_specs(
         schemes: &[String],
         dic: DicSettings,
         seed: u64,
     ) -> Result<Self, CompareOptionsError> {
         let schemes = schemes
             .iter()
-            .map(|s| Scheme::preset(s.trim()))
+            .map(|s| Scheme::parse(s))
             .collect::<Result<Vec<_>, _>>()?;
         if schemes.is_empty() {
             return Err(CompareOptionsError::NoScheme);

@@ -10,7 +10,8 @@ use crate::reduce::Scheme;
 use ffdic_hw::{HardwareScheme, HARDWARE_SCHEME_PREFIX};
 use serde::{Deserialize, Serialize};
 
-/// A reduction scheme by preset name (`ff100`, `ff50`, `ff25`) or spelled out per axis.
+/// A reduction scheme by name (`ff100`, `ff50`, `ff25`, `native`, or `BXxBY/AXxAY`; see
+/// `Scheme::parse`) or spelled out per axis.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(untagged)]
 pub enum SchemeSpec {
@@ -443,7 +444,7 @@ fn check_scheme_count(n: usize) -> Result<(), FieldError> {
 /// Scheme `i` of a request, a preset or spelled out per axis.
 fn synthesised_scheme(i: usize, spec: &SchemeSpec) -> Result<Scheme, FieldError> {
     match spec {
-        SchemeSpec::Preset(name) => Scheme::preset(name),
+        SchemeSpec::Preset(name) => Scheme::parse(name),
         SchemeSpec::Custom(c) => Scheme::new(&c.name, c.x, c.y),
     }
     .map_err(|e| field_error(format!("schemes[{i}]"), e.to_string()))

@@ -28,7 +28,7 @@ pub struct ExperimentSpec {
     /// A new speckle layout for every capture (mock bench and simulation).
     #[serde(default)]
     pub new_layout_per_repeat: bool,
-    /// Reduction schemes by preset name.
+    /// Reduction schemes by name (`ff100`, `native`, `2x2/1x2`, …; see `Scheme::parse`).
     #[serde(default = "default_schemes")]
     pub schemes: Vec<String>,
     #[serde(default)]

@@ -60,7 +60,10 @@ pub struct Scheme {
 
 #[derive(Debug, thiserror::Error)]
 pub enum ReduceError {
-    #[error("unknown scheme '{0}' (presets: ff100, ff50, ff25)")]
+    #[error(
+        "unknown scheme '{0}' (the paper's ff100, ff50, ff25; native, every pixel; or \
+         BLOCKxBLOCK/APERTURE, e.g. 2x2/1x2: 2x2 blocks, their centred 1x2 pixels light-sensitive)"
+    )]
     UnknownPreset(String),
     #[error("invalid scheme {0}")]
     InvalidScheme(String),
@@ -94,7 +97,8 @@ impl Scheme {
         })
     }
 
-    /// The paper's three schemes by name, in any case (`FF50` is `ff50`).
+    /// A scheme by name, in any case (`FF50` is `ff50`): the paper's three and `native` (every
+    /// pixel as it is: a camera's own resolution).
     pub fn preset(name: &str) -> Result<Self, ReduceError> {
         let name = name.to_ascii_lowercase();
         let name = name.as_str();
@@ -108,14 +112,32 @@ impl Scheme {
             first: 0,
             active: 1,
         };
+        let every = AxisScheme {
+            block: 1,
+            first: 0,
+            active: 1,
+        };
         match name {
             "ff100" => Self::new(name, bin, bin),
             "ff50" => Self::new(name, sub, bin),
             "ff25" => Self::new(name, sub, sub),
+            "native" => Self::new(name, every, every),
             other => Err(ReduceError::UnknownPreset(other.to_string())),
         }
     }
 
+    /// A scheme as a person writes it on a command line or in a request: a preset name
+    /// ([`Self::preset`]) or `BXxBY/AXxAY` (blocks of BX by BY pixels whose centred AX by AY are
+    /// light-sensitive, as `ffdic reduce --block --aperture` takes them).
+    pub fn parse(spec: &str) -> Result<Self, ReduceError> {
+        let spec = spec.trim();
+        match spec.split_once('/') {
+            Some((block, aperture)) => Self::from_block(block, aperture, None),
+            None => Self::preset(spec),
+        }
+    }
+
+    /// The paper's three schemes (ff100, ff50, ff25).
     pub fn presets() -> Vec<Scheme> {
         ["ff100", "ff50", "ff25"]
             .iter()
@@ -219,6 +241,27 @@ fn parse_pair(s: &str) -> Result<(usize, usize), ReduceError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_scheme_is_a_preset_native_or_block_over_aperture() {
+        let native = Scheme::parse(" Native ").unwrap();
+        assert_eq!(
+            (native.name.as_str(), native.area_fill_factor()),
+            ("native", 1.0)
+        );
+        assert_eq!(native.output_size(7, 5).unwrap(), (7, 5));
+        // 2x2/1x2 is the paper's ff50 (rows binned, columns subsampled) by another name.
+        let half = Scheme::parse("2x2/1x2").unwrap();
+        let ff50 = Scheme::preset("ff50").unwrap();
+        assert_eq!((half.x, half.y), (ff50.x, ff50.y));
+        assert_eq!(
+            Scheme::parse("3x3/1x1").unwrap().centre_offset_px(),
+            (1.0, 1.0)
+        );
+        for bad in ["ff75", "2x2", "2x2/3x2", "2x/1x1", ""] {
+            assert!(Scheme::parse(bad).is_err(), "{bad}");
+        }
+    }
 
     #[test]
     fn preset_centres_and_fill_factors() {
