@@ -2,6 +2,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 use std::path::{Component, Path, PathBuf};
 
+use super::manifest_schema::schema_problems;
 use crate::model::Placement;
 
 pub const FORMAT: &str = "ffdic-dataset/1";
@@ -259,59 +260,80 @@ impl Manifest {
             path: path.clone(),
             message,
         };
-        // serde_json names the missing field ("missing field `scale_px_per_mm`").
-        let m: Manifest = serde_json::from_str(&text).map_err(|e| invalid(e.to_string()))?;
+        let value: Value = serde_json::from_str(&text).map_err(|e| invalid(e.to_string()))?;
+        // Every mistake at once: first what the schema (docs/dataset-format.schema.json) finds,
+        // then, on a manifest that holds it, what depends on the numbers together (a print's
+        // size at the dataset's scale, a capture's twin).
+        let problems = schema_problems(&value);
+        if !problems.is_empty() {
+            return Err(invalid(listed(problems)));
+        }
+        let m: Manifest = serde_json::from_value(value).map_err(|e| invalid(e.to_string()))?;
         m.validate().map_err(invalid)?;
         Ok(m)
     }
 
-    /// Checks the format, the numbers and every file name; returns the first problem.
+    /// Checks the format, the numbers and every file name; every problem, listed.
     pub fn validate(&self) -> Result<(), String> {
+        let mut problems = Vec::new();
         if self.format != FORMAT {
-            return Err(format!("format is '{}', expected '{FORMAT}'", self.format));
+            problems.push(format!("format is '{}', expected '{FORMAT}'", self.format));
         }
         if !(self.scale_px_per_mm > 0.0) {
-            return Err("scale_px_per_mm must be positive".into());
+            problems.push("scale_px_per_mm must be positive".into());
         }
         if let Some(r) = self.stage_repeatability_um {
             if !(r.is_finite() && r > 0.0) {
-                return Err(format!(
+                problems.push(format!(
                     "stage_repeatability_um must be a positive number of µm, got {r}"
                 ));
             }
         }
         if let Some(z) = self.working_distance_mm {
             if !(z.is_finite() && z >= 1.0) {
-                return Err(format!(
+                problems.push(format!(
                     "working_distance_mm must be a distance of at least 1 mm, got {z}"
                 ));
             }
         }
         if self.runs.is_empty() {
-            return Err("runs is empty".into());
+            problems.push("runs is empty".into());
         }
         for run in &self.runs {
-            for file in std::iter::once(&run.reference)
-                .chain([&run.deformed])
-                .chain(&run.repeat)
-            {
-                if !is_plain_file_name(file) {
-                    return Err(format!(
-                        "run {}: '{file}' is not a file name inside the dataset",
-                        run.id
-                    ));
-                }
-            }
-            if !(run.stage.dx_mm.is_finite() && run.stage.dy_mm.is_finite()) {
-                return Err(format!("run {}: stage move is not finite", run.id));
-            }
-            self.check_capture(run)?;
-            if let Some(p) = &run.pattern {
-                p.check(self.scale_px_per_mm)
-                    .map_err(|e| format!("run {}: {e}", run.id))?;
+            problems.extend(self.run_problems(run));
+        }
+        match problems.is_empty() {
+            true => Ok(()),
+            false => Err(listed(problems)),
+        }
+    }
+
+    /// What is wrong with `run`: its file names, its move, its capture and its print.
+    fn run_problems(&self, run: &Run) -> Vec<String> {
+        let mut problems = Vec::new();
+        for file in std::iter::once(&run.reference)
+            .chain([&run.deformed])
+            .chain(&run.repeat)
+        {
+            if !is_plain_file_name(file) {
+                problems.push(format!(
+                    "run {}: '{file}' is not a file name inside the dataset",
+                    run.id
+                ));
             }
         }
-        Ok(())
+        if !(run.stage.dx_mm.is_finite() && run.stage.dy_mm.is_finite()) {
+            problems.push(format!("run {}: stage move is not finite", run.id));
+        }
+        if let Err(e) = self.check_capture(run) {
+            problems.push(e);
+        }
+        if let Some(p) = &run.pattern {
+            if let Err(e) = p.check(self.scale_px_per_mm) {
+                problems.push(format!("run {}: {e}", run.id));
+            }
+        }
+        problems
     }
 
     /// A hardware run's capture mode (factors 1 to [`MAX_CAPTURE_FACTOR`]) and its twin: an
@@ -380,6 +402,14 @@ impl Manifest {
         let text = serde_json::to_string_pretty(self).expect("a manifest always serialises");
         crate::atomic_write::write_atomically(&path, text.as_bytes())
             .map_err(|source| DatasetError::Write { path, source })
+    }
+}
+
+/// One problem as it is; several counted and listed, so a person fixes them in one go.
+fn listed(problems: Vec<String>) -> String {
+    match problems.len() {
+        1 => problems.into_iter().next().expect("one"),
+        n => format!("{n} problems: {}", problems.join("; ")),
     }
 }
 
@@ -457,6 +487,31 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("scale_px_per_mm"), "{err}");
+    }
+
+    /// Issue 34: errors named one missing field at a time (`id`, then `stage`, then `name`, then
+    /// `scale_px_per_mm`: six tries, twenty minutes). Five mistakes, one error listing all five.
+    #[test]
+    fn a_manifest_with_five_mistakes_gets_one_error_listing_all_five() {
+        let dir = tempfile::tempdir().unwrap();
+        let text = r#"{ "format": "ffdic-dataset/1", "scale_px_per_mm": -26,
+          "runs": [ { "reference": "ref.tif", "deformed": "x1.tif",
+                      "stage": { "dx_mm": 1.0, "dy_mm": 0.0 } },
+                    { "id": "x2", "reference": "../ref.tif", "deformed": "x2.tif",
+                      "stage": { "dx_mm": 2.0 } } ] }"#;
+        std::fs::write(dir.path().join("dataset.json"), text).unwrap();
+        let err = Manifest::read(dir.path()).unwrap_err().to_string();
+        println!("{err}");
+        assert!(err.contains("5 problems"), "{err}");
+        for part in [
+            "missing field `name`",
+            "scale_px_per_mm: -26",
+            "runs[0]: missing field `id`",
+            "runs[1].reference: \"../ref.tif\" is not a plain file name",
+            "runs[1].stage: missing field `dy_mm`",
+        ] {
+            assert!(err.contains(part), "{part}: {err}");
+        }
     }
 
     #[test]
