@@ -60,6 +60,66 @@ fn json_document_has_the_documented_shape() {
     assert_eq!(doc["settings"]["strain_gauge_px"], 161);
 }
 
+/// Issue 34 (4): the core question — how far is the measured move from the commanded one? —
+/// had no answer: `analyze` had no `--expected`. Sample 3's truth is (0.5, 0.5) px for shift_05.
+#[test]
+fn the_bias_against_the_commanded_move_comes_with_its_interval() {
+    let run = |expected: &str, json: bool| {
+        let mut args = vec![
+            "analyze".to_string(),
+            sample3("reference.tif"),
+            sample3("shift_05.tif"),
+            "--expected".into(),
+            expected.into(),
+        ];
+        if json {
+            args.push("--json".into());
+        }
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let out = ffdic(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        out
+    };
+    let doc: serde_json::Value = serde_json::from_slice(&run("0.5,0.5", true).stdout).unwrap();
+    for axis in ["u", "v"] {
+        let b = &doc["bias"][axis];
+        let (mean, bias) = (
+            b["mean_px"].as_f64().unwrap(),
+            b["bias_px"].as_f64().unwrap(),
+        );
+        assert_eq!(mean, doc[axis]["mean"].as_f64().unwrap());
+        assert_eq!(bias, mean - 0.5);
+        // The engine's accuracy on Sample 3 (tests/dic_sample3.rs).
+        assert!(bias.abs() < 0.002, "{axis}: {b}");
+        let (lo, hi) = (
+            b["bias_ci95_px"][0].as_f64().unwrap(),
+            b["bias_ci95_px"][1].as_f64().unwrap(),
+        );
+        assert!(lo < bias && bias < hi && hi - lo < 0.01, "{axis}: {b}");
+        assert_eq!(b["valid_points"], 576);
+    }
+    // A move commanded 0.1 px shorter than made: a bias of +0.1 px, far outside its interval.
+    let doc: serde_json::Value = serde_json::from_slice(&run("0.4,0.5", true).stdout).unwrap();
+    let b = &doc["bias"]["u"];
+    assert!((b["bias_px"].as_f64().unwrap() - 0.1).abs() < 0.002, "{b}");
+    assert!(b["bias_ci95_px"][0].as_f64().unwrap() > 0.09, "{b}");
+    let text = String::from_utf8(run("-0.5,0.5", false).stdout).unwrap();
+    assert!(text.contains("against the commanded move"), "{text}");
+    assert!(text.contains("expected   -0.50000"), "{text}");
+    let bad = ffdic(&[
+        "analyze",
+        &sample3("reference.tif"),
+        &sample3("shift_05.tif"),
+        "--expected",
+        "0.5",
+    ]);
+    assert!(stderr_line(&bad).contains("expected U,V"));
+}
+
 #[test]
 fn out_folder_gets_points_and_settings() {
     let dir = tempfile::tempdir().unwrap();

@@ -118,6 +118,41 @@ impl BlockBootstrap {
             .collect()
     }
 
+    /// The 95 % interval of the mean of every field (row-major over the grid, NaN where a point
+    /// has no value): the random part of a rigid move's measured mean, which the neighbours'
+    /// shared subsets make far wider than std/√n.
+    pub fn mean_intervals(&self, fields: &[&[f64]]) -> Vec<[f64; 2]> {
+        let tables: Vec<BlockSums> = fields
+            .iter()
+            .map(|f| BlockSums::new(f, self.nx, self.ny, self.block))
+            .collect();
+        let reps: Vec<Vec<f64>> = self
+            .replicates
+            .par_iter()
+            .map(|origins| {
+                tables
+                    .iter()
+                    .map(|t| {
+                        let (mut n, mut s) = (0.0f64, 0.0f64);
+                        for &(x0, y0) in origins {
+                            let [bn, bs, _] = t.block(x0 as usize, y0 as usize);
+                            n += bn;
+                            s += bs;
+                        }
+                        if n < 0.5 {
+                            f64::NAN
+                        } else {
+                            t.mean + s / n
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        (0..fields.len())
+            .map(|k| percentile_interval(reps.iter().map(|r| r[k]).collect()))
+            .collect()
+    }
+
     /// The 95 % interval of the % increase of each field's std over its `base` twin's, all on
     /// this grid, resampled in pairs (the same blocks in both).
     pub fn increase_intervals(&self, base: &[&[f64]], fields: &[&[f64]]) -> Vec<[f64; 2]> {
@@ -140,6 +175,8 @@ impl BlockBootstrap {
 /// from the field's mean (so Σd² does not cancel) and zero where there is no value: the sums of
 /// any block, wrapped or not, in four look-ups.
 struct BlockSums {
+    /// The field's mean over its finite values (the deviations are from it).
+    mean: f64,
     /// Side of the extended grid plus one (row length of the tables).
     width: usize,
     block: usize,
@@ -169,7 +206,12 @@ impl BlockSums {
                     [above[0] + row[0], above[1] + row[1], above[2] + row[2]];
             }
         }
-        Self { width, block, sat }
+        Self {
+            mean,
+            width,
+            block,
+            sat,
+        }
     }
 
     /// (count, Σd, Σd²) of the block whose top-left point is (x0, y0).
@@ -266,6 +308,38 @@ mod tests {
             "naive {} vs block {mean_half}",
             0.5 * (hi - lo)
         );
+    }
+
+    /// The mean's interval against the spread of the means of independent realisations (the
+    /// truth it must reproduce from one), and its coverage of the true mean (zero).
+    #[test]
+    fn the_mean_interval_matches_the_spread_between_realisations() {
+        let (n, corr) = (60, 6);
+        let realisations = 40;
+        let plan =
+            BlockBootstrap::new(n, n, BLOCK_PER_CORRELATION_LENGTH * corr).expect("25 blocks");
+        let (mut means, mut half_widths, mut covered) = (Vec::new(), Vec::new(), 0);
+        for seed in 0..realisations {
+            let f = correlated_field(n, corr, 2000 + seed);
+            let mean = Stats::of(f.iter().copied()).mean;
+            let [lo, hi] = plan.mean_intervals(&[&f])[0];
+            assert!(lo < mean && mean < hi, "{lo} {mean} {hi}");
+            covered += usize::from(lo < 0.0 && 0.0 < hi);
+            means.push(mean);
+            half_widths.push(0.5 * (hi - lo));
+        }
+        let spread = sample_std(&means);
+        let mean_half = half_widths.iter().sum::<f64>() / realisations as f64;
+        let ratio = mean_half / (1.96 * spread);
+        eprintln!(
+            "mean: bootstrap half-width / (1.96 x spread) = {ratio:.3}, true mean covered {covered}/{realisations}"
+        );
+        // The spread from 40 realisations is itself uncertain by ≈ 11 %.
+        assert!((0.6..1.35).contains(&ratio), "ratio {ratio}");
+        assert!(covered >= 30, "covered {covered} of {realisations}");
+        // std/√n, blind to the correlation, is several times too narrow here.
+        let naive = Stats::of(correlated_field(n, corr, 2000)).std / (n as f64); // σ/√(n·n)
+        assert!(naive < 0.5 * mean_half, "naive {naive} vs {mean_half}");
     }
 
     #[test]

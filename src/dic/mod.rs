@@ -6,6 +6,7 @@
 //!
 //! Nothing here knows about files, cameras or HTTP: images in, [`DicResult`] out.
 
+mod bias;
 mod bootstrap;
 mod bspline;
 mod engine;
@@ -29,6 +30,7 @@ mod strain;
 mod validate;
 mod warp;
 
+pub use bias::{bias_against, Bias};
 pub use bootstrap::{
     BlockBootstrap, BLOCK_PER_CORRELATION_LENGTH, BOOTSTRAP_REPLICATES, MIN_BLOCKS,
 };
