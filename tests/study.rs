@@ -132,6 +132,13 @@ fn reproduce_json_has_a_row_per_run_and_scheme_and_recovers_the_motion() {
     let angle: f64 = 0.00615;
     assert!((u - 6.5 * angle.cos()).abs() < 0.005, "u {u}");
     assert!((v - 6.5 * angle.sin()).abs() < 0.005, "v {v}");
+    // Issue 34 (4): the commanded move beside the measured one, in the scheme's px; the stage's
+    // misalignment is a bias against it (0.040 px in v).
+    assert_eq!(
+        first["expected_px"],
+        serde_json::json!([6.5, 0.0]),
+        "{first}"
+    );
     // The run went through the service: a run folder in the data folder like any other.
     let out = std::path::PathBuf::from(doc["folder"].as_str().unwrap());
     assert!(out.starts_with(&data), "{}", out.display());
@@ -151,6 +158,19 @@ fn reproduce_json_has_a_row_per_run_and_scheme_and_recovers_the_motion() {
     ] {
         assert!(out.join(f).is_file(), "{f}");
     }
+    let csv = std::fs::read_to_string(out.join("results/study.csv")).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let first_line: Vec<&str> = csv.lines().nth(1).unwrap().split(',').collect();
+    let column = |name: &str| -> f64 {
+        let i = header.iter().position(|h| *h == name).expect(name);
+        first_line[i].parse().unwrap()
+    };
+    assert_eq!((column("u_expected"), column("v_expected")), (6.5, 0.0));
+    assert_eq!(column("u_bias"), column("u_mean") - 6.5);
+    assert!(
+        (column("v_bias") - 6.5 * angle.sin()).abs() < 0.005,
+        "{csv}"
+    );
     // Then the model against the measurement: baseline comparison, diagnosis, the winner added
     // and compared again. The fixture's bench (paper-bench-distortion) has shot noise the
     // baseline lacks (it assumes a signal-independent noise), and the fixture has the static

@@ -62,6 +62,10 @@ def test_results_json_and_table(client: Client, paper_run: Dict[str, Any]) -> No
         assert table[column].dtype == np.float64, column
     # A single capture has no interval: NaN, not text.
     assert np.isnan(table["u_std_lo"]).all()
+    # The commanded move in each scheme's px (65 px halved by every 2x2 block) and the bias
+    # against it.
+    assert (table["u_expected"] == 32.5).all() and (table["v_expected"] == 0.0).all()
+    assert np.array_equal(table["u_bias"], table["u_mean"] - table["u_expected"])
     by_key = {(r["pattern"], r["scheme"]): r for r in rows}
     for p, s, u_std in zip(table["pattern"], table["scheme"], table["u_std"]):
         assert u_std == pytest.approx(by_key[(str(p), str(s))]["u"]["std"], rel=1e-12)

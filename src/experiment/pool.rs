@@ -108,6 +108,7 @@ fn pool(id: &str, members: &[&StudyRow]) -> StudyRow {
         },
         increase_pct,
         increase_ci95,
+        expected_px: first.expected_px,
         repeats: members.len(),
     }
 }

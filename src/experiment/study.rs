@@ -93,6 +93,7 @@ pub fn analyze_dataset_with(
         }
     }
     let mut study = Study {
+        scale_px_per_mm: manifest.scale_px_per_mm,
         rows: Vec::with_capacity(total),
         total,
         progress,
@@ -108,6 +109,8 @@ pub fn analyze_dataset_with(
 
 /// The study's side of the pair loop: one row per result, each against its baseline.
 struct Study<'a> {
+    /// The dataset's scale at full resolution, px/mm.
+    scale_px_per_mm: f64,
     rows: Vec<StudyRow>,
     total: usize,
     progress: &'a (dyn Fn(usize, usize) -> bool + Sync),
@@ -187,6 +190,7 @@ impl PairVisitor for Study<'_> {
             increase_pct,
             increase_ci95,
             repeats: 1,
+            expected_px: Some(expected_px(run, scheme, self.scale_px_per_mm)),
         });
         let first_scheme =
             run.capture.is_none() && self.baseline.as_ref().map(|b| b.0) != Some(pair.index);
@@ -202,6 +206,20 @@ impl PairVisitor for Study<'_> {
             Err(StudyError::Cancelled)
         }
     }
+}
+
+/// The commanded move of `run` in the pixels `scheme` measures it in: the stage's move at the
+/// dataset's scale, over the camera's own binning or decimation (a `capture` run's frames are
+/// read out reduced) and the scheme's block, per axis.
+fn expected_px(run: &Run, scheme: &Scheme, scale_px_per_mm: f64) -> [f64; 2] {
+    let (capture_x, capture_y) = run
+        .capture
+        .as_ref()
+        .map_or((1, 1), |c| (c.x.factor(), c.y.factor()));
+    [
+        run.stage.dx_mm * scale_px_per_mm / (capture_x as f64 * scheme.x.block as f64),
+        run.stage.dy_mm * scale_px_per_mm / (capture_y as f64 * scheme.y.block as f64),
+    ]
 }
 
 fn increase(base: &Summary, s: &Summary) -> Increase {

@@ -23,6 +23,8 @@ pub fn rows_json(rows: &[StudyRow]) -> serde_json::Value {
             "increase_pct": r.increase_pct,
             "increase_ci95": r.increase_ci95,
             "repeats": r.repeats,
+            "expected_px": r.expected_px,
+            "bias_px": r.expected_px.map(|[u, v]| [r.summary.u.mean - u, r.summary.v.mean - v]),
         })).collect::<Vec<_>>()
     })
 }
@@ -209,6 +211,10 @@ pub fn study_csv(rows: &[StudyRow]) -> String {
         "exy_std_lo",
         "exy_std_hi",
         "repeats",
+        "u_expected",
+        "v_expected",
+        "u_bias",
+        "v_bias",
     ];
     let body: Vec<Vec<String>> = rows
         .iter()
@@ -240,10 +246,25 @@ pub fn study_csv(rows: &[StudyRow]) -> String {
                     .flat_map(|st| st.std_ci95.map(|v| v.to_string())),
             )
             .chain([r.repeats.to_string()])
+            .chain(expected_and_bias(r))
             .collect()
         })
         .collect();
     csv(&headers, &body)
+}
+
+/// `u_expected`, `v_expected`, `u_bias`, `v_bias` of a row (px of its scheme); empty where the
+/// row has no commanded move recorded.
+fn expected_and_bias(r: &StudyRow) -> [String; 4] {
+    match r.expected_px {
+        Some([u, v]) => [
+            u.to_string(),
+            v.to_string(),
+            (r.summary.u.mean - u).to_string(),
+            (r.summary.v.mean - v).to_string(),
+        ],
+        None => Default::default(),
+    }
 }
 
 /// Figures 5 and 6 as SVG bar charts: `(file name, svg)`, the % increase over 100 % above

@@ -53,6 +53,11 @@ pub struct StudyRow {
     /// whose intervals are the block bootstrap's.
     #[serde(default = "one_capture")]
     pub repeats: usize,
+    /// The commanded move in this row's pixels (u, v): the stage's move × the dataset's scale,
+    /// over the camera's own read-out factor and the scheme's block per axis. The bias is
+    /// `summary.u.mean − expected_px[0]`. Absent in rows written before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub expected_px: Option<[f64; 2]>,
 }
 
 fn one_capture() -> usize {
