@@ -740,16 +740,23 @@ async fn a_diagnosis_is_cancelled_within_a_second_wherever_it_is() {
             took.as_millis(),
             ended["message"]
         );
-        assert_eq!(ended["status"], "cancelled", "{ended}");
-        latencies_ms.push(took.as_millis());
         assert!(
             took < Duration::from_secs(1),
             "cancelled {delay_ms} ms in, after {took:?}"
         );
+        // A cancel that lands after the diagnosis's last step (writing its results) is accepted
+        // and the run still ends `succeeded`: its work was done. Within the same second either
+        // way; a cancel ignored mid-work would take the seconds the work has left.
+        if ended["status"] == "succeeded" {
+            continue;
+        }
+        assert_eq!(ended["status"], "cancelled", "{ended}");
+        latencies_ms.push(took.as_millis());
     }
     assert!(
-        !latencies_ms.is_empty(),
-        "every diagnosis ended before its cancel"
+        latencies_ms.len() >= 4,
+        "only {} of 7 diagnoses were cancelled mid-work",
+        latencies_ms.len()
     );
     server.stop().await;
 }
