@@ -397,12 +397,7 @@ fn write_summary(out: &mut impl Write, s: &Summary) -> Result<()> {
         ("eyy", s.eyy, 1e6, "µε"),
         ("exy", s.exy, 1e6, "µε"),
     ] {
-        let [lo, hi] = st.std_ci95;
-        let ci = if lo.is_finite() && hi.is_finite() {
-            format!("[{:.5}, {:.5}]", lo * scale, hi * scale)
-        } else {
-            "[—]".to_string()
-        };
+        let ci = interval_text(st.std_ci95.map(|x| x * scale));
         writeln!(
             out,
             "{name:>4}: mean {:>12.5} std {:>10.5} {ci:<22} min {:>12.5} max {:>12.5} {unit}",
@@ -419,15 +414,19 @@ fn write_summary(out: &mut impl Write, s: &Summary) -> Result<()> {
     Ok(())
 }
 
+/// `[lo, hi]` to five decimals, `[—]` when the interval was not computed.
+fn interval_text([lo, hi]: [f64; 2]) -> String {
+    if lo.is_finite() && hi.is_finite() {
+        format!("[{lo:.5}, {hi:.5}]")
+    } else {
+        "[—]".to_string()
+    }
+}
+
 fn write_bias(out: &mut impl Write, bias: &[Bias; 2]) -> Result<()> {
     writeln!(out, "against the commanded move:")?;
     for (name, b) in ["u", "v"].iter().zip(bias) {
-        let [lo, hi] = b.bias_ci95_px;
-        let ci = if lo.is_finite() && hi.is_finite() {
-            format!("[{lo:.5}, {hi:.5}]")
-        } else {
-            "[—]".to_string()
-        };
+        let ci = interval_text(b.bias_ci95_px);
         writeln!(
             out,
             "{name:>4}: expected {:>10.5} measured {:>10.5} bias {:>10.5} {ci:<22} std {:>9.5} px",

@@ -78,9 +78,14 @@ impl BlockBootstrap {
         })
     }
 
-    /// The sample std of every field (row-major over the grid, NaN where a point has no
-    /// value) in every replicate.
-    fn replicate_stds(&self, fields: &[&[f64]]) -> Vec<Vec<f64>> {
+    /// `statistic` of every field (row-major over the grid, NaN where a point has no value) in
+    /// every replicate, from the replicate's (count, Σd, Σd²) summed over its blocks, d the
+    /// deviation from the field's mean.
+    fn replicate_stats(
+        &self,
+        fields: &[&[f64]],
+        statistic: fn(&BlockSums, [f64; 3]) -> f64,
+    ) -> Vec<Vec<f64>> {
         let tables: Vec<BlockSums> = fields
             .iter()
             .map(|f| BlockSums::new(f, self.nx, self.ny, self.block))
@@ -91,22 +96,29 @@ impl BlockBootstrap {
                 tables
                     .iter()
                     .map(|t| {
-                        let (mut n, mut s, mut ss) = (0.0f64, 0.0f64, 0.0f64);
+                        let mut sums = [0.0f64; 3];
                         for &(x0, y0) in origins {
-                            let [bn, bs, bss] = t.block(x0 as usize, y0 as usize);
-                            n += bn;
-                            s += bs;
-                            ss += bss;
+                            let block = t.block(x0 as usize, y0 as usize);
+                            for (s, b) in sums.iter_mut().zip(block) {
+                                *s += b;
+                            }
                         }
-                        if n < 1.5 {
-                            f64::NAN
-                        } else {
-                            ((ss - s * s / n).max(0.0) / (n - 1.0)).sqrt()
-                        }
+                        statistic(t, sums)
                     })
                     .collect()
             })
             .collect()
+    }
+
+    /// The sample std of every field in every replicate.
+    fn replicate_stds(&self, fields: &[&[f64]]) -> Vec<Vec<f64>> {
+        self.replicate_stats(fields, |_, [n, s, ss]| {
+            if n < 1.5 {
+                f64::NAN
+            } else {
+                ((ss - s * s / n).max(0.0) / (n - 1.0)).sqrt()
+            }
+        })
     }
 
     /// The 95 % interval of the sample std of every field (row-major over the grid, NaN where a
@@ -122,32 +134,16 @@ impl BlockBootstrap {
     /// has no value): the random part of a rigid move's measured mean, which the neighbours'
     /// shared subsets make far wider than std/√n.
     pub fn mean_intervals(&self, fields: &[&[f64]]) -> Vec<[f64; 2]> {
-        let tables: Vec<BlockSums> = fields
-            .iter()
-            .map(|f| BlockSums::new(f, self.nx, self.ny, self.block))
-            .collect();
-        let reps: Vec<Vec<f64>> = self
-            .replicates
-            .par_iter()
-            .map(|origins| {
-                tables
-                    .iter()
-                    .map(|t| {
-                        let (mut n, mut s) = (0.0f64, 0.0f64);
-                        for &(x0, y0) in origins {
-                            let [bn, bs, _] = t.block(x0 as usize, y0 as usize);
-                            n += bn;
-                            s += bs;
-                        }
-                        if n < 0.5 {
-                            f64::NAN
-                        } else {
-                            t.mean + s / n
-                        }
-                    })
-                    .collect()
-            })
-            .collect();
+        let reps = self.replicate_stats(
+            fields,
+            |t, [n, s, _]| {
+                if n < 0.5 {
+                    f64::NAN
+                } else {
+                    t.mean + s / n
+                }
+            },
+        );
         (0..fields.len())
             .map(|k| percentile_interval(reps.iter().map(|r| r[k]).collect()))
             .collect()

@@ -24,7 +24,7 @@ pub fn rows_json(rows: &[StudyRow]) -> serde_json::Value {
             "increase_ci95": r.increase_ci95,
             "repeats": r.repeats,
             "expected_px": r.expected_px,
-            "bias_px": r.expected_px.map(|[u, v]| [r.summary.u.mean - u, r.summary.v.mean - v]),
+            "bias_px": r.bias_px(),
         })).collect::<Vec<_>>()
     })
 }
@@ -256,14 +256,9 @@ pub fn study_csv(rows: &[StudyRow]) -> String {
 /// `u_expected`, `v_expected`, `u_bias`, `v_bias` of a row (px of its scheme); empty where the
 /// row has no commanded move recorded.
 fn expected_and_bias(r: &StudyRow) -> [String; 4] {
-    match r.expected_px {
-        Some([u, v]) => [
-            u.to_string(),
-            v.to_string(),
-            (r.summary.u.mean - u).to_string(),
-            (r.summary.v.mean - v).to_string(),
-        ],
-        None => Default::default(),
+    match (r.expected_px, r.bias_px()) {
+        (Some([u, v]), Some([bu, bv])) => [u, v, bu, bv].map(|x| x.to_string()),
+        _ => Default::default(),
     }
 }
 

@@ -60,6 +60,15 @@ pub struct StudyRow {
     pub expected_px: Option<[f64; 2]>,
 }
 
+impl StudyRow {
+    /// The measured mean minus the commanded move (u, v), px of the row's scheme; `None` where
+    /// no commanded move is recorded.
+    pub fn bias_px(&self) -> Option<[f64; 2]> {
+        self.expected_px
+            .map(|[u, v]| [self.summary.u.mean - u, self.summary.v.mean - v])
+    }
+}
+
 fn one_capture() -> usize {
     1
 }
