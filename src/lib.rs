@@ -1,5 +1,5 @@
 //! ffdic: translation experiments, fill-factor synthesis, 2D DIC and a physical model of the
-//! imaging chain. See DESIGN.md in the shared folder and the README.
+//! imaging chain. See the README (for users) and ARCHITECTURE.md (how the code is built).
 
 // `!(x > limit)` is how this crate says "fails unless certainly above the limit": a NaN must
 // fail such checks, which `x <= limit` would let through.
