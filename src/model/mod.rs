@@ -10,6 +10,7 @@ mod pattern;
 mod readout;
 mod render;
 mod seed;
+mod shot_noise;
 mod speckle;
 
 pub use config::{ModelConfig, ModelError};

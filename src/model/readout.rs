@@ -12,7 +12,7 @@
 use super::effects::Effects;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, Normal, Poisson};
+use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 
 use crate::image::Image;
@@ -143,12 +143,9 @@ impl SensorChain {
     }
 
     fn read_electrons(&self, electrons: f64, gain: f64, read_e: f64, rng: &mut ChaCha8Rng) -> f64 {
-        let shot = if electrons > 0.0 {
-            Poisson::new(electrons).map_or(electrons, |p| p.sample(rng))
-        } else {
-            0.0
-        };
-        let read: f64 = read_e * Normal::new(0.0, 1.0).expect("valid").sample(rng);
+        let shot = super::shot_noise::poisson_count(electrons, rng);
+        let z: f64 = StandardNormal.sample(rng);
+        let read = read_e * z;
         (shot + read) / gain
     }
 
