@@ -32,10 +32,12 @@ use super::results::{Comparison, ImageFit, ModelInfo};
 use super::unexplained::{model_scatter, unexplained, Unexplained};
 use super::{CompareOptions, DiagnoseError, Progress};
 use crate::model::{EffectId, Effects, ModelConfig};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Candidate {
@@ -664,7 +666,9 @@ fn rest_is_in_catalogue(
 
 /// Per fitted candidate: its fit, the model with it, and that model's comparison (none when the
 /// fit stayed within the null).
-type FittedModels = BTreeMap<EffectId, (ImageFit, ModelConfig, Option<Comparison>)>;
+/// A candidate's fit, the model with it, and that model's comparison when one was made.
+type FittedModel = (ImageFit, ModelConfig, Option<Comparison>);
+type FittedModels = BTreeMap<EffectId, FittedModel>;
 
 /// The effects the model lacks, split into those this dataset can reveal (to be fitted) and
 /// those it cannot (with the runs that would). The stage is always part of the nominal fit and
@@ -717,54 +721,91 @@ fn discrepancy_by_seed(
     Ok((by_seed, w0))
 }
 
+/// Candidates fitted at once by [`fit_candidates`]: the second fills the core a fit's optimiser
+/// leaves idle (its steps render small crops; one round used ≈ 1.45 of 2 cores with one candidate
+/// at a time); more would multiply the memory (≈ 190 MB per candidate's rendered comparison at
+/// 2560x2160) for little, since each candidate's rendering and DIC are parallel inside.
+const CANDIDATES_AT_ONCE: usize = 2;
+
 /// Fits each candidate, predicts (or, failing that, renders) the comparison of the model with
-/// it, and judges it.
+/// it, and judges it. Candidates are independent (each its own fit, seeds and rendering):
+/// [`CANDIDATES_AT_ONCE`] lanes take them from one queue. The results keep `fit_ids`' order.
 fn fit_candidates(
     meas: &Measurement,
     model: &ModelConfig,
     judge: &Judge<'_>,
     fit_ids: &[EffectId],
-    tick: &dyn Fn() -> Result<(), DiagnoseError>,
+    tick: &(dyn Fn() -> Result<(), DiagnoseError> + Sync),
     ask: Progress,
 ) -> Result<(Vec<Candidate>, FittedModels), DiagnoseError> {
-    let before = judge.before;
+    let next = AtomicUsize::new(0);
+    let slots: Vec<Mutex<Option<(Candidate, FittedModel)>>> =
+        fit_ids.iter().map(|_| Mutex::new(None)).collect();
+    (0..CANDIDATES_AT_ONCE.min(fit_ids.len()))
+        .into_par_iter()
+        .try_for_each(|_| -> Result<(), DiagnoseError> {
+            while let Some(&id) = fit_ids.get(next.fetch_add(1, Ordering::Relaxed)) {
+                let fitted = fit_one_candidate(meas, model, judge, id, ask)?;
+                tick()?;
+                let i = fit_ids
+                    .iter()
+                    .position(|&f| f == id)
+                    .expect("taken from fit_ids");
+                *slots[i].lock().expect("a lane never panics holding it") = fitted;
+            }
+            Ok(())
+        })?;
     let mut candidates = Vec::new();
     let mut models = FittedModels::new();
-    // A cancelled job's fit ends early; the tick after it reports the cancel.
-    let stop = || !ask(0, 0);
-    for &id in fit_ids {
-        let Some(fit) = fit_candidate(meas, before, &model.effects, id, &stop) else {
-            tick()?;
-            continue;
-        };
-        let with = ModelConfig {
-            name: format!("{}+{}", model.name, fit.effect),
-            description: format!(
-                "{} with {} added, fitted by ffdic diagnose on dataset {}{}",
-                model.name,
-                fit.effect,
-                meas.manifest.name,
-                if fit.geometric.notes.is_empty() {
-                    String::new()
-                } else {
-                    format!(" ({})", fit.geometric.notes.join("; "))
-                }
-            ),
-            effects: fit.effects.clone(),
-        };
-        let after = if !fit.beyond_null {
-            None
-        } else if let Some(predicted) = predict(meas, before, &with, &fit) {
-            Some((predicted, Method::Predicted))
-        } else {
-            let rendered = compare_with_scene(meas, &with, meas.options.seed, None, ask)?;
-            Some((rendered, Method::Rendered))
-        };
-        candidates.push(judge.candidate(&fit, after.as_ref()));
-        models.insert(fit.effect, (fit, with, after.map(|a| a.0)));
-        tick()?;
+    for slot in slots {
+        let fitted = slot.into_inner().expect("a lane never panics holding it");
+        if let Some((candidate, (fit, with, after))) = fitted {
+            candidates.push(candidate);
+            models.insert(fit.effect, (fit, with, after));
+        }
     }
     Ok((candidates, models))
+}
+
+/// One candidate of [`fit_candidates`]: None when the effect has no fit on this dataset.
+fn fit_one_candidate(
+    meas: &Measurement,
+    model: &ModelConfig,
+    judge: &Judge<'_>,
+    id: EffectId,
+    ask: Progress,
+) -> Result<Option<(Candidate, FittedModel)>, DiagnoseError> {
+    let before = judge.before;
+    // A cancelled job's fit ends early; the tick after it reports the cancel.
+    let stop = || !ask(0, 0);
+    let Some(fit) = fit_candidate(meas, before, &model.effects, id, &stop) else {
+        return Ok(None);
+    };
+    let with = ModelConfig {
+        name: format!("{}+{}", model.name, fit.effect),
+        description: format!(
+            "{} with {} added, fitted by ffdic diagnose on dataset {}{}",
+            model.name,
+            fit.effect,
+            meas.manifest.name,
+            if fit.geometric.notes.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", fit.geometric.notes.join("; "))
+            }
+        ),
+        effects: fit.effects.clone(),
+    };
+    let after = if !fit.beyond_null {
+        None
+    } else if let Some(predicted) = predict(meas, before, &with, &fit) {
+        Some((predicted, Method::Predicted))
+    } else {
+        let rendered = compare_with_scene(meas, &with, meas.options.seed, None, ask)?;
+        Some((rendered, Method::Rendered))
+    };
+    let candidate = judge.candidate(&fit, after.as_ref());
+    Ok(Some((candidate, (fit, with, after.map(|a| a.0)))))
 }
 
 /// The winner is rendered: a predicted comparison is first order in the effect. When the
