@@ -443,3 +443,73 @@ fn no_wildcard_arm_on_an_effect_in_src() {
     }
     assert!(found.is_empty(), "wildcard arms on EffectId: {found:#?}");
 }
+
+/// Issue 34: the README is for a user who has just cloned the repository — short enough to read
+/// before the first command — and neither it nor a page under docs/ points outside the
+/// repository (`../shared`) or dates a figure by a commit hash, which a reader cannot resolve:
+/// measured figures live in docs/, dated, each with the command that reproduces it.
+#[test]
+fn the_readme_is_for_users() {
+    let readme = std::fs::read_to_string(root().join("README.md")).expect("README.md");
+    let lines = readme.lines().count();
+    assert!(
+        lines < 250,
+        "README.md has {lines} lines: fewer than 250, the rest belongs in docs/"
+    );
+    // The rule finds what it looks for, and passes what the pages legitimately hold.
+    assert_eq!(
+        commit_hashes(
+            "k1 = 1.0227e-4 at `5f5e806`, OpenCorr 44532cc55fc788eda922acd8958fee71db603ab0"
+        ),
+        ["5f5e806", "44532cc55fc788eda922acd8958fee71db603ab0"]
+    );
+    let legitimate =
+        "0x50 = 80, `deadbeef`, 2560x2160, 2026-11-24, 3.14159e5, 1.0138e-4 ± 0.026e-4, \
+         1.5494059725722e-05, exp-20261126t101500-abcdef, `ffdic-dataset/1`, 25,921 points, \
+         Kähler";
+    assert!(commit_hashes(legitimate).is_empty(), "{legitimate}");
+    let mut problems = Vec::new();
+    for path in user_pages() {
+        let text = std::fs::read_to_string(&path).unwrap();
+        let name = path.strip_prefix(root()).unwrap().display().to_string();
+        if text.contains("../shared") {
+            problems.push(format!("{name}: a ../shared path, outside the repository"));
+        }
+        for hash in commit_hashes(&text) {
+            problems.push(format!(
+                "{name}: `{hash}` reads as a commit hash; date it instead"
+            ));
+        }
+    }
+    assert!(problems.is_empty(), "{}", problems.join("\n"));
+}
+
+/// README.md and the Markdown pages directly under docs/.
+fn user_pages() -> Vec<PathBuf> {
+    let mut docs: Vec<PathBuf> = std::fs::read_dir(root().join("docs"))
+        .expect("docs/")
+        .map(|entry| entry.unwrap().path())
+        .filter(|path| path.extension().is_some_and(|e| e == "md"))
+        .collect();
+    docs.sort();
+    let mut pages = vec![root().join("README.md")];
+    pages.extend(docs);
+    pages
+}
+
+/// Words that read as a git commit hash, abbreviated or full: 7 to 40 lowercase hex digits with
+/// at least one digit and one letter. Words are split on everything but ASCII letters and digits,
+/// so `0x50`, `2560x2160`, dates, counts, English words and run ids (`exp-…-abcdef`) are not
+/// one; nor is a word whose only letter is one `e`: a float's digits around its exponent
+/// (`14159e5` of 3.14159e5, `5494059725722e` of 1.5494059725722e-05).
+fn commit_hashes(text: &str) -> Vec<&str> {
+    let hex = |b: u8| b.is_ascii_digit() || (b'a'..=b'f').contains(&b);
+    let float = |w: &str| w.bytes().filter(u8::is_ascii_alphabetic).eq([b'e']);
+    text.split(|c: char| !c.is_ascii_alphanumeric())
+        .filter(|w| (7..=40).contains(&w.len()) && w.bytes().all(hex))
+        .filter(|w| {
+            w.bytes().any(|b| b.is_ascii_digit()) && w.bytes().any(|b| b.is_ascii_alphabetic())
+        })
+        .filter(|&w| !float(w))
+        .collect()
+}

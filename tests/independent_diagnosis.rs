@@ -386,10 +386,10 @@ fn sample3_has_nothing_to_find() {
     );
 }
 
-/// The false-alarm rate over 30 control seeds (slow: run with `--ignored`; the figure is in the
-/// README).
+/// The false-alarm rate over 30 control seeds (slow: run with `--ignored`; the figure is in
+/// docs/model-and-diagnosis.md).
 #[test]
-#[ignore = "slow: 30 diagnoses; the measured rate is in the README"]
+#[ignore = "slow: 30 diagnoses; the measured rate is in docs/model-and-diagnosis.md"]
 fn false_alarm_rate_over_30_controls() {
     let mut verdicts = Vec::new();
     let mut unexplained = 0;

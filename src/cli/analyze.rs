@@ -409,7 +409,7 @@ fn write_summary(out: &mut impl Write, s: &Summary) -> Result<()> {
     }
     writeln!(
         out,
-        "      [95 % interval of the std: block bootstrap over the grid; ≈ 25 % too narrow, see README]"
+        "      [95 % interval of the std: block bootstrap over the grid; ≈ 25 % too narrow, see docs/study.md]"
     )?;
     Ok(())
 }

@@ -173,7 +173,7 @@ fn interval_footnote(rows: &[StudyRow]) -> String {
     } else {
         format!(
             "[…]: 95 % interval of the increase, a paired block bootstrap over the grid (one frame pair;\n\
-             it runs ≈ 25 % narrow, README); n.s.: the interval holds 0, no significant change. No\n\
+             it runs ≈ 25 % narrow, docs/study.md); n.s.: the interval holds 0, no significant change. No\n\
              interval: the grid holds fewer than {MIN_BLOCKS} blocks of {BLOCK_PER_CORRELATION_LENGTH}x the field's correlation\n\
              length (strains: the virtual strain gauge). `--repeats N` gives intervals over captures.\n"
         )
