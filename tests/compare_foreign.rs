@@ -148,3 +148,50 @@ fn the_cli_compares_at_native_resolution_and_on_any_block_and_aperture() {
         "{err}"
     );
 }
+
+/// Issue 34 (7): `ffdic compare DIR/dataset.json` failed on "Not a directory". A dataset is
+/// named by its folder or by its manifest, for `compare`, `diagnose` and `history` alike; any
+/// other file is refused with what is expected.
+#[test]
+fn a_dataset_is_named_by_its_folder_or_by_its_manifest() {
+    let dir = tempfile::tempdir().unwrap();
+    foreign_dataset(dir.path());
+    let manifest = dir.path().join("dataset.json");
+    let ffdic = |args: &[&std::ffi::OsStr]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_ffdic"))
+            .args(args)
+            .output()
+            .unwrap()
+    };
+    let data = dir.path().join("data");
+    let compared = ffdic(&[
+        "compare".as_ref(),
+        manifest.as_os_str(),
+        "--schemes".as_ref(),
+        "native".as_ref(),
+        "--json".as_ref(),
+        "--data".as_ref(),
+        data.as_os_str(),
+    ]);
+    assert!(
+        compared.status.success(),
+        "{}",
+        String::from_utf8_lossy(&compared.stderr)
+    );
+    let history = ffdic(&["history".as_ref(), manifest.as_os_str(), "--json".as_ref()]);
+    assert!(
+        history.status.success(),
+        "{}",
+        String::from_utf8_lossy(&history.stderr)
+    );
+    let entries: serde_json::Value = serde_json::from_slice(&history.stdout).unwrap();
+    assert_eq!(entries.as_array().map(Vec::len), Some(1), "{entries}");
+    let frame = dir.path().join("a_ref.tif");
+    let refused = ffdic(&["diagnose".as_ref(), frame.as_os_str()]);
+    assert!(!refused.status.success());
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        err.contains("a_ref.tif") && err.contains("dataset.json"),
+        "{err}"
+    );
+}

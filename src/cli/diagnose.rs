@@ -12,7 +12,8 @@ use std::path::PathBuf;
 
 #[derive(Debug, Args)]
 pub struct DiagnoseArgs {
-    /// Dataset folder (format ffdic-dataset/1).
+    /// Dataset folder (format ffdic-dataset/1), or its dataset.json.
+    #[arg(value_parser = super::dataset_folder)]
     pub dataset: PathBuf,
     /// Analysis model: a TOML file, or a model name — embedded (baseline, paper-bench,
     /// paper-bench-distortion) or stored by the daemon in DATA/models (default: baseline).

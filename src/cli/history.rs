@@ -9,7 +9,8 @@ use std::path::PathBuf;
 
 #[derive(Debug, Args)]
 pub struct HistoryArgs {
-    /// Dataset folder.
+    /// Dataset folder, or its dataset.json.
+    #[arg(value_parser = super::dataset_folder)]
     pub dataset: PathBuf,
     /// Where to draw the chart (default: DATASET/ffdic-history.svg).
     #[arg(long)]

@@ -2,6 +2,7 @@
 
 pub mod analyze;
 pub mod compare;
+mod dataset_arg;
 pub mod diagnose;
 mod error_line;
 pub mod history;
@@ -14,5 +15,6 @@ pub mod simulate;
 pub mod store;
 pub mod sweep;
 
+pub use dataset_arg::dataset_folder;
 pub use error_line::error_line;
 pub use progress::ProgressBar;

@@ -32,6 +32,7 @@ pub enum SweepCommand {
     },
     /// Run the planned shards not done yet (all by default, in parallel).
     Run {
+        /// The sweep's folder, as `sweep plan --out` made it.
         dir: PathBuf,
         /// Only the shards whose index is I modulo N (`--shard 0/4`).
         #[arg(long, value_name = "I/N", conflicts_with = "index")]
@@ -45,11 +46,16 @@ pub enum SweepCommand {
     },
     /// Gather the results into DIR/map.csv (and map.arrow, map.json), the heat maps, the bias
     /// plots and DIR/recommendations.txt.
-    Merge { dir: PathBuf },
+    Merge {
+        /// The sweep's folder, its shards run.
+        dir: PathBuf,
+    },
     /// Submit the shards as a Slurm array job (`sbatch`) and a merge job that depends on it.
     /// DIR and this ffdic must be at the same path on every node (shared storage).
     Slurm {
+        /// The sweep's folder, as `sweep plan --out` made it.
         dir: PathBuf,
+        /// The Slurm partition (sbatch --partition; default: the cluster's default partition).
         #[arg(long)]
         partition: Option<String>,
         /// Wall-time limit per array task (`30:00`, `1-00:00:00`).
@@ -58,6 +64,7 @@ pub enum SweepCommand {
         /// At most K array tasks at once.
         #[arg(long, value_name = "K")]
         array_max: Option<usize>,
+        /// Cores per array task (sbatch --cpus-per-task; each task runs its shard on them).
         #[arg(long, default_value_t = 1)]
         cpus_per_task: usize,
         /// Write DIR/slurm/run.sbatch and merge.sbatch without submitting them.
@@ -67,6 +74,7 @@ pub enum SweepCommand {
     /// Write a Kubernetes Indexed Job (DIR/k8s/job.json; `kubectl apply -f` it) whose pods run
     /// one shard each from a shared volume.
     K8s {
+        /// The sweep's folder, as `sweep plan --out` made it.
         dir: PathBuf,
         /// Container image with `ffdic` on its PATH.
         #[arg(long)]
@@ -83,6 +91,7 @@ pub enum SweepCommand {
         /// Pods at once.
         #[arg(long, default_value_t = 8)]
         parallelism: usize,
+        /// Cores each pod requests (and runs its shard on).
         #[arg(long, default_value_t = 1)]
         cpus_per_pod: usize,
     },
