@@ -82,9 +82,10 @@ fn paper_study_on_the_noise_limited_bench() {
     }
     // Paper: the sub-pixel y component is affected more than the large x move. Each increase
     // carries its block-bootstrap 95 % interval; with print c's smooth speckle the two differ by
-    // less than their intervals (x 102 % [92, 113], y 90 % [79, 103] in one realisation of the shot
-    // noise; the paper's order in the realisation before it), so the finding is asked where it is resolved: no print may
-    // contradict it beyond the intervals, and the sharp print b must resolve it.
+    // less than their intervals (x 102 % [92, 113], y 90 % [79, 103] in one realisation of the
+    // shot noise; the paper's order in the realisation before it), so the finding is asked where
+    // it is resolved: no print may contradict it beyond the intervals, and the sharp print b must
+    // resolve it.
     let mut resolved = Vec::new();
     for p in ["a", "b", "c"] {
         let quarter = row(&rows, p, "ff25");

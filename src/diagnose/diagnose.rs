@@ -664,10 +664,10 @@ fn rest_is_in_catalogue(
         })
 }
 
-/// Per fitted candidate: its fit, the model with it, and that model's comparison (none when the
-/// fit stayed within the null).
-/// A candidate's fit, the model with it, and that model's comparison when one was made.
+/// A candidate's fit, the model with it, and that model's comparison (none when the fit stayed
+/// within the null).
 type FittedModel = (ImageFit, ModelConfig, Option<Comparison>);
+/// Per fitted candidate, its [`FittedModel`].
 type FittedModels = BTreeMap<EffectId, FittedModel>;
 
 /// The effects the model lacks, split into those this dataset can reveal (to be fitted) and
@@ -744,16 +744,15 @@ fn fit_candidates(
     (0..CANDIDATES_AT_ONCE.min(fit_ids.len()))
         .into_par_iter()
         .try_for_each(|_| -> Result<(), DiagnoseError> {
-            while let Some(&id) = fit_ids.get(next.fetch_add(1, Ordering::Relaxed)) {
+            loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                let Some(&id) = fit_ids.get(i) else {
+                    return Ok(());
+                };
                 let fitted = fit_one_candidate(meas, model, judge, id, ask)?;
                 tick()?;
-                let i = fit_ids
-                    .iter()
-                    .position(|&f| f == id)
-                    .expect("taken from fit_ids");
                 *slots[i].lock().expect("a lane never panics holding it") = fitted;
             }
-            Ok(())
         })?;
     let mut candidates = Vec::new();
     let mut models = FittedModels::new();
