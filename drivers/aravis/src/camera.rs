@@ -19,6 +19,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+/// How long the stream must stay quiet after `AcquisitionStop` before the buffers are taken to
+/// hold nothing of that acquisition (`AravisCamera::drain_after_stop`).
+const QUIET_AFTER_STOP: Duration = Duration::from_millis(50);
+
 /// The stream and the size of the buffers pushed into it.
 struct Pool {
     stream: Stream,
@@ -306,6 +310,23 @@ impl AravisCamera {
         Ok(frames)
     }
 
+    /// Returns to the pool every buffer that arrives until the stream has been quiet for
+    /// [`QUIET_AFTER_STOP`]: a frame the camera began before `AcquisitionStop` still arrives after
+    /// it, and the next acquisition — perhaps in another read-out mode of the same size (2x2
+    /// binning and 2x2 decimation) — would take it as its first frame. The drain before each
+    /// start cannot see a frame that lands after it.
+    fn drain_after_stop(&self) {
+        let Some(pool) = self.pool.as_ref() else {
+            return;
+        };
+        while let Some(late) = pool
+            .stream
+            .timeout_pop_buffer(QUIET_AFTER_STOP.as_micros() as u64)
+        {
+            pool.stream.push_buffer(late);
+        }
+    }
+
     fn update_missing_packets(&mut self) {
         self.counters.missing_packets =
             self.missing_packets_before + self.pool.as_ref().map_or(0, |p| p.missing_packets());
@@ -357,6 +378,9 @@ impl Camera for AravisCamera {
             self.cam()
                 .and_then(|cam| ctl("stop acquisition", || cam.stop_acquisition()))
         };
+        if stopped.is_ok() {
+            self.drain_after_stop();
+        }
         self.update_missing_packets();
         let frames = result?;
         stopped?;
