@@ -142,7 +142,7 @@ fn run_with(name: &str, truth: Effects, spec: ExperimentSpec, opts: CompareOptio
 fn report(name: &str, before_px: f64, after_px: f64, d: &Diagnosis) -> String {
     let mut out = format!(
         "{name}: verdict {}, discrepancy {before_px:.5} -> {after_px:.5} px (se {:.5})",
-        ffdic::model::effects::verdict_name(d.verdict),
+        ffdic::model::effects::verdict_name(&d.verdict),
         d.discrepancy_se_px
     );
     for c in &d.candidates {
@@ -169,7 +169,7 @@ fn close(o: &Outcome, effect: &str, param: &str, truth: f64) {
         .diagnosis
         .candidates
         .iter()
-        .find(|c| c.effect.as_str() == effect)
+        .find(|c| c.effect.to_string() == effect)
         .unwrap_or_else(|| panic!("no candidate {effect}\n{}", o.report));
     let (v, se) = (c.params[param], c.stderr[param]);
     assert!(
@@ -182,7 +182,7 @@ fn close(o: &Outcome, effect: &str, param: &str, truth: f64) {
 /// The diagnosis' verdict is `effect` ("none" for none).
 fn assert_verdict(o: &Outcome, effect: &str) {
     assert_eq!(
-        ffdic::model::effects::verdict_name(o.diagnosis.verdict),
+        ffdic::model::effects::verdict_name(&o.diagnosis.verdict),
         effect,
         "{}",
         o.report
@@ -434,11 +434,11 @@ fn sensor_noise_without_repeats_is_not_identifiable() {
         o.diagnosis
             .candidates
             .iter()
-            .all(|c| c.effect.as_str() != "sensor_noise"),
+            .all(|c| c.effect != ffdic::model::EffectId::SensorNoise),
         "not fitted, not guessed"
     );
     assert_ne!(
-        ffdic::model::effects::verdict_name(o.diagnosis.verdict),
+        ffdic::model::effects::verdict_name(&o.diagnosis.verdict),
         "sensor_noise"
     );
 }

@@ -38,7 +38,7 @@ fn single(spec: Value, effect: &str, name: &str, truth: f64) {
     let (r, _) = diagnose(&spec, 1);
     let d = &r.diagnoses[0];
     assert_eq!(
-        ffdic::model::effects::verdict_name(d.verdict),
+        ffdic::model::effects::verdict_name(&d.verdict),
         effect,
         "verdict"
     );
@@ -82,7 +82,7 @@ fn controls_with_nothing_hidden_give_at_most_one_verdict() {
         let mut draw = Draw::new(100 + k);
         let spec = bench(&format!("control-{k}"), &mut draw, k % 2 == 1);
         let (r, _) = diagnose(&spec, 1);
-        verdicts.push(r.diagnoses[0].verdict);
+        verdicts.push(r.diagnoses[0].verdict.clone());
         unexplained.push(r.diagnoses[0].unexplained.significant);
     }
     println!("control verdicts: {verdicts:?}; unexplained: {unexplained:?}");
@@ -138,7 +138,7 @@ fn hidden_stage_error() {
     let (r, truth) = diagnose(&spec, 1);
     let d = &r.diagnoses[0];
     assert_eq!(
-        ffdic::model::effects::verdict_name(d.verdict),
+        ffdic::model::effects::verdict_name(&d.verdict),
         "stage_error"
     );
     // The truth: the RMS per axis of the offsets the generator drew.
@@ -169,7 +169,10 @@ fn hidden_vignetting() {
     spec["effects"] = json!({"vignetting_v": v});
     let (r, _) = diagnose(&spec, 1);
     let d = &r.diagnoses[0];
-    assert_eq!(ffdic::model::effects::verdict_name(d.verdict), "vignetting");
+    assert_eq!(
+        ffdic::model::effects::verdict_name(&d.verdict),
+        "vignetting"
+    );
     let (fit, se) = param(d, "vignetting", "v");
     close("vignetting", fit, se, v);
     let before = d.before.as_ref().unwrap();
@@ -201,12 +204,12 @@ fn hidden_psf_blur_with_a_nominal_print_is_confounded_with_it() {
     // Never another effect; with a print known only nominally, the blur is the print's or the
     // lens's, and the diagnosis says so with the run that separates them.
     assert!(
-        ffdic::model::effects::verdict_name(d.verdict) == "psf_blur"
-            || ffdic::model::effects::verdict_name(d.verdict) == "none",
+        ffdic::model::effects::verdict_name(&d.verdict) == "psf_blur"
+            || ffdic::model::effects::verdict_name(&d.verdict) == "none",
         "verdict {}",
-        ffdic::model::effects::verdict_name(d.verdict)
+        ffdic::model::effects::verdict_name(&d.verdict)
     );
-    if ffdic::model::effects::verdict_name(d.verdict) == "none" {
+    if ffdic::model::effects::verdict_name(&d.verdict) == "none" {
         assert!(d
             .confounded
             .iter()
@@ -231,10 +234,10 @@ fn hidden_psf_blur_with_a_characterised_print_is_named_within_20_percent() {
     let criteria = d
         .candidates
         .iter()
-        .find(|c| c.effect.as_str() == "psf_blur")
+        .find(|c| c.effect == ffdic::model::EffectId::PsfBlur)
         .map(|c| format!("ΔBIC {:.1}, {:?}", c.delta_bic, c.criteria));
     assert_eq!(
-        ffdic::model::effects::verdict_name(d.verdict),
+        ffdic::model::effects::verdict_name(&d.verdict),
         "psf_blur",
         "psf_blur candidate: {criteria:?}"
     );
@@ -258,12 +261,12 @@ fn hidden_fill_factor_is_never_a_fit_at_its_bound() {
     let (r, _) = diagnose(&spec, 1);
     let d = &r.diagnoses[0];
     assert!(
-        ffdic::model::effects::verdict_name(d.verdict) == "fill_factor"
-            || ffdic::model::effects::verdict_name(d.verdict) == "none",
+        ffdic::model::effects::verdict_name(&d.verdict) == "fill_factor"
+            || ffdic::model::effects::verdict_name(&d.verdict) == "none",
         "verdict {}",
-        ffdic::model::effects::verdict_name(d.verdict)
+        ffdic::model::effects::verdict_name(&d.verdict)
     );
-    if ffdic::model::effects::verdict_name(d.verdict) == "none" {
+    if ffdic::model::effects::verdict_name(&d.verdict) == "none" {
         assert!(d
             .confounded
             .iter()
@@ -284,14 +287,14 @@ fn several(spec: Value, expected: &[(&str, &str, f64)]) {
     let (r, _) = diagnose(&spec, expected.len() + 1);
     for (effect, name, truth) in expected {
         assert!(
-            r.verdicts.iter().any(|v| v.as_str() == *effect),
+            r.verdicts.iter().any(|v| v.to_string() == *effect),
             "{effect} not found: {:?}",
             r.verdicts
         );
         let k = r
             .verdicts
             .iter()
-            .position(|v| v.as_str() == *effect)
+            .position(|v| v.to_string() == *effect)
             .unwrap();
         let value = r.rounds[k].params[*name];
         assert!(
@@ -302,13 +305,13 @@ fn several(spec: Value, expected: &[(&str, &str, f64)]) {
     for round in r
         .rounds
         .iter()
-        .filter(|x| ffdic::model::effects::verdict_name(x.verdict) != "none")
+        .filter(|x| ffdic::model::effects::verdict_name(&x.verdict) != "none")
     {
         let after = round.after_px.unwrap();
         assert!(
             after < round.discrepancy_px,
             "round {}: {} -> {after}",
-            ffdic::model::effects::verdict_name(round.verdict),
+            ffdic::model::effects::verdict_name(&round.verdict),
             round.discrepancy_px
         );
     }
@@ -342,7 +345,7 @@ fn vignetting_and_scale_at_once() {
         let k = r
             .verdicts
             .iter()
-            .position(|x| x.as_str() == effect)
+            .position(|x| x.to_string() == effect)
             .unwrap_or_else(|| panic!("{effect} not found: {:?}", r.verdicts));
         let value = r.rounds[k].params[name];
         assert!(
@@ -356,7 +359,7 @@ fn vignetting_and_scale_at_once() {
         .rounds
         .iter()
         .enumerate()
-        .filter(|(_, x)| ffdic::model::effects::verdict_name(x.verdict) != "none")
+        .filter(|(_, x)| ffdic::model::effects::verdict_name(&x.verdict) != "none")
     {
         let d = &r.diagnoses[k];
         let before = d.before.as_ref().unwrap().chi2.total;
@@ -365,7 +368,7 @@ fn vignetting_and_scale_at_once() {
         assert!(
             after_chi2 < before,
             "round {}: χ² {before} -> {after_chi2}",
-            ffdic::model::effects::verdict_name(round.verdict)
+            ffdic::model::effects::verdict_name(&round.verdict)
         );
     }
 }
@@ -381,7 +384,7 @@ fn sample3_has_nothing_to_find() {
     let r = diagnose_rounds_prepared(&meas, &baseline(), 1, &|_, _| true).unwrap();
     report("sample3", &r);
     assert_eq!(
-        ffdic::model::effects::verdict_name(r.diagnoses[0].verdict),
+        ffdic::model::effects::verdict_name(&r.diagnoses[0].verdict),
         "none"
     );
 }
@@ -397,7 +400,7 @@ fn false_alarm_rate_over_30_controls() {
         let mut draw = Draw::new(1000 + k);
         let spec = bench(&format!("control-{k}"), &mut draw, k % 2 == 1);
         let (r, _) = diagnose(&spec, 1);
-        verdicts.push(r.diagnoses[0].verdict);
+        verdicts.push(r.diagnoses[0].verdict.clone());
         unexplained += usize::from(r.diagnoses[0].unexplained.significant);
     }
     let found = verdicts.iter().filter(|v| v.is_some()).count();

@@ -101,7 +101,7 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
         d.model.version,
         d.discrepancy_px,
         d.discrepancy_se_px,
-        verdict_name(d.verdict)
+        verdict_name(&d.verdict)
     );
     for c in d
         .candidates
@@ -114,7 +114,7 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
     if let Some(a) = &d.after {
         s += &format!(
             "with {} added: {:.5} px{}\n",
-            verdict_name(d.verdict),
+            verdict_name(&d.verdict),
             a.discrepancy_px,
             d.explained_fraction.map_or(String::new(), |f| format!(
                 " ({:.0} % of the unexplained low-order field)",
@@ -132,7 +132,11 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
     if let Some(w) = &d.withheld {
         s += &format!("not named: {}\n", w.reason);
     }
-    for c in d.candidates.iter().filter(|c| Some(c.effect) == d.verdict) {
+    for c in d
+        .candidates
+        .iter()
+        .filter(|c| Some(&c.effect) == d.verdict.as_ref())
+    {
         for note in &c.notes {
             s += &format!("{}: {note}\n", c.effect);
         }
@@ -170,7 +174,7 @@ pub fn rounds_text(r: &Rounds) -> String {
             round.model,
             round.discrepancy_px,
             round.discrepancy_se_px,
-            verdict_name(round.verdict),
+            verdict_name(&round.verdict),
             if params.is_empty() {
                 String::new()
             } else {

@@ -199,7 +199,7 @@ struct ModelStory {
     dataset: String,
     baseline_px: f64,
     #[serde(with = "ffdic::model::effects::verdict_serde")]
-    verdict: Option<ffdic::model::EffectId>,
+    verdict: Option<ffdic::model::CandidateId>,
     /// The winner's fitted parameters and standard errors.
     params: std::collections::BTreeMap<String, f64>,
     stderr: std::collections::BTreeMap<String, f64>,
@@ -261,7 +261,7 @@ fn model_story(
     let winner = diagnosis
         .candidates
         .iter()
-        .find(|c| Some(c.effect) == diagnosis.verdict)
+        .find(|c| Some(&c.effect) == diagnosis.verdict.as_ref())
         .cloned();
     let (model, after_px) = match &winner {
         None => (None, None),
@@ -317,7 +317,7 @@ fn story_text(s: &ModelStory) -> String {
                 .collect();
             t += &format!(
                 "  diagnosis: missing effect {} ({}; ΔBIC {:.1})\n  with it added ({model}): discrepancy {after:.5} px\n",
-                ffdic::model::effects::verdict_name(s.verdict),
+                ffdic::model::effects::verdict_name(&s.verdict),
                 params.join(", "),
                 s.delta_bic.unwrap_or(f64::NAN)
             );

@@ -25,13 +25,14 @@ use super::fit_image::{
     fit_fill_factor, fit_illumination_change, fit_motion_blur, fit_psf_blur, fit_sensor_noise,
     fit_vignetting,
 };
+use super::fit_user_effect::fit_user_effect;
 use super::identifiability::{design_of, separating_run, DatasetDesign};
 pub use super::identifiability::{Confounded, NotIdentifiable};
 use super::print::PrintKnowledge;
 use super::results::{Comparison, ImageFit, ModelInfo};
 use super::unexplained::{model_scatter, unexplained, Unexplained};
 use super::{CompareOptions, DiagnoseError, Progress};
-use crate::model::{EffectId, Effects, ModelConfig};
+use crate::model::{CandidateId, EffectId, Effects, ModelConfig};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -41,7 +42,7 @@ use std::sync::Mutex;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Candidate {
-    pub effect: EffectId,
+    pub effect: CandidateId,
     pub params: BTreeMap<String, f64>,
     /// Standard errors of the fitted parameters (parameters set rather than fitted have none).
     pub stderr: BTreeMap<String, f64>,
@@ -78,6 +79,14 @@ pub enum Evidence {
 }
 
 impl Evidence {
+    /// A user effect is a displacement field.
+    pub fn of_candidate(candidate: &CandidateId) -> Self {
+        match candidate {
+            CandidateId::Catalogue(e) => Self::of(*e),
+            CandidateId::User(_) => Evidence::Displacement,
+        }
+    }
+
     pub fn of(effect: EffectId) -> Self {
         use EffectId::*;
         match effect {
@@ -136,10 +145,10 @@ pub struct Diagnosis {
     /// Ranked by ΔBIC, most negative first.
     pub candidates: Vec<Candidate>,
     /// Candidate ids ranked by the drop of the discrepancy, largest first.
-    pub ranking_by_drop: Vec<EffectId>,
+    pub ranking_by_drop: Vec<CandidateId>,
     /// The winner, `"none"` on the wire when there is none.
     #[serde(with = "crate::model::effects::verdict_serde")]
-    pub verdict: Option<EffectId>,
+    pub verdict: Option<CandidateId>,
     pub confounded: Vec<Confounded>,
     pub not_identifiable: Vec<NotIdentifiable>,
     /// What the model as given leaves unexplained.
@@ -172,7 +181,7 @@ pub struct Diagnosis {
 /// remains, and no other catalogue effect explains the rest: the signature is not its own.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Withheld {
-    pub effect: EffectId,
+    pub effect: CandidateId,
     pub explained_fraction: f64,
     pub reason: String,
 }
@@ -193,13 +202,11 @@ pub fn diagnose(
 }
 
 /// The field differences of the model's comparison, per run and scheme, as the geometric fits
-/// read them, with what else they need; and a geometric effect fitted on them.
-fn geometric_candidate(
-    meas: &Measurement,
-    before: &Comparison,
-    model: &Effects,
-    id: EffectId,
-) -> Option<ImageFit> {
+/// read them, with what else they need.
+fn field_samples<'a>(
+    meas: &'a Measurement,
+    before: &'a Comparison,
+) -> (Vec<FieldSample<'a>>, GeometricSetting) {
     let camera = before.model.nominal.camera(0);
     let centre = camera.centre();
     let r0 = camera.half_diagonal_px();
@@ -229,6 +236,17 @@ fn geometric_candidate(
         r0,
         observations: before.chi2.observations,
     };
+    (samples, setting)
+}
+
+/// A geometric catalogue effect fitted on the field differences of the model's comparison.
+fn geometric_candidate(
+    meas: &Measurement,
+    before: &Comparison,
+    model: &Effects,
+    id: EffectId,
+) -> Option<ImageFit> {
+    let (samples, setting) = field_samples(meas, before);
     fit_geometric_effect(&samples, &setting, model, id)
 }
 
@@ -236,10 +254,17 @@ fn fit_candidate(
     meas: &Measurement,
     before: &Comparison,
     model: &Effects,
-    id: EffectId,
+    id: &CandidateId,
     stop: &dyn Fn() -> bool,
 ) -> Option<ImageFit> {
     use EffectId::*;
+    let id = match id {
+        CandidateId::Catalogue(e) => *e,
+        CandidateId::User(name) => {
+            let (samples, _) = field_samples(meas, before);
+            return fit_user_effect(&samples, model, name);
+        }
+    };
     match id {
         Rotation | Scale | LensDistortion | TargetTilt => {
             geometric_candidate(meas, before, model, id)
@@ -276,12 +301,26 @@ fn bound_of(effect: EffectId, param: &str) -> Option<(f64, f64)> {
     }
 }
 
-fn outside_range(effect: EffectId, params: &BTreeMap<String, f64>) -> Option<String> {
-    let at: Vec<String> = params
+/// A user effect's parameter at either end of the range its author stated.
+fn user_bound_of(effects: &Effects, name: &str, param: &str, value: f64) -> Option<(f64, f64)> {
+    let p = effects.user.get(name)?.params.get(param)?;
+    let width = p.max - p.min;
+    [p.min, p.max]
+        .into_iter()
+        .find(|b| (value - b).abs() <= 0.01 * width)
+        .map(|b| (b, width))
+}
+
+fn outside_range(fit: &ImageFit) -> Option<String> {
+    let at: Vec<String> = fit
+        .params
         .iter()
         .filter_map(|(k, v)| {
-            let (bound, width) = bound_of(effect, k)?;
-            ((v - bound).abs() <= 0.01 * width).then(|| format!("{k} = {v:.4} (bound {bound})"))
+            let (bound, width) = match &fit.effect {
+                CandidateId::Catalogue(e) => bound_of(*e, k)?,
+                CandidateId::User(name) => user_bound_of(&fit.effects, name, k, *v)?,
+            };
+            ((v - bound).abs() <= 0.01 * width).then(|| format!("{k} = {v:.4e} (bound {bound:e})"))
         })
         .collect();
     (!at.is_empty()).then(|| {
@@ -352,7 +391,7 @@ impl Judge<'_> {
             a.discrepancy_se_px.max(self.seed_sd)
         });
         let drop_se_px = self.se_before.hypot(se_after);
-        let evidence = Evidence::of(fit.effect);
+        let evidence = Evidence::of_candidate(&fit.effect);
         let displacement_ok = drop_px > 2.0 * drop_se_px;
         // The image drop is scaled for overdispersion; with no effect a k-parameter drop is
         // χ²_k, whose standard deviation is √(2k).
@@ -366,10 +405,11 @@ impl Judge<'_> {
                 Evidence::Image => image_ok,
                 Evidence::Either => displacement_ok || image_ok,
             };
-        let range = outside_range(fit.effect, &fit.params);
+        let range = outside_range(fit);
+        let catalogue = fit.effect.catalogue();
         let separable_from_print = !(self.print_calibrated
-            && matches!(fit.effect, EffectId::PsfBlur | EffectId::FillFactor)
-            || fit.effect == EffectId::Vignetting && self.small_moves);
+            && matches!(catalogue, Some(EffectId::PsfBlur | EffectId::FillFactor))
+            || catalogue == Some(EffectId::Vignetting) && self.small_moves);
         let criteria = Criteria {
             delta_bic_ok: method != Method::Unchanged && delta < SIGNIFICANT_DELTA_BIC,
             beyond_null: fit.beyond_null,
@@ -385,7 +425,7 @@ impl Judge<'_> {
             explains_its_signature: true,
         };
         Candidate {
-            effect: fit.effect,
+            effect: fit.effect.clone(),
             params: fit.params.clone(),
             // A parameter whose error could not be estimated has no entry (JSON has no NaN).
             stderr: fit
@@ -427,25 +467,42 @@ fn predict(
     }
     let mut nominal = before.model.nominal.clone();
     let mut dic = before.model_dic.clone();
+    let r0 = nominal.camera(0).half_diagonal_px();
+    let user = match &fit.effect {
+        CandidateId::User(name) => {
+            let e = with.effects.user.get(name)?;
+            Some((e.field().ok()?, e.values()?))
+        }
+        CandidateId::Catalogue(_) => None,
+    };
+    // The candidate's field at p (px from the centre) for the move t, full-resolution px.
+    let field = |p: (f64, f64), t: (f64, f64)| -> (f64, f64) {
+        if let Some((f, values)) = &user {
+            return f.displacement(p, t, values);
+        }
+        fit.geometric
+            .field
+            .iter()
+            .fold((0.0, 0.0), |(u, v), &(param, value)| {
+                let (bu, bv) = geometric_basis(param, p, t, r0);
+                (u + value * bu, v + value * bv)
+            })
+    };
     if fit.effect == EffectId::StageError {
         let e = with.effects.stage_error?;
         nominal.stage.repeatability_um = Some(e.repeatability_um);
         nominal.stage.source = super::stage_landing::RepeatabilitySource::Model;
-    } else if !fit.geometric.field.is_empty() {
-        let camera = nominal.camera(0);
-        let (cx, cy) = camera.centre();
-        let r0 = camera.half_diagonal_px();
+    } else if user.is_some() || !fit.geometric.field.is_empty() {
+        let (cx, cy) = nominal.camera(0).centre();
         for (ri, run) in meas.manifest.runs.iter().enumerate() {
             let t = nominal.actual_move_px(ri, (run.stage.dx_mm, run.stage.dy_mm));
             for (si, scheme) in meas.options.schemes.iter().enumerate() {
                 let (bx, by) = (scheme.x.block as f64, scheme.y.block as f64);
                 for p in dic[ri][si].points.iter_mut() {
                     let (fx, fy) = scheme.to_full(p.x, p.y);
-                    for &(param, value) in &fit.geometric.field {
-                        let (bu, bv) = geometric_basis(param, (fx - cx, fy - cy), (t[0], t[1]), r0);
-                        p.u += value * bu / bx;
-                        p.v += value * bv / by;
-                    }
+                    let (u, v) = field((fx - cx, fy - cy), (t[0], t[1]));
+                    p.u += u / bx;
+                    p.v += v / by;
                 }
             }
         }
@@ -515,7 +572,7 @@ pub fn diagnose_prepared(
     candidates.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
     let mut by_drop: Vec<&Candidate> = candidates.iter().collect();
     by_drop.sort_by(|a, b| b.drop_px.total_cmp(&a.drop_px));
-    let ranking_by_drop = by_drop.iter().map(|c| c.effect).collect();
+    let ranking_by_drop = by_drop.iter().map(|c| c.effect.clone()).collect();
     let left = settle(meas, winner, &mut models, &before, w0, (se_before, seed_sd));
     if let Some(w) = &left.withheld {
         for c in candidates.iter_mut().filter(|c| c.effect == w.effect) {
@@ -523,7 +580,7 @@ pub fn diagnose_prepared(
             c.significant = false;
         }
     }
-    let confounded = confounded_pairs(&design, &candidates, left.winner, print_calibrated);
+    let confounded = confounded_pairs(&design, &candidates, left.winner.clone(), print_calibrated);
     Ok(Diagnosis {
         model: before.model.clone(),
         discrepancy_px: before.discrepancy_px,
@@ -550,7 +607,7 @@ pub fn diagnose_prepared(
 
 /// The verdict held against what it leaves (module doc of `unexplained`).
 struct Settled {
-    winner: Option<EffectId>,
+    winner: Option<CandidateId>,
     winner_model: Option<ModelConfig>,
     after_comparison: Option<Comparison>,
     before: Unexplained,
@@ -564,7 +621,7 @@ struct Settled {
 /// catalogue effect explains the rest. `se` is the model's discrepancy SE and the seed scatter.
 fn settle(
     meas: &Measurement,
-    winner: Option<EffectId>,
+    winner: Option<CandidateId>,
     models: &mut FittedModels,
     before: &Comparison,
     w0: Option<f64>,
@@ -573,7 +630,7 @@ fn settle(
     let infl = super::bic::inflation(&meas.options.dic);
     let schemes = &meas.options.schemes;
     let left_before = unexplained(before, schemes, w0, se_before, infl);
-    let (winner_model, after) = match winner.and_then(|w| models.remove(&w)) {
+    let (winner_model, after) = match winner.as_ref().and_then(|w| models.remove(w)) {
         Some((_, m, a)) => (Some(m), a),
         None => (None, None),
     };
@@ -592,7 +649,7 @@ fn settle(
         withheld: None,
     };
     let (Some(w), Some(left), Some(fraction), Some(after), Some(with)) = (
-        winner,
+        settled.winner.clone(),
         &settled.after,
         explained_fraction,
         &settled.after_comparison,
@@ -615,12 +672,12 @@ fn settle(
         after: None,
         explained_fraction: None,
         withheld: Some(Withheld {
-            effect: w,
-            explained_fraction: fraction,
             reason: format!(
                 "{w} explains {:.0} % of the low-order field the model leaves, and no geometric catalogue effect explains the rest: its signature is not what the data show (see unexplained)",
                 100.0 * fraction
             ),
+            effect: w,
+            explained_fraction: fraction,
         }),
         ..settled
     }
@@ -668,15 +725,15 @@ fn rest_is_in_catalogue(
 /// within the null).
 type FittedModel = (ImageFit, ModelConfig, Option<Comparison>);
 /// Per fitted candidate, its [`FittedModel`].
-type FittedModels = BTreeMap<EffectId, FittedModel>;
+type FittedModels = BTreeMap<CandidateId, FittedModel>;
 
 /// The effects the model lacks, split into those this dataset can reveal (to be fitted) and
-/// those it cannot (with the runs that would). The stage is always part of the nominal fit and
-/// the ADC is the TIFFs'.
+/// those it cannot (with the runs that would), then the model's proposed user effects. The stage
+/// is always part of the nominal fit and the ADC is the TIFFs'.
 fn candidates_to_fit(
     model: &ModelConfig,
     design: &DatasetDesign,
-) -> (Vec<EffectId>, Vec<NotIdentifiable>) {
+) -> (Vec<CandidateId>, Vec<NotIdentifiable>) {
     let present = model.effects.enabled();
     let mut not_identifiable = Vec::new();
     let mut fit_ids = Vec::new();
@@ -685,9 +742,17 @@ fn candidates_to_fit(
     }) {
         match design.not_identifiable(id) {
             Some(n) => not_identifiable.push(n),
-            None => fit_ids.push(id),
+            None => fit_ids.push(id.into()),
         }
     }
+    fit_ids.extend(
+        model
+            .effects
+            .user
+            .iter()
+            .filter(|(_, e)| e.is_proposed())
+            .map(|(name, _)| CandidateId::User(name.clone())),
+    );
     (fit_ids, not_identifiable)
 }
 
@@ -734,7 +799,7 @@ fn fit_candidates(
     meas: &Measurement,
     model: &ModelConfig,
     judge: &Judge<'_>,
-    fit_ids: &[EffectId],
+    fit_ids: &[CandidateId],
     tick: &(dyn Fn() -> Result<(), DiagnoseError> + Sync),
     ask: Progress,
 ) -> Result<(Vec<Candidate>, FittedModels), DiagnoseError> {
@@ -746,7 +811,7 @@ fn fit_candidates(
         .try_for_each(|_| -> Result<(), DiagnoseError> {
             loop {
                 let i = next.fetch_add(1, Ordering::Relaxed);
-                let Some(&id) = fit_ids.get(i) else {
+                let Some(id) = fit_ids.get(i) else {
                     return Ok(());
                 };
                 let fitted = fit_one_candidate(meas, model, judge, id, ask)?;
@@ -760,7 +825,7 @@ fn fit_candidates(
         let fitted = slot.into_inner().expect("a lane never panics holding it");
         if let Some((candidate, (fit, with, after))) = fitted {
             candidates.push(candidate);
-            models.insert(fit.effect, (fit, with, after));
+            models.insert(fit.effect.clone(), (fit, with, after));
         }
     }
     Ok((candidates, models))
@@ -771,7 +836,7 @@ fn fit_one_candidate(
     meas: &Measurement,
     model: &ModelConfig,
     judge: &Judge<'_>,
-    id: EffectId,
+    id: &CandidateId,
     ask: Progress,
 ) -> Result<Option<(Candidate, FittedModel)>, DiagnoseError> {
     let before = judge.before;
@@ -816,9 +881,9 @@ fn render_winner(
     candidates: &mut [Candidate],
     models: &mut FittedModels,
     ask: Progress,
-) -> Result<Option<EffectId>, DiagnoseError> {
+) -> Result<Option<CandidateId>, DiagnoseError> {
     while let Some(pos) = candidates.iter().position(|c| c.significant) {
-        let effect = candidates[pos].effect;
+        let effect = candidates[pos].effect.clone();
         if candidates[pos].method == Method::Rendered {
             return Ok(Some(effect));
         }
@@ -850,10 +915,13 @@ fn render_winner(
 fn confounded_pairs(
     design: &DatasetDesign,
     candidates: &[Candidate],
-    winner: Option<EffectId>,
+    winner: Option<CandidateId>,
     print_calibrated: bool,
 ) -> Vec<Confounded> {
-    let fitted: Vec<EffectId> = candidates.iter().map(|c| c.effect).collect();
+    let fitted: Vec<EffectId> = candidates
+        .iter()
+        .filter_map(|c| c.effect.catalogue())
+        .collect();
     let mut confounded = design.confounded(&fitted);
     if fitted.contains(&EffectId::Vignetting)
         && design.largest_move_fraction < VIGNETTING_MOVE_FRACTION
@@ -883,14 +951,14 @@ fn confounded_pairs(
         .find(|c| c.effect == w)
         .expect("winner is a candidate");
     for c in candidates.iter().filter(|c| c.significant && c.effect != w) {
-        let names = super::identifiability::pair(w, c.effect);
+        let names = super::identifiability::pair(&w, &c.effect);
         let already = confounded
             .iter()
             .any(|p| p.effects.contains(&names[0]) && p.effects.contains(&names[1]));
         if !already && top.drop_px > 0.0 && c.drop_px >= 0.8 * top.drop_px {
             confounded.push(Confounded {
                 effects: names,
-                separate_with: separating_run(w, c.effect),
+                separate_with: separating_run(&w, &c.effect),
                 evidence: "data".into(),
             });
         }

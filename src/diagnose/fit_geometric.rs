@@ -49,27 +49,56 @@ struct Sums {
     run: usize,
 }
 
-fn centred_sums(s: &FieldSample, params: &[GeometricParam]) -> Option<Sums> {
+/// The basis fields of a fit, in full-resolution px at `p` (px from the image centre) for the
+/// actual move `t` (px): `k` columns, and a field already known that is taken from the data
+/// first (zero for the catalogue's fields, which are linear in their parameters).
+pub trait Basis: Sync {
+    fn len(&self) -> usize;
+    /// Column j's (u, v) into `u[j]`, `v[j]`.
+    fn at(&self, p: (f64, f64), t: (f64, f64), u: &mut [f64], v: &mut [f64]);
+    fn known(&self, _p: (f64, f64), _t: (f64, f64)) -> (f64, f64) {
+        (0.0, 0.0)
+    }
+}
+
+/// [`GeometricParam`]s with the distortion's normalising radius (the same for every sample: one
+/// camera).
+struct Catalogue<'a> {
+    params: &'a [GeometricParam],
+    r0: f64,
+}
+
+impl Basis for Catalogue<'_> {
+    fn len(&self) -> usize {
+        self.params.len()
+    }
+
+    fn at(&self, p: (f64, f64), t: (f64, f64), u: &mut [f64], v: &mut [f64]) {
+        for (j, &q) in self.params.iter().enumerate() {
+            (u[j], v[j]) = geometric_basis(q, p, t, self.r0);
+        }
+    }
+}
+
+fn centred_sums(s: &FieldSample, basis: &dyn Basis) -> Option<Sums> {
     if !(s.var.0 > 0.0 && s.var.1 > 0.0) || s.points.len() < 3 {
         return None;
     }
-    let k = params.len();
+    let k = basis.len();
     let (bx, by) = (s.scheme.x.block as f64, s.scheme.y.block as f64);
-    // Per point: k basis values in u, k in v, then du, dv.
+    // Per point: k basis values in u, k in v, then du, dv less the known field.
     let rows: Vec<(Vec<f64>, Vec<f64>, f64, f64)> = s
         .points
         .iter()
         .map(|p| {
             let (fx, fy) = s.scheme.to_full(p.x, p.y);
             let rel = (fx - s.centre.0, fy - s.centre.1);
-            let (bu, bv): (Vec<f64>, Vec<f64>) = params
-                .iter()
-                .map(|&q| {
-                    let (u, v) = geometric_basis(q, rel, s.move_px, s.r0);
-                    (u / bx, v / by)
-                })
-                .unzip();
-            (bu, bv, p.du, p.dv)
+            let (mut bu, mut bv) = (vec![0.0; k], vec![0.0; k]);
+            basis.at(rel, s.move_px, &mut bu, &mut bv);
+            bu.iter_mut().for_each(|x| *x /= bx);
+            bv.iter_mut().for_each(|x| *x /= by);
+            let (ku, kv) = basis.known(rel, s.move_px);
+            (bu, bv, p.du - ku / bx, p.dv - kv / by)
         })
         .collect();
     let count = rows.len() as f64;
@@ -136,10 +165,30 @@ fn invert(n: &[f64], k: usize) -> Option<Vec<f64>> {
 /// same in every run, a speckle realisation's systematic error is not. None when the basis
 /// fields cannot be told apart by these runs (a singular normal matrix).
 pub fn fit_geometric(samples: &[FieldSample], params: &[GeometricParam]) -> Option<GeometricFit> {
-    let k = params.len();
+    let r0 = samples.first().map_or(1.0, |s| s.r0);
+    let fit = fit_fields(samples, &Catalogue { params, r0 })?;
+    Some(GeometricFit {
+        params: params.to_vec(),
+        values: fit.values,
+        stderr: fit.stderr,
+        chi2_drop: fit.chi2_drop,
+    })
+}
+
+/// A fit of any [`Basis`]: the values, their standard errors and the Wald χ² (as
+/// [`GeometricFit`]).
+pub struct FieldFit {
+    pub values: Vec<f64>,
+    pub stderr: Vec<f64>,
+    pub chi2_drop: f64,
+}
+
+/// [`fit_geometric`] on any basis.
+pub fn fit_fields(samples: &[FieldSample], basis: &dyn Basis) -> Option<FieldFit> {
+    let k = basis.len();
     let sums: Vec<Sums> = samples
         .iter()
-        .filter_map(|s| centred_sums(s, params))
+        .filter_map(|s| centred_sums(s, basis))
         .collect();
     if sums.is_empty() {
         return None;
@@ -172,8 +221,7 @@ pub fn fit_geometric(samples: &[FieldSample], params: &[GeometricParam]) -> Opti
         })
         .sum::<f64>()
         / inflation;
-    Some(GeometricFit {
-        params: params.to_vec(),
+    Some(FieldFit {
         values,
         stderr: var.iter().map(|v| v.sqrt()).collect(),
         chi2_drop,

@@ -270,7 +270,7 @@ fn write_fit(
     } = out;
     stderr.retain(|_, se: &mut f64| se.is_finite());
     ImageFit {
-        effect,
+        effect: effect.into(),
         params,
         stderr,
         effects,

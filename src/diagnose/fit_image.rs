@@ -147,7 +147,7 @@ pub fn fit_psf_blur(
     let se = curvature_stderr(&obj, &[sigma], &[0.05], &[0.0], &[3.0])[0];
     ImageFit {
         geometric: Default::default(),
-        effect: EffectId::PsfBlur,
+        effect: EffectId::PsfBlur.into(),
         params: map(&[("sigma_px", sigma)]),
         stderr: map(&[("sigma_px", se)]),
         effects: with(sigma),
@@ -188,7 +188,7 @@ pub fn fit_fill_factor(
     let se = curvature_stderr(&obj, &x, &[0.04, 0.04], &lo, &hi);
     ImageFit {
         geometric: Default::default(),
-        effect: EffectId::FillFactor,
+        effect: EffectId::FillFactor.into(),
         params: map(&[("fx", x[0]), ("fy", x[1])]),
         stderr: map(&[("fx", se[0]), ("fy", se[1])]),
         effects: with(x[0], x[1]),
@@ -295,7 +295,7 @@ pub fn fit_sensor_noise(
         ((se_b / (2.0 * sb * a_fit)).powi(2) + (sb * se_a / (a_fit * a_fit)).powi(2)).sqrt();
     Some(ImageFit {
         geometric: Default::default(),
-        effect: EffectId::SensorNoise,
+        effect: EffectId::SensorNoise.into(),
         params: map(&[
             ("gain", gain),
             ("read_noise_e", sn.read_noise_e),
@@ -362,7 +362,7 @@ pub fn fit_vignetting(
     let _ = meas;
     Some(ImageFit {
         geometric: Default::default(),
-        effect: EffectId::Vignetting,
+        effect: EffectId::Vignetting.into(),
         params: map(&[("v", v + existing)]),
         stderr: map(&[("v", se_v)]),
         effects: Effects {
@@ -420,7 +420,7 @@ pub fn fit_illumination_change(
     let _ = meas;
     Some(ImageFit {
         geometric: Default::default(),
-        effect: EffectId::IlluminationChange,
+        effect: EffectId::IlluminationChange.into(),
         params: map(&[("gain", g), ("offset", o)]),
         stderr: map(&[("gain", se_g), ("offset", se_o)]),
         effects: Effects {
@@ -521,7 +521,7 @@ pub fn fit_motion_blur(
     let se = curvature_stderr(&obj, &[l], &[0.2], &[0.0], &[4.0])[0];
     Some(ImageFit {
         geometric: Default::default(),
-        effect: EffectId::MotionBlur,
+        effect: EffectId::MotionBlur.into(),
         params: map(&[("length_px", l), ("angle_rad", angle)]),
         stderr: map(&[("length_px", se)]),
         effects: with(l),

@@ -16,7 +16,7 @@
 //! - `fixed_pattern` needs flat-field and dark frames, which `ffdic-dataset/1` has no run for.
 
 use crate::dataset::Manifest;
-use crate::model::EffectId;
+use crate::model::{CandidateId, EffectId};
 use serde::{Deserialize, Serialize};
 
 /// The runs of a dataset as the identifiability rules see them.
@@ -176,7 +176,7 @@ impl DatasetDesign {
                         .unwrap_or(f64::INFINITY);
         if has(EffectId::LensDistortion) && has(EffectId::Scale) && !sizes_ok {
             out.push(Confounded {
-                effects: pair(EffectId::LensDistortion, EffectId::Scale),
+                effects: pair(&EffectId::LensDistortion.into(), &EffectId::Scale.into()),
                 separate_with: SEVERAL_SIZES.into(),
                 evidence: "design".into(),
             });
@@ -186,7 +186,7 @@ impl DatasetDesign {
             && (self.subpixel_steps_x < 3 || self.subpixel_steps_y < 3)
         {
             out.push(Confounded {
-                effects: pair(EffectId::FillFactor, EffectId::PsfBlur),
+                effects: pair(&EffectId::FillFactor.into(), &EffectId::PsfBlur.into()),
                 separate_with: STEP_SERIES.into(),
                 evidence: "design".into(),
             });
@@ -199,12 +199,19 @@ impl DatasetDesign {
 pub const TILT_SEPARATION: &str = "translations along both x and y, of two sizes each: a tilt's strain is twice as large along the move as across it (εxx ≈ 2 εyy for an x move), decentring distortion's three times, and a scale change does not grow with the move";
 
 /// Two effects as a confounded pair's names.
-pub fn pair(a: EffectId, b: EffectId) -> [String; 2] {
-    [a.as_str().into(), b.as_str().into()]
+pub fn pair(a: &CandidateId, b: &CandidateId) -> [String; 2] {
+    [a.to_string(), b.to_string()]
 }
 
-/// The run that separates two effects, for pairs the data show explaining the same residual.
-pub fn separating_run(a: EffectId, b: EffectId) -> String {
+/// The run that separates two candidates, for pairs the data show explaining the same residual.
+pub fn separating_run(a: &CandidateId, b: &CandidateId) -> String {
+    match (a.catalogue(), b.catalogue()) {
+        (Some(a), Some(b)) => separating_catalogue_run(a, b),
+        _ => "runs for which the two fields differ: other move sizes and directions (a user effect's field is what its expressions say it is)".into(),
+    }
+}
+
+fn separating_catalogue_run(a: EffectId, b: EffectId) -> String {
     use EffectId::*;
     let pair = |x: EffectId, y: EffectId| (a == x && b == y) || (a == y && b == x);
     if pair(LensDistortion, Scale) {

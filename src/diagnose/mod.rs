@@ -90,6 +90,7 @@ mod discrepancy;
 mod fit_geometric;
 mod fit_geometric_effect;
 mod fit_image;
+mod fit_user_effect;
 mod floor_read_out;
 mod history;
 mod identifiability;

@@ -7,7 +7,7 @@ use super::image_stats::FrameStats;
 use super::nominal::Nominal;
 use super::residuals::ResidualMap;
 use crate::dic::{DicResult, Summary};
-use crate::model::{EffectId, Effects};
+use crate::model::{CandidateId, Effects};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -166,7 +166,7 @@ pub struct HardwareComparison {
 /// errors.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ImageFit {
-    pub effect: EffectId,
+    pub effect: CandidateId,
     pub params: BTreeMap<String, f64>,
     pub stderr: BTreeMap<String, f64>,
     pub effects: Effects,

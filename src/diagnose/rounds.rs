@@ -8,7 +8,7 @@ use super::compare::{compare_prepared, load_measurement, Measurement};
 use super::diagnose::{diagnose_prepared, Diagnosis};
 use super::unexplained::Unexplained;
 use super::{CompareOptions, DiagnoseError, Progress};
-use crate::model::EffectId;
+use crate::model::CandidateId;
 use crate::model::ModelConfig;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -23,7 +23,7 @@ pub const MAX_ROUNDS: usize = 8;
 pub struct Round {
     /// `"none"` on the wire when the round found nothing.
     #[serde(with = "crate::model::effects::verdict_serde")]
-    pub verdict: Option<EffectId>,
+    pub verdict: Option<CandidateId>,
     pub params: BTreeMap<String, f64>,
     pub stderr: BTreeMap<String, f64>,
     /// What follows from the parameters and how to read them (a tilt's working distance,
@@ -45,7 +45,7 @@ pub struct Round {
     pub partial: bool,
     /// The nearest catalogue effect, not named (see `Diagnosis::withheld`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub withheld: Option<EffectId>,
+    pub withheld: Option<CandidateId>,
 }
 
 /// Every round; `diagnoses[k]` is round k's full diagnosis.
@@ -53,7 +53,7 @@ pub struct Round {
 pub struct Rounds {
     pub rounds: Vec<Round>,
     /// The verdicts other than `none`, in the order found.
-    pub verdicts: Vec<EffectId>,
+    pub verdicts: Vec<CandidateId>,
     /// The discrepancy of the final model (every verdict added), px.
     pub final_discrepancy_px: f64,
     /// What the final model leaves unexplained: never `none` silently over a significant
@@ -110,9 +110,12 @@ pub fn diagnose_rounds_prepared(
     let mut diagnoses: Vec<Diagnosis> = Vec::new();
     for _ in 0..rounds {
         let d = diagnose_prepared(meas, &current, before.take(), progress)?;
-        let winner = d.candidates.iter().find(|c| Some(c.effect) == d.verdict);
+        let winner = d
+            .candidates
+            .iter()
+            .find(|c| Some(&c.effect) == d.verdict.as_ref());
         out.push(Round {
-            verdict: d.verdict,
+            verdict: d.verdict.clone(),
             params: winner.map(|c| c.params.clone()).unwrap_or_default(),
             stderr: winner.map(|c| c.stderr.clone()).unwrap_or_default(),
             derived: winner.map(|c| c.derived.clone()).unwrap_or_default(),
@@ -123,12 +126,12 @@ pub fn diagnose_rounds_prepared(
             after_px: d.after.as_ref().map(|a| a.discrepancy_px),
             unexplained: d.unexplained.significant,
             partial: d.partial,
-            withheld: d.withheld.as_ref().map(|w| w.effect),
+            withheld: d.withheld.as_ref().map(|w| w.effect.clone()),
         });
         let next = d.winner_model.clone();
         before = d.after.clone();
         diagnoses.push(d);
-        match (next, out.last().and_then(|r| r.verdict)) {
+        match (next, out.last().and_then(|r| r.verdict.clone())) {
             (Some(m), Some(verdict)) => {
                 verdicts.push(verdict);
                 current = m;

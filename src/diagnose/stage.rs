@@ -209,7 +209,7 @@ pub fn fit_stage_error(
     let param = |v: f64| [("repeatability_um".to_string(), v)].into_iter().collect();
     Some(super::results::ImageFit {
         geometric: Default::default(),
-        effect: crate::model::EffectId::StageError,
+        effect: crate::model::EffectId::StageError.into(),
         params: param(sigma_um),
         stderr: param(se_um),
         effects: Effects {

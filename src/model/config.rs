@@ -112,6 +112,16 @@ impl ModelConfig {
                 return bad("target_tilt working_distance_mm must be >= 1".into());
             }
         }
+        for (name, user) in &e.user {
+            if !super::effects::user::is_identifier(name) {
+                return bad(format!(
+                    "user effect '{name}': a name of letters, digits and '_' that starts with a letter"
+                ));
+            }
+            if let Err(message) = user.field() {
+                return bad(format!("user effect '{name}' {message}"));
+            }
+        }
         if let Some(m) = e.motion_blur {
             if !(m.length_px >= 0.0 && m.length_px <= 50.0) {
                 return bad("motion_blur length_px must lie in [0, 50]".into());

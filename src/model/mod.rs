@@ -14,7 +14,7 @@ mod shot_noise;
 mod speckle;
 
 pub use config::{ModelConfig, ModelError};
-pub use effects::{EffectId, Effects, Stage};
+pub use effects::{CandidateId, EffectId, Effects, Stage};
 pub use pattern::{Placement, SpecklePattern, TargetDot, TooManyDots, MAX_TARGET_DOTS};
 pub use readout::{BinnedValue, BinningDomain, SensorChain, SensorReadout};
 pub use render::{

@@ -8,6 +8,7 @@
 //! Distortion moves dot centres and leaves their shape to the local similarity transform: the
 //! shape change it would add is of order k1·(dot size), far below anything DIC resolves.
 
+use super::effects::user::{rendered_fields, UserField};
 use super::effects::Effects;
 use super::pattern::TargetDot;
 use super::readout::{SensorChain, SensorReadout};
@@ -97,6 +98,21 @@ pub fn project_with_depth(
     x_mm: f64,
     y_mm: f64,
 ) -> (f64, f64, f64) {
+    let user = rendered_fields(&effects.user);
+    project_prepared(camera, effects, &user, frame, x_mm, y_mm)
+}
+
+/// [`project_with_depth`] with the model's user effects bound once (`user`, from
+/// [`rendered_fields`]): a user effect's field is a function of where the point is seen in the
+/// reference frame (rendered at the stage's origin) and of the move, added to moved frames.
+fn project_prepared(
+    camera: &Camera,
+    effects: &Effects,
+    user: &[(UserField, Vec<f64>)],
+    frame: &FrameSpec,
+    x_mm: f64,
+    y_mm: f64,
+) -> (f64, f64, f64) {
     let (mx, my) = match effects.stage_misalignment {
         Some(m) => m.actual_move(frame.stage_dx_mm, frame.stage_dy_mm),
         None => (frame.stage_dx_mm, frame.stage_dy_mm),
@@ -119,10 +135,25 @@ pub fn project_with_depth(
     let (cx, cy) = camera.centre();
     let s = camera.scale_px_per_mm * mag;
     let (px, py) = (cx + s * x, cy + s * y);
-    let (px, py) = match effects.lens_distortion {
+    let (mut px, mut py) = match effects.lens_distortion {
         Some(d) => d.distort(px, py, (cx, cy), camera.half_diagonal_px()),
         None => (px, py),
     };
+    if frame.moved && !user.is_empty() {
+        let reference = FrameSpec {
+            stage_dx_mm: 0.0,
+            stage_dy_mm: 0.0,
+            moved: false,
+            ..*frame
+        };
+        let (rx, ry, _) = project_prepared(camera, effects, &[], &reference, x_mm, y_mm);
+        let k = camera.scale_px_per_mm;
+        for (field, values) in user {
+            let (u, v) = field.displacement((rx - cx, ry - cy), (k * mx, k * my), values);
+            px += u;
+            py += v;
+        }
+    }
     (px, py, depth)
 }
 
@@ -172,10 +203,11 @@ fn render_irradiance(
     let margin = 6.0 * dots.iter().map(|d| d.sigma_mm).fold(0.0, f64::max) * camera.scale_px_per_mm
         + psf * 6.0
         + 2.0;
+    let user = rendered_fields(&effects.user);
     let px_dots: Vec<GaussianDot> = dots
         .iter()
         .filter_map(|d| {
-            let (x, y, depth) = project_with_depth(camera, effects, frame, d.x_mm, d.y_mm);
+            let (x, y, depth) = project_prepared(camera, effects, &user, frame, d.x_mm, d.y_mm);
             // A tilted target's dots shrink with their depth (isotropically here: the
             // anisotropy is of the order of the angle times the dot size over the distance);
             // one at or behind the camera's plane is not seen.

@@ -196,11 +196,16 @@ pub fn options() -> CompareOptions {
 /// Generates `spec`, diagnoses the baseline against it for up to `rounds` rounds; returns the
 /// rounds and the truth.
 pub fn diagnose(spec: &Value, rounds: usize) -> (Rounds, Value) {
+    diagnose_model(spec, &baseline(), rounds)
+}
+
+/// [`diagnose`] of `model` instead of the baseline.
+pub fn diagnose_model(spec: &Value, model: &ModelConfig, rounds: usize) -> (Rounds, Value) {
     let root = tempfile::tempdir().unwrap();
     let dir = root.path().join("dataset");
     let truth = generate(spec, &dir);
     let meas = load_measurement(&dir, &options(), &|_, _| true).unwrap();
-    let r = diagnose_rounds_prepared(&meas, &baseline(), rounds, &|_, _| true).unwrap();
+    let r = diagnose_rounds_prepared(&meas, model, rounds, &|_, _| true).unwrap();
     report(spec["name"].as_str().unwrap_or("?"), &r);
     (r, truth)
 }
@@ -212,7 +217,7 @@ pub fn report(name: &str, r: &Rounds) {
             "   {} ± {} px -> {} {:?} ± {:?} -> {:?}",
             round.discrepancy_px,
             round.discrepancy_se_px,
-            ffdic::model::effects::verdict_name(round.verdict),
+            ffdic::model::effects::verdict_name(&round.verdict),
             round.params,
             round.stderr,
             round.after_px
@@ -230,7 +235,7 @@ pub fn report(name: &str, r: &Rounds) {
             d.unexplained_after.as_ref().and_then(|a| a.field_f),
             d.explained_fraction,
             d.partial,
-            d.withheld.as_ref().map(|w| (w.effect, w.explained_fraction)),
+            d.withheld.as_ref().map(|w| (w.effect.clone(), w.explained_fraction)),
         );
         println!("     {}", u.summary);
         if let Some(a) = &d.unexplained_after {
@@ -288,6 +293,6 @@ pub fn report(name: &str, r: &Rounds) {
 pub fn candidate<'a>(d: &'a Diagnosis, effect: &str) -> &'a Candidate {
     d.candidates
         .iter()
-        .find(|c| c.effect.as_str() == effect)
+        .find(|c| c.effect.to_string() == effect)
         .unwrap_or_else(|| panic!("{effect} was not fitted"))
 }

@@ -99,7 +99,19 @@ fn effects() -> impl Strategy<Value = Effects> {
             }),
         ),
     );
-    (geometry, sensor).prop_map(|(g, s)| Effects {
+    // A user effect: its expressions come back as written, its value to the bit.
+    let user = of(finite()).prop_map(|value| {
+        value
+            .map(|v| {
+                let text = format!(
+                    "u = \"c * x * tx\"\nv = \"c * (x^2 + y^2) * ty\"\n[params.c]\nvalue = {v:?}\nunit = \"1/px\"\nmin = -1e300\nmax = 1e300\n"
+                );
+                let e: ffdic::model::effects::UserEffect = toml::from_str(&text).unwrap();
+                [("bow".to_string(), e)].into_iter().collect()
+            })
+            .unwrap_or_default()
+    });
+    (geometry, sensor, user).prop_map(|(g, s, user)| Effects {
         stage_misalignment: g.0,
         stage_error: g.1,
         rotation: g.2,
@@ -114,6 +126,7 @@ fn effects() -> impl Strategy<Value = Effects> {
         vignetting: s.4,
         illumination_change: s.5,
         motion_blur: s.6,
+        user,
     })
 }
 

@@ -105,32 +105,106 @@ impl FromStr for EffectId {
     }
 }
 
-/// A verdict's name: the effect's, or `none`.
-pub fn verdict_name(verdict: Option<EffectId>) -> &'static str {
-    verdict.map_or(verdict_serde::NONE, EffectId::as_str)
+/// What a diagnosis fits and may name: a catalogue effect, or a user effect of the model
+/// (`[effects.user.NAME]`) by its name. On the wire, the effect's name or `user.NAME`.
+#[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum CandidateId {
+    Catalogue(EffectId),
+    User(String),
 }
 
-/// Effect names joined with `separator` (`rotation, scale`).
-pub fn join(effects: &[EffectId], separator: &str) -> String {
+/// The prefix of a user effect's candidate name.
+pub const USER_PREFIX: &str = "user.";
+
+impl CandidateId {
+    /// The catalogue effect, when it is one.
+    pub fn catalogue(&self) -> Option<EffectId> {
+        match self {
+            CandidateId::Catalogue(e) => Some(*e),
+            CandidateId::User(_) => None,
+        }
+    }
+}
+
+impl From<EffectId> for CandidateId {
+    fn from(e: EffectId) -> Self {
+        CandidateId::Catalogue(e)
+    }
+}
+
+impl PartialEq<EffectId> for CandidateId {
+    fn eq(&self, other: &EffectId) -> bool {
+        self.catalogue() == Some(*other)
+    }
+}
+
+impl fmt::Display for CandidateId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            CandidateId::Catalogue(e) => f.write_str(e.as_str()),
+            CandidateId::User(name) => write!(f, "{USER_PREFIX}{name}"),
+        }
+    }
+}
+
+impl FromStr for CandidateId {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.strip_prefix(USER_PREFIX) {
+            Some(name) if super::user::is_identifier(name) => Ok(CandidateId::User(name.into())),
+            Some(_) => Err(format!(
+                "'{s}': a user effect's name is letters, digits and '_'"
+            )),
+            None => s.parse().map(CandidateId::Catalogue),
+        }
+    }
+}
+
+impl Serialize for CandidateId {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
+impl<'de> Deserialize<'de> for CandidateId {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        String::deserialize(d)?
+            .parse()
+            .map_err(serde::de::Error::custom)
+    }
+}
+
+/// A verdict's name: the effect's, or `none`.
+pub fn verdict_name(verdict: &Option<CandidateId>) -> String {
+    verdict
+        .as_ref()
+        .map_or_else(|| verdict_serde::NONE.to_string(), ToString::to_string)
+}
+
+/// Names joined with `separator` (`rotation, scale`, `scale, user.bow`).
+pub fn join<T: fmt::Display>(effects: &[T], separator: &str) -> String {
     effects
         .iter()
-        .map(|e| e.as_str())
+        .map(ToString::to_string)
         .collect::<Vec<_>>()
         .join(separator)
 }
 
 /// A diagnosis' verdict on the wire: the effect's name, or `"none"`.
 pub mod verdict_serde {
-    use super::EffectId;
+    use super::CandidateId;
     use serde::{Deserialize, Deserializer, Serializer};
 
     pub const NONE: &str = "none";
 
-    pub fn serialize<S: Serializer>(v: &Option<EffectId>, s: S) -> Result<S::Ok, S::Error> {
-        s.serialize_str(v.map_or(NONE, EffectId::as_str))
+    pub fn serialize<S: Serializer>(v: &Option<CandidateId>, s: S) -> Result<S::Ok, S::Error> {
+        match v {
+            Some(c) => s.collect_str(c),
+            None => s.serialize_str(NONE),
+        }
     }
 
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<EffectId>, D::Error> {
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<CandidateId>, D::Error> {
         let text = String::deserialize(d)?;
         if text == NONE {
             Ok(None)
@@ -154,5 +228,21 @@ mod tests {
             );
         }
         assert!("none".parse::<EffectId>().is_err());
+    }
+
+    #[test]
+    fn candidates_are_catalogue_names_or_user_dot_name() {
+        for c in [
+            CandidateId::Catalogue(EffectId::TargetTilt),
+            CandidateId::User("bow".into()),
+        ] {
+            let text = serde_json::to_string(&c).unwrap();
+            assert_eq!(serde_json::from_str::<CandidateId>(&text).unwrap(), c);
+        }
+        assert_eq!(CandidateId::User("bow".into()).to_string(), "user.bow");
+        assert!("user.".parse::<CandidateId>().is_err());
+        assert!("user.2x".parse::<CandidateId>().is_err());
+        assert!(CandidateId::Catalogue(EffectId::Scale) == EffectId::Scale);
+        assert!(CandidateId::User("scale".into()) != EffectId::Scale);
     }
 }

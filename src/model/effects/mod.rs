@@ -1,4 +1,4 @@
-//! The effect vocabulary of DESIGN.md: one physical mechanism per file, with named parameters
+//! The effect vocabulary: one physical mechanism per file, with named parameters
 //! (units in the names) and the physics that applies it. Ids are fixed: they are the TOML table
 //! names, the API's and the CLI's words.
 
@@ -16,6 +16,7 @@ mod sensor_noise;
 mod stage_error;
 mod stage_misalignment;
 mod target_tilt;
+pub mod user;
 mod vignetting;
 
 pub use fill_factor::FillFactor;
@@ -31,10 +32,12 @@ pub use sensor_noise::SensorNoise;
 pub use stage_error::StageError;
 pub use stage_misalignment::StageMisalignment;
 pub use target_tilt::{TargetTilt, MAX_TILT_RAD};
+pub use user::{UserEffect, UserParam};
 pub use vignetting::Vignetting;
 
-pub use id::{join as join_effects, verdict_name, verdict_serde, EffectId, Stage};
+pub use id::{join as join_effects, verdict_name, verdict_serde, CandidateId, EffectId, Stage};
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 
 /// The enabled effects of a model; an absent table is an absent effect.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -68,6 +71,9 @@ pub struct Effects {
     pub illumination_change: Option<IlluminationChange>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub motion_blur: Option<MotionBlur>,
+    /// Effects the catalogue lacks, written down by the user (`[effects.user.NAME]`), by name.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub user: BTreeMap<String, UserEffect>,
 }
 
 impl Effects {
