@@ -297,3 +297,34 @@ async fn compare_diagnose_add_the_winner_and_the_history_falls() {
     assert_eq!(resp.status(), 404);
     server.stop().await;
 }
+
+/// A model with an effect the user wrote down goes in through the API like any other, listed as
+/// `user.NAME (proposed)` while its parameter has no value; an expression that reads a variable
+/// it does not declare is refused with 422 naming the variable and what it may read.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_model_with_a_user_effect_is_added_and_a_wrong_one_refused_naming_the_variable() {
+    let data = tempfile::tempdir().unwrap();
+    let server = TestServer::start(small_config(data.path())).await;
+    let add = |toml: &str| {
+        client()
+            .post(server.url("/models"))
+            .json(&json!({ "toml": toml }))
+            .send()
+    };
+    let bow = "name = \"bowed\"\n[effects.user.bow]\nu = \"c * (x^2 + y^2) * tx\"\nv = \"c * (x^2 + y^2) * ty\"\n[effects.user.bow.params.c]\nunit = \"1/px^2\"\nmin = -1e-7\nmax = 1e-7\n";
+    let resp = add(bow).await.unwrap();
+    assert_eq!(resp.status(), 201);
+    let added: Value = resp.json().await.unwrap();
+    assert_eq!(added["effects"], json!(["user.bow (proposed)"]), "{added}");
+    let wrong = add(&bow
+        .replace("c * (x^2 + y^2) * ty", "k * y * ty")
+        .replace("bowed", "other"))
+    .await
+    .unwrap();
+    assert_eq!(wrong.status(), 422);
+    let text = wrong.text().await.unwrap();
+    assert!(
+        text.contains("'k'") && text.contains("x, y, tx, ty"),
+        "{text}"
+    );
+}

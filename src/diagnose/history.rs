@@ -47,12 +47,7 @@ impl HistoryEntry {
             &cmp.model.name,
             &cmp.model.version,
             cmp.discrepancy_px,
-            cmp.model
-                .effects
-                .enabled()
-                .iter()
-                .map(|s| s.to_string())
-                .collect(),
+            cmp.model.effects.names(),
         )
     }
 }

@@ -158,12 +158,7 @@ fn summary(model: &ModelConfig, source: ModelSource) -> ModelSummary {
         name: model.name.clone(),
         version: model_version(model),
         description: model.description.clone(),
-        effects: model
-            .effects
-            .enabled()
-            .iter()
-            .map(|s| s.to_string())
-            .collect(),
+        effects: model.effects.names(),
         source,
     }
 }

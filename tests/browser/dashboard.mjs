@@ -358,6 +358,26 @@ async function main() {
     }
     await shot(page, "6-dataset-reloaded");
 
+    // ---- an effect of the user's own, written beside the unexplained residual ----
+    // The reload reset the analysis settings: ff100 and small subsets again.
+    await page.locator("#model-form summary").click();
+    for (const s of ["ff50", "ff25", "native"]) await mf.locator(`input[name=scheme][value=${s}]`).setChecked(false);
+    await mf.locator("input[name=scheme][value=ff100]").setChecked(true);
+    await mf.locator("input[name=subset_px]").fill("21");
+    await mf.locator("input[name=step_px]").fill("10");
+    await mf.locator("input[name=strain_window]").fill("5");
+    await page.locator("#user-effect summary").click();
+    await page.locator("#user-effect-btn").click();
+    if (expect(await appears(page, '#candidate-table tr[data-effect="user.bow"]', 300 * SECOND), "the user's effect is fitted as a candidate")) {
+      const row = await page.locator('#candidate-table tr[data-effect="user.bow"]').innerText();
+      expect(/c = .*±/.test(row), `the user's effect has its parameter ± stderr: ${row.replace(/\s+/g, " ")}`);
+      await page.waitForFunction(() => /user\.bow: /.test(document.querySelector("#user-effect-notice").textContent), null, { timeout: 30 * SECOND });
+      log(`user effect: ${(await page.locator("#user-effect-notice").innerText()).replace(/\s+/g, " ")}`);
+      const models = await page.evaluate(async () => (await (await fetch("/api/v1/models")).json()).map((m) => m.name));
+      expect(models.includes("baseline+bow"), `the model with the user's effect is stored (${models.join(", ")})`);
+    }
+    await shot(page, "6b-user-effect");
+
     // ---- a second dataset of the same bench: its winner must not pass for the first's ----
     if (secondDatasetDir) {
       await page.goto(`${base}/`);

@@ -242,17 +242,20 @@ async function showDiagnosis(job, body) {
   $("#add-notice").textContent = "";
 }
 
+/** The buttons that start work: one job at a time. */
+const BUTTONS = ["#compare-btn", "#diagnose-btn", "#find-all-btn", "#add-winner", "#user-effect-btn"];
+
 async function guard(fn) {
   if (busy) return;
   busy = true;
-  for (const b of ["#compare-btn", "#diagnose-btn", "#find-all-btn", "#add-winner"]) $(b).disabled = true;
+  for (const b of BUTTONS) $(b).disabled = true;
   try {
     await fn();
   } catch (e) {
     showError($("#job-error"), e);
   } finally {
     busy = false;
-    for (const b of ["#compare-btn", "#diagnose-btn", "#find-all-btn", "#add-winner"]) $(b).disabled = false;
+    for (const b of BUTTONS) $(b).disabled = false;
   }
 }
 
@@ -335,6 +338,56 @@ $("#add-winner").addEventListener("click", () => guard(async () => {
   const last = entries[entries.length - 1];
   $("#add-notice").textContent = `${what} added: discrepancy now ${last ? pxUm(last.discrepancy_px, scale) : "—"}`;
   $("#add-winner").classList.add("hidden");
+}));
+
+/**
+ * The user effect of the form as a TOML table (`[effects.user.NAME]`, values left to the fit);
+ * throws naming what is wrong with a parameter line. TOML basic strings take JSON's escapes.
+ */
+function userEffectToml(form) {
+  const name = form.effect.value.trim();
+  if (!/^[A-Za-z][A-Za-z0-9_]*$/.test(name)) throw new Error(`effect name '${name}': letters, digits and _, starting with a letter`);
+  const lines = [`[effects.user.${name}]`];
+  for (const key of ["u", "v"]) {
+    const text = form[key].value.trim();
+    if (text) lines.push(`${key} = ${JSON.stringify(text)}`);
+  }
+  const params = form.params.value.split("\n").map((l) => l.trim()).filter((l) => l);
+  if (!params.length) throw new Error("at least one parameter: name min max [unit]");
+  for (const line of params) {
+    const [p, lo, hi, ...unit] = line.split(/\s+/);
+    const min = Number(lo), max = Number(hi);
+    if (!p || !Number.isFinite(min) || !Number.isFinite(max)) throw new Error(`parameter line '${line}': name min max [unit]`);
+    lines.push(`[effects.user.${name}.params.${p}]`, `min = ${min}`, `max = ${max}`);
+    if (unit.length) lines.push(`unit = ${JSON.stringify(unit.join(" "))}`);
+  }
+  return { name, table: lines.join("\n") + "\n" };
+}
+
+$("#user-effect-btn").addEventListener("click", () => guard(async () => {
+  const notice = $("#user-effect-notice");
+  const base = $("#model").value;
+  const { name, table } = userEffectToml($("#user-effect-form"));
+  notice.textContent = "adding…";
+  const detail = await api(`/models/${encodeURIComponent(base)}`);
+  const toml = `${renamed(detail.toml, `${base}+${name}`)}\n${table}`;
+  let added;
+  try {
+    ({ added } = await addWinner(toml));
+  } catch (e) {
+    notice.textContent = "";
+    throw e;
+  }
+  await loadModels(added.name);
+  notice.textContent = `model ${added.name} holds user.${name}; diagnosing…`;
+  const body = settings(added.name);
+  const job = await runJob("diagnoses", body);
+  await showDiagnosis(job, body);
+  await loadJobs();
+  const c = lastDiagnosis.d.candidates.find((x) => x.effect === `user.${name}`);
+  notice.textContent = c
+    ? `user.${name}: ${paramText(c)}; discrepancy with it ${pxUm(c.discrepancy_px, scale)} (drop ${pxUm(c.drop_px, scale)})`
+    : `user.${name} could not be fitted on this dataset's runs`;
 }));
 
 async function main() {

@@ -97,6 +97,22 @@ impl Effects {
         }
     }
 
+    /// The names of what the model holds, as the API and the history list them: the catalogue
+    /// effects in vocabulary order, then each user effect as `user.NAME` (`user.NAME (proposed)`
+    /// while a parameter has no value).
+    pub fn names(&self) -> Vec<String> {
+        let catalogue = self.enabled().into_iter().map(|e| e.to_string());
+        let user = self.user.iter().map(|(name, e)| {
+            let id = CandidateId::User(name.clone());
+            if e.is_proposed() {
+                format!("{id} (proposed)")
+            } else {
+                id.to_string()
+            }
+        });
+        catalogue.chain(user).collect()
+    }
+
     /// The enabled effects, in vocabulary order.
     pub fn enabled(&self) -> Vec<EffectId> {
         EffectId::ALL
