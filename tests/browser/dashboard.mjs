@@ -283,15 +283,19 @@ async function main() {
     // ---- dataset: compare with the baseline, diagnose, add the winner ----
     await page.waitForSelector("#model option[value=baseline]", { state: "attached" });
     await page.locator("#model").selectOption("baseline");
-    await page.locator("#model-form summary").click();
     const mf = page.locator("#model-form");
-    // 2x2 binning (ff100) only, small subsets: the diagnosis takes seconds, not minutes.
-    for (const s of ["ff50", "ff25", "native"]) await mf.locator(`input[name=scheme][value=${s}]`).setChecked(false);
-    await mf.locator("input[name=scheme][value=ff100]").setChecked(true);
-    await mf.locator("input[name=subset_px]").fill("21");
-    await mf.locator("input[name=step_px]").fill("10");
-    await mf.locator("input[name=strain_window]").fill("5");
-    await mf.locator("input[name=prefilter_sigma_px]").fill("0.7");
+    // 2x2 binning (ff100) only, small subsets: the diagnosis takes seconds, not minutes. A page
+    // load resets the form, so this is done again after each.
+    const smallAnalysis = async () => {
+      await page.locator("#model-form summary").click();
+      for (const s of ["ff50", "ff25", "native"]) await mf.locator(`input[name=scheme][value=${s}]`).setChecked(false);
+      await mf.locator("input[name=scheme][value=ff100]").setChecked(true);
+      await mf.locator("input[name=subset_px]").fill("21");
+      await mf.locator("input[name=step_px]").fill("10");
+      await mf.locator("input[name=strain_window]").fill("5");
+      await mf.locator("input[name=prefilter_sigma_px]").fill("0.7");
+    };
+    await smallAnalysis();
 
     const historyPoints = async () => {
       const values = await page.locator("#history circle.history-point").evaluateAll((cs) => cs.map((c) => Number(c.dataset.discrepancy)));
@@ -359,13 +363,7 @@ async function main() {
     await shot(page, "6-dataset-reloaded");
 
     // ---- an effect of the user's own, written beside the unexplained residual ----
-    // The reload reset the analysis settings: ff100 and small subsets again.
-    await page.locator("#model-form summary").click();
-    for (const s of ["ff50", "ff25", "native"]) await mf.locator(`input[name=scheme][value=${s}]`).setChecked(false);
-    await mf.locator("input[name=scheme][value=ff100]").setChecked(true);
-    await mf.locator("input[name=subset_px]").fill("21");
-    await mf.locator("input[name=step_px]").fill("10");
-    await mf.locator("input[name=strain_window]").fill("5");
+    await smallAnalysis();
     await page.locator("#user-effect summary").click();
     await page.locator("#user-effect-btn").click();
     if (expect(await appears(page, '#candidate-table tr[data-effect="user.bow"]', 300 * SECOND), "the user's effect is fitted as a candidate")) {
@@ -391,12 +389,7 @@ async function main() {
       log(`uploaded the second dataset: ${second}`);
       await page.waitForSelector("#model option[value=baseline]", { state: "attached" });
       await page.locator("#model").selectOption("baseline");
-      await page.locator("#model-form summary").click();
-      for (const s of ["ff50", "ff25", "native"]) await mf.locator(`input[name=scheme][value=${s}]`).setChecked(false);
-      await mf.locator("input[name=scheme][value=ff100]").setChecked(true);
-      await mf.locator("input[name=subset_px]").fill("21");
-      await mf.locator("input[name=step_px]").fill("10");
-      await mf.locator("input[name=strain_window]").fill("5");
+      await smallAnalysis();
       await page.locator("#diagnose-btn").click();
       await page.waitForSelector("#diagnosis-verdict[data-verdict]", { timeout: 400 * SECOND });
       const verdict2 = await page.locator("#diagnosis-verdict").getAttribute("data-verdict");
