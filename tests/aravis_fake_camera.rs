@@ -8,20 +8,23 @@
 //! network namespace with loopback only. A test not yet isolated re-executes itself (this binary,
 //! that one test) under `unshare -rn` and asserts the child passed.
 
+#[path = "common/folder_sink.rs"]
+mod folder_sink;
+
 use ffdic::dic::{analyze, DicSettings};
 use ffdic::experiment::{
     run_experiment, BenchHandle, BenchHardware, BenchLimits, BenchTimeouts, ExperimentRequest,
-    ModelScene, MoveSpec, PatternSpec, RunSink, SchemeSpec,
+    ModelScene, MoveSpec, PatternSpec, SchemeSpec,
 };
 use ffdic::image::{Image, Roi};
 use ffdic::model::{Camera as ModelCamera, ModelConfig, SpecklePattern};
-use ffdic::run_event::EventKind;
 use ffdic_aravis::{AravisCamera, FakeGvCamera, FillFn, FillRequest};
 use ffdic_hw::{
     schemes_for, BinningDomain, BinningMode, Camera, CameraSettings, HardwareScheme, HwError,
     PixelFormat, ReductionCaps, SensorRoi, Stage, StagePosition, TriggerMode,
 };
 use ffdic_mocks::{new_bench, MockStage, Scene};
+use folder_sink::FolderSink;
 use std::process::Command;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
@@ -427,33 +430,6 @@ fn killed_camera_is_a_disconnect_not_a_short_frame_list() {
     drop(fake);
 }
 
-/// Writes a run's files into a folder and keeps its events (the service writes them into the
-/// store; this is the same runner without HTTP).
-struct FolderSink {
-    dir: std::path::PathBuf,
-    events: std::sync::Mutex<Vec<String>>,
-}
-
-impl RunSink for FolderSink {
-    fn event(&self, kind: EventKind, _progress: f64, message: &str, _data: serde_json::Value) {
-        self.events
-            .lock()
-            .unwrap()
-            .push(format!("{kind:?}: {message}"));
-    }
-
-    fn write(&self, rel: &str, bytes: &[u8]) -> Result<std::path::PathBuf, String> {
-        let path = self.dir.join(rel);
-        std::fs::create_dir_all(path.parent().unwrap()).map_err(|e| e.to_string())?;
-        std::fs::write(&path, bytes).map_err(|e| e.to_string())?;
-        Ok(path)
-    }
-
-    fn cancelled(&self) -> bool {
-        false
-    }
-}
-
 /// Issue 17: a camera with SFNC decimation and an averaging binning mode (the simulator's
 /// description extended) offers the hardware schemes; an experiment naming two of them runs end
 /// to end over GigE Vision — every read-out applied and read back through the driver, frames of
@@ -540,10 +516,7 @@ fn a_hardware_scheme_experiment_runs_through_gige_vision() {
     };
     let plan = request.plan(&limits).expect("a valid plan");
     let dir = tempfile::tempdir().unwrap();
-    let sink = FolderSink {
-        dir: dir.path().to_owned(),
-        events: Default::default(),
-    };
+    let sink = FolderSink::new(dir.path());
     let lease = bench.hold("gige-hw").unwrap();
     let outcome = run_experiment(
         &plan,

@@ -257,6 +257,9 @@ pub enum CameraConfig {
         #[serde(default = "default_buffers")]
         buffers: usize,
     },
+    /// Frames a command renders or replays, one run per frame with the bench state in its
+    /// environment (`ffdic_exec`: a lab's simulator, a recording, the independent generator).
+    Exec(ffdic_exec::ExecCameraConfig),
 }
 
 fn default_exposure_level() -> f64 {
@@ -389,6 +392,9 @@ impl DaemonConfig {
                 ));
             }
         }
+        if let CameraConfig::Exec(exec) = &config.camera {
+            exec.validate().map_err(parse)?;
+        }
         if config.http.max_connections == 0 {
             return Err(parse("http.max_connections must be at least 1".into()));
         }
@@ -447,7 +453,7 @@ impl DaemonConfig {
                 binning: *hardware_binning,
                 decimation_max: *hardware_decimation_max,
             }),
-            _ => None,
+            CameraConfig::Aravis { .. } | CameraConfig::V4l2 { .. } | CameraConfig::Exec(_) => None,
         }
     }
 
@@ -467,7 +473,7 @@ impl DaemonConfig {
                 principal_dx_px: 0.0,
                 principal_dy_px: 0.0,
             }),
-            _ => None,
+            CameraConfig::Aravis { .. } | CameraConfig::V4l2 { .. } | CameraConfig::Exec(_) => None,
         }
     }
 }
@@ -526,6 +532,35 @@ mod tests {
             StageConfig::Zaber(z) => assert_eq!(z.microsteps_per_mm, 20_997.375),
             other => panic!("expected zaber, got {other:?}"),
         }
+    }
+
+    #[test]
+    fn an_exec_camera_is_read_and_its_mistakes_named() {
+        let camera = "[camera]\nkind = \"exec\"\ncommand = [\"render\", \"--frame\"]\nwidth = 640\nheight = 540\n";
+        let text = DEFAULT_CONFIG_TOML.replace("[camera]\n", "[old_camera]\n");
+        let table = |extra: &str| {
+            let (head, tail) = text.split_once("[old_camera]").unwrap();
+            // The embedded camera table is replaced by the exec one (its keys dropped with it).
+            let rest = tail
+                .split_once("\n[")
+                .map_or(String::new(), |(_, r)| format!("\n[{r}"));
+            format!("{head}{camera}{extra}{rest}")
+        };
+        let c = DaemonConfig::from_toml(&table(""), Path::new("exec.toml")).unwrap();
+        match &c.camera {
+            CameraConfig::Exec(e) => {
+                assert_eq!((e.width, e.bit_depth, e.timeout_ms), (640, 16, 60_000))
+            }
+            other => panic!("expected exec, got {other:?}"),
+        }
+        let err = DaemonConfig::from_toml(&table("bit_depth = 12\n"), Path::new("exec.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("bit_depth"), "{err}");
+        let err = DaemonConfig::from_toml(&table("shell = true\n"), Path::new("exec.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("shell"), "{err}");
     }
 
     #[test]

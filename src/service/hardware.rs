@@ -9,7 +9,7 @@ use crate::experiment::{BenchHardware, ModelScene, TargetMount};
 use crate::model::{Camera as ModelCamera, ModelConfig, SpecklePattern};
 use ffdic_hw::{Camera, HardwareScheme, HwError, Stage, StagePosition};
 use ffdic_mocks::{new_bench, MockCamera, MockStage, Scene, SharedBench};
-use std::sync::{Arc, RwLock};
+use std::sync::{Arc, Mutex, RwLock};
 use std::time::Duration;
 
 #[derive(Debug, thiserror::Error)]
@@ -97,7 +97,7 @@ pub fn mock_bench(
     })
 }
 
-/// The mock camera and the target changer that swaps what it sees.
+/// A camera and the target changer that swaps what it sees.
 type MockCameraAndTargets = (Box<dyn Camera>, Box<dyn TargetMount>);
 
 fn mock_camera(
@@ -123,23 +123,44 @@ fn mock_camera(
 /// Opens what `config` names.
 pub fn open_bench(config: &DaemonConfig) -> Result<BenchHardware, HardwareError> {
     let shared = new_bench();
+    let (stage, position) = open_stage(config, shared.clone())?;
     let (camera, targets): (Box<dyn Camera>, Option<Box<dyn TargetMount>>) = match &config.camera {
         CameraConfig::Mock { bench_model, .. } => {
             let geometry = config.mock_geometry().expect("mock camera has a geometry");
             let reduction = config.mock_reduction().unwrap_or_default();
             let truth = load_bench_model(bench_model)?;
-            let (c, t) = mock_camera(geometry, truth, reduction, shared.clone())?;
+            let (c, t) = mock_camera(geometry, truth, reduction, shared)?;
             (c, Some(t))
         }
         CameraConfig::Aravis { device, buffers } => (open_aravis(device, *buffers)?, None),
         CameraConfig::V4l2 { device, buffers } => (open_v4l2(device, *buffers)?, None),
+        CameraConfig::Exec(exec) => {
+            let (c, t) = open_exec(exec, config.bench.scale_px_per_mm, position)?;
+            (c, Some(t))
+        }
     };
+    Ok(BenchHardware {
+        camera,
+        stage,
+        targets,
+    })
+}
+
+/// Where the stage is, for a camera that must know (the exec camera's command is told).
+type PositionSource = Box<dyn Fn() -> StagePosition + Send>;
+
+/// The stage `config` names, and a source of its position: the mock bench's shared state, or
+/// what a real stage last reported ([`PositionTap`]).
+fn open_stage(
+    config: &DaemonConfig,
+    shared: SharedBench,
+) -> Result<(Option<Box<dyn Stage>>, PositionSource), HardwareError> {
     let stage: Option<Box<dyn Stage>> = match &config.stage {
         StageConfig::Mock {
             speed_mm_s,
             settle_ms,
         } => Some(Box::new(MockStage::new(
-            shared,
+            shared.clone(),
             *speed_mm_s,
             Duration::from_millis(*settle_ms),
         ))),
@@ -152,11 +173,118 @@ pub fn open_bench(config: &DaemonConfig) -> Result<BenchHardware, HardwareError>
         StageConfig::Apt(c) => Some(open_serial_stage(ffdic_stage::StageConfig::Apt(c.clone()))?),
         StageConfig::None => None,
     };
-    Ok(BenchHardware {
-        camera,
-        stage,
-        targets,
+    Ok(match (stage, &config.stage) {
+        (Some(s), StageConfig::Mock { .. }) => {
+            let at = move || {
+                shared
+                    .lock()
+                    .expect("bench lock")
+                    .position_at(std::time::Instant::now())
+            };
+            (Some(s), Box::new(at))
+        }
+        (Some(s), _) => {
+            let (tapped, at) = PositionTap::new(s);
+            (Some(Box::new(tapped)), Box::new(at))
+        }
+        (None, _) => (None, Box::new(StagePosition::default)),
     })
+}
+
+/// A stage whose last known position (after a move settles, or when asked) others can read.
+struct PositionTap {
+    stage: Box<dyn Stage>,
+    last: Arc<Mutex<StagePosition>>,
+}
+
+impl PositionTap {
+    fn new(stage: Box<dyn Stage>) -> (Self, impl Fn() -> StagePosition + Send) {
+        let last = Arc::new(Mutex::new(StagePosition::default()));
+        let read = last.clone();
+        (Self { stage, last }, move || {
+            *read.lock().expect("position lock")
+        })
+    }
+
+    fn seen(&self, p: StagePosition) -> StagePosition {
+        *self.last.lock().expect("position lock") = p;
+        p
+    }
+}
+
+impl Stage for PositionTap {
+    fn info(&self) -> &ffdic_hw::StageInfo {
+        self.stage.info()
+    }
+    fn home(&mut self, timeout: Duration) -> Result<(), HwError> {
+        self.stage.home(timeout)?;
+        self.position().map(|_| ())
+    }
+    fn move_absolute(&mut self, target: StagePosition) -> Result<(), HwError> {
+        self.stage.move_absolute(target)
+    }
+    fn move_relative(&mut self, dx_mm: f64, dy_mm: f64) -> Result<(), HwError> {
+        self.stage.move_relative(dx_mm, dy_mm)
+    }
+    fn position(&mut self) -> Result<StagePosition, HwError> {
+        let p = self.stage.position()?;
+        Ok(self.seen(p))
+    }
+    fn wait_settled(&mut self, timeout: Duration) -> Result<StagePosition, HwError> {
+        let p = self.stage.wait_settled(timeout)?;
+        Ok(self.seen(p))
+    }
+    fn stop(&mut self) -> Result<(), HwError> {
+        self.stage.stop()
+    }
+}
+
+/// The exec camera (`ffdic_exec`) and its target changer: a mount tells the command which
+/// target is in front of it.
+fn open_exec(
+    config: &ffdic_exec::ExecCameraConfig,
+    scale_px_per_mm: f64,
+    position: PositionSource,
+) -> Result<MockCameraAndTargets, HardwareError> {
+    let mount = ffdic_exec::SharedMount::default();
+    let camera = ffdic_exec::ExecCamera::open(
+        config.clone(),
+        ffdic_exec::ExecBench {
+            position,
+            mount: mount.clone(),
+        },
+    )
+    .map_err(HardwareError::Camera)?;
+    let field = ModelCamera {
+        width: config.width as usize,
+        height: config.height as usize,
+        scale_px_per_mm,
+        exposure_level: 0.5,
+        principal_dx_px: 0.0,
+        principal_dy_px: 0.0,
+    }
+    .field_mm(MOCK_TARGET_MARGIN_MM);
+    Ok((Box::new(camera), Box::new(ExecTargets { mount, field })))
+}
+
+/// Tells the exec camera's command which target is mounted (it renders or replays it).
+struct ExecTargets {
+    mount: ffdic_exec::SharedMount,
+    /// The field of view plus the stage's travel, mm: what a pattern's layout must cover.
+    field: (f64, f64, f64, f64),
+}
+
+impl TargetMount for ExecTargets {
+    fn mount(&mut self, label: &str, _pattern: &SpecklePattern, _seed: u64) -> Result<(), HwError> {
+        let mut m = self.mount.lock().expect("mount lock");
+        m.label = label.to_string();
+        m.generation += 1;
+        Ok(())
+    }
+
+    fn field_mm(&self) -> (f64, f64, f64, f64) {
+        self.field
+    }
 }
 
 fn open_serial_stage(config: ffdic_stage::StageConfig) -> Result<Box<dyn Stage>, HardwareError> {

@@ -1362,6 +1362,91 @@ def _noise_prediction(spec):
     }
 
 
+def _frames_of(lab: str, pruns: list):
+    """The reference frame of pattern `lab` and the deformed frames of its runs."""
+    ref = Frame(f"{lab}_ref.tif", "reference", np.eye(2), np.zeros(2), 1.0, 0.0)
+    dframes = [Frame(r["deformed"], "deformed", r["M"], np.array(r["actual_move_px"]),
+                     r["illumination_gain"], r["scale_ds"]) for r in pruns]
+    return ref, dframes
+
+
+def _travel_frames(spec: dict, runs: list) -> list:
+    """Frames at the corners of spec["frame_travel_mm"] ([x0, x1, y0, y1], optional): the print then
+    covers every position a single-frame call (`--frame`) may ask for, the same print each time."""
+    travel = spec.get("frame_travel_mm")
+    if not travel:
+        return []
+    x0, x1, y0, y1 = (float(v) for v in travel)
+    corners = []
+    for k, (x, y) in enumerate(((x0, y0), (x1, y0), (x0, y1), (x1, y1))):
+        r = _ad_hoc_run(spec, runs, f"travel-corner-{k}", x, y)
+        corners.append(Frame(f"corner{k}", "deformed", r["M"], np.array(r["actual_move_px"]),
+                             r["illumination_gain"], r["scale_ds"]))
+    return corners
+
+
+def _ad_hoc_run(spec: dict, runs: list, run_id: str, x_mm: float, y_mm: float) -> dict:
+    """A run at a commanded position the spec's moves do not name (its effects the spec's own)."""
+    eff = spec["effects"]
+    r = {"id": run_id, "commanded_mm": [x_mm, y_mm]}
+    for key in _PER_MOVE_OVERRIDES:
+        r[key] = float(eff[key])
+    stage_moves(spec, [r])
+    return r
+
+
+def _print_for(spec: dict, cam: "Camera", pat: dict, ref: "Frame", dframes: list):
+    """The print of pattern `pat`, laid out over what the frames see (plus a margin for the dots'
+    reach), and the inner bounds its statistics are taken over."""
+    render = spec["render"]
+    # margin: the widest dot reach in px, generous for magnification and distortion
+    dmax = float(pat["dot_diameter_mm"]) * (1 + 3 * float(pat["diameter_cv"]))
+    lin_max = cam.scale * max([1.0] + [f.lin for f in dframes]) * 1.1
+    if cam.perspective_on:
+        lin_max *= _perspective_mag_max(cam, [ref] + dframes)
+    sig_px = lin_max * math.hypot(dmax / FWHM_PER_SIGMA, float(pat["edge_softness_mm"]))
+    sig_px = math.hypot(sig_px, cam.psf)
+    margin = float(render["window_sigmas"]) * sig_px + 0.5 * dmax * lin_max + 4
+    x0, x1, y0, y1, inner = _field_bounds(cam, [ref] + dframes, margin)
+    return Print(pat, int(spec["seed"]), (x0, x1, y0, y1), render), inner
+
+
+def single_frame(user_spec: dict, x_mm: float, y_mm: float, target: str, index: int, out: Path) -> str:
+    """One frame, as a camera on the spec's bench delivers it with the stage at (x_mm, y_mm), the
+    pattern `target` mounted (the first pattern when empty) and `index` frames taken since the
+    mount: what `generate` writes for the same frame, bit for bit, where the dataset has one (the
+    first frame at the origin is the reference, later ones its repeats; a run's commanded position
+    gives that run's deformed frame, the same noise on every visit), and otherwise a frame at an
+    ad-hoc position with noise of its own. Returns the file name the frame has in a dataset."""
+    spec = effective_spec(user_spec)
+    cam = Camera(spec)
+    runs = plan_runs(spec)
+    stage_moves(spec, runs)
+    labels = [p["label"] for p in spec["patterns"]]
+    lab = target or labels[0]
+    if lab not in labels:
+        raise SpecError(f"target '{lab}' is not a pattern of the spec ({', '.join(labels)})")
+    pat = spec["patterns"][labels.index(lab)]
+    pruns = [r for r in runs if r["pattern"] == lab]
+    ref, dframes = _frames_of(lab, pruns)
+    pr, _ = _print_for(spec, cam, pat, ref, dframes + _travel_frames(spec, runs))
+    if x_mm == 0.0 and y_mm == 0.0:
+        fr, name = ref, (ref.name if index == 0 else f"{lab}_ref_r{index}.tif")
+    else:
+        named = [(r, f) for r, f in zip(pruns, dframes) if r["commanded_mm"] == [x_mm, y_mm]]
+        if named:
+            fr, name = named[0][1], named[0][1].name
+        else:
+            name = f"{lab}_at_{x_mm!r}_{y_mm!r}_f{index}.tif"
+            r = _ad_hoc_run(spec, runs, f"{lab}-at-{x_mm!r}-{y_mm!r}", x_mm, y_mm)
+            fr = Frame(name, "deformed", r["M"], np.array(r["actual_move_px"]),
+                       r["illumination_gain"], r["scale_ds"])
+    irr, _ = render_irradiance(cam, pr, fr, spec["render"])
+    img, _ = expose(irr, spec, np.random.default_rng(_seed_seq(int(spec["seed"]), 2, name)))
+    write_tiff(Path(out), img)
+    return name
+
+
 def generate(spec: dict, out_dir, overwrite: bool | None = None, quiet: bool = True) -> dict:
     """Write the dataset (dataset.json, TIFFs, truth.json) into out_dir; return the truth dict."""
     t_start = time.perf_counter()
@@ -1385,20 +1470,9 @@ def generate(spec: dict, out_dir, overwrite: bool | None = None, quiet: bool = T
     for pat in spec["patterns"]:
         lab = pat["label"]
         pruns = [r for r in runs if r["pattern"] == lab]
-        ref = Frame(f"{lab}_ref.tif", "reference", np.eye(2), np.zeros(2), 1.0, 0.0)
-        dframes = [Frame(r["deformed"], "deformed", r["M"], np.array(r["actual_move_px"]),
-                         r["illumination_gain"], r["scale_ds"]) for r in pruns]
-        # margin: the widest dot reach in px, generous for magnification and distortion
-        dmax = float(pat["dot_diameter_mm"]) * (1 + 3 * float(pat["diameter_cv"]))
-        lin_max = cam.scale * max([1.0] + [f.lin for f in dframes]) * 1.1
-        if cam.perspective_on:
-            lin_max *= _perspective_mag_max(cam, [ref] + dframes)
-        sig_px = lin_max * math.hypot(dmax / FWHM_PER_SIGMA, float(pat["edge_softness_mm"]))
-        sig_px = math.hypot(sig_px, cam.psf)
-        margin = float(render["window_sigmas"]) * sig_px + 0.5 * dmax * lin_max + 4
-        x0, x1, y0, y1, inner = _field_bounds(cam, [ref] + dframes, margin)
+        ref, dframes = _frames_of(lab, pruns)
         t0 = time.perf_counter()
-        pr = Print(pat, seed, (x0, x1, y0, y1), render)
+        pr, inner = _print_for(spec, cam, pat, ref, dframes + _travel_frames(spec, runs))
         t_print = time.perf_counter() - t0
         log(f"[{lab}] print: {pr.x.size} dots in {t_print:.2f} s")
         st = pr.stats(inner, cam.scale)
@@ -1561,13 +1635,24 @@ def generate(spec: dict, out_dir, overwrite: bool | None = None, quiet: bool = T
 def main(argv=None):
     ap = argparse.ArgumentParser(description="Independent synthetic speckle dataset generator for ffdic")
     ap.add_argument("spec", help="spec JSON file")
-    ap.add_argument("out_dir", help="output dataset folder (must be empty or absent)")
+    ap.add_argument("out_dir", nargs="?", help="output dataset folder (must be empty or absent)")
     ap.add_argument("--overwrite", action="store_true", help="replace an existing dataset in OUT_DIR")
     ap.add_argument("--quiet", action="store_true")
+    ap.add_argument("--frame", action="store_true",
+                    help="one frame, as a camera delivers it: the stage position, target, frame index and "
+                         "output path from FFDIC_X_MM, FFDIC_Y_MM, FFDIC_TARGET, FFDIC_FRAME, FFDIC_OUT "
+                         "(what ffdic's exec camera sets)")
     a = ap.parse_args(argv)
     with open(a.spec) as fh:
         spec = json.load(fh)
     try:
+        if a.frame:
+            env = os.environ
+            single_frame(spec, float(env.get("FFDIC_X_MM", "0")), float(env.get("FFDIC_Y_MM", "0")),
+                         env.get("FFDIC_TARGET", ""), int(env.get("FFDIC_FRAME", "0")), Path(env["FFDIC_OUT"]))
+            return 0
+        if not a.out_dir:
+            ap.error("OUT_DIR is needed without --frame")
         generate(spec, a.out_dir, overwrite=True if a.overwrite else None, quiet=a.quiet)
     except (SpecError, FileExistsError) as e:
         print(f"error: {e}", file=sys.stderr)
