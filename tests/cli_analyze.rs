@@ -386,3 +386,80 @@ fn the_second_order_shape_function_is_selectable() {
     assert!(!out.status.success());
     assert!(stderr_line(&out).contains("cubic"));
 }
+
+/// An ROI that reaches beyond the image is analysed inside it, and the output says so.
+#[test]
+fn an_roi_partly_outside_the_image_is_reported_not_clipped_in_silence() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = write_image(dir.path(), "a.tif", 200, 160);
+    let a = a.to_str().unwrap();
+    let out = ffdic(&[
+        "analyze",
+        a,
+        a,
+        "--roi",
+        "100,100,200,200",
+        "--subset",
+        "21",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("--roi 100,100,200,200 reaches beyond the 200x160 image")
+            && stderr.contains("analysed inside 100,100,100,60")
+            && stderr.contains("points)"),
+        "{stderr}"
+    );
+}
+
+/// With the images' scale, points.csv carries positions and displacements in mm beside px, and
+/// settings.json says what the strain columns are.
+#[test]
+fn a_scale_adds_mm_columns_and_the_strain_is_defined() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_dir = dir.path().join("res");
+    let out = ffdic(&[
+        "analyze",
+        &sample3("reference.tif"),
+        &sample3("shift_02.tif"),
+        "--roi",
+        "100,100,200,200",
+        "--step",
+        "50",
+        "--scale",
+        "20",
+        "--out",
+        out_dir.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let csv = std::fs::read_to_string(out_dir.join("points.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    assert_eq!(&header[12..], ["x_mm", "y_mm", "u_mm", "v_mm"]);
+    for row in lines {
+        let f: Vec<&str> = row.split(',').collect();
+        let num = |i: usize| f[i].parse::<f64>().unwrap();
+        assert!((num(12) - num(0) / 20.0).abs() < 1e-12 && (num(14) - num(2) / 20.0).abs() < 1e-12);
+    }
+    let settings: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out_dir.join("settings.json")).unwrap())
+            .unwrap();
+    assert_eq!(settings["scale_px_per_mm"], 20.0);
+    assert!(settings["strain"].as_str().unwrap().contains("du/dx"));
+    let bad = ffdic(&[
+        "analyze",
+        &sample3("reference.tif"),
+        &sample3("shift_02.tif"),
+        "--scale",
+        "0",
+    ]);
+    assert!(!bad.status.success() && stderr_line(&bad).contains("px per mm"));
+}

@@ -21,6 +21,12 @@ from .client import Client, Event, JobResult, ProblemError, RunFailed
 
 __version__: str = _ffdic.__version__
 
+
+def __dir__() -> list:
+    """What the package offers (``__all__``), not the modules and type names it imports for
+    itself (PEP 562): tab completion and ``dir(ffdic)`` show the API only."""
+    return sorted([*__all__, "__version__"])
+
 __all__ = [
     "AnalysisResult",
     "Client",

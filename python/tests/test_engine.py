@@ -275,3 +275,11 @@ def test_compare_and_diagnose_equal_the_cli(simulated_dataset: Path, tmp_path: P
 def test_version_and_statuses() -> None:
     assert ffdic.__version__ == cli("--version").stdout.decode().split()[-1]
     assert ffdic.Status(0).name == "CONVERGED"
+
+
+def test_the_namespace_offers_the_api_not_its_imports() -> None:
+    names = dir(ffdic)
+    for private in ("Any", "np", "os", "json", "enum"):
+        assert private not in names, f"{private} in dir(ffdic)"
+    for public in ffdic.__all__:
+        assert public in names and hasattr(ffdic, public), public

@@ -6,8 +6,8 @@ use super::ProgressBar;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use ffdic::dic::{
-    analyze_sequence, bias_against, Bias, DicResult, DicSettings, Interpolation, PoiStatus,
-    PolygonMask, PreparedReference, RasterMask, SequenceFrame, ShapeFunction, Summary,
+    analyze_sequence, bias_against, Bias, DicResult, DicSettings, Interpolation, PoiGrid,
+    PoiStatus, PolygonMask, PreparedReference, RasterMask, SequenceFrame, ShapeFunction, Summary,
 };
 use ffdic::image::{read_image, Image, Roi};
 use serde_json::json;
@@ -82,10 +82,25 @@ pub struct AnalyzeArgs {
     /// the measured mean against it, with the 95 % interval of its random part, and the std.
     #[arg(long, value_name = "U,V", value_parser = parse_expected, allow_hyphen_values = true)]
     pub expected: Option<(f64, f64)>,
+    /// The images' scale, px per mm (dataset.json's scale_px_per_mm): points.csv gains
+    /// x_mm, y_mm, u_mm, v_mm.
+    #[arg(long, value_name = "PX_PER_MM", value_parser = parse_scale)]
+    pub scale: Option<f64>,
     /// Print one JSON document on stdout and nothing else.
     #[arg(long)]
     pub json: bool,
 }
+
+fn parse_scale(text: &str) -> Result<f64, String> {
+    text.trim()
+        .parse::<f64>()
+        .ok()
+        .filter(|s| s.is_finite() && *s > 0.0)
+        .ok_or_else(|| format!("'{text}': a scale in px per mm, a positive number"))
+}
+
+/// What the strain columns hold, in settings.json and the points file's docs.
+const STRAIN_DEFINITION: &str = "small-strain tensor from the displacement gradient of a strain window (a plane fitted to u and v): exx = du/dx, eyy = dv/dy, exy = (du/dy + dv/dx)/2; dimensionless (x 1e6 for microstrain)";
 
 /// `0.5,-0.1` as (0.5, −0.1) px.
 fn parse_expected(text: &str) -> Result<(f64, f64), String> {
@@ -99,6 +114,9 @@ pub fn run(args: &AnalyzeArgs) -> Result<()> {
     let (reference, _) = read_image(&args.reference)?;
     let frames = deformed_paths(&args.deformed)?;
     let settings = settings(args)?;
+    if let Some(note) = roi_note(&settings, reference.width(), reference.height()) {
+        eprintln!("{note}");
+    }
     let mask = match &args.mask {
         Some(path) => Some(RasterMask::from_image(&read_image(path)?.0)),
         None => None,
@@ -118,6 +136,19 @@ pub fn run(args: &AnalyzeArgs) -> Result<()> {
         bail!("--expected applies to one image pair (a sequence's frames each moved differently)");
     }
     run_sequence(args, &settings, &reference, &frames, &pool)
+}
+
+/// What became of a stated ROI that reaches beyond the image: never clipped in silence.
+fn roi_note(settings: &DicSettings, width: usize, height: usize) -> Option<String> {
+    let roi = settings.roi?;
+    let kept = roi.clip(width, height)?;
+    if kept == roi {
+        return None;
+    }
+    let points = PoiGrid::new(settings, width, height).map_or(0, |g| g.nx() * g.ny());
+    Some(format!(
+        "note: --roi {roi} reaches beyond the {width}x{height} image; analysed inside {kept} ({points} points)"
+    ))
 }
 
 fn settings(args: &AnalyzeArgs) -> Result<DicSettings> {
@@ -194,7 +225,10 @@ fn run_pair(
 
     if let Some(dir) = &args.out {
         create_dir(dir)?;
-        write_atomic(&dir.join("points.csv"), points_csv(&result).as_bytes())?;
+        write_atomic(
+            &dir.join("points.csv"),
+            points_csv(&result, args.scale).as_bytes(),
+        )?;
         let doc = settings_json(&result, args, &args.deformed[0]);
         write_atomic(
             &dir.join("settings.json"),
@@ -309,7 +343,7 @@ fn run_sequence(
                 written = create_dir(dir).and_then(|_| {
                     write_atomic(
                         &dir.join(format!("points_{:04}.csv", frame.index)),
-                        points_csv(&frame.result).as_bytes(),
+                        points_csv(&frame.result, args.scale).as_bytes(),
                     )
                 });
             }
@@ -445,14 +479,25 @@ fn settings_json(result: &DicResult, args: &AnalyzeArgs, deformed: &Path) -> ser
     doc["reference"] = json!(args.reference);
     doc["deformed"] = json!(deformed);
     doc["mask"] = json!(args.mask);
+    doc["strain"] = json!(STRAIN_DEFINITION);
+    if let Some(scale) = args.scale {
+        doc["scale_px_per_mm"] = json!(scale);
+    }
     doc
 }
 
-fn points_csv(result: &DicResult) -> String {
-    let mut csv = String::from("x,y,u,v,exx,eyy,exy,zncc,u_std_px,v_std_px,iterations,status\n");
+/// One row per point: position and displacement in px (and in mm with a scale), the strain
+/// ([`STRAIN_DEFINITION`]), the match quality.
+fn points_csv(result: &DicResult, scale_px_per_mm: Option<f64>) -> String {
+    let mut csv = String::from("x,y,u,v,exx,eyy,exy,zncc,u_std_px,v_std_px,iterations,status");
+    csv.push_str(if scale_px_per_mm.is_some() {
+        ",x_mm,y_mm,u_mm,v_mm\n"
+    } else {
+        "\n"
+    });
     for p in &result.points {
         csv.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{}",
             p.x,
             p.y,
             p.u,
@@ -466,6 +511,16 @@ fn points_csv(result: &DicResult) -> String {
             p.iterations,
             p.status.as_str()
         ));
+        match scale_px_per_mm {
+            Some(k) => csv.push_str(&format!(
+                ",{},{},{},{}\n",
+                p.x as f64 / k,
+                p.y as f64 / k,
+                p.u / k,
+                p.v / k
+            )),
+            None => csv.push('\n'),
+        }
     }
     csv
 }
