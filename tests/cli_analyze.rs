@@ -13,6 +13,17 @@ fn ffdic(args: &[&str]) -> Output {
         .expect("run ffdic")
 }
 
+/// [`ffdic`], which must succeed (its stderr shown when it does not).
+fn ffdic_ok(args: &[&str]) -> Output {
+    let out = ffdic(args);
+    assert!(
+        out.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
 fn sample3(name: &str) -> String {
     common::shared_data()
         .join("dic-challenge-1/sample3")
@@ -34,17 +45,12 @@ fn stderr_line(out: &Output) -> String {
 
 #[test]
 fn json_document_has_the_documented_shape() {
-    let out = ffdic(&[
+    let out = ffdic_ok(&[
         "analyze",
         &sample3("reference.tif"),
         &sample3("shift_05.tif"),
         "--json",
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     assert!(out.stderr.is_empty(), "nothing but JSON when --json");
     let doc: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON document");
     assert_eq!(doc["points"], 576);
@@ -124,7 +130,7 @@ fn the_bias_against_the_commanded_move_comes_with_its_interval() {
 fn out_folder_gets_points_and_settings() {
     let dir = tempfile::tempdir().unwrap();
     let out_dir = dir.path().join("res");
-    let out = ffdic(&[
+    ffdic_ok(&[
         "analyze",
         &sample3("reference.tif"),
         &sample3("shift_02.tif"),
@@ -143,11 +149,6 @@ fn out_folder_gets_points_and_settings() {
         "--out",
         out_dir.to_str().unwrap(),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let csv = std::fs::read_to_string(out_dir.join("points.csv")).unwrap();
     let mut lines = csv.lines();
     assert_eq!(
@@ -356,7 +357,7 @@ fn thresholds_and_polygon_masks_are_settable() {
 
 #[test]
 fn the_second_order_shape_function_is_selectable() {
-    let out = ffdic(&[
+    let out = ffdic_ok(&[
         "analyze",
         &sample3("reference.tif"),
         &sample3("shift_05.tif"),
@@ -364,11 +365,6 @@ fn the_second_order_shape_function_is_selectable() {
         "quadratic",
         "--json",
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(doc["settings"]["shape_function"], "quadratic");
     assert_eq!(doc["valid"], doc["points"], "{doc}");
@@ -393,7 +389,7 @@ fn an_roi_partly_outside_the_image_is_reported_not_clipped_in_silence() {
     let dir = tempfile::tempdir().unwrap();
     let a = write_image(dir.path(), "a.tif", 200, 160);
     let a = a.to_str().unwrap();
-    let out = ffdic(&[
+    let out = ffdic_ok(&[
         "analyze",
         a,
         a,
@@ -402,11 +398,6 @@ fn an_roi_partly_outside_the_image_is_reported_not_clipped_in_silence() {
         "--subset",
         "21",
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
         stderr.contains("--roi 100,100,200,200 reaches beyond the 200x160 image")
@@ -422,7 +413,7 @@ fn an_roi_partly_outside_the_image_is_reported_not_clipped_in_silence() {
 fn a_scale_adds_mm_columns_and_the_strain_is_defined() {
     let dir = tempfile::tempdir().unwrap();
     let out_dir = dir.path().join("res");
-    let out = ffdic(&[
+    ffdic_ok(&[
         "analyze",
         &sample3("reference.tif"),
         &sample3("shift_02.tif"),
@@ -435,11 +426,6 @@ fn a_scale_adds_mm_columns_and_the_strain_is_defined() {
         "--out",
         out_dir.to_str().unwrap(),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let csv = std::fs::read_to_string(out_dir.join("points.csv")).unwrap();
     let mut lines = csv.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
