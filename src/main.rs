@@ -35,6 +35,8 @@ enum Command {
     Diagnose(cli::diagnose::DiagnoseArgs),
     /// The discrepancy of a dataset over model versions.
     History(cli::history::HistoryArgs),
+    /// Datasets: write one for a folder of frames.
+    Dataset(cli::dataset::DatasetArgs),
     /// A design map: error against dot size, fill factor, noise, blur and sub-pixel motion.
     Sweep(cli::sweep::SweepArgs),
 }
@@ -66,6 +68,7 @@ fn main() {
         Command::Compare(args) => cli::compare::run(args),
         Command::Diagnose(args) => cli::diagnose::run(args),
         Command::History(args) => cli::history::run(args),
+        Command::Dataset(args) => cli::dataset::run(args),
         Command::Sweep(args) => cli::sweep::run(args),
     };
     if let Err(err) = outcome {

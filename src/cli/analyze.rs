@@ -104,10 +104,7 @@ const STRAIN_DEFINITION: &str = "small-strain tensor from the displacement gradi
 
 /// `0.5,-0.1` as (0.5, −0.1) px.
 fn parse_expected(text: &str) -> Result<(f64, f64), String> {
-    let bad = || format!("'{text}': expected U,V in px, e.g. 0.5,0");
-    let (u, v) = text.split_once(',').ok_or_else(bad)?;
-    let number = |t: &str| t.trim().parse::<f64>().ok().filter(|x| x.is_finite());
-    Ok((number(u).ok_or_else(bad)?, number(v).ok_or_else(bad)?))
+    super::number_pair(text, "U,V in px, e.g. 0.5,0")
 }
 
 pub fn run(args: &AnalyzeArgs) -> Result<()> {
@@ -514,8 +511,8 @@ fn points_csv(result: &DicResult, scale_px_per_mm: Option<f64>) -> String {
         match scale_px_per_mm {
             Some(k) => csv.push_str(&format!(
                 ",{},{},{},{}\n",
-                p.x as f64 / k,
-                p.y as f64 / k,
+                p.x / k,
+                p.y / k,
                 p.u / k,
                 p.v / k
             )),

@@ -186,6 +186,8 @@ pub fn comparison_text(cmp: &Comparison) -> String {
         ],
         &rows,
     );
+    s += "\n";
+    s += &accuracy_text(cmp);
     if let Some(hw) = &cmp.hardware {
         s.push_str(&hardware_text(hw));
     }
@@ -210,6 +212,47 @@ pub fn comparison_text(cmp: &Comparison) -> String {
         cmp.model.nominal.misalignment_rad,
         cmp.model.nominal.travel_scale,
         stage_text(cmp)
+    );
+    s
+}
+
+/// The measured side against the commanded move, per run and scheme: the bias with its standard
+/// error and the std, px of the analysed image and µm on the target.
+fn accuracy_text(cmp: &Comparison) -> String {
+    let pm = |x: f64, se: f64| format!("{x:+.5} ± {se:.5}");
+    let rows: Vec<Vec<String>> = cmp
+        .runs
+        .iter()
+        .map(|r| {
+            let a = &r.accuracy;
+            vec![
+                r.id.clone(),
+                r.scheme.clone(),
+                format!("{:.4}, {:.4}", a.commanded_px[0], a.commanded_px[1]),
+                pm(a.bias_px[0], a.bias_se_px[0]),
+                pm(a.bias_px[1], a.bias_se_px[1]),
+                format!("{:.5}", a.std_px[0]),
+                format!("{:.5}", a.std_px[1]),
+                format!("{:+.3}, {:+.3}", a.bias_um[0], a.bias_um[1]),
+                format!("{:.3}, {:.3}", a.std_um[0], a.std_um[1]),
+            ]
+        })
+        .collect();
+    let mut s =
+        String::from("accuracy against the commanded move (the stage's own error included)\n");
+    s += &ffdic::report::text_table(
+        &[
+            "run",
+            "scheme",
+            "commanded [px]",
+            "bias u [px]",
+            "bias v [px]",
+            "std u [px]",
+            "std v [px]",
+            "bias [µm]",
+            "std [µm]",
+        ],
+        &rows,
     );
     s
 }

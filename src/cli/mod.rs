@@ -2,11 +2,13 @@
 
 pub mod analyze;
 pub mod compare;
+pub mod dataset;
 mod dataset_arg;
 pub mod diagnose;
 mod error_line;
 pub mod history;
 mod logging;
+mod number_pair;
 mod progress;
 pub mod reduce;
 pub mod reproduce;
@@ -17,4 +19,5 @@ pub mod sweep;
 
 pub use dataset_arg::dataset_folder;
 pub use error_line::error_line;
+pub use number_pair::number_pair;
 pub use progress::ProgressBar;

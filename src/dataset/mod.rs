@@ -5,12 +5,14 @@
 
 mod capture;
 mod frame_check;
+mod init;
 mod manifest;
 mod manifest_schema;
 mod move_check;
 
 pub use capture::sensor_readout;
 pub use frame_check::{check_frames, CheckedFrames, FrameCheckError, FrameLimits};
+pub use init::{guess_reference, StepSeries};
 pub use manifest::{
     is_plain_file_name, CameraInfo, DatasetError, DotProfile, Manifest, PatternInfo, Run,
     StageMove, FORMAT, MAX_EDGE_SOFTNESS_PX, MAX_PRINT_FEATURE_PX,

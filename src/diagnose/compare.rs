@@ -21,7 +21,7 @@ use super::print::{
 };
 use super::residuals::residual_map;
 use super::results::{
-    Chi2, Comparison, DiscrepancyParts, ImageComparison, ModelInfo, RunComparison, Side,
+    Accuracy, Chi2, Comparison, DiscrepancyParts, ImageComparison, ModelInfo, RunComparison, Side,
 };
 use super::stage::{fit_stage, StageObservation};
 use super::{CompareOptions, DiagnoseError, Progress};
@@ -814,12 +814,44 @@ fn run_comparisons(
                 mean_diff_px: [d.mean_diff_px.0, d.mean_diff_px.1],
                 subpixel_fraction: [frac(m.summary.u.mean), frac(m.summary.v.mean)],
                 move_px,
+                accuracy: accuracy(run, meas.manifest.scale_px_per_mm, scheme, m, &opts.dic),
                 residual: residual_map(m, &d),
                 detail: d,
             });
         }
     }
     out_runs
+}
+
+/// The measured analysis `m` of `run` in `scheme` against the run's commanded move.
+fn accuracy(
+    run: &crate::dataset::Run,
+    scale_px_per_mm: f64,
+    scheme: &Scheme,
+    m: &DicResult,
+    dic: &crate::dic::DicSettings,
+) -> Accuracy {
+    let px_per_mm = run.frame_px_per_mm(scale_px_per_mm);
+    let blocks = [scheme.x.block as f64, scheme.y.block as f64];
+    let commanded = [
+        run.stage.dx_mm * px_per_mm / blocks[0],
+        run.stage.dy_mm * px_per_mm / blocks[1],
+    ];
+    let s = &m.summary;
+    let n_eff = (s.valid as f64 / super::bic::inflation(dic)).max(1.0);
+    let bias = [s.u.mean - commanded[0], s.v.mean - commanded[1]];
+    let std = [s.u.std, s.v.std];
+    let se = std.map(|x| x / n_eff.sqrt());
+    let um = |p: [f64; 2]| [0, 1].map(|i| p[i] * blocks[i] * 1000.0 / px_per_mm);
+    Accuracy {
+        commanded_px: commanded,
+        bias_px: bias,
+        bias_se_px: se,
+        std_px: std,
+        bias_um: um(bias),
+        bias_se_um: um(se),
+        std_um: um(std),
+    }
 }
 
 /// Standard error of the total discrepancy D = √(mean D_r²) from the noise of each analysis,

@@ -125,8 +125,8 @@ pub use print::{PrintCalibration, PrintKnowledge};
 pub use residual_shape::{ImageMismatch, RunShape, Shape};
 pub use residuals::ResidualMap;
 pub use results::{
-    Chi2, Comparison, DiscrepancyParts, HardwareComparison, HardwareRunComparison, ImageComparison,
-    ModelInfo, RunComparison, Side,
+    Accuracy, Chi2, Comparison, DiscrepancyParts, HardwareComparison, HardwareRunComparison,
+    ImageComparison, ModelInfo, RunComparison, Side,
 };
 pub use rounds::{diagnose_rounds, diagnose_rounds_prepared, Round, Rounds, MAX_ROUNDS};
 pub use stage_landing::{RepeatabilitySource, StageLanding};

@@ -52,9 +52,30 @@ pub struct RunComparison {
     pub subpixel_fraction: [f64; 2],
     /// Actual move of the nominal experiment, full-resolution px.
     pub move_px: [f64; 2],
+    /// The measured side against the commanded move.
+    #[serde(default)]
+    pub accuracy: Accuracy,
     pub residual: ResidualMap,
     #[serde(skip)]
     pub detail: RunDiscrepancy,
+}
+
+/// "How accurate is my camera?": the measured mean displacement of a run against the move the
+/// stage was commanded to make (its travel error included), and the scatter about it, in the
+/// analysed image's px and in µm on the target.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Accuracy {
+    /// The commanded move in this scheme's px (stage mm × the frames' px/mm ÷ the block).
+    pub commanded_px: [f64; 2],
+    /// Measured mean − commanded, px, and its standard error: the std over √(valid points / c),
+    /// c = (subset/step)² the overlap of neighbouring subsets.
+    pub bias_px: [f64; 2],
+    pub bias_se_px: [f64; 2],
+    /// The measured displacements' standard deviation over the grid, px.
+    pub std_px: [f64; 2],
+    pub bias_um: [f64; 2],
+    pub bias_se_um: [f64; 2],
+    pub std_um: [f64; 2],
 }
 
 /// Image statistics of one measured frame and the model's frame of it.
