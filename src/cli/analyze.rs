@@ -421,17 +421,18 @@ fn write_statuses(out: &mut impl Write, result: &DicResult) -> Result<()> {
 }
 
 fn write_summary(out: &mut impl Write, s: &Summary) -> Result<()> {
-    for (name, st, scale, unit) in [
-        ("u", s.u, 1.0, "px"),
-        ("v", s.v, 1.0, "px"),
-        ("exx", s.exx, 1e6, "µε"),
-        ("eyy", s.eyy, 1e6, "µε"),
-        ("exy", s.exy, 1e6, "µε"),
+    // Decimals a person reads: 1e-5 px resolves a displacement's std, 0.1 µε a strain's.
+    for (name, st, scale, unit, dp) in [
+        ("u", s.u, 1.0, "px", 5),
+        ("v", s.v, 1.0, "px", 5),
+        ("exx", s.exx, 1e6, "µε", 1),
+        ("eyy", s.eyy, 1e6, "µε", 1),
+        ("exy", s.exy, 1e6, "µε", 1),
     ] {
-        let ci = interval_text(st.std_ci95.map(|x| x * scale));
+        let ci = interval_text(st.std_ci95.map(|x| x * scale), dp);
         writeln!(
             out,
-            "{name:>4}: mean {:>12.5} std {:>10.5} {ci:<22} min {:>12.5} max {:>12.5} {unit}",
+            "{name:>4}: mean {:>12.dp$} std {:>10.dp$} {ci:<22} min {:>12.dp$} max {:>12.dp$} {unit}",
             st.mean * scale,
             st.std * scale,
             st.min * scale,
@@ -445,10 +446,10 @@ fn write_summary(out: &mut impl Write, s: &Summary) -> Result<()> {
     Ok(())
 }
 
-/// `[lo, hi]` to five decimals, `[—]` when the interval was not computed.
-fn interval_text([lo, hi]: [f64; 2]) -> String {
+/// `[lo, hi]` to `dp` decimals, `[—]` when the interval was not computed.
+fn interval_text([lo, hi]: [f64; 2], dp: usize) -> String {
     if lo.is_finite() && hi.is_finite() {
-        format!("[{lo:.5}, {hi:.5}]")
+        format!("[{lo:.dp$}, {hi:.dp$}]")
     } else {
         "[—]".to_string()
     }
@@ -457,7 +458,7 @@ fn interval_text([lo, hi]: [f64; 2]) -> String {
 fn write_bias(out: &mut impl Write, bias: &[Bias; 2]) -> Result<()> {
     writeln!(out, "against the commanded move:")?;
     for (name, b) in ["u", "v"].iter().zip(bias) {
-        let ci = interval_text(b.bias_ci95_px);
+        let ci = interval_text(b.bias_ci95_px, 5);
         writeln!(
             out,
             "{name:>4}: expected {:>10.5} measured {:>10.5} bias {:>10.5} {ci:<22} std {:>9.5} px",

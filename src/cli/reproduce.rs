@@ -171,10 +171,10 @@ pub fn run(args: &ReproduceArgs) -> Result<()> {
 
 /// Waits for run `id` with a progress bar; an error unless it succeeded.
 fn wait(service: &Service, id: &RunId, what: &'static str, show: bool) -> Result<RunRecord> {
-    let bar = ProgressBar::new(show, what);
+    let bar = ProgressBar::fraction(show, what);
     let record = loop {
         let r = service.store.get(id)?;
-        bar.update((r.progress * 1000.0) as usize, 1000);
+        bar.update_fraction(r.progress);
         if r.status.is_terminal() {
             break r;
         }
