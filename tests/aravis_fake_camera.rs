@@ -13,8 +13,8 @@ mod folder_sink;
 
 use ffdic::dic::{analyze, DicSettings};
 use ffdic::experiment::{
-    run_experiment, BenchHandle, BenchHardware, BenchLimits, BenchTimeouts, ExperimentRequest,
-    ModelScene, MoveSpec, PatternSpec, SchemeSpec,
+    run_experiment, BenchGeometry, BenchHandle, BenchHardware, BenchLimits, BenchTimeouts,
+    ExperimentRequest, ModelScene, MoveSpec, PatternSpec, SchemeSpec,
 };
 use ffdic::image::{Image, Roi};
 use ffdic::model::{Camera as ModelCamera, ModelConfig, SpecklePattern};
@@ -522,7 +522,7 @@ fn a_hardware_scheme_experiment_runs_through_gige_vision() {
         &plan,
         &bench,
         &lease,
-        SCALE_PX_PER_MM,
+        BenchGeometry::scale(SCALE_PX_PER_MM),
         BenchTimeouts::default(),
         &sink,
     )

@@ -13,8 +13,8 @@ use folder_sink::FolderSink;
 
 use ffdic::dic::DicSettings;
 use ffdic::experiment::{
-    run_experiment, BenchHandle, BenchLimits, BenchTimeouts, ExperimentRequest, MoveSpec,
-    PatternSpec,
+    run_experiment, BenchGeometry, BenchHandle, BenchLimits, BenchTimeouts, ExperimentRequest,
+    MoveSpec, PatternSpec,
 };
 use ffdic::service::{open_bench, DaemonConfig};
 use serde_json::json;
@@ -125,7 +125,10 @@ fn an_experiment_through_the_exec_camera_captures_the_generators_frames_bit_for_
         &plan,
         &bench,
         &lease,
-        SCALE_PX_PER_MM,
+        BenchGeometry {
+            scale_px_per_mm: SCALE_PX_PER_MM,
+            working_distance_mm: Some(300.0),
+        },
         BenchTimeouts::default(),
         &sink,
     )
@@ -146,6 +149,8 @@ fn an_experiment_through_the_exec_camera_captures_the_generators_frames_bit_for_
             .unwrap()
             .to_string()
     };
+    // The bench's stated working distance goes into the dataset it exports.
+    assert_eq!(outcome.manifest.working_distance_mm, Some(300.0));
     let runs = &outcome.manifest.runs;
     assert_eq!(runs.len(), 2, "{runs:?}");
     let reference = outcome.frames_dir.join(&runs[0].reference);

@@ -31,7 +31,9 @@ pub use request::{
     ExperimentRequest, FieldError, SchemeSpec, MAX_FRAMES_AVERAGED, MAX_MOVES, MAX_PATTERNS,
     MAX_REPEATS, MAX_RUN_NAME_CHARS, MAX_SCHEMES, MAX_SETTLE_MS, MAX_STATIC_FRAMES,
 };
-pub use runner::{run_experiment, BenchTimeouts, ExperimentOutcome, RunSink, RunnerError};
+pub use runner::{
+    run_experiment, BenchGeometry, BenchTimeouts, ExperimentOutcome, RunSink, RunnerError,
+};
 pub use simulate::{pattern_dots, render_stage_frame, simulate_dataset, SimulateError};
 pub use spec::{ExperimentSpec, MoveSpec, PatternSpec, SpecError, StepSeries, PAPER_TOML};
 pub use study::{

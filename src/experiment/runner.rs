@@ -89,11 +89,11 @@ pub fn run_experiment(
     plan: &ExperimentPlan,
     bench: &BenchHandle,
     lease: &BenchLease,
-    scale_px_per_mm: f64,
+    geometry: BenchGeometry,
     timeouts: BenchTimeouts,
     sink: &dyn RunSink,
 ) -> Result<ExperimentOutcome, RunnerError> {
-    let result = capture_and_analyse(plan, bench, lease, scale_px_per_mm, timeouts, sink);
+    let result = capture_and_analyse(plan, bench, lease, geometry, timeouts, sink);
     if result.is_err() {
         // Whatever happened, leave the stage standing still (not waited for: a cancel inside a
         // half-second mock exposure would otherwise wait for it).
@@ -102,12 +102,31 @@ pub fn run_experiment(
     result
 }
 
+/// What the bench's configuration states of its optics, written into every dataset it exports.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BenchGeometry {
+    pub scale_px_per_mm: f64,
+    /// Entrance pupil to target, mm, when the lab stated it (`[bench] working_distance_mm`): a
+    /// tilted target is then reported as angles.
+    pub working_distance_mm: Option<f64>,
+}
+
+impl BenchGeometry {
+    /// A bench that states its scale alone.
+    pub fn scale(scale_px_per_mm: f64) -> Self {
+        Self {
+            scale_px_per_mm,
+            working_distance_mm: None,
+        }
+    }
+}
+
 /// The experiment's steps: prepare the bench, capture and export, analyse, write the results.
 fn capture_and_analyse(
     plan: &ExperimentPlan,
     bench: &BenchHandle,
     lease: &BenchLease,
-    scale_px_per_mm: f64,
+    geometry: BenchGeometry,
     timeouts: BenchTimeouts,
     sink: &dyn RunSink,
 ) -> Result<ExperimentOutcome, RunnerError> {
@@ -116,7 +135,7 @@ fn capture_and_analyse(
         written: Vec::new(),
     };
     let session = Session::prepare(plan, bench, lease, timeouts, sink)?;
-    let captured = session.capture(&mut files, scale_px_per_mm);
+    let captured = session.capture(&mut files, geometry);
     // The camera's own binning and decimation go back to what they were, whatever happened.
     let restored = session.restore_readout();
     let captured = captured?;
@@ -286,7 +305,7 @@ impl<'a> Session<'a> {
     fn capture(
         &self,
         files: &mut Files<'_>,
-        scale_px_per_mm: f64,
+        geometry: BenchGeometry,
     ) -> Result<Captured, RunnerError> {
         let plan = self.plan;
         let labels: Vec<&str> = plan.patterns.iter().map(|p| p.label.as_str()).collect();
@@ -302,7 +321,8 @@ impl<'a> Session<'a> {
             sizes: Vec::new(),
             frames_dir: PathBuf::new(),
         };
-        let mut manifest = Manifest::new(&plan.name, scale_px_per_mm);
+        let mut manifest = Manifest::new(&plan.name, geometry.scale_px_per_mm);
+        manifest.working_distance_mm = geometry.working_distance_mm;
         for target in &captures {
             self.check()?;
             self.mount(target, &state)?;

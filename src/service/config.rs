@@ -202,6 +202,11 @@ impl Default for SweepLimits {
 pub struct BenchConfig {
     /// Magnification of the bench: image px per mm on the target.
     pub scale_px_per_mm: f64,
+    /// Entrance pupil to target along the optical axis, mm, when known: written into every
+    /// dataset the bench exports, so a tilted target is reported as angles (without it, as
+    /// angles at an assumed distance: one translation identifies the angle over the distance).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub working_distance_mm: Option<f64>,
     #[serde(default = "default_frame_timeout_ms")]
     pub frame_timeout_ms: u64,
     #[serde(default = "default_settle_timeout_ms")]
@@ -392,6 +397,13 @@ impl DaemonConfig {
                 ));
             }
         }
+        if let Some(z) = config.bench.working_distance_mm {
+            if !(z.is_finite() && z >= 1.0) {
+                return Err(parse(format!(
+                    "bench.working_distance_mm must be at least 1 mm (got {z})"
+                )));
+            }
+        }
         if let CameraConfig::Exec(exec) = &config.camera {
             exec.validate().map_err(parse)?;
         }
@@ -561,6 +573,11 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("shell"), "{err}");
+        let near = DEFAULT_CONFIG_TOML.replace("[bench]\n", "[bench]\nworking_distance_mm = 0.5\n");
+        let err = DaemonConfig::from_toml(&near, Path::new("x.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("working_distance_mm"), "{err}");
     }
 
     #[test]

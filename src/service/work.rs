@@ -9,8 +9,8 @@ use crate::diagnose::{
 };
 use crate::dic::DicSettings;
 use crate::experiment::{
-    analyze_dataset, check_dic, check_schemes, run_experiment, study_files, ExperimentPlan,
-    ExperimentRequest, FieldError, RunSink, RunnerError, SchemeSpec, StudyError,
+    analyze_dataset, check_dic, check_schemes, run_experiment, study_files, BenchGeometry,
+    ExperimentPlan, ExperimentRequest, FieldError, RunSink, RunnerError, SchemeSpec, StudyError,
 };
 use crate::model::ModelConfig;
 use crate::reduce::Scheme;
@@ -106,7 +106,10 @@ pub fn experiment(service: Service, plan: ExperimentPlan) -> Work {
             &plan,
             &service.bench,
             &lease,
-            service.config.bench.scale_px_per_mm,
+            BenchGeometry {
+                scale_px_per_mm: service.config.bench.scale_px_per_mm,
+                working_distance_mm: service.config.bench.working_distance_mm,
+            },
             service.timeouts(),
             ctx,
         )
