@@ -178,7 +178,15 @@ fn a_dataset_is_named_by_its_folder_or_by_its_manifest() {
         "{}",
         String::from_utf8_lossy(&compared.stderr)
     );
-    let history = ffdic(&["history".as_ref(), manifest.as_os_str(), "--json".as_ref()]);
+    // Issue 34 (6): the history goes into the data folder, not the measurement folder.
+    assert!(!dir.path().join("ffdic-history.jsonl").exists());
+    let history = ffdic(&[
+        "history".as_ref(),
+        manifest.as_os_str(),
+        "--json".as_ref(),
+        "--data".as_ref(),
+        data.as_os_str(),
+    ]);
     assert!(
         history.status.success(),
         "{}",

@@ -172,7 +172,8 @@ def compare(
 
     DIC runs on the measured frames and on the frames the model renders for the same nominal
     experiment; the discrepancy per run and scheme and in total (px). Recorded in the
-    dataset's history (``ffdic-history.jsonl``) unless ``history=False``. ``schemes`` takes the
+    dataset's history unless ``history=False``: ``DATA_DIR/history/NAME-HASH/ffdic-history.jsonl``,
+    where ``ffdic history`` finds it (nothing is written into the dataset's folder). ``schemes`` takes the
     names :func:`reduce` takes (``"native"`` for a camera's own resolution).
     """
     result: Dict[str, Any] = _ffdic.compare(

@@ -4,7 +4,7 @@
 use crate::errors::{json_to_python, value_error};
 use crate::frames::model_config;
 use ffdic::diagnose::{
-    append_history, compare as compare_dataset, diagnose_rounds, CompareOptions,
+    append_history, compare as compare_dataset, diagnose_rounds, history_dir_for, CompareOptions,
     CompareOptionsError, DiagnoseError, HistoryEntry, MAX_ROUNDS,
 };
 use ffdic::dic::DicSettings;
@@ -52,7 +52,7 @@ fn dataset_dir(dataset: &Path) -> PyResult<PathBuf> {
 }
 
 /// DIC on the dataset's frames against the same DIC on the frames `model` renders for the same
-/// nominal experiment; recorded in the dataset's history unless `history=False`.
+/// nominal experiment; recorded in the dataset's history under `data_dir` unless `history=False`.
 #[pyfunction]
 #[pyo3(signature = (dataset, model=None, *, schemes=vec!["ff100".into(), "ff50".into(), "ff25".into()],
     subset=None, step=None, prefilter_sigma=None, seed=None, history=true, data_dir="data"))]
@@ -76,7 +76,8 @@ pub fn compare(
         .allow_threads(|| compare_dataset(&dir, &model, &options, &|_, _| true))
         .map_err(diagnose_error)?;
     if history {
-        append_history(&dir, &HistoryEntry::of(&cmp)).map_err(diagnose_error)?;
+        let into = history_dir_for(Path::new(data_dir), &dir);
+        append_history(&into, &HistoryEntry::of(&cmp)).map_err(diagnose_error)?;
     }
     json_to_python(py, &cmp)
 }

@@ -260,10 +260,12 @@ def test_compare_and_diagnose_equal_the_cli(simulated_dataset: Path, tmp_path: P
     if diag.get("verdict") not in (None, "none"):
         assert final_toml is not None and "[effects" in final_toml
 
-    history = simulated_dataset / "ffdic-history.jsonl"
-    before = len(history.read_text().splitlines()) if history.exists() else 0
-    ffdic.compare(simulated_dataset, schemes=["ff100"])
-    assert len(history.read_text().splitlines()) == before + 1
+    # The history goes into the data folder, one folder per dataset; nothing into the dataset.
+    data = tmp_path / "data"
+    ffdic.compare(simulated_dataset, schemes=["ff100"], data_dir=str(data))
+    (history,) = (data / "history").glob("*/ffdic-history.jsonl")
+    assert len(history.read_text().splitlines()) == 1
+    assert not (simulated_dataset / "ffdic-history.jsonl").exists()
     with pytest.raises(ValueError, match="not a dataset folder"):
         ffdic.compare(tmp_path)
     with pytest.raises(ValueError, match="no such file"):

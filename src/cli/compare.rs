@@ -6,7 +6,9 @@
 use super::ProgressBar;
 use anyhow::{Context, Result};
 use clap::Args;
-use ffdic::diagnose::{append_history, compare, CompareOptions, Comparison, HistoryEntry};
+use ffdic::diagnose::{
+    append_history, compare, history_dir_for, CompareOptions, Comparison, HistoryEntry,
+};
 use ffdic::dic::DicSettings;
 use ffdic::model::ModelConfig;
 use ffdic::report::comparison_svgs;
@@ -68,9 +70,13 @@ pub struct CompareArgs {
     /// Write comparison.json and the plots (SVG) into this folder.
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Do not record the comparison in DATASET/ffdic-history.jsonl.
+    /// Do not record the comparison in the dataset's history.
     #[arg(long)]
     pub no_history: bool,
+    /// Where the dataset's history goes (default: DATA/history/NAME-HASH, one folder per
+    /// dataset; nothing is written into the measurement folder unless named here).
+    #[arg(long, value_name = "DIR")]
+    pub history_dir: Option<PathBuf>,
     #[command(flatten)]
     pub analysis: AnalysisArgs,
 }
@@ -84,9 +90,9 @@ pub fn load_analysis_model(given: &Option<String>, data: &std::path::Path) -> Re
     })
 }
 
-/// Appends the comparison to the dataset's history.
-pub fn record(dataset: &std::path::Path, cmp: &Comparison) -> Result<()> {
-    append_history(dataset, &HistoryEntry::of(cmp))?;
+/// Appends the comparison to the dataset's history in `history_dir`.
+pub fn record(history_dir: &std::path::Path, cmp: &Comparison) -> Result<()> {
+    append_history(history_dir, &HistoryEntry::of(cmp))?;
     Ok(())
 }
 
@@ -333,7 +339,11 @@ pub fn run(args: &CompareArgs) -> Result<()> {
     })?;
     bar.finish();
     if !args.no_history {
-        record(&args.dataset, &cmp)?;
+        let dir = args
+            .history_dir
+            .clone()
+            .unwrap_or_else(|| history_dir_for(&args.analysis.data, &args.dataset));
+        record(&dir, &cmp)?;
     }
     if let Some(out) = &args.out {
         write_outputs(out, &cmp)?;

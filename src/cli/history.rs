@@ -3,7 +3,7 @@
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use ffdic::diagnose::read_history;
+use ffdic::diagnose::{history_dir_for, read_history};
 use ffdic::report::history_chart;
 use std::path::PathBuf;
 
@@ -12,26 +12,38 @@ pub struct HistoryArgs {
     /// Dataset folder, or its dataset.json.
     #[arg(value_parser = super::dataset_folder)]
     pub dataset: PathBuf,
-    /// Where to draw the chart (default: DATASET/ffdic-history.svg).
+    /// Where to draw the chart (default: ffdic-history.svg in the history folder).
     #[arg(long)]
     pub svg: Option<PathBuf>,
+    /// The dataset's history folder, as `compare --history-dir` named it (default:
+    /// DATA/history/NAME-HASH).
+    #[arg(long, value_name = "DIR")]
+    pub history_dir: Option<PathBuf>,
+    /// The data folder whose history/ holds the dataset's history.
+    #[arg(long, default_value = "data")]
+    pub data: PathBuf,
     /// Print the entries as one JSON array and nothing else.
     #[arg(long)]
     pub json: bool,
 }
 
 pub fn run(args: &HistoryArgs) -> Result<()> {
-    let entries = read_history(&args.dataset)?;
+    let dir = args
+        .history_dir
+        .clone()
+        .unwrap_or_else(|| history_dir_for(&args.data, &args.dataset));
+    let entries = read_history(&dir)?;
     if entries.is_empty() {
         bail!(
-            "no comparison recorded for {} yet (run ffdic compare first)",
-            args.dataset.display()
+            "no comparison recorded for {} in {} yet (run ffdic compare first; --history-dir names another history folder)",
+            args.dataset.display(),
+            dir.display()
         );
     }
     let svg_path = args
         .svg
         .clone()
-        .unwrap_or_else(|| args.dataset.join("ffdic-history.svg"));
+        .unwrap_or_else(|| dir.join("ffdic-history.svg"));
     std::fs::write(&svg_path, history_chart(&entries))
         .with_context(|| format!("cannot write {}", svg_path.display()))?;
     if args.json {

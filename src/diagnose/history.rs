@@ -1,6 +1,11 @@
 //! The history of a dataset's comparisons: one JSON line per comparison in
-//! `DATASET/ffdic-history.jsonl` (time, model name, model version, discrepancy), appended, never
-//! rewritten, so the fall of the error as effects are added can be read and drawn.
+//! `HISTORY_DIR/ffdic-history.jsonl` (time, model name, model version, discrepancy), appended,
+//! never rewritten, so the fall of the error as effects are added can be read and drawn.
+//!
+//! The history folder is the daemon's own dataset folder for a stored dataset, and for a dataset
+//! a user names on the command line or from Python one per dataset under the data folder
+//! ([`history_dir_for`]): nothing is written into a measurement folder (often shared or
+//! read-only) unless asked.
 
 use super::DiagnoseError;
 use serde::{Deserialize, Serialize};
@@ -57,12 +62,44 @@ pub fn history_path(dataset_dir: &Path) -> PathBuf {
 }
 
 /// Appends one entry (creates the file).
-pub fn append_history(dataset_dir: &Path, entry: &HistoryEntry) -> Result<(), DiagnoseError> {
-    let path = history_path(dataset_dir);
+/// The history folder of the dataset in `dataset_dir` under the data folder `data_dir`:
+/// `DATA/history/NAME-HASH`, NAME the dataset folder's name, HASH of its full path (two folders
+/// of the same name keep two histories).
+pub fn history_dir_for(data_dir: &Path, dataset_dir: &Path) -> PathBuf {
+    let full = std::fs::canonicalize(dataset_dir).unwrap_or_else(|_| dataset_dir.to_owned());
+    let name: String = full
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "dataset".into())
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .take(64)
+        .collect();
+    // FNV-1a: stable across builds and platforms, unlike std's hasher.
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in full.to_string_lossy().bytes() {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x0100_0000_01b3);
+    }
+    data_dir
+        .join("history")
+        .join(format!("{name}-{:012x}", h & 0xffff_ffff_ffff))
+}
+
+/// Appends `entry` to the history in `history_dir` (made when missing).
+pub fn append_history(history_dir: &Path, entry: &HistoryEntry) -> Result<(), DiagnoseError> {
+    let path = history_path(history_dir);
     let err = |e: std::io::Error| DiagnoseError::History {
         path: path.clone(),
         message: e.to_string(),
     };
+    std::fs::create_dir_all(history_dir).map_err(err)?;
     let mut line = serde_json::to_string(entry).expect("an entry serialises");
     line.push('\n');
     let mut f = std::fs::OpenOptions::new()
@@ -74,8 +111,8 @@ pub fn append_history(dataset_dir: &Path, entry: &HistoryEntry) -> Result<(), Di
 }
 
 /// Every entry, oldest first; no file is an empty history. A malformed line is an error naming it.
-pub fn read_history(dataset_dir: &Path) -> Result<Vec<HistoryEntry>, DiagnoseError> {
-    let path = history_path(dataset_dir);
+pub fn read_history(history_dir: &Path) -> Result<Vec<HistoryEntry>, DiagnoseError> {
+    let path = history_path(history_dir);
     let text = match std::fs::read_to_string(&path) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
@@ -113,5 +150,35 @@ mod tests {
         assert_eq!(h.len(), 2);
         assert_eq!(h[1].model, "baseline+lens_distortion");
         assert!(h[0].time.ends_with('Z'));
+    }
+
+    #[test]
+    fn a_dataset_named_on_the_command_line_keeps_its_history_in_the_data_folder() {
+        let root = tempfile::tempdir().unwrap();
+        let (a, b) = (root.path().join("one/meas"), root.path().join("two/meas"));
+        std::fs::create_dir_all(&a).unwrap();
+        std::fs::create_dir_all(&b).unwrap();
+        let data = root.path().join("data");
+        let (ha, hb) = (history_dir_for(&data, &a), history_dir_for(&data, &b));
+        assert!(
+            ha.starts_with(data.join("history")) && ha != hb,
+            "{ha:?} {hb:?}"
+        );
+        assert!(ha
+            .file_name()
+            .unwrap()
+            .to_string_lossy()
+            .starts_with("meas-"));
+        assert_eq!(ha, history_dir_for(&data, &a.join(".")));
+        append_history(
+            &ha,
+            &HistoryEntry::now("meas", "baseline", "v", 0.1, vec![]),
+        )
+        .unwrap();
+        assert_eq!(read_history(&ha).unwrap().len(), 1);
+        assert!(
+            std::fs::read_dir(&a).unwrap().next().is_none(),
+            "nothing in the measurement folder"
+        );
     }
 }

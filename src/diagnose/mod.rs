@@ -117,7 +117,9 @@ pub use diagnose::{
     PRINT_SEPARATION,
 };
 pub use discrepancy::{quadratic_fit, run_discrepancy, RunDiscrepancy};
-pub use history::{append_history, history_path, read_history, HistoryEntry, HISTORY_FILE};
+pub use history::{
+    append_history, history_dir_for, history_path, read_history, HistoryEntry, HISTORY_FILE,
+};
 pub use identifiability::{design_of, Confounded, DatasetDesign, NotIdentifiable};
 pub use image_stats::{noise_variance, FrameStats, MeanMap, PsdBin, PtcPoint};
 pub use nominal::{Nominal, BASELINE_TOML};
