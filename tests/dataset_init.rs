@@ -39,6 +39,8 @@ fn a_sample3_step_series_is_a_dataset_in_one_command_with_the_bias_of_every_step
         "shift_00.tif",
         "--step-px",
         "0.1,0.1",
+        "--stage-repeatability-um",
+        "2",
     ]);
     assert!(
         init.status.success(),
@@ -110,7 +112,9 @@ fn a_sample3_step_series_is_a_dataset_in_one_command_with_the_bias_of_every_step
     let text = ffdic(&["compare", d, "--schemes", "native", "--no-history"]);
     let text = String::from_utf8_lossy(&text.stdout);
     assert!(
-        text.contains("accuracy against the commanded move") && text.contains("bias u [px]"),
+        text.contains("accuracy against the commanded move")
+            && text.contains("bias u [px]")
+            && text.contains("the stage's repeatability 2.00 µm"),
         "{text}"
     );
 }

@@ -216,3 +216,61 @@ fn a_failing_command_fails_the_capture_and_the_bench_goes_on() {
     assert!(err.contains("wrote no frame"), "{err}");
     assert!(bench.status().is_ok() && bench.is_alive());
 }
+
+/// With `frame_travel_mm` in its spec the generator lays one print over the whole travel: the
+/// dataset's reference and a single-frame call's are the same frame, and a frame far from every
+/// run of the spec is speckle to its corners (what a calibration's moves need).
+#[test]
+fn the_generators_print_covers_the_stated_travel_in_both_modes() {
+    let root = tempfile::tempdir().unwrap();
+    let spec = json!({
+        "name": "travel", "seed": 3302,
+        "width": 320, "height": 270, "scale_px_per_mm": SCALE_PX_PER_MM, "bit_depth": 16,
+        "white_level_dn": 30000.0, "read_noise_dn": 20.0,
+        "patterns": [{"label": "a", "dot_diameter_mm": 0.3, "dot_spacing_mm": 0.45, "contrast": 0.7}],
+        "moves": [{"id": "x1", "dx_mm": 1.0, "dy_mm": 0.0}],
+        "step_series": [],
+        "repeats": 0,
+        "frame_travel_mm": [-6.0, 6.0, -5.0, 5.0]
+    });
+    let spec_path = root.path().join("spec.json");
+    std::fs::write(&spec_path, spec.to_string()).unwrap();
+    let dataset = root.path().join("dataset");
+    independent::generate(&spec, &dataset);
+    let generator = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/independent/generate.py");
+    let frame = |x: &str, y: &str, out: &Path| {
+        let status = std::process::Command::new(independent::python())
+            .arg(&generator)
+            .arg(&spec_path)
+            .arg("--frame")
+            .envs([
+                ("FFDIC_X_MM", x),
+                ("FFDIC_Y_MM", y),
+                ("FFDIC_TARGET", "a"),
+                ("FFDIC_FRAME", "0"),
+            ])
+            .env("FFDIC_OUT", out)
+            .status()
+            .unwrap();
+        assert!(status.success());
+        grey(out)
+    };
+    let reference = frame("0.0", "0.0", &root.path().join("ref.tif"));
+    assert_eq!(reference, grey(&dataset.join("a_ref.tif")));
+    let far = frame("5.5", "-4.5", &root.path().join("far.tif"));
+    // Every 40-px block at the far corner holds speckle: its std well above the read noise.
+    let (w, h) = (320usize, 270usize);
+    for (bx, by) in [(0, 0), (w - 40, 0), (0, h - 40), (w - 40, h - 40)] {
+        let block: Vec<f64> = (by..by + 40)
+            .flat_map(|y| (bx..bx + 40).map(move |x| (x, y)))
+            .map(|(x, y)| far[y * w + x] as f64)
+            .collect();
+        let mean = block.iter().sum::<f64>() / block.len() as f64;
+        let sd =
+            (block.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / block.len() as f64).sqrt();
+        assert!(
+            sd > 1000.0,
+            "block at ({bx}, {by}): std {sd} DN: no speckle"
+        );
+    }
+}

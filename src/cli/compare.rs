@@ -244,8 +244,16 @@ fn accuracy_text(cmp: &Comparison) -> String {
             ]
         })
         .collect();
+    let stated = match cmp.model.nominal.stage.repeatability_um {
+        Some(r) => format!(
+            "; the stage's repeatability {r:.2} µm, 1σ per axis, from the {} = {:.5} full-resolution px",
+            format!("{:?}", cmp.model.nominal.stage.source).to_lowercase(),
+            r * cmp.model.nominal.scale_px_per_mm / 1000.0
+        ),
+        None => String::new(),
+    };
     let mut s =
-        String::from("accuracy against the commanded move (the stage's own error included)\n");
+        format!("accuracy against the commanded move (the stage's own error included{stated})\n");
     s += &ffdic::report::text_table(
         &[
             "run",
