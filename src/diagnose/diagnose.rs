@@ -301,14 +301,15 @@ fn bound_of(effect: EffectId, param: &str) -> Option<(f64, f64)> {
     }
 }
 
-/// A user effect's parameter at either end of the range its author stated.
+/// The end of a user effect's stated range nearer `value`, and the range's width.
 fn user_bound_of(effects: &Effects, name: &str, param: &str, value: f64) -> Option<(f64, f64)> {
     let p = effects.user.get(name)?.params.get(param)?;
-    let width = p.max - p.min;
-    [p.min, p.max]
-        .into_iter()
-        .find(|b| (value - b).abs() <= 0.01 * width)
-        .map(|b| (b, width))
+    let nearer = if (value - p.min).abs() <= (value - p.max).abs() {
+        p.min
+    } else {
+        p.max
+    };
+    Some((nearer, p.max - p.min))
 }
 
 fn outside_range(fit: &ImageFit) -> Option<String> {

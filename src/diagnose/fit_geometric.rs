@@ -54,11 +54,8 @@ struct Sums {
 /// first (zero for the catalogue's fields, which are linear in their parameters).
 pub trait Basis: Sync {
     fn len(&self) -> usize;
-    /// Column j's (u, v) into `u[j]`, `v[j]`.
-    fn at(&self, p: (f64, f64), t: (f64, f64), u: &mut [f64], v: &mut [f64]);
-    fn known(&self, _p: (f64, f64), _t: (f64, f64)) -> (f64, f64) {
-        (0.0, 0.0)
-    }
+    /// Column j's (u, v) into `u[j]`, `v[j]`; returns the known field there.
+    fn at(&self, p: (f64, f64), t: (f64, f64), u: &mut [f64], v: &mut [f64]) -> (f64, f64);
 }
 
 /// [`GeometricParam`]s with the distortion's normalising radius (the same for every sample: one
@@ -73,10 +70,11 @@ impl Basis for Catalogue<'_> {
         self.params.len()
     }
 
-    fn at(&self, p: (f64, f64), t: (f64, f64), u: &mut [f64], v: &mut [f64]) {
+    fn at(&self, p: (f64, f64), t: (f64, f64), u: &mut [f64], v: &mut [f64]) -> (f64, f64) {
         for (j, &q) in self.params.iter().enumerate() {
             (u[j], v[j]) = geometric_basis(q, p, t, self.r0);
         }
+        (0.0, 0.0)
     }
 }
 
@@ -94,10 +92,9 @@ fn centred_sums(s: &FieldSample, basis: &dyn Basis) -> Option<Sums> {
             let (fx, fy) = s.scheme.to_full(p.x, p.y);
             let rel = (fx - s.centre.0, fy - s.centre.1);
             let (mut bu, mut bv) = (vec![0.0; k], vec![0.0; k]);
-            basis.at(rel, s.move_px, &mut bu, &mut bv);
+            let (ku, kv) = basis.at(rel, s.move_px, &mut bu, &mut bv);
             bu.iter_mut().for_each(|x| *x /= bx);
             bv.iter_mut().for_each(|x| *x /= by);
-            let (ku, kv) = basis.known(rel, s.move_px);
             (bu, bv, p.du - ku / bx, p.dv - kv / by)
         })
         .collect();

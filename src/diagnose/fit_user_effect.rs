@@ -43,20 +43,15 @@ impl Basis for Linearised<'_> {
         self.at.len()
     }
 
-    fn at(&self, p: (f64, f64), t: (f64, f64), u: &mut [f64], v: &mut [f64]) {
-        for j in 0..self.at.len() {
-            (u[j], v[j]) = self.column(j, p, t);
-        }
-    }
-
-    fn known(&self, p: (f64, f64), t: (f64, f64)) -> (f64, f64) {
-        let (mut u, mut v) = self.field.displacement(p, t, &self.at);
+    /// The columns, and the known part d(at) − J·at from the same columns.
+    fn at(&self, p: (f64, f64), t: (f64, f64), u: &mut [f64], v: &mut [f64]) -> (f64, f64) {
+        let (mut ku, mut kv) = self.field.displacement(p, t, &self.at);
         for (j, a) in self.at.iter().enumerate() {
-            let (cu, cv) = self.column(j, p, t);
-            u -= cu * a;
-            v -= cv * a;
+            (u[j], v[j]) = self.column(j, p, t);
+            ku -= u[j] * a;
+            kv -= v[j] * a;
         }
-        (u, v)
+        (ku, kv)
     }
 }
 

@@ -20,9 +20,10 @@ use super::DiagnoseError;
 use crate::dataset::{Manifest, Run};
 use crate::image::Image;
 use crate::model::derive_seed;
+use crate::model::effects::user::{rendered_fields, UserField};
 use crate::model::effects::{Quantization, StageMisalignment};
 use crate::model::{
-    project, render_frame, render_frame_read_out, Camera, Effects, FrameSpec, Placement,
+    project_prepared, render_frame, render_frame_read_out, Camera, Effects, FrameSpec, Placement,
     SensorReadout, SpecklePattern, TargetDot, TooManyDots,
 };
 use rand::SeedableRng;
@@ -174,6 +175,9 @@ impl Nominal {
 pub struct Scene {
     pub nominal: Nominal,
     pub effects: Effects,
+    /// The model's user effects bound once ([`rendered_fields`]): a geometric displacement
+    /// projects each point several times.
+    user: Vec<(UserField, Vec<f64>)>,
     dots: Vec<Vec<TargetDot>>,
     seed: u64,
 }
@@ -208,6 +212,7 @@ impl Scene {
         Ok(Self {
             nominal: nominal.clone(),
             effects: nominal.render_effects(model),
+            user: rendered_fields(&model.user),
             dots,
             seed,
         })
@@ -218,6 +223,7 @@ impl Scene {
         Self {
             nominal: nominal.clone(),
             effects: nominal.render_effects(model),
+            user: rendered_fields(&model.user),
             dots: Vec::new(),
             seed: 0,
         }
@@ -361,11 +367,12 @@ impl Scene {
         // Invert the reference projection by fixed-point iteration (distortion is small).
         let (mut x, mut y) = ((p.0 - cx) / s, (p.1 - cy) / s);
         for _ in 0..6 {
-            let (qx, qy) = project(&camera, &self.effects, &reference, x, y);
+            let (qx, qy, _) =
+                project_prepared(&camera, &self.effects, &self.user, &reference, x, y);
             x += (p.0 - qx) / s;
             y += (p.1 - qy) / s;
         }
-        let (qx, qy) = project(&camera, &self.effects, &moved, x, y);
+        let (qx, qy, _) = project_prepared(&camera, &self.effects, &self.user, &moved, x, y);
         (qx - p.0, qy - p.1)
     }
 }

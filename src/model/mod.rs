@@ -18,8 +18,8 @@ pub use effects::{CandidateId, EffectId, Effects, Stage};
 pub use pattern::{Placement, SpecklePattern, TargetDot, TooManyDots, MAX_TARGET_DOTS};
 pub use readout::{BinnedValue, BinningDomain, SensorChain, SensorReadout};
 pub use render::{
-    project, project_with_depth, render_frame, render_frame_read_out, render_frame_until, Camera,
-    FrameSpec,
+    project, project_prepared, project_with_depth, render_frame, render_frame_read_out,
+    render_frame_until, Camera, FrameSpec,
 };
 pub use seed::derive_seed;
 pub use speckle::{render_dots, render_dots_until, GaussianDot, SpeckleLayout};

@@ -105,7 +105,7 @@ pub fn project_with_depth(
 /// [`project_with_depth`] with the model's user effects bound once (`user`, from
 /// [`rendered_fields`]): a user effect's field is a function of where the point is seen in the
 /// reference frame (rendered at the stage's origin) and of the move, added to moved frames.
-fn project_prepared(
+pub fn project_prepared(
     camera: &Camera,
     effects: &Effects,
     user: &[(UserField, Vec<f64>)],

@@ -2,7 +2,7 @@ use crate::run::run_frame;
 use crate::ExecCameraConfig;
 use ffdic_hw::{
     Camera, CameraCounters, CameraInfo, CameraSettings, Frame, HwError, HwResult, PixelFormat,
-    StagePosition, TriggerMode,
+    StagePosition,
 };
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -198,9 +198,7 @@ impl Camera for ExecCamera {
 
     /// Every frame is triggered by its command: a software trigger has nothing to fire.
     fn software_trigger(&mut self) -> HwResult<()> {
-        match self.settings.trigger {
-            TriggerMode::Software | TriggerMode::FreeRun => Ok(()),
-        }
+        Ok(())
     }
 
     fn counters(&self) -> CameraCounters {
