@@ -2,27 +2,10 @@
 
 mod common;
 
+use common::{ffdic, ffdic_ok};
 use ffdic::image::{write_tiff_u16, Image};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn ffdic(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ffdic"))
-        .args(args)
-        .output()
-        .expect("run ffdic")
-}
-
-/// [`ffdic`], which must succeed (its stderr shown when it does not).
-fn ffdic_ok(args: &[&str]) -> Output {
-    let out = ffdic(args);
-    assert!(
-        out.status.success(),
-        "{args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
+use std::process::Output;
 
 fn sample3(name: &str) -> String {
     common::shared_data()

@@ -5,6 +5,25 @@ use ffdic::image::Image;
 use ffdic::model::{render_dots, SpeckleLayout};
 use std::path::PathBuf;
 
+/// The `ffdic` binary run with `args`, as a user runs it.
+pub fn ffdic(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_ffdic"))
+        .args(args)
+        .output()
+        .expect("run ffdic")
+}
+
+/// [`ffdic`], which must succeed (its stderr shown when it does not).
+pub fn ffdic_ok(args: &[&str]) -> std::process::Output {
+    let out = ffdic(args);
+    assert!(
+        out.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
 /// The shared benchmark data beside the repository (`../shared/data`).
 pub fn shared_data() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data")
