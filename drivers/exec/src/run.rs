@@ -10,8 +10,11 @@ use std::time::{Duration, Instant};
 
 /// How often a running command is asked whether it has exited.
 const POLL: Duration = Duration::from_millis(2);
-/// How much of the command's stderr an error quotes (its end: where a failure says why).
-const STDERR_TAIL_BYTES: usize = 1500;
+/// How much of the command's stderr an error quotes, characters (its end: where a failure says
+/// why).
+const STDERR_TAIL_CHARS: usize = 1500;
+/// The least time given to read a command's stderr after it exited.
+const STDERR_GRACE: Duration = Duration::from_millis(100);
 
 /// Runs the command with `env`, waits at most `limit`, and returns the samples of the TIFF it
 /// wrote at `out` (removed afterwards), checked against the configured size and bit depth.
@@ -35,10 +38,11 @@ pub fn run_frame(
         .map_err(|e| HwError::Disconnected(format!("exec camera: cannot run {program}: {e}")))?;
     // Drained on a thread of its own: a chatty command must not block on a full pipe.
     let mut stderr = child.stderr.take().expect("piped");
-    let drain = std::thread::spawn(move || {
+    let (said_tx, said_rx) = std::sync::mpsc::sync_channel(1);
+    std::thread::spawn(move || {
         let mut text = Vec::new();
         let _ = stderr.read_to_end(&mut text);
-        text
+        let _ = said_tx.send(text);
     });
     let started = Instant::now();
     let status = loop {
@@ -51,7 +55,6 @@ pub fn run_frame(
         if started.elapsed() >= limit {
             kill_group(&mut child);
             // The drain ends when the last holder of the pipe is gone; it is not waited for.
-            drop(drain);
             let _ = std::fs::remove_file(out);
             return Err(HwError::Timeout {
                 what: format!("exec camera command {program}"),
@@ -60,7 +63,10 @@ pub fn run_frame(
         }
         std::thread::sleep(POLL);
     };
-    let said = tail(&drain.join().unwrap_or_default());
+    // Its stderr ends when the last holder of the pipe exits: a child the command left running
+    // may hold it, so the wait for it stays within the limit (and a moment).
+    let left = limit.saturating_sub(started.elapsed()).max(STDERR_GRACE);
+    let said = tail(&said_rx.recv_timeout(left).unwrap_or_default());
     if !status.success() {
         let _ = std::fs::remove_file(out);
         return Err(HwError::Protocol(format!(
@@ -96,7 +102,7 @@ fn tail(stderr: &[u8]) -> String {
     let start = text
         .char_indices()
         .rev()
-        .nth(STDERR_TAIL_BYTES)
+        .nth(STDERR_TAIL_CHARS)
         .map_or(0, |(i, _)| i);
     format!("; its stderr ends: {}", &text[start..])
 }

@@ -113,6 +113,7 @@ fn a_failing_silent_wrong_or_hanging_command_fails_the_capture_clearly() {
            silent) exit 0;; \
            small) cp small.tif \"$FFDIC_OUT\";; \
            hang) sleep 20;; \
+           linger) cp good.tif \"$FFDIC_OUT\"; sleep 5 & ;; \
            *) cp good.tif \"$FFDIC_OUT\";; esac",
         400,
         dir.path(),
@@ -141,5 +142,12 @@ fn a_failing_silent_wrong_or_hanging_command_fails_the_capture_clearly() {
         "the hung command was not stopped"
     );
     assert_eq!(run(&mut cam, "good").unwrap().len(), 1);
+    // A command that exits leaving a child behind (holding its stderr) is not waited for.
+    let started = Instant::now();
+    assert_eq!(run(&mut cam, "linger").unwrap().len(), 1);
+    assert!(
+        started.elapsed() < Duration::from_secs(3),
+        "waited for the child"
+    );
     assert_eq!(cam.counters().failed, 4);
 }
