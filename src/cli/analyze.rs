@@ -181,19 +181,7 @@ fn settings(args: &AnalyzeArgs) -> Result<DicSettings> {
 fn deformed_paths(given: &[PathBuf]) -> Result<Vec<PathBuf>> {
     if let [dir] = given {
         if dir.is_dir() {
-            let mut tiffs: Vec<PathBuf> = std::fs::read_dir(dir)
-                .with_context(|| format!("cannot list {}", dir.display()))?
-                .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|p| {
-                    p.extension().and_then(|e| e.to_str()).is_some_and(|e| {
-                        matches!(
-                            e.to_ascii_lowercase().as_str(),
-                            "tif" | "tiff" | "png" | "bmp"
-                        )
-                    })
-                })
-                .collect();
-            tiffs.sort();
+            let tiffs = super::files_with_extensions(dir, &["tif", "tiff", "png", "bmp"])?;
             if tiffs.is_empty() {
                 bail!("{} holds no .tif, .tiff, .png or .bmp image", dir.display());
             }

@@ -1,7 +1,7 @@
 //! `ffdic dataset init DIR`: a `dataset.json` for a folder of frames captured by hand — one
 //! reference, optional static repeats, the rest a step series in name order.
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::{Args, Subcommand};
 use ffdic::dataset::{guess_reference, Manifest, StepSeries};
 use std::path::{Path, PathBuf};
@@ -66,18 +66,10 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
 
 /// The folder's TIFF frames, by name.
 fn frames_in(dir: &Path) -> Result<Vec<String>> {
-    let mut frames: Vec<String> = std::fs::read_dir(dir)
-        .with_context(|| format!("cannot list {}", dir.display()))?
-        .filter_map(|e| e.ok())
-        .filter(|e| e.path().is_file())
-        .map(|e| e.file_name().to_string_lossy().into_owned())
-        .filter(|n| {
-            let lower = n.to_ascii_lowercase();
-            lower.ends_with(".tif") || lower.ends_with(".tiff")
-        })
-        .collect();
-    frames.sort();
-    Ok(frames)
+    Ok(super::files_with_extensions(dir, &["tif", "tiff"])?
+        .iter()
+        .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .collect())
 }
 
 fn run_init(args: &InitArgs) -> Result<()> {
