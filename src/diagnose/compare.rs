@@ -64,12 +64,7 @@ pub struct Measurement {
 
 /// A short, stable hash of the model's content (FNV-1a 64 of its canonical TOML).
 pub fn model_version(model: &ModelConfig) -> String {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in model.effects_toml().bytes() {
-        h ^= b as u64;
-        h = h.wrapping_mul(0x0100_0000_01b3);
-    }
-    format!("{:012x}", h & 0xffff_ffff_ffff)
+    super::history::short_hash(&model.effects_toml())
 }
 
 trait EffectsToml {

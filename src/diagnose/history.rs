@@ -81,15 +81,20 @@ pub fn history_dir_for(data_dir: &Path, dataset_dir: &Path) -> PathBuf {
         })
         .take(64)
         .collect();
-    // FNV-1a: stable across builds and platforms, unlike std's hasher.
+    data_dir
+        .join("history")
+        .join(format!("{name}-{}", short_hash(&full.to_string_lossy())))
+}
+
+/// Twelve hex digits of FNV-1a over `text`: stable across builds and platforms, unlike std's
+/// hasher (a model's version, a dataset's history folder).
+pub(super) fn short_hash(text: &str) -> String {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in full.to_string_lossy().bytes() {
+    for b in text.bytes() {
         h ^= b as u64;
         h = h.wrapping_mul(0x0100_0000_01b3);
     }
-    data_dir
-        .join("history")
-        .join(format!("{name}-{:012x}", h & 0xffff_ffff_ffff))
+    format!("{:012x}", h & 0xffff_ffff_ffff)
 }
 
 /// Appends `entry` to the history in `history_dir` (made when missing).
