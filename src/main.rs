@@ -33,6 +33,8 @@ enum Command {
     Compare(cli::compare::CompareArgs),
     /// Fit the effects the model lacks and name the one that is missing.
     Diagnose(cli::diagnose::DiagnoseArgs),
+    /// Run a calibration plan on the bench (or take a captured dataset) and write a camera card.
+    Calibrate(cli::calibrate::CalibrateArgs),
     /// The discrepancy of a dataset over model versions.
     History(cli::history::HistoryArgs),
     /// Datasets: write one for a folder of frames.
@@ -67,6 +69,7 @@ fn main() {
         Command::Store(args) => cli::store::run(args),
         Command::Compare(args) => cli::compare::run(args),
         Command::Diagnose(args) => cli::diagnose::run(args),
+        Command::Calibrate(args) => cli::calibrate::run(args),
         Command::History(args) => cli::history::run(args),
         Command::Dataset(args) => cli::dataset::run(args),
         Command::Sweep(args) => cli::sweep::run(args),

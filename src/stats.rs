@@ -34,6 +34,22 @@ pub fn t_975(df: usize) -> f64 {
     }
 }
 
+/// The z with P(Z > z) = `p` for a standard normal Z (0 < p < 1), by bisection on the
+/// complementary error function: exact to 1e-12, for the few thresholds a report needs.
+pub fn normal_upper_quantile(p: f64) -> f64 {
+    let upper = |z: f64| 0.5 * libm::erfc(z / std::f64::consts::SQRT_2);
+    let (mut lo, mut hi) = (-40.0f64, 40.0f64);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if upper(mid) > p {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
 /// Mean of `xs` and its 95 % t interval; NaN where any value is NaN, the interval NaN for one
 /// value.
 pub fn mean_interval(xs: &[f64]) -> (f64, [f64; 2]) {
@@ -60,6 +76,15 @@ pub fn mean_and_variance_of_mean(xs: &[f64]) -> (f64, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn normal_quantiles_are_the_tabulated_ones() {
+        // Abramowitz & Stegun table 26.5: 1.959964 (2.5 %), 2.575829 (0.5 %), 3.290527 (0.05 %).
+        assert!((normal_upper_quantile(0.025) - 1.959_964).abs() < 1e-6);
+        assert!((normal_upper_quantile(0.005) - 2.575_829).abs() < 1e-6);
+        assert!((normal_upper_quantile(0.0005) - 3.290_527).abs() < 1e-6);
+        assert!((normal_upper_quantile(0.5)).abs() < 1e-9);
+    }
     use rand::SeedableRng;
     use rand_distr::{Distribution, StandardNormal};
 

@@ -1,6 +1,7 @@
 //! The `ffdic` command line: one file per subcommand.
 
 pub mod analyze;
+pub mod calibrate;
 pub mod compare;
 pub mod dataset;
 mod dataset_arg;

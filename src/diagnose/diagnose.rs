@@ -203,7 +203,7 @@ pub fn diagnose(
 
 /// The field differences of the model's comparison, per run and scheme, as the geometric fits
 /// read them, with what else they need.
-fn field_samples<'a>(
+pub(super) fn field_samples<'a>(
     meas: &'a Measurement,
     before: &'a Comparison,
 ) -> (Vec<FieldSample<'a>>, GeometricSetting) {

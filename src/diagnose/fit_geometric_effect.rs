@@ -50,6 +50,24 @@ pub enum Geometric {
 }
 
 impl Geometric {
+    /// Every geometric effect, in vocabulary order.
+    pub const ALL: [Geometric; 4] = [
+        Geometric::Rotation,
+        Geometric::Scale,
+        Geometric::LensDistortion,
+        Geometric::TargetTilt,
+    ];
+
+    /// The catalogue effect it is.
+    pub fn effect(self) -> EffectId {
+        match self {
+            Geometric::Rotation => EffectId::Rotation,
+            Geometric::Scale => EffectId::Scale,
+            Geometric::LensDistortion => EffectId::LensDistortion,
+            Geometric::TargetTilt => EffectId::TargetTilt,
+        }
+    }
+
     /// The effect as a geometric one; None for an effect that changes the images rather than
     /// where things are, or that the nominal experiment always fits.
     pub fn of(effect: EffectId) -> Option<Geometric> {
@@ -106,6 +124,42 @@ pub fn fit_geometric_effect(
         (effect, geometric),
         &left_out,
     ))
+}
+
+/// A joint fit of several geometric effects' terms as the model writes them: one [`ImageFit`]
+/// per effect whose terms the fit holds (in vocabulary order), each written onto the model the
+/// previous one left, so the last one's `effects` holds them all.
+pub fn write_joint(
+    fit: &GeometricFit,
+    setting: &GeometricSetting,
+    model: &Effects,
+) -> Vec<ImageFit> {
+    let mut effects = model.clone();
+    let mut out = Vec::new();
+    for geometric in Geometric::ALL {
+        let own: Vec<usize> = (0..fit.params.len())
+            .filter(|&i| Geometric::of(fit.params[i].effect_and_name().0) == Some(geometric))
+            .collect();
+        if own.is_empty() {
+            continue;
+        }
+        let part = GeometricFit {
+            params: own.iter().map(|&i| fit.params[i]).collect(),
+            values: own.iter().map(|&i| fit.values[i]).collect(),
+            stderr: own.iter().map(|&i| fit.stderr[i]).collect(),
+            chi2_drop: f64::NAN,
+        };
+        let written = write_fit(
+            &part,
+            setting,
+            &effects,
+            (geometric.effect(), geometric),
+            &[],
+        );
+        effects = written.effects.clone();
+        out.push(written);
+    }
+    out
 }
 
 /// The first group, then each further one kept when identifiable and worth its price.

@@ -82,6 +82,7 @@
 mod basis;
 mod bic;
 pub mod capture_mode;
+mod card;
 pub mod compare;
 // The brief names the file after its job; the module is the entry point of the folder's job.
 #[allow(clippy::module_inception)]
@@ -109,6 +110,9 @@ mod unexplained_words;
 
 pub use basis::{geometric_basis, GeometricParam};
 pub use bic::{delta_bic, SIGNIFICANT_DELTA_BIC};
+pub use card::{
+    calibrate, camera_card, CameraCard, CardEffect, ImagingEntry, StageMap, CARD_FALSE_ALARM_RATE,
+};
 pub use compare::{
     compare, compare_prepared, compare_with_scene, load_measurement, model_version, Measurement,
 };

@@ -3,6 +3,7 @@
 //! the fill-factor study run on it.
 
 mod bench;
+mod calibration_plan;
 mod captures;
 mod findings;
 mod limits;
@@ -19,6 +20,7 @@ pub use bench::{
     BenchError, BenchHandle, BenchHardware, BenchLease, BenchStatus, CameraStatus, Owner,
     StageStatus, TargetMount,
 };
+pub use calibration_plan::{CalibrationPlan, PlanError, DEFAULT_MOVE_FIELD_FRACTIONS};
 pub use captures::{capture_plan, layout_seed, CaptureRun, TargetCapture};
 pub use findings::{findings_text, paper_findings, Finding, Verdict};
 pub use limits::{

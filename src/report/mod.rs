@@ -3,6 +3,7 @@
 //! so nothing depends on system fonts and every asset ships in the binary.
 
 mod bar_chart;
+mod camera_card;
 mod comparison_figures;
 mod dic_summary;
 mod field_maps;
@@ -16,6 +17,7 @@ mod table;
 mod xy_plot;
 
 pub use bar_chart::{BarChart, Series};
+pub use camera_card::camera_card_text;
 pub use comparison_figures::comparison_svgs;
 pub use dic_summary::{dic_settings_json, dic_summary_json};
 pub use field_maps::{field_map_svgs, map_file_name};

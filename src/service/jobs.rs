@@ -3,7 +3,7 @@
 //! a time on the bench lane, others wait their turn — and its events go to the run's log and to
 //! live subscribers (SSE). Cancellation is cooperative: the work checks its token between steps.
 
-use crate::diagnose::{Comparison, Rounds};
+use crate::diagnose::{CameraCard, Comparison, Rounds};
 use crate::experiment::{RunSink, StudyRow};
 use crate::run_event::EventKind;
 use crate::store::{DatasetId, Event, RunId, RunKind, RunRecord, RunStatus, RunStore, StoreError};
@@ -44,6 +44,12 @@ pub enum JobResult {
     Comparison(Box<Comparison>),
     /// Every round of a diagnosis and the model with every verdict added.
     Diagnosis(Box<Rounds>),
+    /// A calibration: its diagnosis rounds, the camera card, and the dataset its runs became.
+    Calibration {
+        rounds: Box<Rounds>,
+        card: Box<CameraCard>,
+        dataset: DatasetId,
+    },
     /// Nothing beyond the files the job wrote (a design map's merged files).
     Files,
 }

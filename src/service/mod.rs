@@ -2,13 +2,16 @@
 //! bench actor and the job lanes, wired together. The HTTP layer (`api/`) and the CLI call this;
 //! neither runs an experiment any other way.
 
+mod calibration_job;
 mod config;
 mod hardware;
 mod jobs;
 mod models;
+mod scaled_sink;
 mod sweep_job;
 mod work;
 
+pub use calibration_job::card_prefix;
 pub use config::{
     load_bench_model, BenchConfig, CameraConfig, ConfigError, DaemonConfig, HttpLimits, JobLimits,
     MockBinning, MockReduction, StageConfig, SweepLimits, UploadLimits, DEFAULT_CONFIG_TOML,
@@ -60,6 +63,8 @@ pub struct Service {
     /// Bytes of one full-resolution 16-bit frame of the camera as written (TIFF): what an
     /// experiment's frames are estimated from when it is submitted.
     pub frame_bytes: u64,
+    /// The camera's sensor width, px: what a calibration's default moves are sized from.
+    pub sensor_width_px: u32,
 }
 
 /// A 16-bit TIFF's bytes beyond its pixels (header, one strip's tags), at most.
@@ -89,6 +94,7 @@ impl Service {
             hardware_schemes: hardware.camera.info().hardware_schemes.clone(),
         });
         let info = hardware.camera.info();
+        let sensor_width_px = info.sensor_width;
         let frame_bytes =
             2 * u64::from(info.sensor_width) * u64::from(info.sensor_height) + TIFF_OVERHEAD_BYTES;
         let bench = BenchHandle::spawn(hardware, Duration::from_secs(30));
@@ -108,6 +114,7 @@ impl Service {
                 frame_checks: Arc::new(tokio::sync::Semaphore::new(1)),
                 uploads_in_flight: Arc::default(),
                 frame_bytes,
+                sensor_width_px,
             },
             recovery,
         ))

@@ -10,13 +10,14 @@ use crate::diagnose::{
 use crate::dic::DicSettings;
 use crate::experiment::{
     analyze_dataset, check_dic, check_schemes, run_experiment, study_files, BenchGeometry,
-    ExperimentPlan, ExperimentRequest, FieldError, RunSink, RunnerError, SchemeSpec, StudyError,
+    ExperimentOutcome, ExperimentPlan, ExperimentRequest, FieldError, RunSink, RunnerError,
+    SchemeSpec, StudyError,
 };
 use crate::model::ModelConfig;
 use crate::reduce::Scheme;
 use crate::report::comparison_svgs;
 use crate::run_event::EventKind;
-use crate::store::{DatasetId, DatasetSource};
+use crate::store::{DatasetId, DatasetRecord, DatasetSource};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
@@ -96,50 +97,60 @@ impl AnalysisPlan {
     }
 }
 
+/// Captures `plan` on the bench (events through `sink`) and registers its frames as a dataset
+/// of their own, so compare and diagnose read captured and imported measurements alike.
+pub(super) fn capture_dataset(
+    service: &Service,
+    plan: &ExperimentPlan,
+    ctx: &JobContext,
+    sink: &dyn RunSink,
+) -> Result<(ExperimentOutcome, DatasetRecord), JobError> {
+    let lease = service
+        .bench
+        .hold(ctx.run_id.as_str())
+        .map_err(JobError::failed)?;
+    let outcome = run_experiment(
+        plan,
+        &service.bench,
+        &lease,
+        BenchGeometry {
+            scale_px_per_mm: service.config.bench.scale_px_per_mm,
+            working_distance_mm: service.config.bench.working_distance_mm,
+        },
+        service.timeouts(),
+        sink,
+    )
+    .map_err(|e| match e {
+        RunnerError::Cancelled => JobError::Cancelled,
+        other => JobError::failed(other),
+    })?;
+    drop(lease);
+    service
+        .check_datasets_room(&outcome.frames_dir)
+        .map_err(JobError::failed)?;
+    let dataset = ctx
+        .store()
+        .import_dataset_dir(
+            &outcome.frames_dir,
+            &plan.name,
+            DatasetSource::Experiment(ctx.run_id.clone()),
+        )
+        .map_err(JobError::failed)?;
+    ctx.store()
+        .set_dataset(&ctx.run_id, &dataset.id)
+        .map_err(JobError::failed)?;
+    sink.event(
+        EventKind::DatasetRegistered,
+        1.0,
+        &format!("frames registered as dataset {}", dataset.id),
+        json!({ "dataset_id": dataset.id }),
+    );
+    Ok((outcome, dataset))
+}
+
 pub fn experiment(service: Service, plan: ExperimentPlan) -> Work {
     Box::new(move |ctx: &JobContext| {
-        let lease = service
-            .bench
-            .hold(ctx.run_id.as_str())
-            .map_err(JobError::failed)?;
-        let outcome = run_experiment(
-            &plan,
-            &service.bench,
-            &lease,
-            BenchGeometry {
-                scale_px_per_mm: service.config.bench.scale_px_per_mm,
-                working_distance_mm: service.config.bench.working_distance_mm,
-            },
-            service.timeouts(),
-            ctx,
-        )
-        .map_err(|e| match e {
-            RunnerError::Cancelled => JobError::Cancelled,
-            other => JobError::failed(other),
-        })?;
-        drop(lease);
-        service
-            .check_datasets_room(&outcome.frames_dir)
-            .map_err(JobError::failed)?;
-        // The frames are also a dataset of their own, so compare and diagnose read captured and
-        // imported measurements alike.
-        let dataset = ctx
-            .store()
-            .import_dataset_dir(
-                &outcome.frames_dir,
-                &plan.name,
-                DatasetSource::Experiment(ctx.run_id.clone()),
-            )
-            .map_err(JobError::failed)?;
-        ctx.store()
-            .set_dataset(&ctx.run_id, &dataset.id)
-            .map_err(JobError::failed)?;
-        ctx.event(
-            EventKind::DatasetRegistered,
-            1.0,
-            &format!("frames registered as dataset {}", dataset.id),
-            json!({ "dataset_id": dataset.id }),
-        );
+        let (outcome, dataset) = capture_dataset(&service, &plan, ctx, ctx)?;
         let hardware_runs = outcome
             .manifest
             .runs
@@ -253,8 +264,8 @@ impl CompareRequest {
 }
 
 /// Reports progress as events, at most about a hundred per job (each event is a synced append).
-fn progress_reporter<'a>(
-    ctx: &'a JobContext,
+pub(super) fn progress_reporter<'a>(
+    ctx: &'a dyn RunSink,
     what: &'a str,
 ) -> impl Fn(usize, usize) -> bool + Sync + 'a {
     let last = std::sync::Mutex::new(-1.0f64);
@@ -276,7 +287,7 @@ fn progress_reporter<'a>(
     }
 }
 
-fn diagnose_failure(e: DiagnoseError) -> JobError {
+pub(super) fn diagnose_failure(e: DiagnoseError) -> JobError {
     match e {
         DiagnoseError::Cancelled => JobError::Cancelled,
         other => JobError::failed(other),

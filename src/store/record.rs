@@ -22,15 +22,19 @@ pub enum RunKind {
     Diagnosis,
     /// A design map (`POST /sweeps`), run on the compute lane.
     Sweep,
+    /// A calibration (`POST /calibrations`): a move plan captured on the bench, diagnosed, and a
+    /// camera card written; on the bench lane.
+    Calibration,
 }
 
 impl RunKind {
-    pub const ALL: [RunKind; 5] = [
+    pub const ALL: [RunKind; 6] = [
         RunKind::Experiment,
         RunKind::Analysis,
         RunKind::Comparison,
         RunKind::Diagnosis,
         RunKind::Sweep,
+        RunKind::Calibration,
     ];
 
     pub fn as_str(self) -> &'static str {
@@ -40,6 +44,7 @@ impl RunKind {
             RunKind::Comparison => "comparison",
             RunKind::Diagnosis => "diagnosis",
             RunKind::Sweep => "sweep",
+            RunKind::Calibration => "calibration",
         }
     }
 
@@ -51,6 +56,7 @@ impl RunKind {
             RunKind::Comparison => "cmp",
             RunKind::Diagnosis => "dia",
             RunKind::Sweep => "swp",
+            RunKind::Calibration => "cal",
         }
     }
 }

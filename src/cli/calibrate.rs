@@ -1,0 +1,147 @@
+//! `ffdic calibrate`: a calibration plan run on the bench through the same service a lab's clients
+//! use (`POST /calibrations`), then the camera card; or, with `--dataset`, the card of runs
+//! already captured. The card's model is stored in DATA/models (`card-NAME-HASH`), where
+//! `compare --model` and the daemon find it.
+
+use super::compare::load_analysis_model;
+use super::ProgressBar;
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use ffdic::diagnose::{calibrate, CameraCard, CompareOptions, Rounds};
+use ffdic::experiment::{check_dic, check_schemes, CalibrationPlan, SchemeSpec};
+use ffdic::report::camera_card_text;
+use ffdic::service::{card_prefix, open_bench, DaemonConfig, JobResult, Service};
+use ffdic::store::{ModelFolder, RunStatus};
+use std::path::PathBuf;
+use std::time::Duration;
+
+#[derive(Debug, Args)]
+pub struct CalibrateArgs {
+    /// Daemon config naming the bench (default: the embedded config/ffdic.toml, the mock bench).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Calibration plan, TOML (default: moves of 2 % and 10 % of the field along ±x and ±y, a
+    /// 0.25 px phase scan of 4 steps along each axis, 2 static frames, 4 rounds; docs/calibration.md).
+    #[arg(long)]
+    pub plan: Option<PathBuf>,
+    /// Data folder (default: the config's): the run, its dataset and the card's model go there.
+    #[arg(long)]
+    pub data: Option<PathBuf>,
+    /// The card of a dataset already captured (format ffdic-dataset/1) instead of running the
+    /// plan on a bench: the plan's rounds, DIC settings, model and name apply.
+    #[arg(long, value_parser = super::dataset_folder)]
+    pub dataset: Option<PathBuf>,
+    /// Print one JSON document (the card, the rounds, the plan) and nothing else.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(args: &CalibrateArgs) -> Result<()> {
+    let plan = match &args.plan {
+        Some(p) => CalibrationPlan::load(p)?,
+        None => CalibrationPlan::default(),
+    };
+    let mut config = match &args.config {
+        Some(p) => DaemonConfig::load(p)?,
+        None => DaemonConfig::embedded(),
+    };
+    if let Some(d) = &args.data {
+        config.data_dir = d.clone();
+    }
+    let (rounds, card, where_) = match &args.dataset {
+        Some(dir) => {
+            let (rounds, card) = card_of_dataset(dir, &plan, &config, !args.json)?;
+            (rounds, card, format!("dataset {}", dir.display()))
+        }
+        None => on_bench(&plan, config.clone(), !args.json)?,
+    };
+    if args.json {
+        let doc = serde_json::json!({
+            "card": card,
+            "model": card.model.name,
+            "rounds": rounds.to_json(),
+            "plan": plan,
+        });
+        println!("{doc}");
+    } else {
+        print!("{}", camera_card_text(&card));
+        println!(
+            "card model {} stored in {} ({where_})",
+            card.model.name,
+            ModelFolder::in_data_dir(&config.data_dir).dir().display()
+        );
+    }
+    Ok(())
+}
+
+/// The plan on the config's bench, as the daemon runs it.
+fn on_bench(
+    plan: &CalibrationPlan,
+    config: DaemonConfig,
+    show: bool,
+) -> Result<(Rounds, CameraCard, String)> {
+    let hardware = open_bench(&config)?;
+    let (service, _) = Service::start(config, hardware)?;
+    service.jobs.keep_results();
+    let (record, _) = service.submit_calibration(plan, None)?;
+    let bar = ProgressBar::fraction(show, "capturing, then diagnosing");
+    let record = loop {
+        let r = service.store.get(&record.id)?;
+        bar.update_fraction(r.progress);
+        if r.status.is_terminal() {
+            break r;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    bar.finish();
+    service.stop(Duration::from_secs(5));
+    if record.status != RunStatus::Succeeded {
+        bail!(
+            "calibration {} {:?}: {}",
+            record.id,
+            record.status,
+            record.message
+        );
+    }
+    let folder = service.store.run_dir(&record.id);
+    match service.jobs.take_result(&record.id) {
+        Some(JobResult::Calibration { rounds, card, .. }) => Ok((
+            *rounds,
+            *card,
+            format!("run {} in {}", record.id, folder.display()),
+        )),
+        _ => bail!("calibration {} succeeded without a card", record.id),
+    }
+}
+
+/// The card of runs already captured; the card's model stored as the daemon would.
+fn card_of_dataset(
+    dir: &std::path::Path,
+    plan: &CalibrationPlan,
+    config: &DaemonConfig,
+    show: bool,
+) -> Result<(Rounds, CameraCard)> {
+    let model = load_analysis_model(&Some(plan.model.clone()), &config.data_dir)?;
+    let options = CompareOptions {
+        dic: check_dic(&plan.dic)?,
+        schemes: check_schemes(&[SchemeSpec::Preset("native".into())])?,
+        seed: plan.seed,
+    };
+    let bar = ProgressBar::new(show, "calibration fits");
+    let (rounds, card) = calibrate(
+        dir,
+        &model,
+        &options,
+        plan.rounds,
+        &card_prefix(&plan.name),
+        &|done, total| {
+            bar.update(done, total);
+            true
+        },
+    )?;
+    bar.finish();
+    ModelFolder::in_data_dir(&config.data_dir)
+        .save(&card.model.name, &card.model.to_toml())
+        .with_context(|| format!("cannot store the card's model {}", card.model.name))?;
+    Ok((rounds, card))
+}

@@ -1,0 +1,458 @@
+//! The camera card (issue 33): what a calibration's runs identify about the camera, its lens, the
+//! target's mount and the stage, each number with its standard error, and the model that holds it.
+//!
+//! The rounds of a diagnosis add one effect at a time, and a later effect's terms can take up part
+//! of an earlier one's field: decentring terms absorb much of a tilt when distortion is named
+//! first (measured on a bench with both: the rounds' tilt fell from 0.0122 to 0.0013 rad). The card
+//! therefore fits every geometric term the runs identify *jointly* on the baseline comparison's
+//! field differences — rotation, scale, target tilt, k1, p1, p2, and k2 when it pays its BIC price
+//! (ln n) — by the same weighted least squares as a candidate ([`super::fit_geometric`]); a term
+//! the runs cannot tell from those before it is listed, not fitted. A number is significant
+//! beyond z = Φ⁻¹(1 − α/2m) standard errors, α = 1 % family-wise over the card's m tested numbers
+//! (Bonferroni): a card of a bench with nothing hidden is empty but at that rate.
+//!
+//! The stage's map — scale per axis, the angle of its x axis to the sensor's rows, the
+//! non-orthogonality of its axes — is the least-squares linear map from the commanded moves (mm)
+//! to each run's measured rigid move (px), with the card's fitted fields' mean over the run's
+//! points taken off: the magnification at the image centre. It is the affine stage-to-camera map
+//! of Micro-Manager's pixel calibrator; the stage is the length standard, so its travel error and
+//! the camera's scale are one number. The imaging chain (blur, pixel aperture, gain, read noise)
+//! comes from the last round's candidate fits, each marked identifiable or not as that round's
+//! design says.
+
+use super::basis::{geometric_basis, GeometricParam};
+use super::compare::{compare_with_scene, Measurement};
+use super::diagnose::field_samples;
+use super::fit_geometric::{fit_geometric, FieldSample, GeometricFit};
+use super::fit_geometric_effect::{write_joint, Geometric};
+use super::results::Comparison;
+use super::rounds::Rounds;
+use super::unexplained::{model_scatter, unexplained, Unexplained};
+use super::{DiagnoseError, Progress};
+use crate::model::{EffectId, Effects, ModelConfig};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// The family-wise false-alarm rate of a card's significance marks.
+pub const CARD_FALSE_ALARM_RATE: f64 = 0.01;
+
+/// The stage map's numbers tested for significance (scale x, scale y, angle, skew).
+const STAGE_NUMBERS: usize = 4;
+
+/// The joint fit's terms in the order they are admitted: each stays when the runs tell it from
+/// those already in.
+const JOINT_ORDER: [GeometricParam; 7] = [
+    GeometricParam::Rotation,
+    GeometricParam::Scale,
+    GeometricParam::TiltSlopeY,
+    GeometricParam::TiltSlopeX,
+    GeometricParam::DistortionK1,
+    GeometricParam::DistortionP1,
+    GeometricParam::DistortionP2,
+];
+
+/// One geometric effect of the card, as the model writes it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CardEffect {
+    pub effect: EffectId,
+    pub params: BTreeMap<String, f64>,
+    pub stderr: BTreeMap<String, f64>,
+    /// What follows from the parameters (a tilt's working distance, a distortion centre).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub derived: BTreeMap<String, f64>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
+    /// A parameter lies more than the card's z standard errors from zero: the effect is in the
+    /// card's model.
+    pub significant: bool,
+}
+
+/// The stage against the sensor, from the runs' measured rigid moves.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StageMap {
+    /// The scale the dataset states, px/mm.
+    pub nominal_scale_px_per_mm: f64,
+    /// Image px per mm of the stage's x travel, and its standard error.
+    pub scale_x_px_per_mm: f64,
+    pub scale_x_se_px_per_mm: f64,
+    pub scale_y_px_per_mm: f64,
+    pub scale_y_se_px_per_mm: f64,
+    /// The stage's x axis against the sensor's rows, rad (positive: a +x move goes towards +y
+    /// in the image).
+    pub angle_rad: f64,
+    pub angle_se_rad: f64,
+    /// The stage's y axis's departure from perpendicular to its x axis, rad.
+    pub skew_rad: f64,
+    pub skew_se_rad: f64,
+    /// RMS of the runs' moves about the map, px: the stage's landing scatter.
+    pub residual_px: f64,
+    pub runs: usize,
+    /// Which of `scale_x`, `scale_y` (against the nominal scale), `angle`, `skew` (against 0)
+    /// differ significantly.
+    pub significant: Vec<String>,
+}
+
+/// An image-level effect of the card (blur, pixel aperture, sensor noise), from the last round.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ImagingEntry {
+    pub effect: EffectId,
+    pub params: BTreeMap<String, f64>,
+    pub stderr: BTreeMap<String, f64>,
+    /// The runs separate it from what it is confounded with.
+    pub identifiable: bool,
+    /// When not: the run that would.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub separate_with: Option<String>,
+}
+
+/// What a calibration identified, with the discrepancy of the baseline and of the card's model on
+/// the calibration's own runs.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CameraCard {
+    /// The significance threshold in standard errors, and the false-alarm rate it keeps.
+    pub z_significant: f64,
+    pub false_alarm_rate: f64,
+    pub geometry: Vec<CardEffect>,
+    /// Geometric terms these runs cannot tell apart from the others (not fitted).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub not_identifiable: Vec<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stage: Option<StageMap>,
+    pub imaging: Vec<ImagingEntry>,
+    /// The model diagnosed, and its discrepancy with its standard error, px.
+    pub baseline_model: String,
+    pub baseline_px: f64,
+    pub baseline_se_px: f64,
+    /// The card's model (the rounds' non-geometric verdicts and the significant geometry).
+    pub card_px: f64,
+    pub card_se_px: f64,
+    /// What the card's model leaves unexplained.
+    pub unexplained: Unexplained,
+    #[serde(skip)]
+    pub model: ModelConfig,
+}
+
+impl CameraCard {
+    /// The names of the card's significant findings (geometry, then the stage's numbers).
+    pub fn found(&self) -> Vec<String> {
+        let geometry = self
+            .geometry
+            .iter()
+            .filter(|g| g.significant)
+            .map(|g| g.effect.to_string());
+        let stage = self
+            .stage
+            .iter()
+            .flat_map(|s| s.significant.iter().map(|n| format!("stage {n}")));
+        geometry.chain(stage).collect()
+    }
+}
+
+/// Reads the dataset in `dir`, diagnoses `model` against it in up to `rounds` rounds and writes
+/// the card (its model named `name` and its hash).
+pub fn calibrate(
+    dir: &std::path::Path,
+    model: &ModelConfig,
+    options: &super::CompareOptions,
+    rounds: usize,
+    name: &str,
+    progress: Progress,
+) -> Result<(Rounds, CameraCard), DiagnoseError> {
+    let meas = super::load_measurement(dir, options, &|_, _| progress(0, 1))?;
+    let r = super::diagnose_rounds_prepared(&meas, model, rounds, progress)?;
+    let card = camera_card(&meas, &r, name, progress)?;
+    Ok((r, card))
+}
+
+/// The card of an analysed measurement: the joint geometric fit on the first round's baseline
+/// comparison, the stage map, the last round's imaging fits, and the card's model compared with
+/// the measurement (twice, for the model's own scatter). The card's model is named `name`, a
+/// dash and its content's hash.
+pub fn camera_card(
+    meas: &Measurement,
+    rounds: &Rounds,
+    name: &str,
+    progress: Progress,
+) -> Result<CameraCard, DiagnoseError> {
+    let first = rounds.diagnoses.first();
+    let before = match first.and_then(|d| d.before.as_ref()) {
+        Some(b) => b.clone(),
+        None => compare_with_scene(meas, &rounds.final_model, meas.options.seed, None, progress)?,
+    };
+    let (samples, setting) = field_samples(meas, &before);
+    let (fit, not_identifiable) = joint_fit(&samples, setting.observations);
+    let tested = fit.as_ref().map_or(0, |f| f.params.len()) + STAGE_NUMBERS;
+    let z = crate::stats::normal_upper_quantile(CARD_FALSE_ALARM_RATE / (2.0 * tested as f64));
+
+    let mut effects = rounds.final_model.effects.clone();
+    for g in Geometric::ALL {
+        take_geometric(&mut effects, &Effects::default(), g);
+    }
+    let base_effects = effects.clone();
+    let mut geometry = Vec::new();
+    if let Some(fit) = &fit {
+        for written in write_joint(fit, &setting, &base_effects) {
+            let significant = written
+                .params
+                .iter()
+                .any(|(k, v)| written.stderr.get(k).is_some_and(|se| v.abs() > z * se));
+            let id = written.effect.catalogue().expect("a geometric effect");
+            if significant {
+                let g = Geometric::of(id).expect("a geometric effect");
+                take_geometric(&mut effects, &written.effects, g);
+            }
+            geometry.push(CardEffect {
+                effect: id,
+                params: written.params,
+                stderr: written.stderr,
+                derived: written.geometric.derived,
+                notes: written.geometric.notes,
+                significant,
+            });
+        }
+    }
+    let stage = fit
+        .as_ref()
+        .and_then(|f| stage_map(meas, &samples, f, setting.scale_px_per_mm, z));
+    let imaging = imaging_entries(rounds);
+    let mut model = ModelConfig {
+        name: String::new(),
+        description: format!(
+            "camera card: {} diagnosed on {}",
+            rounds
+                .diagnoses
+                .first()
+                .map_or("the baseline", |d| d.model.name.as_str()),
+            meas.manifest.name
+        ),
+        effects,
+    };
+    // Names are versions: the card's carries its content's hash, so a new card is a new name.
+    model.name = format!("{name}-{}", super::model_version(&model));
+    let (card_cmp, card_se, left) = judge_card(meas, &model, progress)?;
+    let baseline_se_px = first.map_or(before.discrepancy_se_px, |d| d.discrepancy_se_px);
+    Ok(CameraCard {
+        z_significant: z,
+        false_alarm_rate: CARD_FALSE_ALARM_RATE,
+        geometry,
+        not_identifiable,
+        stage,
+        imaging,
+        baseline_model: before.model.name.clone(),
+        baseline_px: before.discrepancy_px,
+        baseline_se_px,
+        card_px: card_cmp.discrepancy_px,
+        card_se_px: card_se,
+        unexplained: left,
+        model,
+    })
+}
+
+/// Every term of [`JOINT_ORDER`] the runs tell from those before it, then k2 when its Wald χ²
+/// pays ln n; the terms left out, named.
+fn joint_fit(samples: &[FieldSample], observations: usize) -> (Option<GeometricFit>, Vec<String>) {
+    let mut kept: Vec<GeometricParam> = Vec::new();
+    let mut left_out = Vec::new();
+    let named = |p: GeometricParam| {
+        let (effect, name) = p.effect_and_name();
+        format!("{effect}.{name}: not identifiable apart from the other terms with these runs")
+    };
+    for p in JOINT_ORDER {
+        let mut trial = kept.clone();
+        trial.push(p);
+        if fit_geometric(samples, &trial).is_some() {
+            kept = trial;
+        } else {
+            left_out.push(named(p));
+        }
+    }
+    let Some(mut fit) = fit_geometric(samples, &kept) else {
+        return (None, left_out);
+    };
+    let mut wider = kept.clone();
+    wider.push(GeometricParam::DistortionK2);
+    match fit_geometric(samples, &wider) {
+        Some(w) => {
+            let (k2, se) = (w.values[kept.len()], w.stderr[kept.len()]);
+            if (k2 / se).powi(2) > (observations.max(2) as f64).ln() {
+                fit = w;
+            }
+        }
+        None => left_out.push(named(GeometricParam::DistortionK2)),
+    }
+    (Some(fit), left_out)
+}
+
+/// Sets `to`'s geometric effect `g` to `from`'s.
+fn take_geometric(to: &mut Effects, from: &Effects, g: Geometric) {
+    match g {
+        Geometric::Rotation => to.rotation = from.rotation,
+        Geometric::Scale => to.scale = from.scale,
+        Geometric::LensDistortion => to.lens_distortion = from.lens_distortion,
+        Geometric::TargetTilt => to.target_tilt = from.target_tilt,
+    }
+}
+
+/// The least-squares linear map from commanded moves (mm) to the runs' rigid moves (px), the
+/// fitted fields' mean over each run's points taken off; None with fewer than three runs or moves
+/// along one axis only.
+fn stage_map(
+    meas: &Measurement,
+    samples: &[FieldSample],
+    fit: &GeometricFit,
+    nominal_scale_px_per_mm: f64,
+    z: f64,
+) -> Option<StageMap> {
+    let mut seen = std::collections::BTreeSet::new();
+    let rows: Vec<([f64; 2], [f64; 2])> = samples
+        .iter()
+        .filter(|s| seen.insert(s.run))
+        .map(|s| {
+            let stage = &meas.manifest.runs[s.run].stage;
+            let (fu, fv) = mean_field(s, fit);
+            (
+                [stage.dx_mm, stage.dy_mm],
+                [s.move_px.0 - fu, s.move_px.1 - fv],
+            )
+        })
+        .collect();
+    let n = rows.len();
+    let (mut xx, mut xy, mut yy) = (0.0, 0.0, 0.0);
+    for ([dx, dy], _) in &rows {
+        xx += dx * dx;
+        xy += dx * dy;
+        yy += dy * dy;
+    }
+    let det = xx * yy - xy * xy;
+    if n < 3 || !(det > 1e-12 * (xx * yy).max(1e-300)) {
+        return None;
+    }
+    let inv = [yy / det, -xy / det, xx / det];
+    let solve = |k: usize| {
+        let (mut sx, mut sy) = (0.0, 0.0);
+        for ([dx, dy], m) in &rows {
+            sx += dx * m[k];
+            sy += dy * m[k];
+        }
+        [inv[0] * sx + inv[1] * sy, inv[1] * sx + inv[2] * sy]
+    };
+    let (row_u, row_v) = (solve(0), solve(1));
+    let ss: f64 = rows
+        .iter()
+        .map(|([dx, dy], m)| {
+            (m[0] - row_u[0] * dx - row_u[1] * dy).powi(2)
+                + (m[1] - row_v[0] * dx - row_v[1] * dy).powi(2)
+        })
+        .sum();
+    let dof = (2 * n - 4).max(1) as f64;
+    let s = (ss / dof).sqrt();
+    let (a11, a12, a21, a22) = (row_u[0], row_u[1], row_v[0], row_v[1]);
+    let scale_x = a11.hypot(a21);
+    let scale_y = a12.hypot(a22);
+    let (se_x, se_y) = (s * inv[0].sqrt(), s * inv[2].sqrt());
+    let angle = a21.atan2(a11);
+    let angle_se = se_x / scale_x;
+    let y_angle = (-a12).atan2(a22);
+    let skew = y_angle - angle;
+    let skew_se = angle_se.hypot(se_y / scale_y);
+    let tests = [
+        ("scale_x", scale_x - nominal_scale_px_per_mm, se_x),
+        ("scale_y", scale_y - nominal_scale_px_per_mm, se_y),
+        ("angle", angle, angle_se),
+        ("skew", skew, skew_se),
+    ];
+    Some(StageMap {
+        nominal_scale_px_per_mm,
+        scale_x_px_per_mm: scale_x,
+        scale_x_se_px_per_mm: se_x,
+        scale_y_px_per_mm: scale_y,
+        scale_y_se_px_per_mm: se_y,
+        angle_rad: angle,
+        angle_se_rad: angle_se,
+        skew_rad: skew,
+        skew_se_rad: skew_se,
+        residual_px: (ss / n as f64).sqrt(),
+        runs: n,
+        significant: tests
+            .iter()
+            .filter(|(_, d, se)| d.abs() > z * se)
+            .map(|(name, _, _)| name.to_string())
+            .collect(),
+    })
+}
+
+/// The mean over a run's points of the fitted geometric fields, full-resolution px.
+fn mean_field(s: &FieldSample, fit: &GeometricFit) -> (f64, f64) {
+    if s.points.is_empty() {
+        return (0.0, 0.0);
+    }
+    let (mut su, mut sv) = (0.0, 0.0);
+    for p in s.points {
+        let (fx, fy) = s.scheme.to_full(p.x, p.y);
+        let rel = (fx - s.centre.0, fy - s.centre.1);
+        for (q, v) in fit.params.iter().zip(&fit.values) {
+            let (bu, bv) = geometric_basis(*q, rel, s.move_px, s.r0);
+            su += v * bu;
+            sv += v * bv;
+        }
+    }
+    let n = s.points.len() as f64;
+    (su / n, sv / n)
+}
+
+/// Blur, pixel aperture and sensor noise as the last round fitted them.
+fn imaging_entries(rounds: &Rounds) -> Vec<ImagingEntry> {
+    let Some(last) = rounds.diagnoses.last() else {
+        return Vec::new();
+    };
+    [
+        EffectId::PsfBlur,
+        EffectId::FillFactor,
+        EffectId::SensorNoise,
+    ]
+    .into_iter()
+    .filter_map(|effect| {
+        let c = last
+            .candidates
+            .iter()
+            .find(|c| c.effect.catalogue() == Some(effect))?;
+        let name = effect.to_string();
+        let confounded = last
+            .confounded
+            .iter()
+            .find(|k| k.effects.contains(&name))
+            .map(|k| k.separate_with.clone());
+        Some(ImagingEntry {
+            effect,
+            params: c.params.clone(),
+            stderr: c.stderr.clone(),
+            identifiable: confounded.is_none(),
+            separate_with: confounded,
+        })
+    })
+    .collect()
+}
+
+/// The card's model against the measurement: its comparison, the discrepancy's standard error
+/// (with the scatter of a second rendering) and what it leaves unexplained.
+fn judge_card(
+    meas: &Measurement,
+    model: &ModelConfig,
+    progress: Progress,
+) -> Result<(Comparison, f64, Unexplained), DiagnoseError> {
+    let seed = meas.options.seed;
+    let first = compare_with_scene(meas, model, seed, None, progress)?;
+    let second = compare_with_scene(
+        meas,
+        model,
+        seed.wrapping_add(1),
+        Some(&first.model.nominal),
+        progress,
+    )?;
+    let infl = super::bic::inflation(&meas.options.dic);
+    let w0 = model_scatter(&first, &second, infl);
+    let seed_sd = (first.discrepancy_px - second.discrepancy_px).abs() / std::f64::consts::SQRT_2;
+    let se = first.discrepancy_se_px.max(seed_sd);
+    let left = unexplained(&first, &meas.options.schemes, w0, se, infl);
+    Ok((first, se, left))
+}

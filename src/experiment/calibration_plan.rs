@@ -1,0 +1,237 @@
+//! A calibration's move plan (`ffdic calibrate --plan FILE`, `POST /calibrations`): moves of
+//! several sizes along +x, −x, +y and −y, a sub-pixel phase scan along each axis, static repeats.
+//! Each kind of run separates effects the others cannot: two move sizes tell lens distortion
+//! (quadratic in the move) from a scale change (linear), moves along both axes tell a tilt from
+//! decentring distortion and map the stage's axes, the phase scan tells the pixel aperture from
+//! lens blur (their bias against the sub-pixel phase differs), the repeats give the noise floor.
+//! Plans are TOML files like experiments; unknown keys are refused with the key named.
+
+use super::limits::BenchLimits;
+use super::request::{ExperimentRequest, FieldError, SchemeSpec};
+use super::spec::{MoveSpec, PatternSpec, StepSeries};
+use crate::dic::DicSettings;
+use serde::{Deserialize, Serialize};
+
+/// The default moves, as fractions of the field's width: small and large, so that a field
+/// quadratic in the move (distortion) differs from one linear in it (scale) by a factor 5.
+pub const DEFAULT_MOVE_FIELD_FRACTIONS: [f64; 2] = [0.02, 0.1];
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct CalibrationPlan {
+    /// The calibration's name: the experiment's, and the card model's prefix (`NAME-HASH`).
+    pub name: String,
+    /// The mounted target: a preset (`a`, `b`, `c`) or a full description.
+    #[schema(value_type = Object)]
+    pub pattern: PatternSpec,
+    /// Move sizes, mm, each made along +x, −x, +y and −y from the reference position. Empty: 2 %
+    /// and 10 % of the field's width, within the stage's travel.
+    pub move_sizes_mm: Vec<f64>,
+    /// The phase scan's step along each axis, px of the sensor (0 or a count of 0: no scan).
+    pub phase_scan_step_px: f64,
+    pub phase_scan_count: usize,
+    /// Static frames of the reference position (the noise floor).
+    pub static_frames: usize,
+    /// Diagnosis rounds before the card is written (1–8, checked where the job is submitted).
+    #[schema(minimum = 1, maximum = 8)]
+    pub rounds: usize,
+    /// The model the calibration starts from (a name from `GET /models`).
+    pub model: String,
+    /// DIC settings of the analyses (the camera's own resolution, `native`).
+    #[schema(value_type = Object)]
+    pub dic: DicSettings,
+    /// Seed of the mock bench's speckle and noise, and of the model's.
+    pub seed: u64,
+}
+
+impl Default for CalibrationPlan {
+    fn default() -> Self {
+        Self {
+            name: "camera-card".into(),
+            pattern: PatternSpec::Preset("a".into()),
+            move_sizes_mm: Vec::new(),
+            phase_scan_step_px: 0.25,
+            phase_scan_count: 4,
+            static_frames: 2,
+            rounds: 4,
+            model: "baseline".into(),
+            dic: DicSettings::default(),
+            seed: 1,
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum PlanError {
+    #[error("cannot read calibration plan {path}: {source}")]
+    Read {
+        path: std::path::PathBuf,
+        source: std::io::Error,
+    },
+    #[error("calibration plan {path}: {message}")]
+    Parse {
+        path: std::path::PathBuf,
+        message: String,
+    },
+}
+
+impl CalibrationPlan {
+    pub fn load(path: &std::path::Path) -> Result<Self, PlanError> {
+        let text = std::fs::read_to_string(path).map_err(|source| PlanError::Read {
+            path: path.to_owned(),
+            source,
+        })?;
+        toml::from_str(&text).map_err(|e| PlanError::Parse {
+            path: path.to_owned(),
+            message: e.message().to_string(),
+        })
+    }
+
+    /// The move sizes, mm: the plan's, or the defaults for a sensor `width_px` wide, kept within
+    /// the stage's travel.
+    pub fn sizes_mm(&self, limits: &BenchLimits, width_px: u32) -> Vec<f64> {
+        if !self.move_sizes_mm.is_empty() {
+            return self.move_sizes_mm.clone();
+        }
+        let field_mm = f64::from(width_px) / limits.scale_px_per_mm;
+        let reach_mm = [limits.travel_x_mm, limits.travel_y_mm]
+            .into_iter()
+            .flatten()
+            .map(|(lo, hi)| (-lo).min(hi))
+            .fold(f64::INFINITY, f64::min);
+        DEFAULT_MOVE_FIELD_FRACTIONS
+            .iter()
+            .map(|f| ((f * field_mm).min(reach_mm) * 100.0).round() / 100.0)
+            .collect()
+    }
+
+    /// The experiment that captures the plan on a bench with `limits` and a sensor `width_px`
+    /// wide; the experiment's own checks (travel, counts) follow when it is planned.
+    pub fn experiment(
+        &self,
+        limits: &BenchLimits,
+        width_px: u32,
+    ) -> Result<ExperimentRequest, FieldError> {
+        let bad = |field: &str, reason: String| FieldError {
+            field: field.into(),
+            reason,
+        };
+        let sizes = self.sizes_mm(limits, width_px);
+        if let Some(s) = sizes.iter().find(|s| !(s.is_finite() && **s > 0.0)) {
+            return Err(bad(
+                "move_sizes_mm",
+                format!("every size must be a positive number of mm, got {s}"),
+            ));
+        }
+        if !(self.phase_scan_step_px.is_finite() && self.phase_scan_step_px >= 0.0) {
+            return Err(bad(
+                "phase_scan_step_px",
+                "must be a non-negative number of px".into(),
+            ));
+        }
+        let mut moves = Vec::new();
+        for (k, size) in sizes.iter().enumerate() {
+            for (axis, sign, dx, dy) in [
+                ("x", "p", 1.0, 0.0),
+                ("x", "m", -1.0, 0.0),
+                ("y", "p", 0.0, 1.0),
+                ("y", "m", 0.0, -1.0),
+            ] {
+                moves.push(MoveSpec {
+                    id: format!("{axis}{sign}{}", k + 1),
+                    dx_mm: dx * size,
+                    dy_mm: dy * size,
+                });
+            }
+        }
+        let step_mm = self.phase_scan_step_px / limits.scale_px_per_mm;
+        let step_series = if self.phase_scan_count > 0 && step_mm > 0.0 {
+            vec![
+                StepSeries {
+                    id: "xs".into(),
+                    dx_step_mm: step_mm,
+                    dy_step_mm: 0.0,
+                    count: self.phase_scan_count,
+                },
+                StepSeries {
+                    id: "ys".into(),
+                    dx_step_mm: 0.0,
+                    dy_step_mm: step_mm,
+                    count: self.phase_scan_count,
+                },
+            ]
+        } else {
+            Vec::new()
+        };
+        Ok(ExperimentRequest {
+            name: self.name.clone(),
+            patterns: vec![self.pattern.clone()],
+            moves,
+            step_series,
+            static_frames: self.static_frames,
+            repeats: 1,
+            schemes: vec![SchemeSpec::Preset("native".into())],
+            dic: self.dic.clone(),
+            seed: self.seed,
+            ..ExperimentRequest::default()
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn limits() -> BenchLimits {
+        BenchLimits {
+            scale_px_per_mm: 13.0,
+            target_field_mm: None,
+            travel_x_mm: Some((-25.0, 25.0)),
+            travel_y_mm: Some((-3.0, 25.0)),
+            exposure_us: (10.0, 1e6),
+            hardware_schemes: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn the_default_plan_moves_both_ways_along_both_axes_within_the_travel() {
+        let request = CalibrationPlan::default()
+            .experiment(&limits(), 640)
+            .unwrap();
+        // 640 px at 13 px/mm: a 49.2 mm field; 2 % is 0.98 mm, 10 % (4.92 mm) is cut to the
+        // 3 mm the stage can go towards −y.
+        let sizes: Vec<f64> = request
+            .moves
+            .iter()
+            .map(|m| m.dx_mm.abs() + m.dy_mm.abs())
+            .collect();
+        assert_eq!(sizes, [0.98, 0.98, 0.98, 0.98, 3.0, 3.0, 3.0, 3.0]);
+        let ids: Vec<&str> = request.moves.iter().map(|m| m.id.as_str()).collect();
+        assert_eq!(
+            ids,
+            ["xp1", "xm1", "yp1", "ym1", "xp2", "xm2", "yp2", "ym2"]
+        );
+        assert_eq!(request.step_series.len(), 2);
+        assert!((request.step_series[0].dx_step_mm - 0.25 / 13.0).abs() < 1e-15);
+        assert!(request.plan(&limits()).is_ok());
+    }
+
+    #[test]
+    fn a_plan_names_what_is_wrong() {
+        let plan: Result<CalibrationPlan, _> = toml::from_str("move_sizes = [1.0]");
+        assert!(plan.unwrap_err().to_string().contains("move_sizes"));
+        let plan = CalibrationPlan {
+            move_sizes_mm: vec![1.0, -2.0],
+            ..CalibrationPlan::default()
+        };
+        assert_eq!(
+            plan.experiment(&limits(), 640).unwrap_err().field,
+            "move_sizes_mm"
+        );
+        let plan = CalibrationPlan {
+            rounds: 0,
+            ..CalibrationPlan::default()
+        };
+        assert_eq!(plan.experiment(&limits(), 640).unwrap_err().field, "rounds");
+    }
+}

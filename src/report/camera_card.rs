@@ -1,0 +1,119 @@
+//! A camera card as a person reads it: one row per number with its standard error and whether it
+//! is significant, the stage's map, the imaging chain, and the discrepancy the card leaves.
+
+use super::text_table;
+use crate::diagnose::CameraCard;
+use std::collections::BTreeMap;
+
+/// The card as text (the CLI's `calibrate` and the job's `results/card.txt`).
+pub fn camera_card_text(card: &CameraCard) -> String {
+    let z = card.z_significant;
+    let mark = |v: f64, se: f64| if v.abs() > z * se { "yes" } else { "no" };
+    let mut rows: Vec<Vec<String>> = Vec::new();
+    for g in &card.geometry {
+        for (name, v) in &g.params {
+            let se = g.stderr.get(name).copied().unwrap_or(f64::NAN);
+            rows.push(vec![
+                g.effect.to_string(),
+                name.clone(),
+                format!("{v:.4e}"),
+                format!("{se:.1e}"),
+                mark(*v, se).into(),
+            ]);
+        }
+    }
+    if let Some(s) = &card.stage {
+        let nominal = s.nominal_scale_px_per_mm;
+        for (name, v, se, against) in [
+            (
+                "scale_x_px_per_mm",
+                s.scale_x_px_per_mm,
+                s.scale_x_se_px_per_mm,
+                nominal,
+            ),
+            (
+                "scale_y_px_per_mm",
+                s.scale_y_px_per_mm,
+                s.scale_y_se_px_per_mm,
+                nominal,
+            ),
+            ("angle_rad", s.angle_rad, s.angle_se_rad, 0.0),
+            ("skew_rad", s.skew_rad, s.skew_se_rad, 0.0),
+        ] {
+            rows.push(vec![
+                "stage".into(),
+                name.into(),
+                format!("{v:.6}"),
+                format!("{se:.1e}"),
+                mark(v - against, se).into(),
+            ]);
+        }
+    }
+    let mut out = format!(
+        "camera card {} (significant: beyond {z:.2} SE, {:.0} % family-wise false alarms)\n",
+        card.model.name,
+        100.0 * card.false_alarm_rate
+    );
+    out += &text_table(
+        &["effect", "parameter", "value", "SE", "significant"],
+        &rows,
+    );
+    if let Some(s) = &card.stage {
+        out += &format!(
+            "stage: against the nominal {:.4} px/mm; {} runs scatter {:.4} px about the map (the stage is the length standard: its travel error and the camera's scale are one number)\n",
+            s.nominal_scale_px_per_mm, s.runs, s.residual_px
+        );
+    } else {
+        out += "stage: not mapped (moves along both axes, at least three runs, are needed)\n";
+    }
+    for g in &card.geometry {
+        for (name, v) in &g.derived {
+            out += &format!("{}: {name} = {v:.4}\n", g.effect);
+        }
+        for note in &g.notes {
+            out += &format!("{}: {note}\n", g.effect);
+        }
+    }
+    for n in &card.not_identifiable {
+        out += &format!("not fitted: {n}\n");
+    }
+    for i in &card.imaging {
+        let params = with_errors(&i.params, &i.stderr);
+        match &i.separate_with {
+            None => out += &format!("{}: {params}\n", i.effect),
+            Some(how) => {
+                out += &format!(
+                    "{}: not identifiable with these runs ({params}); separate it with {how}\n",
+                    i.effect
+                )
+            }
+        }
+    }
+    let found = card.found();
+    out += &format!(
+        "found: {}\ndiscrepancy: baseline {} {:.5} ± {:.5} px → card {:.5} ± {:.5} px\nleft unexplained: {}\n",
+        if found.is_empty() {
+            "nothing significant".to_string()
+        } else {
+            found.join(", ")
+        },
+        card.baseline_model,
+        card.baseline_px,
+        card.baseline_se_px,
+        card.card_px,
+        card.card_se_px,
+        card.unexplained.summary
+    );
+    out
+}
+
+fn with_errors(params: &BTreeMap<String, f64>, stderr: &BTreeMap<String, f64>) -> String {
+    params
+        .iter()
+        .map(|(k, v)| match stderr.get(k) {
+            Some(se) => format!("{k} = {v:.4e} ± {se:.1e}"),
+            None => format!("{k} = {v:.4e}"),
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}

@@ -1,0 +1,185 @@
+//! `POST /calibrations` and `ffdic calibrate`: a calibration plan captured on the bench (the
+//! first half of the job's progress), the frames registered as a dataset, diagnosed in rounds at
+//! the camera's own resolution and written as a camera card (the second half). The card's model
+//! joins the stored models (`card-NAME-HASH`); the run's folder gets `results/card.json` (the
+//! card, the rounds, the plan and the experiment it became), `results/card.txt` and
+//! `results/diagnosis.json`.
+
+use super::jobs::{JobContext, JobError, JobOutput, JobResult, Lane, Work};
+use super::scaled_sink::ScaledSink;
+use super::work::{capture_dataset, diagnose_failure, progress_reporter};
+use super::{NewModel, Service, SubmitError};
+use crate::diagnose::{calibrate, CompareOptions};
+use crate::experiment::{
+    check_dic, check_schemes, CalibrationPlan, ExperimentPlan, ExperimentRequest, RunSink,
+    SchemeSpec,
+};
+use crate::model::ModelConfig;
+use crate::report::camera_card_text;
+use crate::store::{RunKind, RunRecord};
+use serde_json::json;
+
+/// The share of a calibration's progress its capture takes.
+const CAPTURE_SHARE: f64 = 0.5;
+
+impl Service {
+    /// Queues a calibration on the bench lane (validated first: a bad plan queues nothing).
+    pub fn submit_calibration(
+        &self,
+        calibration: &CalibrationPlan,
+        idempotency_key: Option<&str>,
+    ) -> Result<(RunRecord, bool), SubmitError> {
+        if !(1..=crate::diagnose::MAX_ROUNDS).contains(&calibration.rounds) {
+            return Err(SubmitError::Field(crate::experiment::FieldError {
+                field: "rounds".into(),
+                reason: format!(
+                    "must lie in [1, {}], got {}",
+                    crate::diagnose::MAX_ROUNDS,
+                    calibration.rounds
+                ),
+            }));
+        }
+        let request = calibration.experiment(&self.limits, self.sensor_width_px)?;
+        let plan = request.plan(&self.limits)?;
+        if !self.limits.has_stage() {
+            return Err(SubmitError::NoStage);
+        }
+        self.store
+            .check_runs_room(plan.frame_count() as u64 * self.frame_bytes)?;
+        let model = self.requested_model(&calibration.model)?;
+        let options = CompareOptions {
+            dic: check_dic(&calibration.dic)?,
+            schemes: check_schemes(&[SchemeSpec::Preset("native".into())])?,
+            seed: calibration.seed,
+        };
+        let work = calibration_work(
+            self.clone(),
+            Calibration {
+                plan,
+                request,
+                calibration: calibration.clone(),
+                model,
+                options,
+            },
+        );
+        let body = serde_json::to_value(calibration).expect("a plan serialises");
+        Ok(self.jobs.submit(
+            RunKind::Calibration,
+            Lane::Bench,
+            body,
+            idempotency_key,
+            None,
+            work,
+        )?)
+    }
+}
+
+/// What a calibration job runs, checked.
+struct Calibration {
+    plan: ExperimentPlan,
+    request: ExperimentRequest,
+    calibration: CalibrationPlan,
+    model: ModelConfig,
+    options: CompareOptions,
+}
+
+/// The card model's name prefix: `card-` and the plan's name in model-name characters.
+pub fn card_prefix(name: &str) -> String {
+    let clean: String = name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.') {
+                c
+            } else {
+                '-'
+            }
+        })
+        .take(64)
+        .collect();
+    format!("card-{}", clean.trim_start_matches(['-', '.']))
+}
+
+fn calibration_work(service: Service, job: Calibration) -> Work {
+    Box::new(move |ctx: &JobContext| {
+        let capture = ScaledSink {
+            inner: ctx,
+            from: 0.0,
+            span: CAPTURE_SHARE,
+        };
+        let (_, dataset) = capture_dataset(&service, &job.plan, ctx, &capture)?;
+        let diagnosis = ScaledSink {
+            inner: ctx,
+            from: CAPTURE_SHARE,
+            span: 1.0 - CAPTURE_SHARE,
+        };
+        let report = progress_reporter(&diagnosis, "calibration fits");
+        let dir = service.store.dataset_dir(&dataset.id);
+        let (rounds, card) = calibrate(
+            &dir,
+            &job.model,
+            &job.options,
+            job.calibration.rounds,
+            &card_prefix(&job.calibration.name),
+            &report,
+        )
+        .map_err(diagnose_failure)?;
+        service
+            .add_model(&NewModel {
+                toml: card.model.to_toml(),
+            })
+            .map_err(JobError::failed)?;
+        let document = json!({
+            "card": card,
+            "model": card.model.name,
+            "dataset_id": dataset.id,
+            "rounds": rounds.to_json(),
+            "plan": job.calibration,
+            "experiment": job.request,
+        });
+        let write = |rel: &str, bytes: &[u8]| ctx.write(rel, bytes).map_err(JobError::failed);
+        write(
+            "results/card.json",
+            &serde_json::to_vec_pretty(&document).map_err(JobError::failed)?,
+        )?;
+        write("results/card.txt", camera_card_text(&card).as_bytes())?;
+        write(
+            "results/diagnosis.json",
+            &serde_json::to_vec_pretty(&rounds.to_json()).map_err(JobError::failed)?,
+        )?;
+        write("results/card-model.toml", card.model.to_toml().as_bytes())?;
+        let found = card.found();
+        Ok(JobOutput {
+            message: format!(
+                "card {}: {}; discrepancy {:.5} → {:.5} px",
+                card.model.name,
+                if found.is_empty() {
+                    "nothing significant".to_string()
+                } else {
+                    found.join(", ")
+                },
+                card.baseline_px,
+                card.card_px
+            ),
+            result: JobResult::Calibration {
+                rounds: Box::new(rounds),
+                card: Box::new(card),
+                dataset: dataset.id,
+            },
+        })
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_card_is_named_in_model_name_characters() {
+        assert_eq!(card_prefix("camera-card"), "card-camera-card");
+        assert_eq!(card_prefix("lab 3 / lens #2"), "card-lab-3---lens--2");
+        assert!(crate::store::is_model_name(&format!(
+            "{}-0123456789ab",
+            card_prefix(&"x".repeat(200))
+        )));
+    }
+}
