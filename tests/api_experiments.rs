@@ -6,7 +6,8 @@
 mod daemon;
 
 use daemon::{
-    client, read_events, small_config, small_request, wait_terminal, wait_until, TestServer,
+    client, get, get_json, post, read_events, small_config, small_request, wait_terminal,
+    wait_until, TestServer,
 };
 use serde_json::{json, Value};
 
@@ -614,4 +615,54 @@ async fn run_to_results(server: &TestServer, request: &Value) -> (String, Value)
         .await
         .unwrap();
     (id, results)
+}
+
+/// `POST /calibrations` (issue 33): a plan on the mock bench becomes a run of its own kind whose
+/// frames are a dataset, whose card is a file and whose model is stored; a plan the bench cannot
+/// move is refused naming the move, and nothing is queued.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_calibration_over_http_writes_a_card_and_stores_its_model() {
+    let tmp = tempfile::tempdir().unwrap();
+    let server = TestServer::start(small_config(tmp.path())).await;
+    let plan = json!({
+        "name": "small bench",
+        "move_sizes_mm": [0.5, 2.5],
+        "phase_scan_count": 0,
+        "static_frames": 1,
+        "rounds": 1,
+        "dic": {"subset_px": 21, "step_px": 10, "strain_window": 5}
+    });
+    let r = post(&server.url("/calibrations"), &plan).await;
+    assert_eq!(r.status(), 202);
+    let location = r.headers()["location"].to_str().unwrap().to_string();
+    let id = r.json::<Value>().await.unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    assert!(id.starts_with("cal-"), "{id}");
+    assert_eq!(location, format!("/api/v1/calibrations/{id}"));
+    let record = wait_terminal(&server.url(&format!("/calibrations/{id}"))).await;
+    assert_eq!(record["status"], "succeeded", "{record}");
+    assert!(record["dataset_id"].is_string(), "{record}");
+    let card: Value = get_json(&server.url(&format!("/calibrations/{id}/card"))).await;
+    let model = card["model"].as_str().unwrap();
+    assert!(model.starts_with("card-small-bench-"), "{model}");
+    assert_eq!(card["plan"]["move_sizes_mm"], json!([0.5, 2.5]));
+    assert_eq!(card["experiment"]["moves"].as_array().unwrap().len(), 8);
+    let stage = &card["card"]["stage"];
+    assert!(
+        (stage["scale_x_px_per_mm"].as_f64().unwrap() - 13.0).abs() < 0.1,
+        "{stage}"
+    );
+    let stored = get(&server.url(&format!("/models/{model}"))).await;
+    assert_eq!(stored.status(), 200, "the card's model is stored");
+    let listed: Value = get_json(&server.url("/calibrations")).await;
+    assert_eq!(listed.as_array().unwrap().len(), 1, "{listed}");
+
+    let beyond = json!({"move_sizes_mm": [500.0], "rounds": 1});
+    let r = post(&server.url("/calibrations"), &beyond).await;
+    assert_eq!(r.status(), 422);
+    let problem: Value = r.json().await.unwrap();
+    assert!(problem.to_string().contains("moves[0]"), "{problem}");
+    server.stop().await;
 }

@@ -2,7 +2,9 @@
 //! so the document cannot drift from the router (a test checks it against a snapshot).
 
 use super::problem::Problem;
-use super::routes::{camera, datasets, experiments, jobs, models, stage, sweeps, system};
+use super::routes::{
+    calibrations, camera, datasets, experiments, jobs, models, stage, sweeps, system,
+};
 use crate::run_event::EventKind;
 use crate::service::Service;
 use utoipa::OpenApi;
@@ -22,8 +24,9 @@ use utoipa_axum::routes;
         (name = "system", description = "Health and status"),
         (name = "bench", description = "Camera and stage, directly"),
         (name = "experiments", description = "Translation experiments on the bench"),
+        (name = "calibrations", description = "Calibration plans on the bench and the camera cards they write"),
         (name = "datasets", description = "Measurements in format ffdic-dataset/1"),
-        (name = "jobs", description = "Any run: experiments, analyses, comparisons, diagnoses, sweeps"),
+        (name = "jobs", description = "Any run: experiments, analyses, comparisons, diagnoses, sweeps, calibrations"),
         (name = "models", description = "Analysis models: embedded and added by users"),
         (name = "sweeps", description = "Design maps: error against dot size, fill factor, noise, blur and sub-pixel motion"),
     )
@@ -52,6 +55,9 @@ pub fn router(max_upload_bytes: usize) -> OpenApiRouter<Service> {
         .routes(routes!(experiments::results_csv))
         .routes(routes!(experiments::frame))
         .routes(routes!(experiments::plot))
+        .routes(routes!(calibrations::create, calibrations::list))
+        .routes(routes!(calibrations::get))
+        .routes(routes!(calibrations::card))
         .routes(routes!(datasets::list))
         .routes(routes!(datasets::get, datasets::delete))
         .routes(routes!(datasets::analyse))
@@ -132,7 +138,21 @@ pub const FILE_NAME_PATTERN: &str = r"^[A-Za-z0-9_][A-Za-z0-9._+\-]{0,127}$";
 /// body), so a client — and schemathesis' stateful phase — can follow them.
 fn add_links(paths: &mut serde_json::Map<String, serde_json::Value>) {
     // (Not results: they exist only once the run has succeeded.)
-    const LINKS: [(&str, &str, &str, &str, &str); 9] = [
+    const LINKS: [(&str, &str, &str, &str, &str); 11] = [
+        (
+            "/api/v1/calibrations",
+            "post",
+            "202",
+            "/api/v1/calibrations/{id}",
+            "get",
+        ),
+        (
+            "/api/v1/calibrations",
+            "post",
+            "202",
+            "/api/v1/jobs/{id}/cancel",
+            "post",
+        ),
         (
             "/api/v1/sweeps",
             "post",

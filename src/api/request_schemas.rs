@@ -47,13 +47,21 @@ pub fn refinements() -> Vec<(&'static str, &'static str, Value)> {
         "maxItems": MAX_SCHEMES,
     });
     let mut out = Vec::new();
-    for body in ["ExperimentRequest", "AnalysisRequest", "CompareRequest"] {
+    for body in [
+        "ExperimentRequest",
+        "AnalysisRequest",
+        "CompareRequest",
+        "CalibrationPlan",
+    ] {
         out.push((body, "dic", reference("DicSettings")));
+    }
+    for body in ["ExperimentRequest", "AnalysisRequest", "CompareRequest"] {
         out.push((body, "schemes", schemes.clone()));
     }
-    for body in ["ExperimentRequest", "CompareRequest"] {
+    for body in ["ExperimentRequest", "CompareRequest", "CalibrationPlan"] {
         out.push((body, "seed", json!({ "maximum": u64::MAX })));
     }
+    out.extend(calibration_refinements());
     out.extend(sweep_refinements());
     out.extend([
         ("ExperimentRequest", "name", run_name_schema()),
@@ -145,6 +153,35 @@ pub fn apply(schemas: &mut Map<String, Value>) {
             }
         }
     }
+}
+
+/// `POST /calibrations`: `crate::experiment::CalibrationPlan`, which becomes an experiment
+/// request (its checks then apply: the travel, the counts).
+fn calibration_refinements() -> Vec<(&'static str, &'static str, Value)> {
+    vec![
+        ("CalibrationPlan", "name", run_name_schema()),
+        ("CalibrationPlan", "pattern", reference("PatternSpec")),
+        (
+            "CalibrationPlan",
+            "move_sizes_mm",
+            json!({ "items": { "type": "number", "exclusiveMinimum": 0 }, "maxItems": MAX_MOVES / 4 }),
+        ),
+        (
+            "CalibrationPlan",
+            "phase_scan_step_px",
+            json!({ "minimum": 0 }),
+        ),
+        (
+            "CalibrationPlan",
+            "phase_scan_count",
+            json!({ "minimum": 0, "maximum": MAX_MOVES / 2 }),
+        ),
+        (
+            "CalibrationPlan",
+            "static_frames",
+            json!({ "minimum": 0, "maximum": MAX_STATIC_FRAMES }),
+        ),
+    ]
 }
 
 /// `POST /sweeps`: `crate::sweep::SweepSpec`, checked by `SweepSpec::validate` and the daemon's

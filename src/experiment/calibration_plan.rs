@@ -29,6 +29,7 @@ pub struct CalibrationPlan {
     pub move_sizes_mm: Vec<f64>,
     /// The phase scan's step along each axis, px of the sensor (0 or a count of 0: no scan).
     pub phase_scan_step_px: f64,
+    /// Steps of the phase scan along each axis.
     pub phase_scan_count: usize,
     /// Static frames of the reference position (the noise floor).
     pub static_frames: usize,

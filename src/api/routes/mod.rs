@@ -1,5 +1,6 @@
 //! Route handlers, one file per resource.
 
+pub mod calibrations;
 pub mod camera;
 pub mod datasets;
 pub mod experiments;
