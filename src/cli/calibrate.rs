@@ -20,8 +20,9 @@ pub struct CalibrateArgs {
     /// Daemon config naming the bench (default: the embedded config/ffdic.toml, the mock bench).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Calibration plan, TOML (default: moves of 2 % and 10 % of the field along ±x and ±y, a
-    /// 0.25 px phase scan of 4 steps along each axis, 2 static frames, 4 rounds; docs/calibration.md).
+    /// Calibration plan, TOML (default: moves of 10 % of the field and a fifth of that along ±x
+    /// and ±y, a 0.25 px phase scan of 4 steps along each axis, 2 static frames, 4 rounds;
+    /// docs/calibration.md).
     #[arg(long)]
     pub plan: Option<PathBuf>,
     /// Data folder (default: the config's): the run, its dataset and the card's model go there.

@@ -7,7 +7,8 @@
 //! therefore fits every geometric term the runs identify *jointly* on the baseline comparison's
 //! field differences — rotation, scale, target tilt, k1, p1, p2, and k2 when it pays its BIC price
 //! (ln n) — by the same weighted least squares as a candidate ([`super::fit_geometric`]); a term
-//! the runs cannot tell from those before it is listed, not fitted. A number is significant
+//! the runs cannot tell from those before it is listed, not fitted. Where that fit finds k1, the
+//! distortion is refitted about a centre of its own ([`super::card_distortion`]). A number is significant
 //! beyond z = Φ⁻¹(1 − α/2m) standard errors, α = 1 % family-wise over the card's m tested numbers
 //! (Bonferroni): a card of a bench with nothing hidden is empty but at that rate.
 //!
@@ -20,7 +21,8 @@
 //! comes from the last round's candidate fits, each marked identifiable or not as that round's
 //! design says.
 
-use super::basis::{geometric_basis, GeometricParam};
+use super::basis::GeometricParam;
+use super::card_distortion::{card_geometry, CardGeometry, CentredDistortion};
 use super::compare::{compare_with_scene, Measurement};
 use super::diagnose::field_samples;
 use super::fit_geometric::{fit_geometric, FieldSample, GeometricFit};
@@ -29,6 +31,7 @@ use super::results::Comparison;
 use super::rounds::Rounds;
 use super::unexplained::{model_scatter, unexplained, Unexplained};
 use super::{DiagnoseError, Progress};
+use crate::model::effects::LensDistortion;
 use crate::model::{EffectId, Effects, ModelConfig};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -181,7 +184,13 @@ pub fn camera_card(
     };
     let (samples, setting) = field_samples(meas, &before);
     let (fit, not_identifiable) = joint_fit(&samples, setting.observations);
-    let tested = fit.as_ref().map_or(0, |f| f.params.len()) + STAGE_NUMBERS;
+    let geometry_fit = fit.map(|f| card_geometry(&samples, f, setting.r0, setting.observations));
+    let tested = geometry_fit.as_ref().map_or(0, |g| {
+        g.linear.params.len()
+            + g.centred
+                .as_ref()
+                .map_or(0, |c| 3 + usize::from(c.k2.is_some()))
+    }) + STAGE_NUMBERS;
     let z = crate::stats::normal_upper_quantile(CARD_FALSE_ALARM_RATE / (2.0 * tested as f64));
 
     let mut effects = rounds.final_model.effects.clone();
@@ -190,8 +199,8 @@ pub fn camera_card(
     }
     let base_effects = effects.clone();
     let mut geometry = Vec::new();
-    if let Some(fit) = &fit {
-        for written in write_joint(fit, &setting, &base_effects) {
+    if let Some(fit) = &geometry_fit {
+        for written in write_joint(&fit.linear, &setting, &base_effects) {
             let significant = written
                 .params
                 .iter()
@@ -210,10 +219,24 @@ pub fn camera_card(
                 significant,
             });
         }
+        if let Some(c) = &fit.centred {
+            let entry = centred_entry(c, z);
+            if entry.significant {
+                effects.lens_distortion = Some(LensDistortion {
+                    k1: c.k1.0,
+                    k2: c.k2.map_or(0.0, |k| k.0),
+                    centre_dx_px: c.centre_px[0].0,
+                    centre_dy_px: c.centre_px[1].0,
+                    ..LensDistortion::radial(0.0)
+                });
+            }
+            geometry.push(entry);
+            geometry.sort_by_key(|g| g.effect);
+        }
     }
-    let stage = fit
+    let stage = geometry_fit
         .as_ref()
-        .and_then(|f| stage_map(meas, &samples, f, setting.scale_px_per_mm, z));
+        .and_then(|g| stage_map(meas, &samples, g, setting.scale_px_per_mm, z));
     let imaging = imaging_entries(rounds);
     let mut model = ModelConfig {
         name: String::new(),
@@ -299,7 +322,7 @@ fn take_geometric(to: &mut Effects, from: &Effects, g: Geometric) {
 fn stage_map(
     meas: &Measurement,
     samples: &[FieldSample],
-    fit: &GeometricFit,
+    geometry: &CardGeometry,
     nominal_scale_px_per_mm: f64,
     z: f64,
 ) -> Option<StageMap> {
@@ -309,7 +332,7 @@ fn stage_map(
         .filter(|s| seen.insert(s.run))
         .map(|s| {
             let stage = &meas.manifest.runs[s.run].stage;
-            let (fu, fv) = mean_field(s, fit);
+            let (fu, fv) = mean_field(s, geometry);
             (
                 [stage.dx_mm, stage.dy_mm],
                 [s.move_px.0 - fu, s.move_px.1 - fv],
@@ -381,23 +404,50 @@ fn stage_map(
     })
 }
 
-/// The mean over a run's points of the fitted geometric fields, full-resolution px.
-fn mean_field(s: &FieldSample, fit: &GeometricFit) -> (f64, f64) {
+/// The mean over a run's points of the card's fitted fields, full-resolution px.
+fn mean_field(s: &FieldSample, geometry: &CardGeometry) -> (f64, f64) {
     if s.points.is_empty() {
         return (0.0, 0.0);
     }
     let (mut su, mut sv) = (0.0, 0.0);
     for p in s.points {
         let (fx, fy) = s.scheme.to_full(p.x, p.y);
-        let rel = (fx - s.centre.0, fy - s.centre.1);
-        for (q, v) in fit.params.iter().zip(&fit.values) {
-            let (bu, bv) = geometric_basis(*q, rel, s.move_px, s.r0);
-            su += v * bu;
-            sv += v * bv;
-        }
+        let (u, v) = geometry.displacement((fx - s.centre.0, fy - s.centre.1), s.move_px);
+        su += u;
+        sv += v;
     }
     let n = s.points.len() as f64;
     (su / n, sv / n)
+}
+
+/// The distortion about its own centre as a card entry.
+fn centred_entry(c: &CentredDistortion, z: f64) -> CardEffect {
+    let mut params = BTreeMap::from([
+        ("k1".to_string(), c.k1.0),
+        ("centre_dx_px".to_string(), c.centre_px[0].0),
+        ("centre_dy_px".to_string(), c.centre_px[1].0),
+    ]);
+    let mut stderr = BTreeMap::from([
+        ("k1".to_string(), c.k1.1),
+        ("centre_dx_px".to_string(), c.centre_px[0].1),
+        ("centre_dy_px".to_string(), c.centre_px[1].1),
+    ]);
+    if let Some((k2, se)) = c.k2 {
+        params.insert("k2".into(), k2);
+        stderr.insert("k2".into(), se);
+    }
+    let significant = [Some(c.k1), c.k2]
+        .into_iter()
+        .flatten()
+        .any(|(v, se)| v.abs() > z * se);
+    CardEffect {
+        effect: EffectId::LensDistortion,
+        params,
+        stderr,
+        derived: BTreeMap::new(),
+        notes: vec!["radial distortion about its own centre (the principal point), fitted by Gauss–Newton; decentring (tangential) distortion about the image centre leaves the same field to first order, which translations alone cannot tell apart".into()],
+        significant,
+    }
 }
 
 /// Blur, pixel aperture and sensor noise as the last round fitted them.

@@ -83,6 +83,7 @@ mod basis;
 mod bic;
 pub mod capture_mode;
 mod card;
+mod card_distortion;
 pub mod compare;
 // The brief names the file after its job; the module is the entry point of the folder's job.
 #[allow(clippy::module_inception)]
@@ -93,6 +94,7 @@ mod fit_geometric_effect;
 mod fit_image;
 mod fit_user_effect;
 mod floor_read_out;
+mod gauss_newton;
 mod history;
 mod identifiability;
 mod image_stats;

@@ -12,9 +12,11 @@ use super::spec::{MoveSpec, PatternSpec, StepSeries};
 use crate::dic::DicSettings;
 use serde::{Deserialize, Serialize};
 
-/// The default moves, as fractions of the field's width: small and large, so that a field
-/// quadratic in the move (distortion) differs from one linear in it (scale) by a factor 5.
-pub const DEFAULT_MOVE_FIELD_FRACTIONS: [f64; 2] = [0.02, 0.1];
+/// The default large move, as a fraction of the field's width.
+pub const DEFAULT_LARGE_MOVE_FIELD_FRACTION: f64 = 0.1;
+/// The default large move over the small one: a field quadratic in the move (distortion) then
+/// differs from one linear in it (scale) by this factor.
+pub const DEFAULT_MOVE_SIZE_RATIO: f64 = 5.0;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields, default)]
@@ -24,8 +26,9 @@ pub struct CalibrationPlan {
     /// The mounted target: a preset (`a`, `b`, `c`) or a full description.
     #[schema(value_type = Object)]
     pub pattern: PatternSpec,
-    /// Move sizes, mm, each made along +x, −x, +y and −y from the reference position. Empty: 2 %
-    /// and 10 % of the field's width, within the stage's travel.
+    /// Move sizes, mm, each made along +x, −x, +y and −y from the reference position. Empty: 10 %
+    /// of the field's width (within the stage's travel and 75 % of `dic.max_motion_px`) and a
+    /// fifth of that.
     pub move_sizes_mm: Vec<f64>,
     /// The phase scan's step along each axis, px of the sensor (0 or a count of 0: no scan).
     pub phase_scan_step_px: f64,
@@ -88,8 +91,9 @@ impl CalibrationPlan {
         })
     }
 
-    /// The move sizes, mm: the plan's, or the defaults for a sensor `width_px` wide, kept within
-    /// the stage's travel.
+    /// The move sizes, mm: the plan's, or the defaults for a sensor `width_px` wide — the larger
+    /// 10 % of the field's width, within the stage's travel and within 75 % of the DIC's
+    /// `max_motion_px`, the smaller a fifth of it.
     pub fn sizes_mm(&self, limits: &BenchLimits, width_px: u32) -> Vec<f64> {
         if !self.move_sizes_mm.is_empty() {
             return self.move_sizes_mm.clone();
@@ -100,10 +104,12 @@ impl CalibrationPlan {
             .flatten()
             .map(|(lo, hi)| (-lo).min(hi))
             .fold(f64::INFINITY, f64::min);
-        DEFAULT_MOVE_FIELD_FRACTIONS
-            .iter()
-            .map(|f| ((f * field_mm).min(reach_mm) * 100.0).round() / 100.0)
-            .collect()
+        let tracked_mm = 0.75 * self.dic.max_motion_px as f64 / limits.scale_px_per_mm;
+        let large_mm = (DEFAULT_LARGE_MOVE_FIELD_FRACTION * field_mm)
+            .min(reach_mm)
+            .min(tracked_mm);
+        let round = |mm: f64| (mm * 100.0).round() / 100.0;
+        vec![round(large_mm / DEFAULT_MOVE_SIZE_RATIO), round(large_mm)]
     }
 
     /// The experiment that captures the plan on a bench with `limits` and a sensor `width_px`
@@ -122,6 +128,17 @@ impl CalibrationPlan {
             return Err(bad(
                 "move_sizes_mm",
                 format!("every size must be a positive number of mm, got {s}"),
+            ));
+        }
+        let max_px = self.dic.max_motion_px as f64;
+        if let Some(s) = sizes.iter().find(|s| **s * limits.scale_px_per_mm > max_px) {
+            return Err(bad(
+                "move_sizes_mm",
+                format!(
+                    "a {s} mm move is {:.0} px at {} px/mm, beyond what the DIC tracks (dic.max_motion_px, {max_px:.0})",
+                    s * limits.scale_px_per_mm,
+                    limits.scale_px_per_mm
+                ),
             ));
         }
         if !(self.phase_scan_step_px.is_finite() && self.phase_scan_step_px >= 0.0) {
@@ -199,14 +216,14 @@ mod tests {
         let request = CalibrationPlan::default()
             .experiment(&limits(), 640)
             .unwrap();
-        // 640 px at 13 px/mm: a 49.2 mm field; 2 % is 0.98 mm, 10 % (4.92 mm) is cut to the
-        // 3 mm the stage can go towards −y.
+        // 640 px at 13 px/mm: a 49.2 mm field, 10 % of it 4.92 mm, cut to the 3 mm the stage
+        // can go towards −y; the small move a fifth of that.
         let sizes: Vec<f64> = request
             .moves
             .iter()
             .map(|m| m.dx_mm.abs() + m.dy_mm.abs())
             .collect();
-        assert_eq!(sizes, [0.98, 0.98, 0.98, 0.98, 3.0, 3.0, 3.0, 3.0]);
+        assert_eq!(sizes, [0.6, 0.6, 0.6, 0.6, 3.0, 3.0, 3.0, 3.0]);
         let ids: Vec<&str> = request.moves.iter().map(|m| m.id.as_str()).collect();
         assert_eq!(
             ids,
@@ -215,6 +232,28 @@ mod tests {
         assert_eq!(request.step_series.len(), 2);
         assert!((request.step_series[0].dx_step_mm - 0.25 / 13.0).abs() < 1e-15);
         assert!(request.plan(&limits()).is_ok());
+    }
+
+    #[test]
+    fn the_default_moves_stay_within_what_the_dic_tracks() {
+        // The paper's bench (26 px/mm, 2560 px): 10 % of the field is 256 px, beyond the DIC's
+        // 160 px; the default stays within 75 % of it (4.62 mm), and a plan asking more is told.
+        let paper = BenchLimits {
+            scale_px_per_mm: 26.0,
+            travel_y_mm: Some((-25.0, 25.0)),
+            ..limits()
+        };
+        assert_eq!(
+            CalibrationPlan::default().sizes_mm(&paper, 2560),
+            [0.92, 4.62]
+        );
+        let plan = CalibrationPlan {
+            move_sizes_mm: vec![9.85],
+            ..CalibrationPlan::default()
+        };
+        let e = plan.experiment(&paper, 2560).unwrap_err();
+        assert_eq!(e.field, "move_sizes_mm");
+        assert!(e.reason.contains("max_motion_px"), "{}", e.reason);
     }
 
     #[test]
@@ -229,10 +268,5 @@ mod tests {
             plan.experiment(&limits(), 640).unwrap_err().field,
             "move_sizes_mm"
         );
-        let plan = CalibrationPlan {
-            rounds: 0,
-            ..CalibrationPlan::default()
-        };
-        assert_eq!(plan.experiment(&limits(), 640).unwrap_err().field, "rounds");
     }
 }

@@ -20,7 +20,9 @@ pub use bench::{
     BenchError, BenchHandle, BenchHardware, BenchLease, BenchStatus, CameraStatus, Owner,
     StageStatus, TargetMount,
 };
-pub use calibration_plan::{CalibrationPlan, PlanError, DEFAULT_MOVE_FIELD_FRACTIONS};
+pub use calibration_plan::{
+    CalibrationPlan, PlanError, DEFAULT_LARGE_MOVE_FIELD_FRACTION, DEFAULT_MOVE_SIZE_RATIO,
+};
 pub use captures::{capture_plan, layout_seed, CaptureRun, TargetCapture};
 pub use findings::{findings_text, paper_findings, Finding, Verdict};
 pub use limits::{
