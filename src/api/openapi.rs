@@ -134,89 +134,91 @@ fn upload_schema() -> serde_json::Value {
 /// A file name in a run or dataset folder, as the routes' path parameters document it.
 pub const FILE_NAME_PATTERN: &str = r"^[A-Za-z0-9_][A-Za-z0-9._+\-]{0,127}$";
 
+/// Each submission's links: (from, method, status, to, to's method). Not results: they exist
+/// only once the run has succeeded.
+const LINKS: [(&str, &str, &str, &str, &str); 11] = [
+    (
+        "/api/v1/calibrations",
+        "post",
+        "202",
+        "/api/v1/calibrations/{id}",
+        "get",
+    ),
+    (
+        "/api/v1/calibrations",
+        "post",
+        "202",
+        "/api/v1/jobs/{id}/cancel",
+        "post",
+    ),
+    (
+        "/api/v1/sweeps",
+        "post",
+        "202",
+        "/api/v1/sweeps/{id}",
+        "get",
+    ),
+    (
+        "/api/v1/sweeps",
+        "post",
+        "202",
+        "/api/v1/jobs/{id}/cancel",
+        "post",
+    ),
+    (
+        "/api/v1/experiments",
+        "post",
+        "202",
+        "/api/v1/experiments/{id}",
+        "get",
+    ),
+    (
+        "/api/v1/experiments",
+        "post",
+        "202",
+        "/api/v1/experiments/{id}/events",
+        "get",
+    ),
+    (
+        "/api/v1/experiments",
+        "post",
+        "202",
+        "/api/v1/experiments/{id}/cancel",
+        "post",
+    ),
+    (
+        "/api/v1/datasets",
+        "post",
+        "201",
+        "/api/v1/datasets/{id}",
+        "get",
+    ),
+    (
+        "/api/v1/datasets",
+        "post",
+        "201",
+        "/api/v1/datasets/{id}/analyses",
+        "post",
+    ),
+    (
+        "/api/v1/datasets",
+        "post",
+        "201",
+        "/api/v1/datasets/{id}/comparisons",
+        "post",
+    ),
+    (
+        "/api/v1/datasets/{id}/analyses",
+        "post",
+        "202",
+        "/api/v1/jobs/{id}",
+        "get",
+    ),
+];
+
 /// OpenAPI links from each submission to what its answer names (the run or dataset `id` in the
 /// body), so a client — and schemathesis' stateful phase — can follow them.
 fn add_links(paths: &mut serde_json::Map<String, serde_json::Value>) {
-    // (Not results: they exist only once the run has succeeded.)
-    const LINKS: [(&str, &str, &str, &str, &str); 11] = [
-        (
-            "/api/v1/calibrations",
-            "post",
-            "202",
-            "/api/v1/calibrations/{id}",
-            "get",
-        ),
-        (
-            "/api/v1/calibrations",
-            "post",
-            "202",
-            "/api/v1/jobs/{id}/cancel",
-            "post",
-        ),
-        (
-            "/api/v1/sweeps",
-            "post",
-            "202",
-            "/api/v1/sweeps/{id}",
-            "get",
-        ),
-        (
-            "/api/v1/sweeps",
-            "post",
-            "202",
-            "/api/v1/jobs/{id}/cancel",
-            "post",
-        ),
-        (
-            "/api/v1/experiments",
-            "post",
-            "202",
-            "/api/v1/experiments/{id}",
-            "get",
-        ),
-        (
-            "/api/v1/experiments",
-            "post",
-            "202",
-            "/api/v1/experiments/{id}/events",
-            "get",
-        ),
-        (
-            "/api/v1/experiments",
-            "post",
-            "202",
-            "/api/v1/experiments/{id}/cancel",
-            "post",
-        ),
-        (
-            "/api/v1/datasets",
-            "post",
-            "201",
-            "/api/v1/datasets/{id}",
-            "get",
-        ),
-        (
-            "/api/v1/datasets",
-            "post",
-            "201",
-            "/api/v1/datasets/{id}/analyses",
-            "post",
-        ),
-        (
-            "/api/v1/datasets",
-            "post",
-            "201",
-            "/api/v1/datasets/{id}/comparisons",
-            "post",
-        ),
-        (
-            "/api/v1/datasets/{id}/analyses",
-            "post",
-            "202",
-            "/api/v1/jobs/{id}",
-            "get",
-        ),
-    ];
     for (from, method, status, to, to_method) in LINKS {
         let operation_ref = format!(
             "#/paths/{}/{to_method}",

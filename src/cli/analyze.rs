@@ -2,6 +2,7 @@
 //! images, or one folder of them) analysed incrementally; summary on stdout, points and
 //! settings on disk.
 
+use super::analyze_card::CardCorrection;
 use super::ProgressBar;
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -86,6 +87,14 @@ pub struct AnalyzeArgs {
     /// x_mm, y_mm, u_mm, v_mm.
     #[arg(long, value_name = "PX_PER_MM", value_parser = parse_scale)]
     pub scale: Option<f64>,
+    /// A camera card (`ffdic calibrate`): a stored model's name or a TOML file. The summary adds
+    /// the displacements with its lens distortion and target tilt taken off (a tilt needs
+    /// --scale), points.csv gains u_card, v_card. One image pair only.
+    #[arg(long, value_name = "NAME|FILE")]
+    pub card: Option<String>,
+    /// Data folder whose models/ holds the cards `--card NAME` finds.
+    #[arg(long, default_value = "data")]
+    pub data: PathBuf,
     /// Print one JSON document on stdout and nothing else.
     #[arg(long)]
     pub json: bool,
@@ -131,6 +140,9 @@ pub fn run(args: &AnalyzeArgs) -> Result<()> {
     }
     if args.expected.is_some() {
         bail!("--expected applies to one image pair (a sequence's frames each moved differently)");
+    }
+    if args.card.is_some() {
+        bail!("--card applies to one image pair");
     }
     run_sequence(args, &settings, &reference, &frames, &pool)
 }
@@ -199,6 +211,15 @@ fn run_pair(
     deformed: &Image,
     pool: &rayon::ThreadPool,
 ) -> Result<()> {
+    let card = match &args.card {
+        Some(given) => Some(CardCorrection::load(
+            given,
+            &args.data,
+            (reference.width(), reference.height()),
+            args.scale,
+        )?),
+        None => None,
+    };
     let bar = ProgressBar::new(!args.json, "correlating");
     let started = Instant::now();
     let result = pool.install(|| -> Result<DicResult> {
@@ -210,9 +231,10 @@ fn run_pair(
 
     if let Some(dir) = &args.out {
         create_dir(dir)?;
+        let corrected = card.as_ref().map(|c| c.corrected(&result));
         write_atomic(
             &dir.join("points.csv"),
-            points_csv(&result, args.scale).as_bytes(),
+            points_csv(&result, args.scale, corrected.as_deref()).as_bytes(),
         )?;
         let doc = settings_json(&result, args, &args.deformed[0]);
         write_atomic(
@@ -226,6 +248,9 @@ fn run_pair(
     doc["settings"] = settings_json(&result, args, &args.deformed[0]);
     if let Some([u, v]) = &bias {
         doc["bias"] = json!({ "u": u, "v": v });
+    }
+    if let Some(card) = &card {
+        doc["card"] = card.json(&result);
     }
     let mut out = std::io::stdout().lock();
     if args.json {
@@ -244,6 +269,9 @@ fn run_pair(
         write_summary(&mut out, s)?;
         if let Some(bias) = &bias {
             write_bias(&mut out, bias)?;
+        }
+        if let Some(card) = &card {
+            write!(out, "{}", card.text(&result))?;
         }
     }
     if result.summary.valid == 0 && result.summary.points > 0 {
@@ -328,7 +356,7 @@ fn run_sequence(
                 written = create_dir(dir).and_then(|_| {
                     write_atomic(
                         &dir.join(format!("points_{:04}.csv", frame.index)),
-                        points_csv(&frame.result, args.scale).as_bytes(),
+                        points_csv(&frame.result, args.scale, None).as_bytes(),
                     )
                 });
             }
@@ -473,15 +501,21 @@ fn settings_json(result: &DicResult, args: &AnalyzeArgs, deformed: &Path) -> ser
 }
 
 /// One row per point: position and displacement in px (and in mm with a scale), the strain
-/// ([`STRAIN_DEFINITION`]), the match quality.
-fn points_csv(result: &DicResult, scale_px_per_mm: Option<f64>) -> String {
+/// ([`STRAIN_DEFINITION`]), the match quality, and with a card the corrected displacement.
+fn points_csv(
+    result: &DicResult,
+    scale_px_per_mm: Option<f64>,
+    card: Option<&[(f64, f64)]>,
+) -> String {
     let mut csv = String::from("x,y,u,v,exx,eyy,exy,zncc,u_std_px,v_std_px,iterations,status");
-    csv.push_str(if scale_px_per_mm.is_some() {
-        ",x_mm,y_mm,u_mm,v_mm\n"
-    } else {
-        "\n"
-    });
-    for p in &result.points {
+    if scale_px_per_mm.is_some() {
+        csv.push_str(",x_mm,y_mm,u_mm,v_mm");
+    }
+    if card.is_some() {
+        csv.push_str(",u_card,v_card");
+    }
+    csv.push('\n');
+    for (i, p) in result.points.iter().enumerate() {
         csv.push_str(&format!(
             "{},{},{},{},{},{},{},{},{},{},{},{}",
             p.x,
@@ -497,16 +531,13 @@ fn points_csv(result: &DicResult, scale_px_per_mm: Option<f64>) -> String {
             p.iterations,
             p.status.as_str()
         ));
-        match scale_px_per_mm {
-            Some(k) => csv.push_str(&format!(
-                ",{},{},{},{}\n",
-                p.x / k,
-                p.y / k,
-                p.u / k,
-                p.v / k
-            )),
-            None => csv.push('\n'),
+        if let Some(k) = scale_px_per_mm {
+            csv.push_str(&format!(",{},{},{},{}", p.x / k, p.y / k, p.u / k, p.v / k));
         }
+        if let Some((u, v)) = card.and_then(|c| c.get(i)) {
+            csv.push_str(&format!(",{u},{v}"));
+        }
+        csv.push('\n');
     }
     csv
 }

@@ -115,6 +115,20 @@ fn on_bench(
     }
 }
 
+/// The frames' size: the manifest's camera, else the first reference frame's.
+fn frame_size(dir: &std::path::Path) -> Result<(u32, u32)> {
+    let manifest = ffdic::dataset::Manifest::read(dir)?;
+    let (width, height) = match (&manifest.camera, manifest.runs.first()) {
+        (Some(c), _) => (c.width, c.height),
+        (None, Some(run)) => {
+            let (image, _) = ffdic::image::read_image(&dir.join(&run.reference))?;
+            (image.width(), image.height())
+        }
+        (None, None) => bail!("{}: the dataset has no runs", dir.display()),
+    };
+    Ok((u32::try_from(width)?, u32::try_from(height)?))
+}
+
 /// The card of runs already captured; the card's model stored as the daemon would.
 fn card_of_dataset(
     dir: &std::path::Path,
@@ -123,8 +137,9 @@ fn card_of_dataset(
     show: bool,
 ) -> Result<(Rounds, CameraCard)> {
     let model = load_analysis_model(&Some(plan.model.clone()), &config.data_dir)?;
+    let size = frame_size(dir)?;
     let options = CompareOptions {
-        dic: check_dic(&plan.dic)?,
+        dic: check_dic(&plan.dic_for(size))?,
         schemes: check_schemes(&[SchemeSpec::Preset("native".into())])?,
         seed: plan.seed,
     };

@@ -1,6 +1,7 @@
 //! The `ffdic` command line: one file per subcommand.
 
 pub mod analyze;
+mod analyze_card;
 pub mod calibrate;
 pub mod compare;
 pub mod dataset;

@@ -41,7 +41,8 @@ pub struct CalibrationPlan {
     pub rounds: usize,
     /// The model the calibration starts from (a name from `GET /models`).
     pub model: String,
-    /// DIC settings of the analyses (the camera's own resolution, `native`).
+    /// DIC settings of the analyses (the camera's own resolution, `native`). Without a `roi`, the
+    /// whole frame: distortion shows most at the corners.
     #[schema(value_type = Object)]
     pub dic: DicSettings,
     /// Seed of the mock bench's speckle and noise, and of the model's.
@@ -112,18 +113,33 @@ impl CalibrationPlan {
         vec![round(large_mm / DEFAULT_MOVE_SIZE_RATIO), round(large_mm)]
     }
 
-    /// The experiment that captures the plan on a bench with `limits` and a sensor `width_px`
-    /// wide; the experiment's own checks (travel, counts) follow when it is planned.
+    /// The DIC settings for a sensor of `width` x `height` px: the plan's, over the whole frame
+    /// when they name no ROI.
+    pub fn dic_for(&self, (width, height): (u32, u32)) -> DicSettings {
+        let mut dic = self.dic.clone();
+        if dic.roi.is_none() {
+            dic.roi = Some(crate::image::Roi::new(
+                0,
+                0,
+                width as usize,
+                height as usize,
+            ));
+        }
+        dic
+    }
+
+    /// The experiment that captures the plan on a bench with `limits` and a sensor of `size` px;
+    /// the experiment's own checks (travel, counts) follow when it is planned.
     pub fn experiment(
         &self,
         limits: &BenchLimits,
-        width_px: u32,
+        size: (u32, u32),
     ) -> Result<ExperimentRequest, FieldError> {
         let bad = |field: &str, reason: String| FieldError {
             field: field.into(),
             reason,
         };
-        let sizes = self.sizes_mm(limits, width_px);
+        let sizes = self.sizes_mm(limits, size.0);
         if let Some(s) = sizes.iter().find(|s| !(s.is_finite() && **s > 0.0)) {
             return Err(bad(
                 "move_sizes_mm",
@@ -189,7 +205,7 @@ impl CalibrationPlan {
             static_frames: self.static_frames,
             repeats: 1,
             schemes: vec![SchemeSpec::Preset("native".into())],
-            dic: self.dic.clone(),
+            dic: self.dic_for(size),
             seed: self.seed,
             ..ExperimentRequest::default()
         })
@@ -214,7 +230,7 @@ mod tests {
     #[test]
     fn the_default_plan_moves_both_ways_along_both_axes_within_the_travel() {
         let request = CalibrationPlan::default()
-            .experiment(&limits(), 640)
+            .experiment(&limits(), (640, 540))
             .unwrap();
         // 640 px at 13 px/mm: a 49.2 mm field, 10 % of it 4.92 mm, cut to the 3 mm the stage
         // can go towards −y; the small move a fifth of that.
@@ -251,7 +267,7 @@ mod tests {
             move_sizes_mm: vec![9.85],
             ..CalibrationPlan::default()
         };
-        let e = plan.experiment(&paper, 2560).unwrap_err();
+        let e = plan.experiment(&paper, (2560, 2160)).unwrap_err();
         assert_eq!(e.field, "move_sizes_mm");
         assert!(e.reason.contains("max_motion_px"), "{}", e.reason);
     }
@@ -265,7 +281,7 @@ mod tests {
             ..CalibrationPlan::default()
         };
         assert_eq!(
-            plan.experiment(&limits(), 640).unwrap_err().field,
+            plan.experiment(&limits(), (640, 540)).unwrap_err().field,
             "move_sizes_mm"
         );
     }

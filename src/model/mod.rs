@@ -5,6 +5,7 @@
 //! measured against. Effects and their ids follow DESIGN.md ("The model and its effects").
 
 mod config;
+mod correction;
 pub mod effects;
 mod pattern;
 mod readout;
@@ -14,6 +15,7 @@ mod shot_noise;
 mod speckle;
 
 pub use config::{ModelConfig, ModelError};
+pub use correction::GeometryCorrection;
 pub use effects::{CandidateId, EffectId, Effects, Stage};
 pub use pattern::{Placement, SpecklePattern, TargetDot, TooManyDots, MAX_TARGET_DOTS};
 pub use readout::{BinnedValue, BinningDomain, SensorChain, SensorReadout};

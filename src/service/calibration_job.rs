@@ -39,7 +39,7 @@ impl Service {
                 ),
             }));
         }
-        let request = calibration.experiment(&self.limits, self.sensor_width_px)?;
+        let request = calibration.experiment(&self.limits, self.sensor_px)?;
         let plan = request.plan(&self.limits)?;
         if !self.limits.has_stage() {
             return Err(SubmitError::NoStage);
@@ -48,7 +48,7 @@ impl Service {
             .check_runs_room(plan.frame_count() as u64 * self.frame_bytes)?;
         let model = self.requested_model(&calibration.model)?;
         let options = CompareOptions {
-            dic: check_dic(&calibration.dic)?,
+            dic: check_dic(&calibration.dic_for(self.sensor_px))?,
             schemes: check_schemes(&[SchemeSpec::Preset("native".into())])?,
             seed: calibration.seed,
         };

@@ -63,8 +63,9 @@ pub struct Service {
     /// Bytes of one full-resolution 16-bit frame of the camera as written (TIFF): what an
     /// experiment's frames are estimated from when it is submitted.
     pub frame_bytes: u64,
-    /// The camera's sensor width, px: what a calibration's default moves are sized from.
-    pub sensor_width_px: u32,
+    /// The camera's sensor, px (width, height): what a calibration's default moves and its DIC's
+    /// region are sized from.
+    pub sensor_px: (u32, u32),
 }
 
 /// A 16-bit TIFF's bytes beyond its pixels (header, one strip's tags), at most.
@@ -94,7 +95,7 @@ impl Service {
             hardware_schemes: hardware.camera.info().hardware_schemes.clone(),
         });
         let info = hardware.camera.info();
-        let sensor_width_px = info.sensor_width;
+        let sensor_px = (info.sensor_width, info.sensor_height);
         let frame_bytes =
             2 * u64::from(info.sensor_width) * u64::from(info.sensor_height) + TIFF_OVERHEAD_BYTES;
         let bench = BenchHandle::spawn(hardware, Duration::from_secs(30));
@@ -114,7 +115,7 @@ impl Service {
                 frame_checks: Arc::new(tokio::sync::Semaphore::new(1)),
                 uploads_in_flight: Arc::default(),
                 frame_bytes,
-                sensor_width_px,
+                sensor_px,
             },
             recovery,
         ))
