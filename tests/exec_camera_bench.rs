@@ -4,6 +4,7 @@
 //! each captured frame equals the generator's own dataset frame for that position bit for bit.
 //! And a command that fails leaves a clear error while the bench goes on.
 
+mod common;
 #[path = "common/folder_sink.rs"]
 mod folder_sink;
 #[path = "common/independent.rs"]
@@ -510,16 +511,7 @@ fn analyze_with_the_card(fresh: &Path, card: &ffdic::model::ModelConfig, root: &
         if with_card {
             args.extend(["--card", card_path.to_str().unwrap(), "--scale", &scale]);
         }
-        let out = std::process::Command::new(env!("CARGO_BIN_EXE_ffdic"))
-            .arg("analyze")
-            .args(&args)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        let out = common::ffdic_ok(&[&["analyze"], &args[..]].concat());
         serde_json::from_slice(&out.stdout).unwrap()
     };
     let std_of = |doc: &serde_json::Value, path: &str| doc.pointer(path).unwrap().as_f64().unwrap();
