@@ -659,10 +659,12 @@ async fn a_calibration_over_http_writes_a_card_and_stores_its_model() {
     let listed: Value = get_json(&server.url("/calibrations")).await;
     assert_eq!(listed.as_array().unwrap().len(), 1, "{listed}");
 
-    let beyond = json!({"move_sizes_mm": [500.0], "rounds": 1});
+    // 20 mm is 260 px here, beyond what the DIC tracks (160 px): refused before the bench moves.
+    let beyond = json!({"move_sizes_mm": [20.0], "rounds": 1});
     let r = post(&server.url("/calibrations"), &beyond).await;
     assert_eq!(r.status(), 422);
     let problem: Value = r.json().await.unwrap();
-    assert!(problem.to_string().contains("moves[0]"), "{problem}");
+    assert_eq!(problem["field"], "move_sizes_mm", "{problem}");
+    assert!(problem.to_string().contains("max_motion_px"), "{problem}");
     server.stop().await;
 }
