@@ -25,6 +25,7 @@ import json
 import os
 import socket
 import sys
+import time
 import urllib.error
 import urllib.parse
 import urllib.request
@@ -43,6 +44,8 @@ TERMINAL_EVENTS = frozenset({"succeeded", "failed", "cancelled"})
 
 #: The event the daemon sends last when it shuts down before the run has ended (it has no id).
 SHUTDOWN_EVENT = "server_shutdown"
+#: How long ``follow`` waits for a run's record to agree with its terminal event, s.
+FINAL_RECORD_WAIT_S = 5.0
 
 #: Where a job of each kind writes its headline document.
 _JOB_DOCUMENT = {
@@ -529,6 +532,18 @@ class Client:
                 printer.close()
         path = self._events_path(run_id, kind)
         record: Dict[str, Any] = self._json("GET", path)
+        # The store writes a run's terminal event before its record (so that a crash between the
+        # two is completed from the event at the next start): a record read at once may still
+        # say "running". Wait, briefly, for the record to agree with the event.
+        deadline = time.monotonic() + FINAL_RECORD_WAIT_S
+        while (
+            end is not None
+            and end.terminal
+            and record.get("status") not in TERMINAL_EVENTS
+            and time.monotonic() < deadline
+        ):
+            time.sleep(0.02)
+            record = self._json("GET", path)
         if end is not None and end.event == SHUTDOWN_EVENT and record.get("status") not in TERMINAL_EVENTS:
             raise ConnectionError(
                 f"the ffdic daemon at {self.url} shut down before {run_id} ended "
