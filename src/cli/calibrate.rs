@@ -7,11 +7,13 @@ use super::compare::load_analysis_model;
 use super::ProgressBar;
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use ffdic::diagnose::{calibrate, CameraCard, CompareOptions, Rounds};
-use ffdic::experiment::{check_dic, check_schemes, CalibrationPlan, SchemeSpec};
+use ffdic::diagnose::{calibrate, CameraCard, Rounds};
+use ffdic::experiment::CalibrationPlan;
 use ffdic::report::camera_card_text;
-use ffdic::service::{card_prefix, open_bench, DaemonConfig, JobResult, Service};
-use ffdic::store::{ModelFolder, RunStatus};
+use ffdic::service::{
+    calibration_options, card_prefix, open_bench, DaemonConfig, JobResult, Service,
+};
+use ffdic::store::ModelFolder;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -85,25 +87,9 @@ fn on_bench(
     let (service, _) = Service::start(config, hardware)?;
     service.jobs.keep_results();
     let (record, _) = service.submit_calibration(plan, None)?;
-    let bar = ProgressBar::fraction(show, "capturing, then diagnosing");
-    let record = loop {
-        let r = service.store.get(&record.id)?;
-        bar.update_fraction(r.progress);
-        if r.status.is_terminal() {
-            break r;
-        }
-        std::thread::sleep(Duration::from_millis(100));
-    };
-    bar.finish();
+    let record = super::reproduce::wait(&service, &record.id, "capturing, then diagnosing", show);
     service.stop(Duration::from_secs(5));
-    if record.status != RunStatus::Succeeded {
-        bail!(
-            "calibration {} {:?}: {}",
-            record.id,
-            record.status,
-            record.message
-        );
-    }
+    let record = record?;
     let folder = service.store.run_dir(&record.id);
     match service.jobs.take_result(&record.id) {
         Some(JobResult::Calibration { rounds, card, .. }) => Ok((
@@ -138,11 +124,7 @@ fn card_of_dataset(
 ) -> Result<(Rounds, CameraCard)> {
     let model = load_analysis_model(&Some(plan.model.clone()), &config.data_dir)?;
     let size = frame_size(dir)?;
-    let options = CompareOptions {
-        dic: check_dic(&plan.dic_for(size))?,
-        schemes: check_schemes(&[SchemeSpec::Preset("native".into())])?,
-        seed: plan.seed,
-    };
+    let options = calibration_options(plan, size)?;
     let bar = ProgressBar::new(show, "calibration fits");
     let (rounds, card) = calibrate(
         dir,

@@ -170,7 +170,12 @@ pub fn run(args: &ReproduceArgs) -> Result<()> {
 }
 
 /// Waits for run `id` with a progress bar; an error unless it succeeded.
-fn wait(service: &Service, id: &RunId, what: &'static str, show: bool) -> Result<RunRecord> {
+pub(super) fn wait(
+    service: &Service,
+    id: &RunId,
+    what: &'static str,
+    show: bool,
+) -> Result<RunRecord> {
     let bar = ProgressBar::fraction(show, what);
     let record = loop {
         let r = service.store.get(id)?;

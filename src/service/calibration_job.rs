@@ -11,8 +11,8 @@ use super::work::{capture_dataset, diagnose_failure, progress_reporter};
 use super::{NewModel, Service, SubmitError};
 use crate::diagnose::{calibrate, CompareOptions};
 use crate::experiment::{
-    check_dic, check_schemes, CalibrationPlan, ExperimentPlan, ExperimentRequest, RunSink,
-    SchemeSpec,
+    check_dic, check_schemes, CalibrationPlan, ExperimentPlan, ExperimentRequest, FieldError,
+    RunSink, SchemeSpec,
 };
 use crate::model::ModelConfig;
 use crate::report::camera_card_text;
@@ -47,11 +47,7 @@ impl Service {
         self.store
             .check_runs_room(plan.frame_count() as u64 * self.frame_bytes)?;
         let model = self.requested_model(&calibration.model)?;
-        let options = CompareOptions {
-            dic: check_dic(&calibration.dic_for(self.sensor_px))?,
-            schemes: check_schemes(&[SchemeSpec::Preset("native".into())])?,
-            seed: calibration.seed,
-        };
+        let options = calibration_options(calibration, self.sensor_px)?;
         let work = calibration_work(
             self.clone(),
             Calibration {
@@ -72,6 +68,19 @@ impl Service {
             work,
         )?)
     }
+}
+
+/// How a calibration's runs are analysed on a sensor of `size` px: at its own resolution
+/// (`native`), with the plan's DIC over the whole frame unless it names a ROI, and its seed.
+pub fn calibration_options(
+    plan: &CalibrationPlan,
+    size: (u32, u32),
+) -> Result<CompareOptions, FieldError> {
+    Ok(CompareOptions {
+        dic: check_dic(&plan.dic_for(size))?,
+        schemes: check_schemes(&[SchemeSpec::Preset("native".into())])?,
+        seed: plan.seed,
+    })
 }
 
 /// What a calibration job runs, checked.

@@ -11,7 +11,7 @@ mod scaled_sink;
 mod sweep_job;
 mod work;
 
-pub use calibration_job::card_prefix;
+pub use calibration_job::{calibration_options, card_prefix};
 pub use config::{
     load_bench_model, BenchConfig, CameraConfig, ConfigError, DaemonConfig, HttpLimits, JobLimits,
     MockBinning, MockReduction, StageConfig, SweepLimits, UploadLimits, DEFAULT_CONFIG_TOML,
