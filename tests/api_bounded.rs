@@ -3,8 +3,7 @@
 //! connection slot, an upload trickling a byte at a time, a check that outlived its client —
 //! and asserts the bound that now holds. The bomb frames are generated here, not committed.
 
-#[path = "common/daemon.rs"]
-mod daemon;
+use crate::common::daemon;
 
 use daemon::{
     client, get_json, small_config, small_request, wait_terminal, ServeProcess, TestServer,

@@ -2,8 +2,7 @@
 //! headline figures, a dataset's details (scale, bit depth, moves in mm and px), and the
 //! speckle-quality figures of a snapshot.
 
-#[path = "common/daemon.rs"]
-mod daemon;
+use crate::common::daemon;
 
 use daemon::{
     client, get, post, small_config, small_request, wait_terminal, TestServer, SCALE_PX_PER_MM,

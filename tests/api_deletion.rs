@@ -1,8 +1,7 @@
 //! Issue 36 (6): deletion through the API (refused while in use), the run folders' quota,
 //! retention, and lists in pages.
 
-#[path = "common/daemon.rs"]
-mod daemon;
+use crate::common::daemon;
 
 use daemon::{client, get, post, small_config, small_request, wait_terminal, TestServer};
 use serde_json::{json, Value};

@@ -2,8 +2,7 @@
 //! order over SSE with resume, downloads, the run folder against the index, cancellation,
 //! queueing, idempotency, and the bench refusing direct control while an experiment holds it.
 
-#[path = "common/daemon.rs"]
-mod daemon;
+use crate::common::daemon;
 
 use daemon::{
     client, get, get_json, post, read_events, small_config, small_request, wait_terminal,

@@ -2,8 +2,7 @@
 //! lens distortion the baseline lacks, compare, diagnose, add the winner as a model, compare again
 //! — and the dataset's history shows the discrepancy fall.
 
-#[path = "common/daemon.rs"]
-mod daemon;
+use crate::common::daemon;
 
 use daemon::{client, small_config, wait_terminal, TestServer};
 use ffdic::dic::DicSettings;

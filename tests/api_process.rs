@@ -2,8 +2,7 @@
 //! earlier runs intact), SIGTERM mid-run (cancelled, stage stopped, exit within 10 s), and a
 //! non-loopback address without a token refused.
 
-#[path = "common/daemon.rs"]
-mod daemon;
+use crate::common::daemon;
 
 use daemon::{client, small_config_toml, small_request, wait_terminal, wait_until, ServeProcess};
 use serde_json::Value;

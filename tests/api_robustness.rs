@@ -2,8 +2,7 @@
 //! OpenAPI document matches its checked-in snapshot and lists every route; the token guards every
 //! mutating request.
 
-#[path = "common/daemon.rs"]
-mod daemon;
+use crate::common::daemon;
 
 use daemon::{client, small_config, wait_terminal, TestServer};
 use serde_json::{json, Value};

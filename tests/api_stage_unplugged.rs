@@ -1,8 +1,7 @@
 //! Issue 36 (7): `/health` said `ok` while the stage was unplugged and `GET /stage` kept
 //! `homed: true`. A stage whose cable can be pulled and put back, under the daemon.
 
-#[path = "common/daemon.rs"]
-mod daemon;
+use crate::common::daemon;
 
 use daemon::{get, post, small_bench, small_config, TestServer};
 use ffdic_hw::{HwError, HwResult, Stage, StageInfo, StagePosition};

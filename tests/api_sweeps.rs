@@ -2,8 +2,7 @@
 //! progress, its map equals the one `ffdic sweep plan/run/merge` makes of the same spec, a bad
 //! spec is refused naming the field with nothing queued, and a cancelled sweep stops.
 
-#[path = "common/daemon.rs"]
-mod daemon;
+use crate::common::daemon;
 
 use daemon::{
     client, get, get_json, post, read_events, small_config, wait_terminal, wait_until, TestServer,

@@ -8,8 +8,7 @@
 //! network namespace with loopback only. A test not yet isolated re-executes itself (this binary,
 //! that one test) under `unshare -rn` and asserts the child passed.
 
-#[path = "common/folder_sink.rs"]
-mod folder_sink;
+use crate::common::folder_sink;
 
 use ffdic::dic::{analyze, DicSettings};
 use ffdic::experiment::{
@@ -56,6 +55,10 @@ fn isolated(name: &str) -> bool {
         std::env::var_os(NETNS_MARKER).is_none(),
         "re-executed for isolation but the namespace still has {ifaces:?}"
     );
+    // The test's name in the binary: its module path without the crate's name.
+    let module = module_path!().split_once("::").map_or("", |(_, m)| m);
+    let full_name = format!("{module}::{name}");
+    let name = full_name.as_str();
     let exe = std::env::current_exe().expect("test binary path");
     let out = Command::new("unshare")
         .args(["-rn", "sh", "-c", "ip link set lo up && exec \"$0\" \"$@\""])

@@ -18,8 +18,7 @@
 //! Needs `node`, `/usr/bin/chromium` and `npm ci --prefix tests/browser` (scripts/test-all.sh
 //! installs all three). Missing any of them is a failure, not a skip: CI has them.
 
-#[path = "common/daemon.rs"]
-mod daemon;
+use crate::common::daemon;
 
 use daemon::{client, small_config, TestServer};
 use reqwest::header::{CONTENT_TYPE, HOST, ORIGIN};

@@ -1,6 +1,6 @@
 //! `ffdic analyze` as a user runs it: JSON on stdout, files in --out, one-line errors.
 
-mod common;
+use crate::common;
 
 use common::{ffdic, ffdic_ok};
 use ffdic::image::{write_tiff_u16, Image};

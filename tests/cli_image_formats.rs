@@ -4,7 +4,7 @@
 //! under test: PNG by the `png` crate, BMP written byte by byte below; 16-bit pairs by
 //! scaling the same pixels by 257.
 
-mod common;
+use crate::common;
 
 use ffdic::image::{read_image, read_tiff, write_tiff_u16, Image};
 use serde_json::Value;

@@ -2,7 +2,7 @@
 //! compared at the camera's resolution, with the accuracy of every step against its commanded
 //! move — on DIC Challenge 1.0 Sample 3 (shift_k moved by 0.1·k px in x and y).
 
-mod common;
+use crate::common;
 
 use common::{ffdic, ffdic_ok};
 use std::path::Path;

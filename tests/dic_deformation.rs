@@ -9,8 +9,6 @@
 //! error above 0.1 px, bias ≤ 0.01 px; across a step and a blank region no valid point with an
 //! error above 0.5 px, and subsets wholly in the blank invalid.
 
-mod common;
-
 use ffdic::dic::{analyze, DicResult, DicSettings, PoiStatus, ShapeFunction};
 use ffdic::image::{Image, Roi};
 use ffdic::model::{render_dots, SpeckleLayout};

@@ -2,7 +2,7 @@
 //! shifts (0.1k, 0.1k) px. Acceptance of the DIC engine issue: subset 41, step 20, ROI inside the
 //! 512x512 image.
 
-mod common;
+use crate::common;
 
 use ffdic::dic::{analyze, DicSettings};
 use ffdic::image::read_tiff;

@@ -2,7 +2,7 @@
 //! truth has no interpolation in it, so what the engine reports beyond the commanded motion is
 //! the engine's own error.
 
-mod common;
+use crate::common;
 
 use ffdic::dic::{analyze, DicSettings, PoiStatus};
 use ffdic::image::{Image, Roi};

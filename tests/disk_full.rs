@@ -3,8 +3,7 @@
 //! test mounts (root, as in CI); the job fills the disk itself, so its end cannot be written.
 //! Issue 36: an upload that meets a full disk is 507, as every other store write, not 500.
 
-#[path = "common/daemon.rs"]
-mod daemon;
+use crate::common::daemon;
 
 use ffdic::service::{JobOutput, JobResult, Jobs, Lane};
 use ffdic::store::{RunKind, RunStatus, RunStore};

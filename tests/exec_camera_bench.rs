@@ -4,11 +4,9 @@
 //! each captured frame equals the generator's own dataset frame for that position bit for bit.
 //! And a command that fails leaves a clear error while the bench goes on.
 
-mod common;
-#[path = "common/folder_sink.rs"]
-mod folder_sink;
-#[path = "common/independent.rs"]
-mod independent;
+use crate::common;
+use crate::common::folder_sink;
+use crate::common::independent;
 
 use folder_sink::FolderSink;
 

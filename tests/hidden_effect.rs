@@ -341,7 +341,7 @@ fn hidden_fill_factor_fine_speckle() {
 /// pixel aperture leaves the DIC output of these frames within the discrepancy's noise floor
 /// (measured: 0.00034 px before, 0.00036 px after, the same as the control's 0.0004 px), so there
 /// is nothing in DIC for the effect to remove; the image statistics identify it (ΔBIC ≈ −1230).
-/// Kept, ignored, so the claim stays checkable: `cargo test --test hidden_effect -- --ignored`.
+/// Kept, ignored, so the claim stays checkable: `cargo test --test integration hidden_effect:: -- --ignored`.
 #[test]
 #[ignore = "fill_factor does not move DIC above its noise floor on these datasets (see the doc comment)"]
 fn hidden_fill_factor_halves_the_discrepancy() {

@@ -8,8 +8,7 @@
 //! The analysis is the default DIC (subset 41, step 20) on the native frames (one scheme, to keep
 //! the suite's time), `diagnose --rounds` as the library runs it.
 
-#[path = "common/independent.rs"]
-mod independent;
+use crate::common::independent;
 
 use ffdic::diagnose::{diagnose_rounds_prepared, load_measurement, CompareOptions, Diagnosis};
 use ffdic::dic::DicSettings;

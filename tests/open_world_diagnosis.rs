@@ -4,8 +4,7 @@
 //! centre), an effect that no catalogue names (a bowed target), and what each diagnosis leaves
 //! unexplained.
 
-#[path = "common/independent.rs"]
-mod independent;
+use crate::common::independent;
 
 use ffdic::diagnose::{Diagnosis, Rounds};
 use ffdic::model::effects::verdict_name;

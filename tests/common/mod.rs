@@ -1,6 +1,10 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
+pub mod daemon;
+pub mod folder_sink;
+pub mod independent;
+
 use ffdic::image::Image;
 use ffdic::model::{render_dots, SpeckleLayout};
 use std::path::PathBuf;
