@@ -144,7 +144,9 @@ pub fn ptc(a: &Image, repeat: Option<&Image>) -> Vec<PtcPoint> {
     if samples.len() < 100 {
         return Vec::new();
     }
-    samples.sort_by(|x, y| x.0.total_cmp(&y.0));
+    // Stable, ordered as `total_cmp`: the same bins as a comparison sort, in a tenth of the
+    // time (the sort was 10 % of a 640x540 diagnosis round's CPU).
+    radsort::sort_by_key(&mut samples, |s| s.0);
     let bins = 10;
     let n = samples.len();
     // Drop the extreme 1 % on both ends (clipping, overlapping dots).
