@@ -7,7 +7,8 @@
 //! lower point; reloads the page and reopens those jobs; uploads a second dataset of the same bench
 //! (another seed) and adds its winner, which must get a name of its own (issue 13); starts the
 //! smoke design map from the home page and sees its recommendations, heat maps with the paper's
-//! points, bias plots and cells (issue 15). Screenshots
+//! points, bias plots and cells (issue 15); starts a calibration from the home page and sees its
+//! camera card: the stored model, the stage's map, the discrepancy with its SEs (issue 33). Screenshots
 //! land in `target/browser-artifacts/`.
 //!
 //! Needs `node`, `/usr/bin/chromium` and `npm ci --prefix tests/browser` (scripts/test-all.sh

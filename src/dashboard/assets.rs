@@ -4,9 +4,10 @@ pub const HOME_HTML: &str = include_str!("assets/home.html");
 pub const EXPERIMENT_HTML: &str = include_str!("assets/experiment.html");
 pub const DATASET_HTML: &str = include_str!("assets/dataset.html");
 pub const SWEEP_HTML: &str = include_str!("assets/sweep.html");
+pub const CALIBRATION_HTML: &str = include_str!("assets/calibration.html");
 
 /// Every asset under `/assets/`: name and bytes.
-pub const ALL: [(&str, &[u8]); 8] = [
+pub const ALL: [(&str, &[u8]); 9] = [
     ("style.css", include_bytes!("assets/style.css")),
     ("common.js", include_bytes!("assets/common.js")),
     ("charts.js", include_bytes!("assets/charts.js")),
@@ -14,6 +15,7 @@ pub const ALL: [(&str, &[u8]); 8] = [
     ("experiment.js", include_bytes!("assets/experiment.js")),
     ("dataset.js", include_bytes!("assets/dataset.js")),
     ("sweep.js", include_bytes!("assets/sweep.js")),
+    ("calibration.js", include_bytes!("assets/calibration.js")),
     ("favicon.svg", include_bytes!("assets/favicon.svg")),
 ];
 

@@ -2,11 +2,14 @@
 //! Plain HTML, CSS and a little JavaScript that talks only to `/api/v1`; every asset is compiled
 //! into the binary (no CDN: it works on an offline lab network). Pages:
 //! - `/`: the bench (camera, stage, live snapshot with its histogram, exposure and gain), the
-//!   experiments (list, a form to start one), the design maps (list, a spec to start one) and
-//!   the datasets (list, upload);
+//!   experiments (list, a form to start one), the calibrations (list, a plan to start one), the
+//!   design maps (list, a spec to start one) and the datasets (list, upload);
 //! - `/experiments/{id}`: live progress, Figures 5 and 6, u/v/strain maps, downloads;
 //! - `/datasets/{id}`: compare against a model, diagnose, add the winner, the history chart;
-//! - `/sweeps/{id}`: a design map's progress, recommendations, heat maps, bias plots and cells.
+//! - `/sweeps/{id}`: a design map's progress, recommendations, heat maps, bias plots and cells;
+//! - `/calibrations/{id}`: a calibration's progress, then its camera card (every number with its
+//!   standard error and significance, the stage's map, the imaging chain, what is left
+//!   unexplained, the stored model and how to use it).
 
 mod assets;
 
@@ -37,6 +40,10 @@ pub fn router() -> Router<Service> {
         .route(
             "/sweeps/{id}",
             get(|_: Path<String>| async { page(assets::SWEEP_HTML) }),
+        )
+        .route(
+            "/calibrations/{id}",
+            get(|_: Path<String>| async { page(assets::CALIBRATION_HTML) }),
         )
         .route("/assets/{name}", get(asset))
 }
@@ -86,6 +93,7 @@ mod tests {
             assets::EXPERIMENT_HTML,
             assets::DATASET_HTML,
             assets::SWEEP_HTML,
+            assets::CALIBRATION_HTML,
         ] {
             for part in html.split("/assets/").skip(1) {
                 let name = &part[..part.find('"').unwrap()];

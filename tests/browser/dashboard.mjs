@@ -11,7 +11,8 @@
 // (issue 13) the page, reloaded, lists those jobs and reopens one; a second dataset of the same
 // bench (another seed) diagnosed and added must not claim the first dataset's model as its own;
 // the home page takes no snapshot until asked; a finished experiment replays its events; the
-// study charts carry error bars; moves and errors carry µm beside px.
+// study charts carry error bars; moves and errors carry µm beside px; a calibration started from
+// the home page shows its camera card (issue 33).
 //
 // Defects are collected (each check says what it saw) and reported together at the end, so one
 // run shows every one that is still there.
@@ -269,6 +270,42 @@ async function main() {
     expect(/\[[-+−]?\d/.test(await page.locator("#cells").innerText()), "the cells carry intervals");
     log(`sweep: ${cellRows} cells, ${recommendationRows} recommendations, ${heatmaps} heat maps with ${markers} paper points, ${biasPlots} bias plots`);
     await shot(page, "8-sweep");
+
+    // ---- a calibration from the home page (issue 33): its camera card as a page ----
+    await page.goto(`${base}/`);
+    await page.waitForSelector("#calibration-form textarea[name=plan]");
+    const planText = await page.locator("#calibration-form textarea[name=plan]").inputValue();
+    expect(JSON.parse(planText).name === "camera-card", "the calibration form offers a plan");
+    // Two move sizes along both axes (the stage's map needs them), no phase scan, one round, small
+    // subsets: seconds on the small mock bench.
+    await page.locator("#calibration-form textarea[name=plan]").fill(JSON.stringify({
+      name: "browser-card", pattern: "a", move_sizes_mm: [0.5, 2.5], phase_scan_count: 0,
+      static_frames: 1, rounds: 1, dic: { subset_px: 21, step_px: 10, strain_window: 5 },
+    }));
+    await Promise.all([
+      page.waitForURL(/\/calibrations\/[^/]+$/, { timeout: 30 * SECOND }),
+      page.locator("#start-calibration").click(),
+    ]);
+    log(`calibration started: ${page.url()}`);
+    await page.waitForSelector("#run-status .badge[data-status=succeeded]", { timeout: 180 * SECOND });
+    await page.waitForSelector("#results[data-loaded=true]", { timeout: 60 * SECOND });
+    const cardModel = await page.locator("#card-model").innerText();
+    expect(/^card-browser-card-/.test(cardModel), `the card names its stored model: ${cardModel}`);
+    const stageRows = await page.locator("#card-stage tbody tr").count();
+    expect(stageRows === 4, `the stage's map: scale x, scale y, angle, skew (${stageRows} rows)`);
+    const discrepancy = await page.locator("#card-discrepancy").innerText();
+    expect(/\d ± \d/.test(discrepancy) && discrepancy.includes("→"), `the discrepancy before and with the card, with SEs: ${discrepancy}`);
+    const found = await page.locator("#card-found").innerText();
+    expect(found.startsWith("Found: "), `the card says what it found: ${found}`);
+    expect((await page.locator("#card-imaging tbody tr").count()) >= 1, "the imaging chain has rows");
+    expect((await page.locator("#card-unexplained").innerText()).length > 20, "what the card leaves unexplained is said");
+    expect(await page.locator(`#card-use a[href^="/datasets/"]`).count() === 1, "the card links the dataset its frames became");
+    expect(await page.locator("#downloads a").count() === 4, "card.json, card.txt, the model and the rounds to download");
+    log(`calibration: ${found}; ${discrepancy}`);
+    await shot(page, "9-calibration");
+    await page.goto(`${base}/`);
+    await page.waitForSelector("#calibration-list tr[data-id]", { timeout: 10 * SECOND });
+    expect(await page.locator("#calibration-list tr[data-id]").count() === 1, "the home page lists the calibration");
 
     // ---- upload the hidden-effect dataset through the form ----
     await page.goto(`${base}/`);

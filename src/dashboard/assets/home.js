@@ -334,6 +334,38 @@ $("#sweep-form").addEventListener("submit", async (ev) => {
   }
 });
 
+// ---------- calibrations ----------
+
+/** A plan with every field left to its default but the name and the target. */
+const DEFAULT_PLAN = { name: "camera-card", pattern: "a" };
+
+function loadCalibrations() {
+  return loadRunList("/calibrations?limit=50", "calibrations", $("#calibration-list"), "no calibration yet: start one below");
+}
+
+$("#calibration-form").plan.value = JSON.stringify(DEFAULT_PLAN, null, 2);
+
+$("#calibration-form").addEventListener("submit", async (ev) => {
+  ev.preventDefault();
+  const err = $("#calibration-error");
+  showError(err, null);
+  let body;
+  try {
+    body = JSON.parse(ev.target.plan.value);
+  } catch (e) {
+    showError(err, `the plan is not JSON: ${e.message}`);
+    return;
+  }
+  $("#start-calibration").disabled = true;
+  try {
+    const run = await api("/calibrations", { method: "POST", body });
+    location.href = `/calibrations/${run.id}`;
+  } catch (e) {
+    showError(err, e);
+    $("#start-calibration").disabled = false;
+  }
+});
+
 // ---------- datasets ----------
 
 async function loadDatasets() {
@@ -383,7 +415,8 @@ $("#upload-form").addEventListener("submit", async (ev) => {
 loadBench();
 loadExperiments();
 loadSweeps();
+loadCalibrations();
 loadDatasets();
 // No snapshot here: on real hardware every snapshot is an acquisition, taken only on request.
-setInterval(() => { loadBench(); loadExperiments(); loadSweeps(); }, 4000);
+setInterval(() => { loadBench(); loadExperiments(); loadCalibrations(); loadSweeps(); }, 4000);
 
