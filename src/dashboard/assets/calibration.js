@@ -1,7 +1,7 @@
 // One calibration: live progress over SSE, then its camera card as a person reads it — every
 // number with its standard error and whether it is significant, the stage's map, the imaging
 // chain, what the card leaves unexplained, and how to use it (the text form is results/card.txt).
-import { api, el, $, clear, num, when, badge, showError, setupToken, runPage, progressBar, pageId, TERMINAL, API, eventLog } from "./common.js";
+import { api, el, $, clear, num, when, badge, showError, setupToken, runPage, progressBar, pageId, TERMINAL, API, eventLog, downloadLink, table } from "./common.js";
 
 setupToken();
 const id = pageId();
@@ -38,12 +38,6 @@ function showRecord(r) {
 }
 
 const onEvent = eventLog(bar, $("#run-message"), $("#events"));
-
-function table(head, rows) {
-  return el("table", {},
-    el("thead", {}, el("tr", {}, head.map((h) => el("th", {}, h)))),
-    el("tbody", {}, rows.map((cells) => el("tr", {}, cells.map((c) => el("td", {}, c))))));
-}
 
 /** "yes" when `v` lies more than `z` standard errors from `against`. */
 function mark(v, se, z, against = 0) {
@@ -130,12 +124,11 @@ async function showResults() {
     return;
   }
   showCard(doc);
-  const link = (href, text) => el("li", {}, el("a", { href, download: "" }, text));
   clear($("#downloads"), el("ul", { class: "links" },
-    link(`${API}${base}/card`, "card.json (the card, the rounds, the plan and the experiment it became)"),
-    link(`${API}${files}/card.txt`, "card.txt (as ffdic calibrate prints it)"),
-    link(`${API}${files}/card-model.toml`, "card-model.toml (the card's model)"),
-    link(`${API}${files}/diagnosis.json`, "diagnosis.json (the rounds)")));
+    downloadLink(`${API}${base}/card`, "card.json (the card, the rounds, the plan and the experiment it became)"),
+    downloadLink(`${API}${files}/card.txt`, "card.txt (as ffdic calibrate prints it)"),
+    downloadLink(`${API}${files}/card-model.toml`, "card-model.toml (the card's model)"),
+    downloadLink(`${API}${files}/diagnosis.json`, "diagnosis.json (the rounds)")));
   $("#results").dataset.loaded = "true";
 }
 

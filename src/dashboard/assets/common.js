@@ -62,6 +62,18 @@ export function el(tag, attrs = {}, ...children) {
   return node;
 }
 
+/** A table of `head` and `rows` (each row a list of cells: text or nodes). */
+export function table(head, rows) {
+  return el("table", {},
+    el("thead", {}, el("tr", {}, head.map((h) => el("th", {}, h)))),
+    el("tbody", {}, rows.map((cells) => el("tr", {}, cells.map((c) => el("td", {}, c))))));
+}
+
+/** A list item that downloads `href`. */
+export function downloadLink(href, text) {
+  return el("li", {}, el("a", { href, download: "" }, text));
+}
+
 export function $(sel, root = document) { return root.querySelector(sel); }
 export function $$(sel, root = document) { return [...root.querySelectorAll(sel)]; }
 

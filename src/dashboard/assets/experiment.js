@@ -1,5 +1,5 @@
 // One experiment: live progress over SSE, then Figures 5 and 6, the study, maps and downloads.
-import { api, el, $, clear, num, when, badge, setupToken, runPage, progressBar, inlineSvg, pageId, um, TERMINAL, API, eventLog } from "./common.js";
+import { api, el, $, clear, num, when, badge, setupToken, runPage, progressBar, inlineSvg, pageId, um, TERMINAL, API, eventLog, downloadLink } from "./common.js";
 
 setupToken();
 const id = pageId();
@@ -132,18 +132,17 @@ async function showResults(r) {
 
   // Downloads.
   const frames = (r.result_files || []).filter((f) => f.startsWith("frames/")).map((f) => f.slice(7));
-  const link = (href, text) => el("li", {}, el("a", { href, download: "" }, text));
   // The run names the dataset its frames became (runs stored before that field: look it up).
   const ds = r.dataset_id
     ? { id: r.dataset_id }
     : (await api("/datasets?limit=1000").catch(() => [])).find((d) => d.source === `experiment:${id}`);
   clear($("#downloads"),
     el("ul", { class: "links" },
-      link(`${API}${base}/results.csv`, "study.csv (CSV)"),
-      link(`${API}${base}/results`, "study.json (JSON)"),
-      FIGURES.map((f) => link(`${API}${base}/plots/${f}.svg`, `${f}.svg`))),
+      downloadLink(`${API}${base}/results.csv`, "study.csv (CSV)"),
+      downloadLink(`${API}${base}/results`, "study.json (JSON)"),
+      FIGURES.map((f) => downloadLink(`${API}${base}/plots/${f}.svg`, `${f}.svg`))),
     el("h3", {}, `Frames (16-bit TIFF) and manifest`),
-    el("ul", { class: "links" }, frames.map((f) => link(`${API}${base}/frames/${encodeURIComponent(f)}`, f))),
+    el("ul", { class: "links" }, frames.map((f) => downloadLink(`${API}${base}/frames/${encodeURIComponent(f)}`, f))),
     ds ? el("p", {}, "The frames are also dataset ", el("a", { href: `/datasets/${ds.id}` }, ds.id), ": compare them with a model and diagnose there.") : null);
   $("#results").dataset.loaded = "true";
 }

@@ -289,6 +289,35 @@ $("#experiment-form").addEventListener("submit", async (ev) => {
   }
 });
 
+// ---------- forms that start runs ----------
+
+/**
+ * A form whose textarea `field` holds a run's JSON body: submitted, it is POSTed to `/{kind}` and
+ * the page goes to the new run's (`/{kind}/{id}`); a body that is not JSON or a refusal is shown
+ * in `error`.
+ */
+function startsRuns({ form, field, what, kind, button, error }) {
+  form.addEventListener("submit", async (ev) => {
+    ev.preventDefault();
+    showError(error, null);
+    let body;
+    try {
+      body = JSON.parse(form[field].value);
+    } catch (e) {
+      showError(error, `${what} is not JSON: ${e.message}`);
+      return;
+    }
+    button.disabled = true;
+    try {
+      const run = await api(`/${kind}`, { method: "POST", body });
+      location.href = `/${kind}/${run.id}`;
+    } catch (e) {
+      showError(error, e);
+      button.disabled = false;
+    }
+  });
+}
+
 // ---------- design maps ----------
 
 /** config/sweeps/smoke.toml as JSON: 3 prints x 3 schemes x 2 sub-pixel positions x 3 seeds. */
@@ -313,26 +342,7 @@ function loadSweeps() {
 
 $("#sweep-form").spec.value = JSON.stringify(SMOKE_SPEC, null, 2);
 
-$("#sweep-form").addEventListener("submit", async (ev) => {
-  ev.preventDefault();
-  const err = $("#sweep-error");
-  showError(err, null);
-  let body;
-  try {
-    body = JSON.parse(ev.target.spec.value);
-  } catch (e) {
-    showError(err, `the spec is not JSON: ${e.message}`);
-    return;
-  }
-  $("#start-sweep").disabled = true;
-  try {
-    const run = await api("/sweeps", { method: "POST", body });
-    location.href = `/sweeps/${run.id}`;
-  } catch (e) {
-    showError(err, e);
-    $("#start-sweep").disabled = false;
-  }
-});
+startsRuns({ form: $("#sweep-form"), field: "spec", what: "the spec", kind: "sweeps", button: $("#start-sweep"), error: $("#sweep-error") });
 
 // ---------- calibrations ----------
 
@@ -345,26 +355,7 @@ function loadCalibrations() {
 
 $("#calibration-form").plan.value = JSON.stringify(DEFAULT_PLAN, null, 2);
 
-$("#calibration-form").addEventListener("submit", async (ev) => {
-  ev.preventDefault();
-  const err = $("#calibration-error");
-  showError(err, null);
-  let body;
-  try {
-    body = JSON.parse(ev.target.plan.value);
-  } catch (e) {
-    showError(err, `the plan is not JSON: ${e.message}`);
-    return;
-  }
-  $("#start-calibration").disabled = true;
-  try {
-    const run = await api("/calibrations", { method: "POST", body });
-    location.href = `/calibrations/${run.id}`;
-  } catch (e) {
-    showError(err, e);
-    $("#start-calibration").disabled = false;
-  }
-});
+startsRuns({ form: $("#calibration-form"), field: "plan", what: "the plan", kind: "calibrations", button: $("#start-calibration"), error: $("#calibration-error") });
 
 // ---------- datasets ----------
 

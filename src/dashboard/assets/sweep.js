@@ -1,6 +1,6 @@
 // One design map (a sweep): live progress over SSE, then the recommendations, the heat maps with
 // the paper's points, the bias plots and every cell with its 95 % interval.
-import { api, el, $, clear, num, when, badge, showError, setupToken, runPage, progressBar, inlineSvg, pageId, TERMINAL, API, eventLog } from "./common.js";
+import { api, el, $, clear, num, when, badge, showError, setupToken, runPage, progressBar, inlineSvg, pageId, TERMINAL, API, eventLog, downloadLink, table } from "./common.js";
 
 setupToken();
 const id = pageId();
@@ -49,12 +49,6 @@ const onEvent = eventLog(bar, $("#run-message"), $("#events"));
 function withInterval(s) {
   if (!s) return "—";
   return `${num(s.mean, 3)} [${num(s.lo, 3)}, ${num(s.hi, 3)}]`;
-}
-
-function table(head, rows) {
-  return el("table", {},
-    el("thead", {}, el("tr", {}, head.map((h) => el("th", {}, h)))),
-    el("tbody", {}, rows.map((cells) => el("tr", {}, cells.map((c) => el("td", {}, c))))));
 }
 
 const STATS = [["u_std_px", "std u"], ["v_std_px", "std v"], ["exx_std", "std εxx"]];
@@ -108,11 +102,10 @@ async function showResults() {
       withInterval(c.stats.u_bias_px), withInterval(c.stats.v_bias_px),
       withInterval(c.stats.exx_std), num(c.stats.valid_fraction.mean, 3)])));
 
-  const link = (href, text) => el("li", {}, el("a", { href, download: "" }, text));
   clear($("#downloads"), el("ul", { class: "links" },
-    link(`${API}${base}/map.csv`, "map.csv (one row per cell, means and 95 % bounds)"),
-    link(`${API}${base}/map`, "map.json"),
-    map.figures.map((f) => link(`${API}${base}/plots/${f}`, f))));
+    downloadLink(`${API}${base}/map.csv`, "map.csv (one row per cell, means and 95 % bounds)"),
+    downloadLink(`${API}${base}/map`, "map.json"),
+    map.figures.map((f) => downloadLink(`${API}${base}/plots/${f}`, f))));
   $("#results").dataset.loaded = "true";
 }
 
