@@ -125,7 +125,8 @@ fn run_with(name: &str, truth: Effects, spec: ExperimentSpec, opts: CompareOptio
     let meas = load_measurement(dir.path(), &opts, &|_, _| true).unwrap();
     let model = baseline();
     let before = compare_prepared(&meas, &model, &|_, _| true).unwrap();
-    let diagnosis = diagnose_prepared(&meas, &model, Some(before.clone()), &|_, _| true).unwrap();
+    let diagnosis =
+        diagnose_prepared(&meas, &model, Some(before.clone()), &[], &|_, _| true).unwrap();
     let after_px = diagnosis
         .after
         .as_ref()

@@ -198,7 +198,7 @@ pub fn diagnose(
     progress: Progress,
 ) -> Result<Diagnosis, DiagnoseError> {
     let meas = load_measurement(dir, options, &|_, _| progress(0, 1))?;
-    diagnose_prepared(&meas, model, None, progress)
+    diagnose_prepared(&meas, model, None, &[], progress)
 }
 
 /// The field differences of the model's comparison, per run and scheme, as the geometric fits
@@ -239,22 +239,24 @@ pub(super) fn field_samples<'a>(
     (samples, setting)
 }
 
-/// A geometric catalogue effect fitted on the field differences of the model's comparison.
+/// A geometric catalogue effect fitted on the field differences of the model's comparison, the
+/// model's `refit` effects re-estimated beside it.
 fn geometric_candidate(
     meas: &Measurement,
     before: &Comparison,
     model: &Effects,
     id: EffectId,
+    refit: &[EffectId],
 ) -> Option<ImageFit> {
     let (samples, setting) = field_samples(meas, before);
-    fit_geometric_effect(&samples, &setting, model, id)
+    fit_geometric_effect(&samples, &setting, model, id, refit)
 }
 
 fn fit_candidate(
     meas: &Measurement,
     before: &Comparison,
     model: &Effects,
-    id: &CandidateId,
+    (id, refit): (&CandidateId, &[EffectId]),
     stop: &dyn Fn() -> bool,
 ) -> Option<ImageFit> {
     use EffectId::*;
@@ -267,7 +269,7 @@ fn fit_candidate(
     };
     match id {
         Rotation | Scale | LensDistortion | TargetTilt => {
-            geometric_candidate(meas, before, model, id)
+            geometric_candidate(meas, before, model, id, refit)
         }
         PsfBlur => Some(fit_psf_blur(meas, before, model, stop)),
         FillFactor => Some(fit_fill_factor(meas, before, model, stop)),
@@ -521,11 +523,14 @@ fn predict(
 }
 
 /// Diagnoses `model` against an analysed measurement; `before` is the model's comparison when
-/// already made. `progress` counts candidates.
+/// already made; `refit`, the geometric effects of `model` re-estimated beside each geometric
+/// candidate (the earlier rounds' verdicts; see `fit_geometric_effect`). `progress` counts
+/// candidates.
 pub fn diagnose_prepared(
     meas: &Measurement,
     model: &ModelConfig,
     before: Option<Comparison>,
+    refit: &[EffectId],
     progress: Progress,
 ) -> Result<Diagnosis, DiagnoseError> {
     let before = match before {
@@ -567,7 +572,8 @@ pub fn diagnose_prepared(
         small_moves: design.largest_move_fraction < VIGNETTING_MOVE_FRACTION,
         dic: &meas.options.dic,
     };
-    let (mut candidates, mut models) = fit_candidates(meas, model, &judge, &fit_ids, &tick, &ask)?;
+    let (mut candidates, mut models) =
+        fit_candidates(meas, (model, refit), &judge, &fit_ids, &tick, &ask)?;
     candidates.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
     let winner = render_winner(meas, &judge, &mut candidates, &mut models, &ask)?;
     candidates.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
@@ -710,7 +716,7 @@ fn rest_is_in_catalogue(
     EffectId::ALL
         .into_iter()
         .filter(|id| !with.effects.has(*id))
-        .filter_map(|id| geometric_candidate(meas, after, &with.effects, id))
+        .filter_map(|id| geometric_candidate(meas, after, &with.effects, id, &[]))
         .filter(|fit| fit.beyond_null)
         .any(|fit| {
             let next = ModelConfig {
@@ -798,7 +804,7 @@ const CANDIDATES_AT_ONCE: usize = 2;
 /// [`CANDIDATES_AT_ONCE`] lanes take them from one queue. The results keep `fit_ids`' order.
 fn fit_candidates(
     meas: &Measurement,
-    model: &ModelConfig,
+    (model, refit): (&ModelConfig, &[EffectId]),
     judge: &Judge<'_>,
     fit_ids: &[CandidateId],
     tick: &(dyn Fn() -> Result<(), DiagnoseError> + Sync),
@@ -815,7 +821,7 @@ fn fit_candidates(
                 let Some(id) = fit_ids.get(i) else {
                     return Ok(());
                 };
-                let fitted = fit_one_candidate(meas, model, judge, id, ask)?;
+                let fitted = fit_one_candidate(meas, (model, refit), judge, id, ask)?;
                 tick()?;
                 *slots[i].lock().expect("a lane never panics holding it") = fitted;
             }
@@ -835,7 +841,7 @@ fn fit_candidates(
 /// One candidate of [`fit_candidates`]: None when the effect has no fit on this dataset.
 fn fit_one_candidate(
     meas: &Measurement,
-    model: &ModelConfig,
+    (model, refit): (&ModelConfig, &[EffectId]),
     judge: &Judge<'_>,
     id: &CandidateId,
     ask: Progress,
@@ -843,7 +849,7 @@ fn fit_one_candidate(
     let before = judge.before;
     // A cancelled job's fit ends early; the tick after it reports the cancel.
     let stop = || !ask(0, 0);
-    let Some(fit) = fit_candidate(meas, before, &model.effects, id, &stop) else {
+    let Some(fit) = fit_candidate(meas, before, &model.effects, (id, refit), &stop) else {
         return Ok(None);
     };
     let with = ModelConfig {

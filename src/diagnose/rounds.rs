@@ -2,14 +2,16 @@
 //! or the rounds run out; what the final model leaves unexplained is reported either way. Each
 //! round starts from the comparison the previous one made with its
 //! winner added, so the fall of the discrepancy is a chain of comparisons on the same
-//! measurement.
+//! measurement. The earlier rounds' geometric verdicts are fitted again beside each later
+//! geometric candidate (`fit_geometric_effect`): the rounds are stepwise regression with
+//! re-estimation, not a greedy sequence that keeps what its first verdict absorbed.
 
 use super::compare::{compare_prepared, load_measurement, Measurement};
 use super::diagnose::{diagnose_prepared, Diagnosis};
 use super::unexplained::Unexplained;
 use super::{CompareOptions, DiagnoseError, Progress};
-use crate::model::CandidateId;
 use crate::model::ModelConfig;
+use crate::model::{CandidateId, EffectId};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -109,7 +111,10 @@ pub fn diagnose_rounds_prepared(
     let mut verdicts = Vec::new();
     let mut diagnoses: Vec<Diagnosis> = Vec::new();
     for _ in 0..rounds {
-        let d = diagnose_prepared(meas, &current, before.take(), progress)?;
+        // The earlier rounds' geometric verdicts are re-estimated beside each geometric
+        // candidate: a verdict gives back what a later effect explains better.
+        let refit: Vec<EffectId> = verdicts.iter().filter_map(CandidateId::catalogue).collect();
+        let d = diagnose_prepared(meas, &current, before.take(), &refit, progress)?;
         let winner = d
             .candidates
             .iter()
