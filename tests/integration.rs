@@ -21,6 +21,7 @@ mod aravis_fake_camera;
 mod architecture;
 mod browser_cross_origin;
 mod cli_analyze;
+mod cli_calibrate;
 mod cli_image_formats;
 mod compare_foreign;
 mod dashboard_browser;
