@@ -23,29 +23,30 @@ pub fn camera_card_text(card: &CameraCard) -> String {
         }
     }
     if let Some(s) = &card.stage {
-        let nominal = s.nominal_scale_px_per_mm;
-        for (name, v, se, against) in [
+        // Which numbers are significant is the map's own finding (`StageMap::significant`).
+        for (name, test, v, se) in [
             (
                 "scale_x_px_per_mm",
+                "scale_x",
                 s.scale_x_px_per_mm,
                 s.scale_x_se_px_per_mm,
-                nominal,
             ),
             (
                 "scale_y_px_per_mm",
+                "scale_y",
                 s.scale_y_px_per_mm,
                 s.scale_y_se_px_per_mm,
-                nominal,
             ),
-            ("angle_rad", s.angle_rad, s.angle_se_rad, 0.0),
-            ("skew_rad", s.skew_rad, s.skew_se_rad, 0.0),
+            ("angle_rad", "angle", s.angle_rad, s.angle_se_rad),
+            ("skew_rad", "skew", s.skew_rad, s.skew_se_rad),
         ] {
+            let significant = s.significant.iter().any(|n| n == test);
             rows.push(vec![
                 "stage".into(),
                 name.into(),
                 format!("{v:.6}"),
                 format!("{se:.1e}"),
-                mark(v - against, se).into(),
+                if significant { "yes" } else { "no" }.into(),
             ]);
         }
     }

@@ -57,6 +57,20 @@ function fail(msg) {
   throw new Error(msg);
 }
 
+/**
+ * Clicks the home page's `button` that starts a run of `kind` (sweeps, calibrations), follows it
+ * to its page, and waits until the run has succeeded and its results are shown.
+ */
+async function startAndFinish(page, button, kind) {
+  await Promise.all([
+    page.waitForURL(new RegExp(`/${kind}/[^/]+$`), { timeout: 30 * SECOND }),
+    page.locator(button).click(),
+  ]);
+  log(`${kind}: started ${page.url()}`);
+  await page.waitForSelector("#run-status .badge[data-status=succeeded]", { timeout: 180 * SECOND });
+  await page.waitForSelector("#results[data-loaded=true]", { timeout: 60 * SECOND });
+}
+
 /** Defects seen so far; the run fails at the end when there is any. */
 const defects = [];
 function expect(ok, msg) {
@@ -248,13 +262,7 @@ async function main() {
     await page.waitForSelector("#sweep-form textarea[name=spec]");
     const specText = await page.locator("#sweep-form textarea[name=spec]").inputValue();
     expect(JSON.parse(specText).name === "smoke", "the sweep form offers the smoke spec");
-    await Promise.all([
-      page.waitForURL(/\/sweeps\/[^/]+$/, { timeout: 30 * SECOND }),
-      page.locator("#start-sweep").click(),
-    ]);
-    log(`sweep started: ${page.url()}`);
-    await page.waitForSelector("#run-status .badge[data-status=succeeded]", { timeout: 180 * SECOND });
-    await page.waitForSelector("#results[data-loaded=true]", { timeout: 60 * SECOND });
+    await startAndFinish(page, "#start-sweep", "sweeps");
     const recommendationRows = await page.locator("#recommendations tbody tr").count();
     const cellRows = await page.locator("#cells tbody tr").count();
     expect(recommendationRows === 6, `6 recommendations (3 schemes x 2 sub-pixel positions): ${recommendationRows}`);
@@ -282,13 +290,7 @@ async function main() {
       name: "browser-card", pattern: "a", move_sizes_mm: [0.5, 2.5], phase_scan_count: 0,
       static_frames: 1, rounds: 1, dic: { subset_px: 21, step_px: 10, strain_window: 5 },
     }));
-    await Promise.all([
-      page.waitForURL(/\/calibrations\/[^/]+$/, { timeout: 30 * SECOND }),
-      page.locator("#start-calibration").click(),
-    ]);
-    log(`calibration started: ${page.url()}`);
-    await page.waitForSelector("#run-status .badge[data-status=succeeded]", { timeout: 180 * SECOND });
-    await page.waitForSelector("#results[data-loaded=true]", { timeout: 60 * SECOND });
+    await startAndFinish(page, "#start-calibration", "calibrations");
     const cardModel = await page.locator("#card-model").innerText();
     expect(/^card-browser-card-/.test(cardModel), `the card names its stored model: ${cardModel}`);
     const stageRows = await page.locator("#card-stage tbody tr").count();

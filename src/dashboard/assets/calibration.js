@@ -39,9 +39,9 @@ function showRecord(r) {
 
 const onEvent = eventLog(bar, $("#run-message"), $("#events"));
 
-/** "yes" when `v` lies more than `z` standard errors from `against`. */
-function mark(v, se, z, against = 0) {
-  return Math.abs(v - against) > z * se ? "yes" : "no";
+/** "yes" when `v` lies more than `z` standard errors from zero. */
+function mark(v, se, z) {
+  return Math.abs(v) > z * se ? "yes" : "no";
 }
 
 function geometryRows(card) {
@@ -51,13 +51,15 @@ function geometryRows(card) {
   }));
 }
 
-function stageRows(s, z) {
+/** The stage's numbers; which are significant is the map's own finding (`significant`). */
+function stageRows(s) {
   return [
-    ["x scale [px/mm]", s.scale_x_px_per_mm, s.scale_x_se_px_per_mm, s.nominal_scale_px_per_mm],
-    ["y scale [px/mm]", s.scale_y_px_per_mm, s.scale_y_se_px_per_mm, s.nominal_scale_px_per_mm],
-    ["angle to the rows [rad]", s.angle_rad, s.angle_se_rad, 0],
-    ["skew of the axes [rad]", s.skew_rad, s.skew_se_rad, 0],
-  ].map(([name, v, se, against]) => [name, num(v, 7), num(se, 2), num(against, 6), mark(v, se, z, against)]);
+    ["x scale [px/mm]", "scale_x", s.scale_x_px_per_mm, s.scale_x_se_px_per_mm, s.nominal_scale_px_per_mm],
+    ["y scale [px/mm]", "scale_y", s.scale_y_px_per_mm, s.scale_y_se_px_per_mm, s.nominal_scale_px_per_mm],
+    ["angle to the rows [rad]", "angle", s.angle_rad, s.angle_se_rad, 0],
+    ["skew of the axes [rad]", "skew", s.skew_rad, s.skew_se_rad, 0],
+  ].map(([name, test, v, se, against]) =>
+    [name, num(v, 7), num(se, 2), num(against, 6), s.significant.includes(test) ? "yes" : "no"]);
 }
 
 function paramsText(params, stderr) {
@@ -93,7 +95,7 @@ function showCard(doc) {
   ]));
   const s = card.stage;
   clear($("#card-stage"), s
-    ? table(["", "value", "SE", "against", "significant"], stageRows(s, z))
+    ? table(["", "value", "SE", "against", "significant"], stageRows(s))
     : el("p", { class: "muted small" }, "not mapped: moves along both axes, at least three runs, are needed"));
   $("#card-stage-note").textContent = s
     ? `${s.runs} runs scatter ${num(s.residual_px, 3)} px about the map. The stage is the length standard: its travel error and the camera's scale are one number.`
