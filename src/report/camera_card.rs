@@ -2,7 +2,7 @@
 //! is significant, the stage's map, the imaging chain, and the discrepancy the card leaves.
 
 use super::text_table;
-use crate::diagnose::CameraCard;
+use crate::diagnose::{CameraCard, StageMap};
 use std::collections::BTreeMap;
 
 /// The card as text (the CLI's `calibrate` and the job's `results/card.txt`).
@@ -23,32 +23,7 @@ pub fn camera_card_text(card: &CameraCard) -> String {
         }
     }
     if let Some(s) = &card.stage {
-        // Which numbers are significant is the map's own finding (`StageMap::significant`).
-        for (name, test, v, se) in [
-            (
-                "scale_x_px_per_mm",
-                "scale_x",
-                s.scale_x_px_per_mm,
-                s.scale_x_se_px_per_mm,
-            ),
-            (
-                "scale_y_px_per_mm",
-                "scale_y",
-                s.scale_y_px_per_mm,
-                s.scale_y_se_px_per_mm,
-            ),
-            ("angle_rad", "angle", s.angle_rad, s.angle_se_rad),
-            ("skew_rad", "skew", s.skew_rad, s.skew_se_rad),
-        ] {
-            let significant = s.significant.iter().any(|n| n == test);
-            rows.push(vec![
-                "stage".into(),
-                name.into(),
-                format!("{v:.6}"),
-                format!("{se:.1e}"),
-                if significant { "yes" } else { "no" }.into(),
-            ]);
-        }
+        rows.extend(stage_rows(s));
     }
     let mut out = format!(
         "camera card {} (significant: beyond {z:.2} SE, {:.0} % family-wise false alarms)\n",
@@ -106,6 +81,39 @@ pub fn camera_card_text(card: &CameraCard) -> String {
         card.unexplained.summary
     );
     out
+}
+
+/// The stage map's rows; which numbers are significant is the map's own finding
+/// (`StageMap::significant`).
+fn stage_rows(s: &StageMap) -> Vec<Vec<String>> {
+    [
+        (
+            "scale_x_px_per_mm",
+            "scale_x",
+            s.scale_x_px_per_mm,
+            s.scale_x_se_px_per_mm,
+        ),
+        (
+            "scale_y_px_per_mm",
+            "scale_y",
+            s.scale_y_px_per_mm,
+            s.scale_y_se_px_per_mm,
+        ),
+        ("angle_rad", "angle", s.angle_rad, s.angle_se_rad),
+        ("skew_rad", "skew", s.skew_rad, s.skew_se_rad),
+    ]
+    .into_iter()
+    .map(|(name, test, v, se)| {
+        let significant = s.significant.iter().any(|n| n == test);
+        vec![
+            "stage".into(),
+            name.into(),
+            format!("{v:.6}"),
+            format!("{se:.1e}"),
+            if significant { "yes" } else { "no" }.into(),
+        ]
+    })
+    .collect()
 }
 
 fn with_errors(params: &BTreeMap<String, f64>, stderr: &BTreeMap<String, f64>) -> String {
