@@ -331,6 +331,7 @@ fn hidden_fill_factor_fine_speckle() {
         contrast: 0.85,
         edge_softness_mm: 0.01,
         placement: Default::default(),
+        profile: Default::default(),
     })];
     let o = run_with("fill_factor-fine", truth, sp, options(vec![native()], 0.0));
     assert_verdict(&o, "fill_factor");

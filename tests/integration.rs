@@ -38,6 +38,7 @@ mod mock_bench;
 mod model;
 mod open_world_diagnosis;
 mod paper_findings;
+mod print_random_error;
 mod properties;
 mod store;
 mod store_removal;

@@ -4,7 +4,7 @@
 use ffdic::dic::{analyze, DicSettings};
 use ffdic::model::effects::{FillFactor, SensorNoise};
 use ffdic::model::{
-    render_dots, render_frame, Camera, Effects, FrameSpec, GaussianDot, SpecklePattern,
+    render_dots, render_frame, Camera, DotShape, Effects, FrameSpec, GaussianDot, SpecklePattern,
 };
 
 /// sinc(x) = sin(πx)/(πx).
@@ -19,7 +19,7 @@ fn sinc(x: f64) -> f64 {
 #[test]
 fn uniform_scene_renders_uniform_for_any_aperture() {
     for (fx, fy) in [(1.0, 1.0), (0.5, 1.0), (0.25, 0.5), (0.1, 0.1)] {
-        let img = render_dots(64, 48, &[], 1234.0, (fx, fy));
+        let img = render_dots::<GaussianDot>(64, 48, &[], 1234.0, (fx, fy));
         assert!(img.data().iter().all(|&v| v == 1234.0));
         // Dots far outside the frame change nothing either.
         let far = GaussianDot {
@@ -276,7 +276,7 @@ fn a_lens_blur_follows_the_gaussian_transfer_function_and_keeps_the_mean() {
             (-8..=8).map(move |j| TargetDot {
                 x_mm: 0.8 * i as f64,
                 y_mm: 0.8 * j as f64,
-                sigma_mm: 0.12,
+                shape: DotShape::Gaussian { sigma_mm: 0.12 },
                 depth: 0.6,
             })
         })

@@ -3,6 +3,7 @@ use serde_json::{Map, Value};
 use std::path::{Component, Path, PathBuf};
 
 use super::manifest_schema::schema_problems;
+pub use crate::model::DotProfile;
 use crate::model::Placement;
 
 pub const FORMAT: &str = "ffdic-dataset/1";
@@ -66,16 +67,6 @@ pub struct PatternInfo {
     pub placement: Option<Placement>,
     #[serde(flatten)]
     pub extra: Map<String, Value>,
-}
-
-/// A print's dot profile as a lab measured it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum DotProfile {
-    /// Deficit c·exp(−ρ²/2σ²) per dot.
-    Gaussian,
-    /// Hard-edged disks.
-    Disk,
 }
 
 /// The largest dot or spacing a print may state, in image px: a few dots per frame at most.

@@ -16,8 +16,8 @@ use super::nominal::{
 };
 use super::optimise::golden;
 use super::print::{
-    placement_band_edge, spectral_shape_chi2, spectral_shape_chi2_below, PrintCalibration,
-    PrintKnowledge,
+    placement_band_edge, spectral_shape_bins, spectral_shape_chi2, spectral_shape_chi2_below,
+    PrintCalibration, PrintKnowledge,
 };
 use super::residuals::residual_map;
 use super::results::{
@@ -29,7 +29,7 @@ use crate::dataset::check_stated_move;
 use crate::dataset::{Manifest, Run};
 use crate::dic::{DicError, DicResult, PreparedReference, Watch};
 use crate::image::{read_tiff, Image};
-use crate::model::{ModelConfig, Placement};
+use crate::model::{DotProfile, ModelConfig, Placement, SpecklePattern};
 use crate::pairs::{correlate_pairs, PairVisitor, RunPair};
 use crate::reduce::{reduce, Scheme};
 use std::path::{Path, PathBuf};
@@ -421,7 +421,7 @@ fn reference_crop(
     pi: usize,
     seed: u64,
 ) -> Result<Image, DiagnoseError> {
-    let scene = Scene::new(nominal, &model.effects, &meas.manifest, seed)?;
+    let scene = Scene::of_patterns(nominal, &model.effects, &meas.manifest, seed, &|i| i == pi)?;
     Ok(scene.render(pi, (0.0, 0.0), false, 0, Some(STATS_CROP_PX)))
 }
 
@@ -447,7 +447,8 @@ fn match_white(
 /// profile changes it little — over the whole band below the spacing frequency an unmodelled
 /// blur of 1 px made a grid print read as Poisson. On the independent generator's Poisson prints
 /// the jittered grid left the model's random error under subsampling at a third of the measured
-/// one (ff50 0.00091 against 0.00283 px).
+/// one (ff50 0.00091 against 0.00283 px). Dots that never touch (the hard core) keep the
+/// spectrum suppressed like a grid but without its order.
 fn choose_placement(
     meas: &Measurement,
     nominal: &mut Nominal,
@@ -456,28 +457,29 @@ fn choose_placement(
     seed: u64,
 ) -> Result<(), DiagnoseError> {
     let f_max = placement_band_edge(&nominal.patterns[pi].pattern, nominal.scale_px_per_mm);
-    let mut chi2 = [0.0; 2];
-    for (k, placement) in [Placement::JitteredGrid, Placement::Poisson]
-        .into_iter()
-        .enumerate()
-    {
+    let mut chi2 = [0.0; 3];
+    for (k, placement) in PLACEMENTS.into_iter().enumerate() {
         let mut n = nominal.clone();
         n.patterns[pi].pattern.placement = placement;
         let crop = reference_crop(meas, &n, model, pi, seed)?;
         chi2[k] = spectral_shape_chi2_below(&meas.reference_stats[pi], &crop, f_max);
     }
+    let best = (0..3).fold(0, |b, k| if chi2[k] < chi2[b] { k } else { b });
     let p = &mut nominal.patterns[pi];
-    p.pattern.placement = if chi2[1] < chi2[0] {
-        Placement::Poisson
-    } else {
-        Placement::JitteredGrid
-    };
+    p.pattern.placement = PLACEMENTS[best];
     p.placement_chi2 = Some(chi2);
     Ok(())
 }
 
-/// Calibrates pattern `pi`'s print to the measured reference (see [`super::print`]): two rounds of
-/// contrast then dot size.
+/// The placements [`choose_placement`] tries, in the order of `placement_chi2`.
+const PLACEMENTS: [Placement; 3] = [
+    Placement::JitteredGrid,
+    Placement::Poisson,
+    Placement::HardCore,
+];
+
+/// Calibrates pattern `pi`'s print to the measured reference (see [`super::print`]): with the
+/// stated dot profile, or with Gaussian dots and, where their spectral shape is rejected, disks.
 fn calibrate_print(
     meas: &Measurement,
     nominal: &mut Nominal,
@@ -486,42 +488,35 @@ fn calibrate_print(
     seed: u64,
     go_on: &dyn Fn() -> bool,
 ) -> Result<(), DiagnoseError> {
-    let measured = &meas.reference_stats[pi];
     let start = nominal.patterns[pi].pattern.clone();
-    let contrast_of = |img: &Image| {
-        let (m, s) = img.mean_std();
-        s / m.max(1e-12)
-    };
-    for _ in 0..2 {
-        let crop = reference_crop(meas, nominal, model, pi, seed)?;
-        let ratio = measured.contrast / contrast_of(&crop).max(1e-9);
-        if ratio.is_finite() {
-            let p = &mut nominal.patterns[pi].pattern;
-            p.contrast = (p.contrast * ratio).clamp(0.02, 1.0);
-        }
-        let sigma0 = nominal.patterns[pi].pattern.sigma_mm();
-        let trial = |ln_factor: f64| -> f64 {
-            if !go_on() {
-                return f64::INFINITY;
+    if nominal.patterns[pi].profile_stated {
+        fit_print(meas, nominal, model, pi, seed, go_on)?;
+    } else {
+        // Gaussian dots first; disks only when the Gaussian's spectral shape is rejected (χ²
+        // beyond its degrees of freedom by three standard deviations): the simpler print is
+        // kept when it fits, and a disk's fit costs twice a Gaussian's.
+        nominal.patterns[pi].pattern.profile = DotProfile::Gaussian;
+        let mut gaussian = nominal.clone();
+        let chi2_gaussian = fit_print(meas, &mut gaussian, model, pi, seed, go_on)?;
+        let dof = spectral_shape_bins(&meas.reference_stats[pi]).saturating_sub(2) as f64;
+        let mut chi2 = [Some(chi2_gaussian), None];
+        let mut best = gaussian.patterns[pi].pattern.clone();
+        if chi2_gaussian > dof + 3.0 * (2.0 * dof).sqrt() {
+            let mut disk = nominal.clone();
+            disk.patterns[pi].pattern.profile = DotProfile::Disk;
+            // The placement was chosen under Gaussian dots, whose spectrum could not be the
+            // measured one: chosen again under disks (dense hard disks read as a grid before).
+            if !disk.patterns[pi].placement_stated {
+                choose_placement(meas, &mut disk, model, pi, seed)?;
             }
-            let mut n = nominal.clone();
-            set_sigma(&mut n.patterns[pi].pattern, sigma0 * ln_factor.exp());
-            match reference_crop(meas, &n, model, pi, seed) {
-                Ok(img) => spectral_shape_chi2(measured, &img),
-                Err(_) => f64::INFINITY,
+            let chi2_disk = fit_print(meas, &mut disk, model, pi, seed, go_on)?;
+            chi2[1] = Some(chi2_disk);
+            if chi2_disk < chi2_gaussian {
+                best = disk.patterns[pi].pattern.clone();
             }
-        };
-        // Keep the print physical: its mean darkening 2πσ²ρc (Campbell's theorem for a field of
-        // Gaussian dots) below 60 %, beyond which dots pile up into black.
-        let p = &nominal.patterns[pi].pattern;
-        let rho_per_mm2 = 1.0 / p.dot_spacing_mm.powi(2);
-        let sigma_max = (0.6 / (2.0 * std::f64::consts::PI * rho_per_mm2 * p.contrast)).sqrt();
-        let hi = (sigma_max / sigma0).clamp(0.3, 4.0);
-        let best = golden(&trial, (0.25f64).ln(), hi.ln(), 12);
-        if !go_on() {
-            return Err(DiagnoseError::Cancelled);
         }
-        set_sigma(&mut nominal.patterns[pi].pattern, sigma0 * best.exp());
+        nominal.patterns[pi].pattern = best;
+        nominal.patterns[pi].profile_chi2 = Some(chi2);
     }
     let crop = reference_crop(meas, nominal, model, pi, seed)?;
     let p = &nominal.patterns[pi].pattern;
@@ -530,14 +525,117 @@ fn calibrate_print(
         sigma_mm: p.sigma_mm(),
         start_contrast: start.contrast,
         contrast: p.contrast,
-        measured_contrast: measured.contrast,
+        measured_contrast: meas.reference_stats[pi].contrast,
         model_contrast: contrast_of(&crop),
+        profile: p.profile,
+        dot_diameter_mm: p.dot_diameter_mm,
+        edge_softness_mm: p.edge_softness_mm,
     });
     Ok(())
 }
 
+/// A crop's contrast: std/mean.
+fn contrast_of(img: &Image) -> f64 {
+    let (m, s) = img.mean_std();
+    s / m.max(1e-12)
+}
+
+/// Fits pattern `pi`'s print with its profile: two rounds of contrast, then size — a Gaussian's
+/// σ, or a disk's diameter and then its edge softness — by golden section on the spectral
+/// shape's χ², which it returns for the fitted print.
+fn fit_print(
+    meas: &Measurement,
+    nominal: &mut Nominal,
+    model: &ModelConfig,
+    pi: usize,
+    seed: u64,
+    go_on: &dyn Fn() -> bool,
+) -> Result<f64, DiagnoseError> {
+    let measured = &meas.reference_stats[pi];
+    let chi2_of = |n: &Nominal| -> f64 {
+        if !go_on() {
+            return f64::INFINITY;
+        }
+        match reference_crop(meas, n, model, pi, seed) {
+            Ok(img) => spectral_shape_chi2(measured, &img),
+            Err(_) => f64::INFINITY,
+        }
+    };
+    // One size of the print along the search's coordinate, from `current`: golden section
+    // assumes one minimum, and the χ² of a softness need not have one (on a hard print the
+    // second round's search ran to its bound at 3,500 times the χ² it started from), so the
+    // search's end is kept only where it is better than where it started.
+    let search = |nominal: &mut Nominal,
+                  set: &dyn Fn(&mut SpecklePattern, f64),
+                  (lo, hi): (f64, f64),
+                  current: f64,
+                  iters: usize| {
+        let trial = |x: f64| {
+            let mut n = nominal.clone();
+            set(&mut n.patterns[pi].pattern, x);
+            chi2_of(&n)
+        };
+        let best = golden(&trial, lo, hi, iters);
+        if trial(best) <= trial(current) {
+            set(&mut nominal.patterns[pi].pattern, best);
+        } else {
+            set(&mut nominal.patterns[pi].pattern, current);
+        }
+    };
+    for _ in 0..2 {
+        let crop = reference_crop(meas, nominal, model, pi, seed)?;
+        let ratio = measured.contrast / contrast_of(&crop).max(1e-9);
+        if ratio.is_finite() {
+            let p = &mut nominal.patterns[pi].pattern;
+            p.contrast = (p.contrast * ratio).clamp(0.02, 1.0);
+        }
+        let p = nominal.patterns[pi].pattern.clone();
+        // Keep the print physical: the dots' mean darkening — 2πσ²ρc for Gaussian dots
+        // (Campbell's theorem), the covered fraction πR²ρ times c for disks — below 60 %, beyond
+        // which dots pile up into black.
+        let rho_per_mm2 = 1.0 / p.dot_spacing_mm.powi(2);
+        match p.profile {
+            DotProfile::Gaussian => {
+                let sigma0 = p.sigma_mm();
+                let sigma_max =
+                    (0.6 / (2.0 * std::f64::consts::PI * rho_per_mm2 * p.contrast)).sqrt();
+                let hi = (sigma_max / sigma0).clamp(0.3, 4.0).ln();
+                let set =
+                    |q: &mut SpecklePattern, ln_factor: f64| set_sigma(q, sigma0 * ln_factor.exp());
+                search(nominal, &set, ((0.25f64).ln(), hi), 0.0, 12);
+            }
+            DotProfile::Disk => {
+                let d0 = p.dot_diameter_mm;
+                let d_max = 2.0 * (0.6 / (std::f64::consts::PI * rho_per_mm2 * p.contrast)).sqrt();
+                let hi = (d_max / d0).clamp(0.3, 4.0).ln();
+                let set = |q: &mut SpecklePattern, ln_factor: f64| {
+                    q.dot_diameter_mm = d0 * ln_factor.exp();
+                };
+                search(nominal, &set, ((0.25f64).ln(), hi), 0.0, 12);
+                let q = &nominal.patterns[pi].pattern;
+                let (d, fraction) = (q.dot_diameter_mm, q.edge_softness_mm / q.dot_diameter_mm);
+                let set = |q: &mut SpecklePattern, fraction: f64| {
+                    q.edge_softness_mm = d * fraction;
+                };
+                search(nominal, &set, (0.0, 0.5), fraction, 10);
+            }
+        }
+        if !go_on() {
+            return Err(DiagnoseError::Cancelled);
+        }
+    }
+    // The size's last search moves the contrast of the crop: matched once more.
+    let crop = reference_crop(meas, nominal, model, pi, seed)?;
+    let ratio = measured.contrast / contrast_of(&crop).max(1e-9);
+    if ratio.is_finite() {
+        let p = &mut nominal.patterns[pi].pattern;
+        p.contrast = (p.contrast * ratio).clamp(0.02, 1.0);
+    }
+    Ok(chi2_of(nominal))
+}
+
 /// A Gaussian dot of σ `sigma_mm` (the FWHM carries all of it; no separate softness).
-fn set_sigma(p: &mut crate::model::SpecklePattern, sigma_mm: f64) {
+fn set_sigma(p: &mut SpecklePattern, sigma_mm: f64) {
     p.dot_diameter_mm = sigma_mm * 2.354_820_045_030_949;
     p.edge_softness_mm = 0.0;
 }

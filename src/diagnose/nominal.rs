@@ -14,7 +14,9 @@
 //! ([`super::stage`]).
 
 use super::image_stats::{centred_crop, noise_variance, percentile};
-use super::print::{characterised, stated_placement, PrintCalibration, PrintKnowledge};
+use super::print::{
+    characterised, stated_placement, stated_profile, PrintCalibration, PrintKnowledge,
+};
 use super::stage_landing::StageLanding;
 use super::DiagnoseError;
 use crate::dataset::{Manifest, Run};
@@ -23,8 +25,8 @@ use crate::model::derive_seed;
 use crate::model::effects::user::{rendered_fields, UserField};
 use crate::model::effects::{Quantization, StageMisalignment};
 use crate::model::{
-    project_prepared, render_frame, render_frame_read_out, Camera, Effects, FrameSpec, Placement,
-    SensorReadout, SpecklePattern, TargetDot, TooManyDots,
+    project_prepared, render_frame, render_frame_read_out, Camera, DotProfile, Effects, FrameSpec,
+    Placement, SensorReadout, SpecklePattern, TargetDot, TooManyDots,
 };
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -57,10 +59,18 @@ pub struct PatternEstimate {
     /// otherwise it is chosen from the measured spectrum below the dot-spacing frequency.
     #[serde(default)]
     pub placement_stated: bool,
-    /// That choice's evidence: the spectral-shape χ² there of the jittered grid and of Poisson
-    /// placement.
+    /// That choice's evidence: the spectral-shape χ² there of the jittered grid, of Poisson
+    /// placement and of the hard core.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub placement_chi2: Option<[f64; 2]>,
+    pub placement_chi2: Option<[f64; 3]>,
+    /// Whether the manifest states the dots' profile; otherwise the print is calibrated with
+    /// each and the better kept ([`super::print`]).
+    #[serde(default)]
+    pub profile_stated: bool,
+    /// That choice's evidence: the calibrated print's spectral-shape χ² with Gaussian dots and
+    /// with disks (None: not tried, the Gaussian fitted).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub profile_chi2: Option<[Option<f64>; 2]>,
 }
 
 impl PatternEstimate {
@@ -80,6 +90,8 @@ impl PatternEstimate {
             calibration: None,
             placement_stated: false,
             placement_chi2: None,
+            profile_stated: false,
+            profile_chi2: None,
         }
     }
 }
@@ -191,6 +203,19 @@ impl Scene {
         manifest: &Manifest,
         seed: u64,
     ) -> Result<Self, TooManyDots> {
+        Self::of_patterns(nominal, model, manifest, seed, &|_| true)
+    }
+
+    /// [`Scene::new`] holding the dots of the patterns `wanted` names only: a print's
+    /// calibration renders one pattern some fifty times, and laying out the others each time
+    /// was a fifth of a comparison.
+    pub fn of_patterns(
+        nominal: &Nominal,
+        model: &Effects,
+        manifest: &Manifest,
+        seed: u64,
+        wanted: &dyn Fn(usize) -> bool,
+    ) -> Result<Self, TooManyDots> {
         let travel = manifest
             .runs
             .iter()
@@ -203,6 +228,9 @@ impl Scene {
             .iter()
             .enumerate()
             .map(|(i, p)| {
+                if !wanted(i) {
+                    return Ok(Vec::new());
+                }
                 p.pattern.dots(
                     camera.field_mm(travel + 2.0),
                     derive_seed(seed, i as u64, 0xD075),
@@ -295,7 +323,7 @@ impl Scene {
         // with room for the move, the dots' reach and a generous allowance for distortion).
         let near: Vec<TargetDot>;
         let dots: &[TargetDot] = if crop.is_some() {
-            let reach = all.iter().map(|d| d.sigma_mm).fold(0.0, f64::max) * 6.0;
+            let reach = all.iter().map(|d| d.shape.reach_mm()).fold(0.0, f64::max);
             let (x0, y0, x1, y1) = camera.field_mm(2.0 + reach);
             let (pad_x, pad_y) = (0.05 * (x1 - x0), 0.05 * (y1 - y0));
             let (mx, my) = (sx, sy);
@@ -391,6 +419,7 @@ pub fn pattern_for(
         estimate.pattern.placement = placement;
         estimate.placement_stated = true;
     }
+    estimate.profile_stated = stated_profile(run).is_some();
     estimate
 }
 
@@ -407,23 +436,15 @@ fn pattern_guess(
     let spacing = info.and_then(|p| p.dot_spacing_mm);
     let contrast = info.and_then(|p| p.contrast);
     let softness = info.and_then(|p| p.edge_softness_mm).unwrap_or(0.0);
-    if let (Some((sigma_mm, c, Some(s))), _) | (Some((sigma_mm, c, None)), Some(s)) =
-        (characterised(run), spacing)
-    {
+    if let Some(pattern) = characterised(run) {
         return PatternEstimate::new(
-            SpecklePattern {
-                label,
-                dot_diameter_mm: sigma_mm * FWHM_PER_SIGMA,
-                dot_spacing_mm: s,
-                contrast: c,
-                edge_softness_mm: 0.0,
-                placement: Placement::default(),
-            },
+            SpecklePattern { label, ..pattern },
             "manifest",
             white_dn,
             PrintKnowledge::Characterised,
         );
     }
+    let profile = stated_profile(run).unwrap_or_default();
     if let (Some(d), Some(s), Some(c)) = (diameter, spacing, contrast) {
         return PatternEstimate::new(
             SpecklePattern {
@@ -433,6 +454,7 @@ fn pattern_guess(
                 contrast: c,
                 edge_softness_mm: softness,
                 placement: Placement::default(),
+                profile,
             },
             "manifest",
             white_dn,
@@ -465,9 +487,11 @@ fn pattern_guess(
         }
     };
     let spacing_mm = spacing.unwrap_or(1.0 / (rho.sqrt() * scale_px_per_mm));
-    let (dot_diameter_mm, edge_softness_mm) = match diameter {
-        Some(d) => (d, softness),
-        None => (sigma_mm * fwhm, 0.0),
+    let (dot_diameter_mm, edge_softness_mm) = match (diameter, profile) {
+        (Some(d), _) => (d, softness),
+        (None, DotProfile::Gaussian) => (sigma_mm * fwhm, 0.0),
+        // A disk of radius R has the second moment of a Gaussian of σ R/2.
+        (None, DotProfile::Disk) => (4.0 * sigma_mm, 0.0),
     };
     let all_missing = diameter.is_none() && spacing.is_none() && contrast.is_none();
     PatternEstimate::new(
@@ -478,6 +502,7 @@ fn pattern_guess(
             contrast: c,
             edge_softness_mm,
             placement: Placement::default(),
+            profile,
         },
         if all_missing {
             "estimated"

@@ -172,6 +172,7 @@ mod tests {
             contrast: 0.8,
             edge_softness_mm: 0.0,
             placement: Default::default(),
+            profile: Default::default(),
         }
     }
 

@@ -6,7 +6,9 @@
 
 mod config;
 mod correction;
+mod disk;
 pub mod effects;
+mod hard_core;
 mod pattern;
 mod readout;
 mod render;
@@ -16,12 +18,15 @@ mod speckle;
 
 pub use config::{ModelConfig, ModelError};
 pub use correction::GeometryCorrection;
+pub use disk::DiskDot;
 pub use effects::{CandidateId, EffectId, Effects, Stage};
-pub use pattern::{Placement, SpecklePattern, TargetDot, TooManyDots, MAX_TARGET_DOTS};
+pub use pattern::{
+    DotProfile, DotShape, Placement, SpecklePattern, TargetDot, TooManyDots, MAX_TARGET_DOTS,
+};
 pub use readout::{BinnedValue, BinningDomain, SensorChain, SensorReadout};
 pub use render::{
     project, project_prepared, project_with_depth, render_frame, render_frame_read_out,
     render_frame_until, Camera, FrameSpec,
 };
 pub use seed::derive_seed;
-pub use speckle::{render_dots, render_dots_until, GaussianDot, SpeckleLayout};
+pub use speckle::{render_dots, render_dots_until, Dot, Footprint, GaussianDot, SpeckleLayout};

@@ -1,10 +1,14 @@
 //! Printed random speckle targets, defined in mm on the target plane.
 //!
-//! A dot is a Gaussian darkening whose full width at half maximum is the dot diameter, softened
-//! by `edge_softness_mm` (a Gaussian blur of the print, variances add). Smooth dots can be
-//! integrated exactly over any pixel aperture (see `speckle.rs`); the price is that "diameter" is
-//! the FWHM of a soft dot rather than the edge of a hard disc.
+//! A dot is either a Gaussian darkening whose full width at half maximum is the dot diameter, or
+//! a disk of that diameter with a hard edge (toner, a laser print, a stencil); either is softened
+//! by `edge_softness_mm` (a Gaussian blur of the print). Both are integrated exactly over any pixel
+//! aperture (see `speckle.rs`). The profile matters to DIC beyond the spectrum's width: a hard
+//! edge carries gradient energy that no Gaussian of the same contrast has, and that energy sets
+//! the random error (Pan et al., "Study on subset size selection in digital image correlation for
+//! speckle patterns", Opt. Express 16 (2008): σ_u ∝ σ_noise / √(Σ|∇I|²)).
 
+use super::hard_core::hard_core_centres;
 use serde::{Deserialize, Serialize};
 
 /// FWHM = 2·sqrt(2 ln 2)·σ.
@@ -25,6 +29,46 @@ pub struct SpecklePattern {
     /// Where the dots sit: [`Placement`] (absent: the jittered grid).
     #[serde(default, skip_serializing_if = "Placement::is_jittered_grid")]
     pub placement: Placement,
+    /// The dots' profile (absent: Gaussian).
+    #[serde(default, skip_serializing_if = "DotProfile::is_gaussian")]
+    pub profile: DotProfile,
+}
+
+/// A printed dot's profile.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DotProfile {
+    /// Deficit c·exp(−ρ²/2σ²) per dot, the diameter its FWHM.
+    #[default]
+    Gaussian,
+    /// A hard-edged disk of the diameter, depth c.
+    Disk,
+}
+
+impl DotProfile {
+    pub fn is_gaussian(&self) -> bool {
+        *self == DotProfile::Gaussian
+    }
+}
+
+/// One dot's shape on the target plane, mm.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum DotShape {
+    /// A Gaussian of standard deviation `sigma_mm` (the print's softness included).
+    Gaussian { sigma_mm: f64 },
+    /// A disk of radius `radius_mm`, blurred by a Gaussian of σ `blur_mm` (the print's softness).
+    Disk { radius_mm: f64, blur_mm: f64 },
+}
+
+impl DotShape {
+    /// How far the dot darkens the print from its centre, mm (six standard deviations of blur
+    /// beyond its edge: exp(−18) of its depth).
+    pub fn reach_mm(&self) -> f64 {
+        match *self {
+            DotShape::Gaussian { sigma_mm } => 6.0 * sigma_mm,
+            DotShape::Disk { radius_mm, blur_mm } => radius_mm + 6.0 * blur_mm,
+        }
+    }
 }
 
 /// How a print's dots are placed. The placement sets the print's spectrum below the
@@ -39,6 +83,11 @@ pub enum Placement {
     JitteredGrid,
     /// Every dot anywhere in the field, independently (a Poisson process of the same density).
     Poisson,
+    /// Dots anywhere but never closer than their diameter (at most 0.8 spacing; random
+    /// sequential adsorption: a
+    /// print whose dots do not touch, as a stencil or a laser printer's speckle generator
+    /// makes them). Dense prints of hard dots differ most: overlaps merge dots and remove edges.
+    HardCore,
 }
 
 impl Placement {
@@ -68,7 +117,7 @@ pub struct TooManyDots {
 pub struct TargetDot {
     pub x_mm: f64,
     pub y_mm: f64,
-    pub sigma_mm: f64,
+    pub shape: DotShape,
     /// Fraction of the background removed at the centre.
     pub depth: f64,
 }
@@ -84,6 +133,7 @@ impl SpecklePattern {
             contrast: c,
             edge_softness_mm: soft,
             placement: Placement::JitteredGrid,
+            profile: DotProfile::Gaussian,
         };
         match label {
             "a" => Some(p(0.5, 0.75, 0.85, 0.02)),
@@ -93,9 +143,27 @@ impl SpecklePattern {
         }
     }
 
-    /// σ of one dot's Gaussian profile, mm.
+    /// σ of one dot's profile, mm: a Gaussian's own, a disk's that of the Gaussian with its
+    /// second moment (R²/4 per axis), each with the print's softness in quadrature.
     pub fn sigma_mm(&self) -> f64 {
-        ((self.dot_diameter_mm / FWHM_PER_SIGMA).powi(2) + self.edge_softness_mm.powi(2)).sqrt()
+        let own = match self.profile {
+            DotProfile::Gaussian => self.dot_diameter_mm / FWHM_PER_SIGMA,
+            DotProfile::Disk => self.dot_diameter_mm / 4.0,
+        };
+        own.hypot(self.edge_softness_mm)
+    }
+
+    /// One dot's shape as printed.
+    pub fn shape(&self) -> DotShape {
+        match self.profile {
+            DotProfile::Gaussian => DotShape::Gaussian {
+                sigma_mm: self.sigma_mm(),
+            },
+            DotProfile::Disk => DotShape::Disk {
+                radius_mm: 0.5 * self.dot_diameter_mm,
+                blur_mm: self.edge_softness_mm,
+            },
+        }
     }
 
     /// How many dots cover the rectangle [x0, x1] x [y0, y1] mm: one per lattice cell. Refuses
@@ -130,14 +198,32 @@ impl SpecklePattern {
         let s = self.dot_spacing_mm;
         let nx = ((x1 - x0) / s).ceil() as usize;
         let ny = ((y1 - y0) / s).ceil() as usize;
-        let sigma = self.sigma_mm();
+        let shape = self.shape();
+        let depth_of = |rng: &mut rand_chacha::ChaCha8Rng| {
+            self.contrast * (1.0 + 0.15 * (2.0 * rng.gen::<f64>() - 1.0))
+        };
+        if self.placement == Placement::HardCore {
+            // Dots of their diameter cannot all keep it beyond the jamming limit (54.7 % of the
+            // plane): the distance is held to 0.8 spacing (50 %).
+            let distance = self.dot_diameter_mm.min(0.8 * s);
+            let centres = hard_core_centres(&mut rng, field, nx * ny, distance);
+            return Ok(centres
+                .into_iter()
+                .map(|(x_mm, y_mm)| TargetDot {
+                    x_mm,
+                    y_mm,
+                    shape,
+                    depth: depth_of(&mut rng),
+                })
+                .collect());
+        }
         let mut dots = Vec::with_capacity(nx * ny);
         for j in 0..ny {
             for i in 0..nx {
                 // The jittered grid keeps the cell; Poisson draws the cell too (the same count
                 // and the same stream of draws, so the two layouts differ only in placement).
                 let (ci, cj) = match self.placement {
-                    Placement::JitteredGrid => (i as f64, j as f64),
+                    Placement::JitteredGrid | Placement::HardCore => (i as f64, j as f64),
                     Placement::Poisson => (
                         (rng.gen::<f64>() * nx as f64).floor(),
                         (rng.gen::<f64>() * ny as f64).floor(),
@@ -146,8 +232,8 @@ impl SpecklePattern {
                 dots.push(TargetDot {
                     x_mm: x0 + (ci + rng.gen::<f64>()) * s,
                     y_mm: y0 + (cj + rng.gen::<f64>()) * s,
-                    sigma_mm: sigma,
-                    depth: self.contrast * (1.0 + 0.15 * (2.0 * rng.gen::<f64>() - 1.0)),
+                    shape,
+                    depth: depth_of(&mut rng),
                 });
             }
         }

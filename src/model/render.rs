@@ -8,11 +8,12 @@
 //! Distortion moves dot centres and leaves their shape to the local similarity transform: the
 //! shape change it would add is of order k1·(dot size), far below anything DIC resolves.
 
+use super::disk::DiskDot;
 use super::effects::user::{rendered_fields, UserField};
 use super::effects::Effects;
-use super::pattern::TargetDot;
+use super::pattern::{DotShape, TargetDot};
 use super::readout::{SensorChain, SensorReadout};
-use super::speckle::{render_dots_until, GaussianDot};
+use super::speckle::{render_dots_until, Dot, Footprint, GaussianDot};
 use crate::image::Image;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -200,11 +201,12 @@ fn render_irradiance(
     let psf = effects.psf_blur.map_or(0.0, |p| p.sigma_px);
     let aperture = effects.fill_factor.map_or((1.0, 1.0), |f| (f.fx, f.fy));
     let (w, h) = (camera.width, camera.height);
-    let margin = 6.0 * dots.iter().map(|d| d.sigma_mm).fold(0.0, f64::max) * camera.scale_px_per_mm
+    let margin = dots.iter().map(|d| d.shape.reach_mm()).fold(0.0, f64::max)
+        * camera.scale_px_per_mm
         + psf * 6.0
         + 2.0;
     let user = rendered_fields(&effects.user);
-    let px_dots: Vec<GaussianDot> = dots
+    let px_dots: Vec<ImagedDot> = dots
         .iter()
         .filter_map(|d| {
             let (x, y, depth) = project_prepared(camera, effects, &user, frame, d.x_mm, d.y_mm);
@@ -218,24 +220,8 @@ fn render_irradiance(
                 && y > -margin - 60.0
                 && x < w as f64 + margin + 60.0
                 && y < h as f64 + margin + 60.0;
-            inside.then(|| {
-                let sigma_print = d.sigma_mm * camera.scale_px_per_mm * mag * depth;
-                let sigma = sigma_print.hypot(psf);
-                // The lens spreads a dot's darkening, it does not add to it: the convolution
-                // keeps the dot's volume depth·2πσ², so the depth falls as σ² grows.
-                let spread = if sigma > 0.0 {
-                    (sigma_print / sigma).powi(2)
-                } else {
-                    1.0
-                };
-                GaussianDot {
-                    x_px: x,
-                    y_px: y,
-                    sigma_x_px: sigma,
-                    sigma_y_px: sigma,
-                    depth: d.depth * background * spread,
-                }
-            })
+            let px_per_mm = camera.scale_px_per_mm * mag * depth;
+            inside.then(|| ImagedDot::of(d, (x, y), px_per_mm, psf, background))
         })
         .collect();
 
@@ -250,14 +236,8 @@ fn render_irradiance(
             let mut acc = vec![0.0f32; w * h];
             for i in 0..k {
                 let t = (i as f64 / (k - 1) as f64 - 0.5) * m.length_px;
-                let shifted: Vec<GaussianDot> = px_dots
-                    .iter()
-                    .map(|d| GaussianDot {
-                        x_px: d.x_px - t * c,
-                        y_px: d.y_px - t * s,
-                        ..*d
-                    })
-                    .collect();
+                let shifted: Vec<ImagedDot> =
+                    px_dots.iter().map(|d| d.shifted(-t * c, -t * s)).collect();
                 let img = render_dots_until(w, h, &shifted, background, aperture, stop)?;
                 for (a, v) in acc.iter_mut().zip(img.data()) {
                     *a += v / k as f32;
@@ -266,6 +246,98 @@ fn render_irradiance(
             Some(Image::from_vec(w, h, acc).expect("sized"))
         }
         None => render_dots_until(w, h, &px_dots, background, aperture, stop),
+    }
+}
+
+/// A target dot as the sensor sees it, px.
+#[derive(Clone, Copy, Debug)]
+enum ImagedDot {
+    Gaussian(GaussianDot),
+    Disk(DiskDot),
+}
+
+impl ImagedDot {
+    /// Dot `d` imaged at (x, y) px with `px_per_mm` of magnification and a Gaussian lens blur of
+    /// σ `psf` px, on a background of `background` DN.
+    fn of(d: &TargetDot, (x, y): (f64, f64), px_per_mm: f64, psf: f64, background: f64) -> Self {
+        match d.shape {
+            DotShape::Gaussian { sigma_mm } => {
+                let sigma_print = sigma_mm * px_per_mm;
+                let sigma = sigma_print.hypot(psf);
+                // The lens spreads a dot's darkening, it does not add to it: the convolution
+                // keeps the dot's volume depth·2πσ², so the depth falls as σ² grows.
+                let spread = if sigma > 0.0 {
+                    (sigma_print / sigma).powi(2)
+                } else {
+                    1.0
+                };
+                ImagedDot::Gaussian(GaussianDot {
+                    x_px: x,
+                    y_px: y,
+                    sigma_x_px: sigma,
+                    sigma_y_px: sigma,
+                    depth: d.depth * background * spread,
+                })
+            }
+            // A disk keeps its depth under blur: the blur is normalised, and spreads the edge.
+            DotShape::Disk { radius_mm, blur_mm } => {
+                let blur = (blur_mm * px_per_mm).hypot(psf);
+                ImagedDot::Disk(DiskDot {
+                    x_px: x,
+                    y_px: y,
+                    radius_x_px: radius_mm * px_per_mm,
+                    radius_y_px: radius_mm * px_per_mm,
+                    blur_x_px: blur,
+                    blur_y_px: blur,
+                    depth: d.depth * background,
+                })
+            }
+        }
+    }
+
+    fn shifted(&self, dx: f64, dy: f64) -> Self {
+        match *self {
+            ImagedDot::Gaussian(g) => ImagedDot::Gaussian(GaussianDot {
+                x_px: g.x_px + dx,
+                y_px: g.y_px + dy,
+                ..g
+            }),
+            ImagedDot::Disk(k) => ImagedDot::Disk(DiskDot {
+                x_px: k.x_px + dx,
+                y_px: k.y_px + dy,
+                ..k
+            }),
+        }
+    }
+}
+
+impl Dot for ImagedDot {
+    fn x_px(&self) -> f64 {
+        match self {
+            ImagedDot::Gaussian(g) => g.x_px,
+            ImagedDot::Disk(k) => k.x_px,
+        }
+    }
+
+    fn y_px(&self) -> f64 {
+        match self {
+            ImagedDot::Gaussian(g) => g.y_px,
+            ImagedDot::Disk(k) => k.y_px,
+        }
+    }
+
+    fn reach_px(&self, aperture: (f64, f64)) -> (f64, f64) {
+        match self {
+            ImagedDot::Gaussian(g) => g.reach_px(aperture),
+            ImagedDot::Disk(k) => k.reach_px(aperture),
+        }
+    }
+
+    fn footprint(&self, size: (usize, usize), aperture: (f64, f64)) -> Option<Footprint> {
+        match self {
+            ImagedDot::Gaussian(g) => g.footprint(size, aperture),
+            ImagedDot::Disk(k) => k.footprint(size, aperture),
+        }
     }
 }
 

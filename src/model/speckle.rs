@@ -1,4 +1,5 @@
-//! Speckle made of Gaussian dots, rendered by exact integration over rectangular pixel apertures.
+//! Speckle made of dots, rendered by exact integration over rectangular pixel apertures: Gaussian
+//! dots here, hard-edged disks in `disk.rs`, each a sum of separable terms (a [`Footprint`]).
 //!
 //! A dot darkens the background by `depth · exp(-((x-xc)²/2σx² + (y-yc)²/2σy²))`. Its integral over
 //! the aperture [c - fx/2, c + fx/2] x [r - fy/2, r + fy/2] of pixel (c, r) separates into two
@@ -83,12 +84,26 @@ impl SpeckleLayout {
     }
 }
 
+/// A dot the renderer can integrate over pixel apertures: its centre row, how far it reaches,
+/// and its contribution to the pixels it reaches as a [`Footprint`].
+pub trait Dot: Clone + Send + Sync {
+    /// The centre's column coordinate, px.
+    fn x_px(&self) -> f64;
+    /// The centre's row coordinate, px.
+    fn y_px(&self) -> f64;
+    /// How far the dot reaches from its centre along x and y, px, with an `aperture`.
+    fn reach_px(&self, aperture: (f64, f64)) -> (f64, f64);
+    /// The dot's darkening of a `size` image as a sum of separable terms; None where it reaches
+    /// no pixel.
+    fn footprint(&self, size: (usize, usize), aperture: (f64, f64)) -> Option<Footprint>;
+}
+
 /// Renders `background - Σ dots`, each pixel the mean over its aperture of fx x fy px (1 = 100 %
 /// linear fill factor) centred on the pixel centre.
-pub fn render_dots(
+pub fn render_dots<D: Dot>(
     width: usize,
     height: usize,
-    dots: &[GaussianDot],
+    dots: &[D],
     background: f64,
     aperture: (f64, f64),
 ) -> Image {
@@ -98,29 +113,29 @@ pub fn render_dots(
 
 /// [`render_dots`], asking `stop` before each band of rows: `None` once it said so (a frame of
 /// a large sensor takes seconds; the job that wants it may have been cancelled).
-pub fn render_dots_until(
+pub fn render_dots_until<D: Dot>(
     width: usize,
     height: usize,
-    dots: &[GaussianDot],
+    dots: &[D],
     background: f64,
     aperture: (f64, f64),
     stop: &(dyn Fn() -> bool + Sync),
 ) -> Option<Image> {
     const BAND: usize = 32;
-    let mut sorted: Vec<GaussianDot> = dots.to_vec();
-    sorted.sort_by(|a, b| a.y_px.total_cmp(&b.y_px));
+    let mut sorted: Vec<D> = dots.to_vec();
+    sorted.sort_by(|a, b| a.y_px().total_cmp(&b.y_px()));
     // Each dot's profiles once, not once per band it crosses (a paper-size dot crosses two or
     // three): the erf evaluations were a fifth of a diagnosis round.
     let footprints: Vec<Option<Footprint>> = sorted
         .par_iter()
-        .map(|d| Footprint::of(d, (width, height), aperture))
+        .map(|d| d.footprint((width, height), aperture))
         .collect();
     if stop() {
         return None;
     }
     let max_reach_y = sorted
         .iter()
-        .map(|d| reach(d, aperture).1)
+        .map(|d| d.reach_px(aperture).1)
         .fold(0.0, f64::max);
     let mut data = vec![0.0f32; width * height];
     data.par_chunks_mut(BAND * width)
@@ -132,20 +147,13 @@ pub fn render_dots_until(
             let r0 = band * BAND;
             let rows = chunk.len() / width;
             let mut acc = vec![0.0f64; rows * width];
-            let lo = sorted.partition_point(|d| d.y_px < r0 as f64 - max_reach_y);
+            let lo = sorted.partition_point(|d| d.y_px() < r0 as f64 - max_reach_y);
             for (d, f) in sorted[lo..].iter().zip(&footprints[lo..]) {
-                if d.y_px > (r0 + rows) as f64 + max_reach_y {
+                if d.y_px() > (r0 + rows) as f64 + max_reach_y {
                     break;
                 }
-                let Some(f) = f else { continue };
-                let first = f.r_lo.max(r0);
-                let last = (f.r_lo + f.wy.len()).min(r0 + rows);
-                for r in first..last {
-                    let row = &mut acc[(r - r0) * width..][..width];
-                    let a = d.depth * f.wy[r - f.r_lo];
-                    for (cell, &vx) in row[f.c_lo..][..f.wx.len()].iter_mut().zip(&f.wx) {
-                        *cell += a * vx;
-                    }
+                if let Some(f) = f {
+                    f.add_to(&mut acc, width, r0, rows);
                 }
             }
             for (o, a) in chunk.iter_mut().zip(&acc) {
@@ -158,38 +166,79 @@ pub fn render_dots_until(
     Some(Image::from_vec(width, height, data).expect("buffer sized to the image"))
 }
 
-/// How far a dot reaches from its centre, px: 5σ (exp(-12.5) ≈ 4e-6 of the depth) plus an
-/// aperture.
-fn reach(d: &GaussianDot, (fx, fy): (f64, f64)) -> (f64, f64) {
-    (5.0 * d.sigma_x_px + fx, 5.0 * d.sigma_y_px + fy)
+impl Dot for GaussianDot {
+    fn x_px(&self) -> f64 {
+        self.x_px
+    }
+
+    fn y_px(&self) -> f64 {
+        self.y_px
+    }
+
+    /// 5σ (exp(-12.5) ≈ 4e-6 of the depth) plus an aperture.
+    fn reach_px(&self, (fx, fy): (f64, f64)) -> (f64, f64) {
+        (5.0 * self.sigma_x_px + fx, 5.0 * self.sigma_y_px + fy)
+    }
+
+    fn footprint(&self, size: (usize, usize), aperture: (f64, f64)) -> Option<Footprint> {
+        let (c_lo, c_hi, r_lo, r_hi) = Footprint::span(self, size, aperture)?;
+        let (fx, fy) = aperture;
+        let wy = box_gauss_span(r_lo, r_hi, fy, self.y_px, self.sigma_y_px);
+        Some(Footprint {
+            c_lo,
+            r_lo,
+            wx: box_gauss_span(c_lo, c_hi, fx, self.x_px, self.sigma_x_px),
+            wy: wy.into_iter().map(|v| v * self.depth).collect(),
+            terms: 1,
+        })
+    }
 }
 
-/// A dot's aperture means along x over columns `c_lo..` and along y over rows `r_lo..`, clipped
-/// to the image: its contribution to pixel (c, r) is depth · wx[c − c_lo] · wy[r − r_lo].
-struct Footprint {
-    c_lo: usize,
-    r_lo: usize,
-    wx: Vec<f64>,
-    wy: Vec<f64>,
+/// A dot's darkening as `terms` separable parts over columns `c_lo..` and rows `r_lo..`, clipped
+/// to the image: its contribution to pixel (c, r) is Σₖ wx[k][c − c_lo] · wy[k][r − r_lo] (the
+/// depth held in wy). A Gaussian is one term; a disk is a sum of strips ([`super::disk`]).
+pub struct Footprint {
+    pub(super) c_lo: usize,
+    pub(super) r_lo: usize,
+    /// `terms` rows of the columns' weights, one after the other.
+    pub(super) wx: Vec<f64>,
+    /// `terms` rows of the rows' weights (times the depth), one after the other.
+    pub(super) wy: Vec<f64>,
+    pub(super) terms: usize,
 }
 
 impl Footprint {
-    /// None for a dot that reaches no pixel of a `width` x `height` image.
-    fn of(d: &GaussianDot, (width, height): (usize, usize), (fx, fy): (f64, f64)) -> Option<Self> {
-        let (rx, ry) = reach(d, (fx, fy));
+    /// The columns `c_lo..=c_hi` and rows `r_lo..=r_hi` a dot reaches, None outside the image.
+    pub(super) fn span<D: Dot>(
+        d: &D,
+        (width, height): (usize, usize),
+        aperture: (f64, f64),
+    ) -> Option<(usize, usize, usize, usize)> {
+        let (rx, ry) = d.reach_px(aperture);
         let span = |centre: f64, r: f64, size: usize| {
             let lo = (centre - r).floor().max(0.0);
             let hi = (centre + r).ceil().min(size as f64 - 1.0);
             (hi >= lo).then_some((lo as usize, hi as usize))
         };
-        let (c_lo, c_hi) = span(d.x_px, rx, width)?;
-        let (r_lo, r_hi) = span(d.y_px, ry, height)?;
-        Some(Self {
-            c_lo,
-            r_lo,
-            wx: box_gauss_span(c_lo, c_hi, fx, d.x_px, d.sigma_x_px),
-            wy: box_gauss_span(r_lo, r_hi, fy, d.y_px, d.sigma_y_px),
-        })
+        let (c_lo, c_hi) = span(d.x_px(), rx, width)?;
+        let (r_lo, r_hi) = span(d.y_px(), ry, height)?;
+        Some((c_lo, c_hi, r_lo, r_hi))
+    }
+
+    /// Adds the darkening to `acc`, the `rows` rows from `r0` of a `width`-wide image.
+    fn add_to(&self, acc: &mut [f64], width: usize, r0: usize, rows: usize) {
+        let (nc, nr) = (self.wx.len() / self.terms, self.wy.len() / self.terms);
+        let first = self.r_lo.max(r0);
+        let last = (self.r_lo + nr).min(r0 + rows);
+        for (wx, wy) in self.wx.chunks_exact(nc).zip(self.wy.chunks_exact(nr)) {
+            for r in first..last {
+                let row = &mut acc[(r - r0) * width..][..width];
+                let a = wy[r - self.r_lo];
+                for (cell, &vx) in row[self.c_lo..][..nc].iter_mut().zip(wx) {
+                    *cell += a * vx;
+                }
+            }
+        }
     }
 }
 

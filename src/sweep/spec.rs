@@ -119,6 +119,7 @@ impl PrintAxis {
                     contrast: 0.85,
                     edge_softness_mm: 0.0,
                     placement: Default::default(),
+                    profile: Default::default(),
                 }
             }
             PrintAxis::Pattern(label) => {

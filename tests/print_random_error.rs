@@ -1,0 +1,165 @@
+//! The print's random error (issue 32): the model's random DIC error against the measured one,
+//! print by print and scheme by scheme, on a paper-like dataset the independent generator made
+//! (`tests/independent/`): the paper's 26 px/mm, its prints a (Gaussian dots), b (small hard
+//! disks, placed without touching) and c (a defocused, low-contrast print of a: disks of 0.5 mm
+//! blurred by a further 0.18 mm, contrast 0.45), a 5 mm and a 0.05 mm move, a stage offset of
+//! 0.4 px in y, the paper's three schemes. The field is 1280x1080 (half the paper's per axis: the
+//! same prints in px, a quarter of the time).
+
+use crate::common::independent;
+
+use ffdic::diagnose::{compare_prepared, load_measurement, CompareOptions, Comparison};
+use ffdic::dic::DicSettings;
+use ffdic::reduce::Scheme;
+use independent::{baseline, candidate, generate, report, Draw};
+use serde_json::{json, Value};
+
+fn paper_like(name: &str, draw: &mut Draw, effects: Value) -> Value {
+    json!({
+        "name": name,
+        "seed": draw.seed(),
+        "width": 1280, "height": 1080, "scale_px_per_mm": 26.0, "bit_depth": 16,
+        "white_level_dn": draw.range(25000.0, 35000.0),
+        "gain_e_per_dn": null, "read_noise_dn": 40.0,
+        "patterns": [
+            {"label": "a", "profile": "gaussian", "dot_diameter_mm": 0.5, "dot_spacing_mm": 0.75,
+             "contrast": 0.7},
+            {"label": "b", "profile": "disk", "dot_diameter_mm": 0.24, "dot_spacing_mm": 0.36,
+             "contrast": 0.8, "placement": "dart"},
+            {"label": "c", "profile": "disk", "dot_diameter_mm": 0.5, "dot_spacing_mm": 0.75,
+             "contrast": 0.45, "edge_softness_mm": 0.18, "placement": "dart"}
+        ],
+        "state_print": "nominal",
+        "moves": [{"id": "x5mm", "dx_mm": 5.0, "dy_mm": 0.0},
+                  {"id": "x005", "dx_mm": 0.05, "dy_mm": 0.0}],
+        "repeats": 1,
+        "stage": {"constant_offset_px": [0.0, 0.4], "repeatability_um": 2.0},
+        "stated_repeatability_um": 20.0,
+        "effects": effects
+    })
+}
+
+fn paper_schemes() -> CompareOptions {
+    CompareOptions {
+        dic: DicSettings::default(),
+        schemes: Scheme::presets(),
+        seed: 0x5EED,
+    }
+}
+
+/// The relative standard error of a std from its 95 % interval.
+fn relative_se(std: f64, ci95: [f64; 2]) -> f64 {
+    (ci95[1] - ci95[0]) / (2.0 * 1.96 * std)
+}
+
+#[test]
+#[ignore = "open (issue 32): on this draw print b's placement is read as a jittered grid, and its \
+            random error under ff50/ff25 is 0.57-1.37x the measured; figures in \
+            docs/model-and-diagnosis.md"]
+fn the_model_random_error_matches_the_measured_for_every_print_and_scheme() {
+    let mut draw = Draw::new(3701);
+    let spec = paper_like("print-random-error", &mut draw, json!({}));
+    let root = tempfile::tempdir().unwrap();
+    let dir = root.path().join("dataset");
+    generate(&spec, &dir);
+    let meas = load_measurement(&dir, &paper_schemes(), &|_, _| true).unwrap();
+    let cmp: Comparison = compare_prepared(&meas, &baseline(), &|_, _| true).unwrap();
+    for p in &cmp.model.nominal.patterns {
+        println!(
+            "print {}: {:?} {:?}, d {:.4} mm, softness {:.4} mm, contrast {:.3} (profile χ² {:?}, placement χ² {:?})",
+            p.pattern.label,
+            p.pattern.profile,
+            p.pattern.placement,
+            p.pattern.dot_diameter_mm,
+            p.pattern.edge_softness_mm,
+            p.pattern.contrast,
+            p.profile_chi2,
+            p.placement_chi2
+        );
+    }
+    let (mut strict, mut total, mut misses) = (0, 0, Vec::new());
+    for r in &cmp.runs {
+        let (m, o) = (&r.measured, &r.model);
+        let stats = [
+            (
+                &m.summary.u,
+                &o.summary.u,
+                m.random_px[0],
+                o.random_px[0],
+                "u",
+            ),
+            (
+                &m.summary.v,
+                &o.summary.v,
+                m.random_px[1],
+                o.random_px[1],
+                "v",
+            ),
+        ];
+        for (ms, os, measured, model, axis) in stats {
+            let ratio = model / measured;
+            let se =
+                ratio * relative_se(ms.std, ms.std_ci95).hypot(relative_se(os.std, os.std_ci95));
+            println!(
+                "{} {} {axis}: measured {measured:.5} px, model {model:.5} px, ratio {ratio:.3} ± {se:.3}",
+                r.id, r.scheme
+            );
+            total += 1;
+            strict += usize::from((ratio - 1.0).abs() <= 0.10);
+            // Within 10 %, or short of it by less than two standard errors of the ratio (the two
+            // stds are each known to ±5–6 % at 95 % over ~700 points: a ratio of 1.12 ± 0.04 is
+            // not a miss).
+            if (ratio - 1.0).abs() > 0.10 + 2.0 * se {
+                misses.push(format!(
+                    "{} {} {axis}: {ratio:.3} ± {se:.3}",
+                    r.id, r.scheme
+                ));
+            }
+        }
+    }
+    println!("{strict} of {total} within 10 %; beyond 10 % by more than 2 SE: {misses:?}");
+    assert!(misses.is_empty(), "random error off: {misses:?}");
+}
+
+/// A hidden effect on the paper-like dataset: named, and the total discrepancy falls 3x.
+fn hidden(test: u64, effects: Value, effect: &str) {
+    let mut draw = Draw::new(test);
+    let spec = paper_like(&format!("paper-like-{effect}"), &mut draw, effects);
+    let root = tempfile::tempdir().unwrap();
+    let dir = root.path().join("dataset");
+    generate(&spec, &dir);
+    let meas = load_measurement(&dir, &paper_schemes(), &|_, _| true).unwrap();
+    let r = ffdic::diagnose::diagnose_rounds_prepared(&meas, &baseline(), 1, &|_, _| true).unwrap();
+    report(effect, &r);
+    let d = &r.diagnoses[0];
+    assert_eq!(
+        ffdic::model::effects::verdict_name(&d.verdict),
+        effect,
+        "verdict"
+    );
+    let c = candidate(d, effect);
+    println!("{effect}: {:?} ± {:?}", c.params, c.stderr);
+    let after = d.after.as_ref().expect("the winner's comparison");
+    println!(
+        "{effect}: discrepancy {:.5} ± {:.5} -> {:.5} ± {:.5} px",
+        d.discrepancy_px, d.discrepancy_se_px, after.discrepancy_px, after.discrepancy_se_px
+    );
+    assert!(
+        after.discrepancy_px * 3.0 <= d.discrepancy_px,
+        "{effect}: discrepancy {} -> {} px, less than a 3x fall",
+        d.discrepancy_px,
+        after.discrepancy_px
+    );
+}
+
+#[test]
+fn hidden_lens_distortion_on_paper_prints_falls_3x() {
+    // −4e-10 px⁻² at the paper's 2560x2160 (its half-diagonal 1675 px): the same normalised k1
+    // (−1.1e-3) here is −1.6e-9 px⁻².
+    hidden(3702, json!({"k1_per_px2": -1.6e-9}), "lens_distortion");
+}
+
+#[test]
+fn hidden_scale_on_paper_prints_falls_3x() {
+    hidden(3703, json!({"scale_ds": 2.0e-4}), "scale");
+}
