@@ -3,12 +3,12 @@
 //! (`tests/independent/`): the paper's 26 px/mm, its prints a (Gaussian dots), b (small hard
 //! disks, placed without touching) and c (a defocused, low-contrast print of a: disks of 0.5 mm
 //! blurred by a further 0.18 mm, contrast 0.45), a 5 mm and a 0.05 mm move, a stage offset of
-//! 0.4 px in y, the paper's three schemes. The field is 1280x1080 (half the paper's per axis: the
-//! same prints in px, a quarter of the time).
+//! 0.4 px in y, the paper's three schemes. The field is 960x810 (3/8 of the paper's per axis: the
+//! same prints in px, a seventh of the pixels).
 
 use crate::common::independent;
 
-use ffdic::diagnose::{compare_prepared, load_measurement, CompareOptions, Comparison};
+use ffdic::diagnose::{compare_prepared, load_measurement, CompareOptions, Comparison, Rounds};
 use ffdic::dic::DicSettings;
 use ffdic::reduce::Scheme;
 use independent::{baseline, candidate, generate, report, Draw};
@@ -18,7 +18,7 @@ fn paper_like(name: &str, draw: &mut Draw, effects: Value) -> Value {
     json!({
         "name": name,
         "seed": draw.seed(),
-        "width": 1280, "height": 1080, "scale_px_per_mm": 26.0, "bit_depth": 16,
+        "width": 960, "height": 810, "scale_px_per_mm": 26.0, "bit_depth": 16,
         "white_level_dn": draw.range(25000.0, 35000.0),
         "gain_e_per_dn": null, "read_noise_dn": 40.0,
         "patterns": [
@@ -53,9 +53,6 @@ fn relative_se(std: f64, ci95: [f64; 2]) -> f64 {
 }
 
 #[test]
-#[ignore = "open (issue 32): on this draw print b's placement is read as a jittered grid, and its \
-            random error under ff50/ff25 is 0.57-1.37x the measured; figures in \
-            docs/model-and-diagnosis.md"]
 fn the_model_random_error_matches_the_measured_for_every_print_and_scheme() {
     let mut draw = Draw::new(3701);
     let spec = paper_like("print-random-error", &mut draw, json!({}));
@@ -106,9 +103,9 @@ fn the_model_random_error_matches_the_measured_for_every_print_and_scheme() {
             );
             total += 1;
             strict += usize::from((ratio - 1.0).abs() <= 0.10);
-            // Within 10 %, or short of it by less than two standard errors of the ratio (the two
-            // stds are each known to ±5–6 % at 95 % over ~700 points: a ratio of 1.12 ± 0.04 is
-            // not a miss).
+            // Within 10 %, or beyond it by less than two standard errors of the ratio (the two
+            // stds are each known to ±5–6 % at 95 % over ~700 points: a ratio of 1.12 ± 0.05
+            // is not shown to be off by more than 10 %). The note counts the strict ones.
             if (ratio - 1.0).abs() > 0.10 + 2.0 * se {
                 misses.push(format!(
                     "{} {} {axis}: {ratio:.3} ± {se:.3}",
@@ -121,8 +118,9 @@ fn the_model_random_error_matches_the_measured_for_every_print_and_scheme() {
     assert!(misses.is_empty(), "random error off: {misses:?}");
 }
 
-/// A hidden effect on the paper-like dataset: named, and the total discrepancy falls 3x.
-fn hidden(test: u64, effects: Value, effect: &str) {
+/// Diagnoses the paper-like dataset with `effects` hidden for one round; the verdict must be
+/// `effect`.
+fn diagnosed(test: u64, effects: Value, effect: &str) -> Rounds {
     let mut draw = Draw::new(test);
     let spec = paper_like(&format!("paper-like-{effect}"), &mut draw, effects);
     let root = tempfile::tempdir().unwrap();
@@ -131,6 +129,12 @@ fn hidden(test: u64, effects: Value, effect: &str) {
     let meas = load_measurement(&dir, &paper_schemes(), &|_, _| true).unwrap();
     let r = ffdic::diagnose::diagnose_rounds_prepared(&meas, &baseline(), 1, &|_, _| true).unwrap();
     report(effect, &r);
+    r
+}
+
+/// A hidden effect on the paper-like dataset: named, and the total discrepancy falls 3x.
+fn hidden(test: u64, effects: Value, effect: &str) {
+    let r = diagnosed(test, effects, effect);
     let d = &r.diagnoses[0];
     assert_eq!(
         ffdic::model::effects::verdict_name(&d.verdict),
@@ -155,11 +159,33 @@ fn hidden(test: u64, effects: Value, effect: &str) {
 #[test]
 fn hidden_lens_distortion_on_paper_prints_falls_3x() {
     // −4e-10 px⁻² at the paper's 2560x2160 (its half-diagonal 1675 px): the same normalised k1
-    // (−1.1e-3) here is −1.6e-9 px⁻².
-    hidden(3702, json!({"k1_per_px2": -1.6e-9}), "lens_distortion");
+    // (−1.12e-3) at 960x810 (628 px) is −2.84e-9 px⁻².
+    hidden(3702, json!({"k1_per_px2": -2.84e-9}), "lens_distortion");
 }
 
 #[test]
 fn hidden_scale_on_paper_prints_falls_3x() {
     hidden(3703, json!({"scale_ds": 2.0e-4}), "scale");
+}
+
+/// Vignetting barely moves a zero-normalised DIC result, so its displacement discrepancy has
+/// little to fall (the test prints it); the fall asked is that of the statistic it acts on, the
+/// mean-intensity map's χ² (as `independent_diagnosis::hidden_vignetting`).
+#[test]
+fn hidden_vignetting_on_paper_prints_is_named_and_its_map_falls_3x() {
+    let r = diagnosed(3704, json!({"vignetting_v": 0.3}), "vignetting");
+    let d = &r.diagnoses[0];
+    assert_eq!(
+        ffdic::model::effects::verdict_name(&d.verdict),
+        "vignetting"
+    );
+    let c = candidate(d, "vignetting");
+    println!("vignetting: {:?} ± {:?}", c.params, c.stderr);
+    let (before, after) = (d.before.as_ref().unwrap(), d.after.as_ref().unwrap());
+    let (map_before, map_after) = (before.chi2.image_parts[2].0, after.chi2.image_parts[2].0);
+    println!(
+        "vignetting: mean-map χ² {map_before:.1} -> {map_after:.1}; discrepancy {:.5} ± {:.5} -> {:.5} ± {:.5} px",
+        before.discrepancy_px, before.discrepancy_se_px, after.discrepancy_px, after.discrepancy_se_px
+    );
+    assert!(map_after * 3.0 <= map_before);
 }

@@ -68,7 +68,9 @@ pub struct PatternEstimate {
     #[serde(default)]
     pub profile_stated: bool,
     /// That choice's evidence: the calibrated print's spectral-shape χ² with Gaussian dots and
-    /// with disks (None: not tried, the Gaussian fitted).
+    /// with disks, the best of the placements each fitted with disks (None: not tried, the
+    /// Gaussian fitted). A disk print's placement is its best fit's, not `placement_chi2`'s
+    /// choice (made below half the spacing frequency under Gaussian dots).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub profile_chi2: Option<[Option<f64>; 2]>,
 }
