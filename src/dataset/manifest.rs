@@ -436,6 +436,20 @@ mod tests {
         assert!(back.contains("\"operator\":\"kept\""));
     }
 
+    /// A hard-disk print whose dots never touch: its profile and placement pass the schema
+    /// (`docs/dataset-format.schema.json`) and the types.
+    #[test]
+    fn a_disk_print_placed_as_a_hard_core_is_accepted() {
+        let print = r#""dot_spacing_mm": 0.36, "profile": "disk", "contrast": 0.8,
+            "placement": "hard_core""#;
+        let text = EXAMPLE.replace(r#""dot_spacing_mm": 0.36"#, print);
+        let m: Manifest = serde_json::from_str(&text).unwrap();
+        m.validate().unwrap();
+        let p = m.runs[0].pattern.as_ref().unwrap();
+        assert_eq!(p.profile, Some(DotProfile::Disk));
+        assert_eq!(p.placement, Some(Placement::HardCore));
+    }
+
     #[test]
     fn a_characterised_print_is_typed_and_checked() {
         let print = r#""dot_spacing_mm": 0.36, "profile": "gaussian", "contrast": 0.7,
