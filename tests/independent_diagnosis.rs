@@ -43,13 +43,7 @@ fn single(spec: Value, effect: &str, name: &str, truth: f64) {
     );
     let (v, se) = param(d, effect, name);
     close(effect, v, se, truth);
-    let after = d.after.as_ref().expect("the winner's comparison");
-    assert!(
-        after.discrepancy_px * 3.0 <= d.discrepancy_px,
-        "{effect}: discrepancy {} -> {} px, less than a 3x fall",
-        d.discrepancy_px,
-        after.discrepancy_px
-    );
+    independent::winner_falls_3x(d, effect);
 }
 
 #[test]

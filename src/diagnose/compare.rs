@@ -600,12 +600,7 @@ fn fit_print(
         }
     };
     for _ in 0..rounds {
-        let crop = reference_crop(meas, nominal, model, pi, seed)?;
-        let ratio = measured.contrast / contrast_of(&crop).max(1e-9);
-        if ratio.is_finite() {
-            let p = &mut nominal.patterns[pi].pattern;
-            p.contrast = (p.contrast * ratio).clamp(0.02, 1.0);
-        }
+        match_contrast(meas, nominal, model, pi, seed)?;
         let p = nominal.patterns[pi].pattern.clone();
         // Keep the print physical: the dots' mean darkening — 2πσ²ρc for Gaussian dots
         // (Campbell's theorem), the covered fraction πR²ρ times c for disks — below 60 %, beyond
@@ -642,13 +637,26 @@ fn fit_print(
         }
     }
     // The size's last search moves the contrast of the crop: matched once more.
+    match_contrast(meas, nominal, model, pi, seed)?;
+    Ok(chi2_of(nominal))
+}
+
+/// Scales pattern `pi`'s dot depth so the model's reference crop has the measured contrast
+/// (std/mean; both sides carry the same noise, so the raw ratio is compared), within [0.02, 1].
+fn match_contrast(
+    meas: &Measurement,
+    nominal: &mut Nominal,
+    model: &ModelConfig,
+    pi: usize,
+    seed: u64,
+) -> Result<(), DiagnoseError> {
     let crop = reference_crop(meas, nominal, model, pi, seed)?;
-    let ratio = measured.contrast / contrast_of(&crop).max(1e-9);
+    let ratio = meas.reference_stats[pi].contrast / contrast_of(&crop).max(1e-9);
     if ratio.is_finite() {
         let p = &mut nominal.patterns[pi].pattern;
         p.contrast = (p.contrast * ratio).clamp(0.02, 1.0);
     }
-    Ok(chi2_of(nominal))
+    Ok(())
 }
 
 /// A Gaussian dot of σ `sigma_mm` (the FWHM carries all of it; no separate softness).

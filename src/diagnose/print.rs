@@ -37,9 +37,10 @@
 //!
 //! Otherwise the dots' **profile** is calibrated too: the print is fitted with Gaussian dots and,
 //! when their spectral shape is rejected (χ² more than three standard deviations above its
-//! degrees of freedom), with disks (diameter, then edge softness); the better is kept
-//! (`profile_chi2` in the JSON: Gaussian, disk or null when not tried). The profile is what a Gaussian cannot
-//! imitate: a hard edge's gradient energy, which sets DIC's random error. On the independent
+//! degrees of freedom), with disks (diameter, then edge softness) under each placement; the
+//! better is kept (`profile_chi2` in the JSON: Gaussian, disk or null when not tried). The
+//! profile is what a Gaussian cannot imitate: a hard edge's gradient energy, which sets DIC's
+//! random error. On the independent
 //! generator's hard-disk print b (0.24 mm at 26 px/mm) the Gaussian fit had collapsed to 0.03 mm
 //! dots at full contrast and put the model's random error at 2.6–3.7x the measured.
 

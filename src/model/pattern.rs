@@ -84,9 +84,9 @@ pub enum Placement {
     /// Every dot anywhere in the field, independently (a Poisson process of the same density).
     Poisson,
     /// Dots anywhere but never closer than their diameter (at most 0.8 spacing; random
-    /// sequential adsorption: a
-    /// print whose dots do not touch, as a stencil or a laser printer's speckle generator
-    /// makes them). Dense prints of hard dots differ most: overlaps merge dots and remove edges.
+    /// sequential adsorption): a print whose dots do not touch, as a stencil or a laser
+    /// printer's speckle generator makes them. Dense prints of hard dots differ most: overlaps
+    /// merge dots and remove edges.
     HardCore,
 }
 
@@ -223,11 +223,12 @@ impl SpecklePattern {
                 // The jittered grid keeps the cell; Poisson draws the cell too (the same count
                 // and the same stream of draws, so the two layouts differ only in placement).
                 let (ci, cj) = match self.placement {
-                    Placement::JitteredGrid | Placement::HardCore => (i as f64, j as f64),
+                    Placement::JitteredGrid => (i as f64, j as f64),
                     Placement::Poisson => (
                         (rng.gen::<f64>() * nx as f64).floor(),
                         (rng.gen::<f64>() * ny as f64).floor(),
                     ),
+                    Placement::HardCore => unreachable!("a hard core is laid out above"),
                 };
                 dots.push(TargetDot {
                     x_mm: x0 + (ci + rng.gen::<f64>()) * s,

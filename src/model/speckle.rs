@@ -84,8 +84,8 @@ impl SpeckleLayout {
     }
 }
 
-/// A dot the renderer can integrate over pixel apertures: its centre row, how far it reaches,
-/// and its contribution to the pixels it reaches as a [`Footprint`].
+/// A dot the renderer can integrate over pixel apertures: its centre, how far it reaches, and
+/// its contribution to the pixels it reaches as a [`Footprint`].
 pub trait Dot: Clone + Send + Sync {
     /// The centre's column coordinate, px.
     fn x_px(&self) -> f64;

@@ -296,3 +296,14 @@ pub fn candidate<'a>(d: &'a Diagnosis, effect: &str) -> &'a Candidate {
         .find(|c| c.effect.to_string() == effect)
         .unwrap_or_else(|| panic!("{effect} was not fitted"))
 }
+
+/// The winner of the first round lowered the discrepancy at least 3x.
+pub fn winner_falls_3x(d: &Diagnosis, effect: &str) {
+    let after = d.after.as_ref().expect("the winner's comparison");
+    assert!(
+        after.discrepancy_px * 3.0 <= d.discrepancy_px,
+        "{effect}: discrepancy {} -> {} px, less than a 3x fall",
+        d.discrepancy_px,
+        after.discrepancy_px
+    );
+}
