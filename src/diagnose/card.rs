@@ -23,7 +23,7 @@
 
 use super::basis::GeometricParam;
 use super::card_distortion::{card_geometry, CardGeometry, CentredDistortion};
-use super::compare::{compare_with_scene, Measurement};
+use super::compare::{compare_prepared, compare_with_scene, Measurement, SceneFrom};
 use super::diagnose::field_samples;
 use super::fit_geometric::{fit_geometric, FieldSample, GeometricFit};
 use super::fit_geometric_effect::{write_joint, Geometric};
@@ -180,7 +180,7 @@ pub fn camera_card(
     let first = rounds.diagnoses.first();
     let before = match first.and_then(|d| d.before.as_ref()) {
         Some(b) => b.clone(),
-        None => compare_with_scene(meas, &rounds.final_model, meas.options.seed, None, progress)?,
+        None => compare_prepared(meas, &rounds.final_model, progress)?,
     };
     let (samples, setting) = field_samples(meas, &before);
     let (fit, not_identifiable) = joint_fit(&samples, setting.observations);
@@ -252,7 +252,8 @@ pub fn camera_card(
     };
     // Names are versions: the card's carries its content's hash, so a new card is a new name.
     model.name = format!("{name}-{}", super::model_version(&model));
-    let (card_cmp, card_se, left) = judge_card(meas, &model, progress)?;
+    let scene = SceneFrom::Refit(&before.model.nominal);
+    let (card_cmp, card_se, left) = judge_card(meas, &model, scene, progress)?;
     let baseline_se_px = first.map_or(before.discrepancy_se_px, |d| d.discrepancy_se_px);
     Ok(CameraCard {
         z_significant: z,
@@ -483,20 +484,22 @@ fn imaging_entries(rounds: &Rounds) -> Vec<ImagingEntry> {
     .collect()
 }
 
-/// The card's model against the measurement: its comparison, the discrepancy's standard error
-/// (with the scatter of a second rendering) and what it leaves unexplained.
+/// The card's model against the measurement: its comparison (the print calibrated again from
+/// `scene`, the baseline's), the discrepancy's standard error (with the scatter of a second
+/// rendering) and what it leaves unexplained.
 fn judge_card(
     meas: &Measurement,
     model: &ModelConfig,
+    scene: SceneFrom<'_>,
     progress: Progress,
 ) -> Result<(Comparison, f64, Unexplained), DiagnoseError> {
     let seed = meas.options.seed;
-    let first = compare_with_scene(meas, model, seed, None, progress)?;
+    let first = compare_with_scene(meas, model, seed, scene, progress)?;
     let second = compare_with_scene(
         meas,
         model,
         seed.wrapping_add(1),
-        Some(&first.model.nominal),
+        SceneFrom::Reuse(&first.model.nominal),
         progress,
     )?;
     let infl = super::bic::inflation(&meas.options.dic);

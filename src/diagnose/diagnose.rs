@@ -18,7 +18,9 @@
 
 use super::basis::geometric_basis;
 use super::bic::{chi2, delta_bic, image_change, SIGNIFICANT_DELTA_BIC};
-use super::compare::{compare_prepared, compare_with_scene, load_measurement, Measurement};
+use super::compare::{
+    compare_prepared, compare_with_scene, load_measurement, Measurement, SceneFrom,
+};
 use super::fit_geometric::FieldSample;
 use super::fit_geometric_effect::{fit_geometric_effect, GeometricSetting};
 use super::fit_image::{
@@ -781,7 +783,7 @@ fn discrepancy_by_seed(
             meas,
             model,
             meas.options.seed.wrapping_add(k),
-            Some(&before.model.nominal),
+            SceneFrom::Reuse(&before.model.nominal),
             ask,
         )?;
         by_seed.push(c.discrepancy_px);
@@ -872,7 +874,8 @@ fn fit_one_candidate(
     } else if let Some(predicted) = predict(meas, before, &with, &fit) {
         Some((predicted, Method::Predicted))
     } else {
-        let rendered = compare_with_scene(meas, &with, meas.options.seed, None, ask)?;
+        let scene = SceneFrom::Refit(&before.model.nominal);
+        let rendered = compare_with_scene(meas, &with, meas.options.seed, scene, ask)?;
         Some((rendered, Method::Rendered))
     };
     let candidate = judge.candidate(&fit, after.as_ref());
@@ -900,7 +903,7 @@ fn render_winner(
                 meas,
                 with,
                 meas.options.seed,
-                Some(&judge.before.model.nominal),
+                SceneFrom::Reuse(&judge.before.model.nominal),
                 ask,
             )?,
             Method::Rendered,

@@ -117,6 +117,7 @@ pub use card::{
 };
 pub use compare::{
     compare, compare_prepared, compare_with_scene, load_measurement, model_version, Measurement,
+    SceneFrom,
 };
 pub use diagnose::{
     diagnose, diagnose_prepared, Candidate, Criteria, Diagnosis, Evidence, MODEL_SEEDS,

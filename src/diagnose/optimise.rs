@@ -17,8 +17,10 @@ pub fn unless_stopped<'a>(
     }
 }
 
-/// Golden-section minimum of `f` on [a, b] (`iters` steps).
-pub fn golden(f: &dyn Fn(f64) -> f64, a: f64, b: f64, iters: usize) -> f64 {
+/// Golden-section minimum of `f` on [a, b] (`iters` steps), with its value: a caller that
+/// compares it with another point need not evaluate it again (each evaluation of the print's
+/// and the image fits' objectives renders a crop).
+pub fn golden(f: &dyn Fn(f64) -> f64, a: f64, b: f64, iters: usize) -> (f64, f64) {
     let g = 0.618_033_988_749_895;
     let (mut lo, mut hi) = (a, b);
     let (mut x1, mut x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
@@ -37,9 +39,9 @@ pub fn golden(f: &dyn Fn(f64) -> f64, a: f64, b: f64, iters: usize) -> f64 {
         }
     }
     if f1 < f2 {
-        x1
+        (x1, f1)
     } else {
-        x2
+        (x2, f2)
     }
 }
 
@@ -57,8 +59,8 @@ pub fn minimise_1d(f: &dyn Fn(f64) -> f64, a: f64, b: f64, n: usize) -> f64 {
         .unwrap_or(0);
     let h = (b - a) / (n - 1) as f64;
     let (lo, hi) = ((grid[best].0 - h).max(a), (grid[best].0 + h).min(b));
-    let x = golden(f, lo, hi, 14);
-    if grid[best].1 < f(x) {
+    let (x, fx) = golden(f, lo, hi, 14);
+    if grid[best].1 < fx {
         grid[best].0
     } else {
         x
@@ -181,4 +183,33 @@ pub fn curvature_stderr(
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::cell::Cell;
+
+    #[test]
+    fn golden_finds_a_parabola_minimum_and_returns_its_value() {
+        let calls = Cell::new(0);
+        let f = |x: f64| {
+            calls.set(calls.get() + 1);
+            (x - 0.3).powi(2) + 2.0
+        };
+        let (x, fx) = golden(&f, -1.0, 2.0, 30);
+        // The bracket shrinks by 0.618 per step: 3 · 0.618^30 ≈ 1.6e-6.
+        assert!((x - 0.3).abs() < 2e-6, "{x}");
+        assert_eq!(fx, f(x));
+        // Two evaluations to start, one per step.
+        assert_eq!(calls.get(), 2 + 30 + 1);
+    }
+
+    #[test]
+    fn minimise_1d_takes_the_deeper_of_two_minima() {
+        // Two minima: the grid finds the deeper one, golden section refines inside its bracket.
+        let f = |x: f64| ((x - 0.2).powi(2)).min((x - 0.8).powi(2) - 0.01);
+        let x = minimise_1d(&f, 0.0, 1.0, 11);
+        assert!((x - 0.8).abs() < 1e-3, "{x}");
+    }
 }

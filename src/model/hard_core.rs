@@ -20,6 +20,7 @@ pub(super) fn hard_core_centres(
     min_distance_mm: f64,
 ) -> Vec<(f64, f64)> {
     let d = min_distance_mm.max(1e-9);
+    let d2 = d * d;
     // A grid of cells of side d: a centre's neighbours within d lie in the 3x3 cells about it.
     let cols = (((x1 - x0) / d).ceil() as usize).max(1);
     let rows = (((y1 - y0) / d).ceil() as usize).max(1);
@@ -42,7 +43,8 @@ pub(super) fn hard_core_centres(
                 (c.saturating_sub(1)..=(c + 1).min(cols - 1)).all(|cc| {
                     cells[rr * cols + cc].iter().all(|&k| {
                         let (x, y) = centres[k as usize];
-                        (x - at.0).hypot(y - at.1) >= d
+                        // Squared: hypot's care for overflow cost a tenth of a render.
+                        (x - at.0).powi(2) + (y - at.1).powi(2) >= d2
                     })
                 })
             });
