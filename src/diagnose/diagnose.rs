@@ -670,7 +670,7 @@ fn settle(
     // plausibility is another finding.
     if !(left.field_significant()
         && fraction < MIN_EXPLAINED_FRACTION
-        && !rest_is_in_catalogue(meas, after, with, w0, infl))
+        && !rest_has_a_name(meas, after, with, w0, infl))
     {
         return settled;
     }
@@ -682,7 +682,7 @@ fn settle(
         explained_fraction: None,
         withheld: Some(Withheld {
             reason: format!(
-                "{w} explains {:.0} % of the low-order field the model leaves, and no geometric catalogue effect explains the rest: its signature is not what the data show (see unexplained)",
+                "{w} explains {:.0} % of the low-order field the model leaves, and no geometric catalogue effect or proposed user effect explains the rest: its signature is not what the data show (see unexplained)",
                 100.0 * fraction
             ),
             effect: w,
@@ -698,11 +698,12 @@ fn explained(before: &Unexplained, after: &Unexplained) -> Option<f64> {
     (fb > 1.0).then(|| ((fb - fa) / (fb - 1.0)).clamp(0.0, 1.0))
 }
 
-/// Whether another geometric catalogue effect, fitted on what the winner leaves (`after`, the
-/// comparison of `with`, the model with the winner), explains at least half of it: then the
-/// winner is one of several effects (the next round finds the next), not the nearest name for
-/// something outside the catalogue.
-fn rest_is_in_catalogue(
+/// Whether another geometric catalogue effect or one of the model's proposed user effects,
+/// fitted on what the winner leaves (`after`, the comparison of `with`, the model with the
+/// winner), explains at least half of it: then the winner is one of several effects (the next
+/// round finds the next), not the nearest name for something outside the catalogue. A user's
+/// effect counts as a catalogue's does: it is what the user said may be there.
+fn rest_has_a_name(
     meas: &Measurement,
     after: &Comparison,
     with: &ModelConfig,
@@ -715,10 +716,23 @@ fn rest_is_in_catalogue(
         // Nothing beyond the model's own scatter is left for another effect to explain.
         return true;
     }
-    EffectId::ALL
+    let catalogue = EffectId::ALL
         .into_iter()
         .filter(|id| !with.effects.has(*id))
-        .filter_map(|id| geometric_candidate(meas, after, &with.effects, id, &[]))
+        .filter_map(|id| geometric_candidate(meas, after, &with.effects, id, &[]));
+    let proposed: Vec<&String> = with
+        .effects
+        .user
+        .iter()
+        .filter(|(_, e)| e.is_proposed())
+        .map(|(name, _)| name)
+        .collect();
+    let samples = (!proposed.is_empty()).then(|| field_samples(meas, after).0);
+    let user = proposed.into_iter().filter_map(|name| {
+        fit_user_effect(samples.as_deref().unwrap_or_default(), &with.effects, name)
+    });
+    catalogue
+        .chain(user)
         .filter(|fit| fit.beyond_null)
         .any(|fit| {
             let next = ModelConfig {
@@ -977,4 +991,4 @@ fn confounded_pairs(
 }
 
 /// What separates lens blur and pixel aperture from the print's own profile.
-pub const PRINT_SEPARATION: &str = "a characterised print (dataset.json pattern.profile \"gaussian\" with its contrast and dot_diameter_mm or measured mtf), a second magnification, a through-focus pair, or a slanted-edge frame measured as in ISO 12233: the print's calibration to the frames absorbs whatever blur one magnification cannot attribute";
+pub const PRINT_SEPARATION: &str = "a characterised print (the dataset.json pattern's dot_spacing_mm and contrast, with profile \"gaussian\" and its dot_diameter_mm or a measured mtf, or profile \"disk\" and its dot_diameter_mm and edge_softness_mm), a second magnification, a through-focus pair, or a slanted-edge frame measured as in ISO 12233: the print's calibration to the frames absorbs whatever blur one magnification cannot attribute";
