@@ -265,8 +265,8 @@ fn fit_candidate(
     let id = match id {
         CandidateId::Catalogue(e) => *e,
         CandidateId::User(name) => {
-            let (samples, _) = field_samples(meas, before);
-            return fit_user_effect(&samples, model, name);
+            let (samples, setting) = field_samples(meas, before);
+            return fit_user_effect(&samples, &setting, model, (name, refit));
         }
     };
     match id {
@@ -481,14 +481,16 @@ fn predict(
         CandidateId::Catalogue(_) => None,
     };
     // The candidate's field at p (px from the centre) for the move t, full-resolution px.
+    // A user effect's own field from its expressions, beside the basis terms (a geometric
+    // candidate's, or the increments of the verdicts re-estimated beside a user effect).
     let field = |p: (f64, f64), t: (f64, f64)| -> (f64, f64) {
-        if let Some((f, values)) = &user {
-            return f.displacement(p, t, values);
-        }
+        let own = user
+            .as_ref()
+            .map_or((0.0, 0.0), |(f, values)| f.displacement(p, t, values));
         fit.geometric
             .field
             .iter()
-            .fold((0.0, 0.0), |(u, v), &(param, value)| {
+            .fold(own, |(u, v), &(param, value)| {
                 let (bu, bv) = geometric_basis(param, p, t, r0);
                 (u + value * bu, v + value * bv)
             })
@@ -727,9 +729,10 @@ fn rest_has_a_name(
         .filter(|(_, e)| e.is_proposed())
         .map(|(name, _)| name)
         .collect();
-    let samples = (!proposed.is_empty()).then(|| field_samples(meas, after).0);
+    let fields = (!proposed.is_empty()).then(|| field_samples(meas, after));
     let user = proposed.into_iter().filter_map(|name| {
-        fit_user_effect(samples.as_deref().unwrap_or_default(), &with.effects, name)
+        let (samples, setting) = fields.as_ref()?;
+        fit_user_effect(samples, setting, &with.effects, (name, &[]))
     });
     catalogue
         .chain(user)

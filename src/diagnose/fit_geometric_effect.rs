@@ -151,12 +151,7 @@ pub fn fit_geometric_effect(
     refit: &[EffectId],
 ) -> Option<ImageFit> {
     let geometric = Geometric::of(effect)?;
-    let again: Vec<GeometricParam> = refit
-        .iter()
-        .filter_map(|e| Geometric::of(*e))
-        .filter(|g| *g != geometric)
-        .flat_map(|g| g.held_terms(model, setting.r0))
-        .collect();
+    let again = held_again(model, refit, setting.r0, Some(geometric));
     let (fit, left_out) = match geometric.terms() {
         Terms::Joint(params) => (
             fit_geometric(samples, &[params, &again[..]].concat())?,
@@ -169,24 +164,45 @@ pub fn fit_geometric_effect(
     let base = with_increments(model, &again_part, setting.scale_px_per_mm);
     let mut written = write_fit(&own_part, setting, &base, (effect, geometric), &left_out);
     if !again_part.params.is_empty() {
-        written.geometric.notes.push(format!(
-            "re-estimated beside it: {}",
-            again_part
-                .params
-                .iter()
-                .zip(&again_part.values)
-                .zip(&again_part.stderr)
-                .map(|((p, v), se)| {
-                    let (e, name) = p.effect_and_name();
-                    format!("{e}.{name} {v:+.3e} ± {se:.1e}")
-                })
-                .collect::<Vec<_>>()
-                .join(", ")
-        ));
+        written.geometric.notes.push(re_estimated_note(&again_part));
         // The field the candidate predicts: its own terms and the others' increments.
         written.geometric.field = fit.params.iter().copied().zip(fit.values.clone()).collect();
     }
     Some(written)
+}
+
+/// The basis terms of the geometric effects in `refit` that `model` holds, but `except`'s: what
+/// a re-estimation beside a candidate frees (see [`fit_geometric_effect`]).
+pub fn held_again(
+    model: &Effects,
+    refit: &[EffectId],
+    r0: f64,
+    except: Option<Geometric>,
+) -> Vec<GeometricParam> {
+    refit
+        .iter()
+        .filter_map(|e| Geometric::of(*e))
+        .filter(|g| Some(*g) != except)
+        .flat_map(|g| g.held_terms(model, r0))
+        .collect()
+}
+
+/// A re-estimation's increments, as a candidate's note says them.
+pub fn re_estimated_note(again: &GeometricFit) -> String {
+    format!(
+        "re-estimated beside it: {}",
+        again
+            .params
+            .iter()
+            .zip(&again.values)
+            .zip(&again.stderr)
+            .map(|((p, v), se)| {
+                let (e, name) = p.effect_and_name();
+                format!("{e}.{name} {v:+.3e} ± {se:.1e}")
+            })
+            .collect::<Vec<_>>()
+            .join(", ")
+    )
 }
 
 /// The coefficient of `d` that basis term `p` multiplies; `p` a distortion term.
@@ -223,7 +239,7 @@ impl GeometricFit {
 
 /// `model` with the increments of a re-estimation added to the effects it holds (first order:
 /// each term's field is linear in it, so increments add).
-fn with_increments(model: &Effects, fit: &GeometricFit, scale_px_per_mm: f64) -> Effects {
+pub fn with_increments(model: &Effects, fit: &GeometricFit, scale_px_per_mm: f64) -> Effects {
     use GeometricParam as P;
     let mut out = model.clone();
     for (&p, &dv) in fit.params.iter().zip(&fit.values) {
