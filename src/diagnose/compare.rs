@@ -408,7 +408,11 @@ fn calibrate_seeded(
                 p.profile_chi2 = decided.profile_chi2;
                 check()?;
                 match_white(meas, &mut nominal, model, pi, seed)?;
-                ProfileKnown::Decided
+                if nominal.patterns[pi].profile_stated {
+                    ProfileKnown::Stated
+                } else {
+                    ProfileKnown::Decided
+                }
             }
             SceneFrom::Calibrate => {
                 check()?;
