@@ -394,7 +394,8 @@ fn calibrate_seeded(
     let check = || go_on().then_some(()).ok_or(DiagnoseError::Cancelled);
     for pi in 0..nominal.patterns.len() {
         let stated = nominal.patterns[pi].pattern.clone();
-        let profile = match scene_from {
+        // Whether an earlier calibration decided the placement and the dots' profile.
+        let decided = match scene_from {
             SceneFrom::Reuse(other) => {
                 nominal.patterns[pi].clone_from(&other.patterns[pi]);
                 continue;
@@ -406,27 +407,22 @@ fn calibrate_seeded(
                 p.pattern.profile = decided.pattern.profile;
                 p.placement_chi2 = decided.placement_chi2;
                 p.profile_chi2 = decided.profile_chi2;
-                check()?;
-                match_white(meas, &mut nominal, model, pi, seed)?;
-                if nominal.patterns[pi].profile_stated {
-                    ProfileKnown::Stated
-                } else {
-                    ProfileKnown::Decided
-                }
+                true
             }
-            SceneFrom::Calibrate => {
-                check()?;
-                match_white(meas, &mut nominal, model, pi, seed)?;
-                if !nominal.patterns[pi].placement_stated {
-                    check()?;
-                    choose_placement(meas, &mut nominal, model, pi, seed)?;
-                }
-                if nominal.patterns[pi].profile_stated {
-                    ProfileKnown::Stated
-                } else {
-                    ProfileKnown::No
-                }
-            }
+            SceneFrom::Calibrate => false,
+        };
+        check()?;
+        match_white(meas, &mut nominal, model, pi, seed)?;
+        if !decided && !nominal.patterns[pi].placement_stated {
+            check()?;
+            choose_placement(meas, &mut nominal, model, pi, seed)?;
+        }
+        let profile = if nominal.patterns[pi].profile_stated {
+            ProfileKnown::Stated
+        } else if decided {
+            ProfileKnown::Decided
+        } else {
+            ProfileKnown::No
         };
         if nominal.patterns[pi].print == PrintKnowledge::Calibrated {
             check()?;

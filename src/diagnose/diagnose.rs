@@ -722,13 +722,7 @@ fn rest_has_a_name(
         .into_iter()
         .filter(|id| !with.effects.has(*id))
         .filter_map(|id| geometric_candidate(meas, after, &with.effects, id, &[]));
-    let proposed: Vec<&String> = with
-        .effects
-        .user
-        .iter()
-        .filter(|(_, e)| e.is_proposed())
-        .map(|(name, _)| name)
-        .collect();
+    let proposed: Vec<&String> = with.effects.proposed_user().collect();
     let fields = (!proposed.is_empty()).then(|| field_samples(meas, after));
     let user = proposed.into_iter().filter_map(|name| {
         let (samples, setting) = fields.as_ref()?;
@@ -774,10 +768,8 @@ fn candidates_to_fit(
     fit_ids.extend(
         model
             .effects
-            .user
-            .iter()
-            .filter(|(_, e)| e.is_proposed())
-            .map(|(name, _)| CandidateId::User(name.clone())),
+            .proposed_user()
+            .map(|name| CandidateId::User(name.clone())),
     );
     (fit_ids, not_identifiable)
 }

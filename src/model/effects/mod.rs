@@ -113,6 +113,14 @@ impl Effects {
         catalogue.chain(user).collect()
     }
 
+    /// The user effects with a parameter still without a value: a diagnosis fits them.
+    pub fn proposed_user(&self) -> impl Iterator<Item = &String> {
+        self.user
+            .iter()
+            .filter(|(_, e)| e.is_proposed())
+            .map(|(name, _)| name)
+    }
+
     /// The enabled effects, in vocabulary order.
     pub fn enabled(&self) -> Vec<EffectId> {
         EffectId::ALL
