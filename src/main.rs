@@ -43,6 +43,13 @@ enum Command {
     Sweep(cli::sweep::SweepArgs),
 }
 
+/// mimalloc instead of the system's allocator: a diagnosis renders thousands of frames, each dot's
+/// footprint a small buffer and each band of rows a large one; glibc's malloc returned the large
+/// ones to the kernel and faulted them back in (12 % of a round), mimalloc keeps them (a round on
+/// a 640x540 control 19.5 -> 16.3 s).
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 fn main() {
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,

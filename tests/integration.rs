@@ -6,6 +6,10 @@
 //! another. A file's tests are named by its module: `cargo test --test integration store::`
 //! runs `tests/store.rs`, `cargo test --test integration exec_camera_bench::` the exec camera's.
 
+/// The binary's allocator (src/main.rs says why): the diagnosis tests are most of the suite.
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 mod common;
 
 mod api_bounded;

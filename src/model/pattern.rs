@@ -8,7 +8,7 @@
 //! the random error (Pan et al., "Study on subset size selection in digital image correlation for
 //! speckle patterns", Opt. Express 16 (2008): σ_u ∝ σ_noise / √(Σ|∇I|²)).
 
-use super::hard_core::hard_core_centres;
+use super::hard_core::hard_core_centres_remembered;
 use serde::{Deserialize, Serialize};
 
 /// FWHM = 2·sqrt(2 ln 2)·σ.
@@ -206,10 +206,10 @@ impl SpecklePattern {
             // Dots of their diameter cannot all keep it beyond the jamming limit (54.7 % of the
             // plane): the distance is held to 0.8 spacing (50 %).
             let distance = self.dot_diameter_mm.min(0.8 * s);
-            let centres = hard_core_centres(&mut rng, field, nx * ny, distance);
+            let centres = hard_core_centres_remembered(&mut rng, field, nx * ny, distance);
             return Ok(centres
-                .into_iter()
-                .map(|(x_mm, y_mm)| TargetDot {
+                .iter()
+                .map(|&(x_mm, y_mm)| TargetDot {
                     x_mm,
                     y_mm,
                     shape,

@@ -187,24 +187,37 @@ impl Dot for GaussianDot {
         Some(Footprint {
             c_lo,
             r_lo,
-            wx: box_gauss_span(c_lo, c_hi, fx, self.x_px, self.sigma_x_px),
-            wy: wy.into_iter().map(|v| v * self.depth).collect(),
-            terms: 1,
+            weights: Weights::Separable {
+                wx: box_gauss_span(c_lo, c_hi, fx, self.x_px, self.sigma_x_px),
+                wy: wy.into_iter().map(|v| v * self.depth).collect(),
+                terms: 1,
+            },
         })
     }
 }
 
-/// A dot's darkening as `terms` separable parts over columns `c_lo..` and rows `r_lo..`, clipped
-/// to the image: its contribution to pixel (c, r) is Σₖ wx[k][c − c_lo] · wy[k][r − r_lo] (the
-/// depth held in wy). A Gaussian is one term; a disk is a sum of strips ([`super::disk`]).
+/// A dot's darkening of the pixels from column `c_lo` and row `r_lo` on, clipped to the image.
 pub struct Footprint {
     pub(super) c_lo: usize,
     pub(super) r_lo: usize,
-    /// `terms` rows of the columns' weights, one after the other.
-    pub(super) wx: Vec<f64>,
-    /// `terms` rows of the rows' weights (times the depth), one after the other.
-    pub(super) wy: Vec<f64>,
-    pub(super) terms: usize,
+    pub(super) weights: Weights,
+}
+
+/// How a [`Footprint`] holds its pixels' darkening.
+pub(super) enum Weights {
+    /// `terms` separable parts: the darkening of pixel (c, r) is Σₖ wx[k][c − c_lo] ·
+    /// wy[k][r − r_lo] (the depth held in wy). A Gaussian is one term; a blurred disk is a sum of
+    /// strips ([`super::disk`]).
+    Separable {
+        /// `terms` rows of the columns' weights, one after the other.
+        wx: Vec<f64>,
+        /// `terms` rows of the rows' weights (times the depth), one after the other.
+        wy: Vec<f64>,
+        terms: usize,
+    },
+    /// Every pixel's darkening, row after row, `columns` per row: a hard disk, whose coverage of
+    /// each pixel has a closed form ([`super::disk`]).
+    Dense { values: Vec<f64>, columns: usize },
 }
 
 impl Footprint {
@@ -225,14 +238,39 @@ impl Footprint {
         Some((c_lo, c_hi, r_lo, r_hi))
     }
 
-    /// Adds the darkening to `acc`, the `rows` rows from `r0` of a `width`-wide image. A term's
-    /// rows where its weight is zero are skipped: a hard disk's strip of 1/8 px touches one or
-    /// two of the dot's rows, and looping over all of them was a quarter of a calibration.
+    /// Adds the darkening to `acc`, the `rows` rows from `r0` of a `width`-wide image.
     fn add_to(&self, acc: &mut [f64], width: usize, r0: usize, rows: usize) {
-        let (nc, nr) = (self.wx.len() / self.terms, self.wy.len() / self.terms);
+        match &self.weights {
+            Weights::Separable { wx, wy, terms } => {
+                self.add_separable(acc, width, (r0, rows), (wx, wy, *terms))
+            }
+            Weights::Dense { values, columns } => {
+                let first = self.r_lo.max(r0);
+                let last = (self.r_lo + values.len() / columns).min(r0 + rows);
+                for r in first..last {
+                    let row = &mut acc[(r - r0) * width + self.c_lo..][..*columns];
+                    let weights = &values[(r - self.r_lo) * columns..][..*columns];
+                    for (cell, &v) in row.iter_mut().zip(weights) {
+                        *cell += v;
+                    }
+                }
+            }
+        }
+    }
+
+    /// [`Footprint::add_to`] of separable terms. A term's rows where its weight is zero are
+    /// skipped: a blurred disk's strip is as high as its blur, and touches few of the dot's rows.
+    fn add_separable(
+        &self,
+        acc: &mut [f64],
+        width: usize,
+        (r0, rows): (usize, usize),
+        (wx, wy, terms): (&[f64], &[f64], usize),
+    ) {
+        let (nc, nr) = (wx.len() / terms, wy.len() / terms);
         let first = self.r_lo.max(r0);
         let last = (self.r_lo + nr).min(r0 + rows);
-        for (wx, wy) in self.wx.chunks_exact(nc).zip(self.wy.chunks_exact(nr)) {
+        for (wx, wy) in wx.chunks_exact(nc).zip(wy.chunks_exact(nr)) {
             for r in first..last {
                 let a = wy[r - self.r_lo];
                 if a == 0.0 {
