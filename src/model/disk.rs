@@ -11,6 +11,7 @@
 //! lies at frequencies the blur removes (its transfer function exp(−2π²σ²f²) at f = 1/σ is
 //! 2.7e-9).
 
+use super::normal::{integrated_cdf, NORMAL_RANGE};
 use super::speckle::{Dot, Footprint, Weights};
 
 /// One disk in image coordinates (px): an axis-aligned ellipse of radii (`radius_x_px`,
@@ -240,7 +241,7 @@ impl Dot for DiskDot {
 
 /// [`box_rect`] of the pixels `lo..=hi`, times `scale`, appended to `out`. With a full aperture
 /// a pixel's upper edge is the next one's lower edge: each antiderivative is evaluated once.
-/// Pixels whose aperture ends more than [`G_RANGE`] σ from the interval are zero, and are written
+/// Pixels whose aperture ends more than [`NORMAL_RANGE`] σ from the interval are zero, and are written
 /// as zero without evaluating anything: beyond the interval's far end the two ramps' difference
 /// is constant, and computed it left rounding noise (1e-17 of the depth) that made
 /// [`Footprint`]'s sum walk every row below a strip of 1/8 px.
@@ -252,7 +253,7 @@ fn box_rect_span(
     sigma: f64,
     scale: f64,
 ) {
-    let reach = G_RANGE * sigma.max(0.0) + 0.5 * a;
+    let reach = NORMAL_RANGE * sigma.max(0.0) + 0.5 * a;
     let first = (x0 - reach).floor().max(lo as f64) as usize;
     let last = ((x1 + reach).ceil().max(0.0) as usize).min(hi);
     if first > last {
@@ -300,54 +301,6 @@ fn ramp(x: f64, sigma: f64) -> f64 {
         return x.max(0.0);
     }
     sigma * integrated_cdf(x / sigma)
-}
-
-/// Beyond ±9 the edge is hard to double precision (Φ(−9) ≈ 1e-19).
-const G_RANGE: f64 = 9.0;
-/// Nodes of the table of G per unit of z.
-const G_NODES_PER_UNIT: f64 = 256.0;
-
-/// G(z) = zΦ(z) + φ(z), the integral of the normal CDF, by cubic Hermite interpolation in a
-/// table of G and its derivative Φ (error below 1e-12: h⁴/384 · max|G⁗|, h = 1/256). A disk's
-/// footprint evaluates G some hundred times per strip; erfc and exp there were half of a
-/// print's calibration.
-#[inline]
-fn integrated_cdf(z: f64) -> f64 {
-    if z >= G_RANGE {
-        return z;
-    }
-    if z <= -G_RANGE {
-        return 0.0;
-    }
-    let table = g_table();
-    let t = (z + G_RANGE) * G_NODES_PER_UNIT;
-    let i = (t as usize).min(table.len() - 2);
-    let f = t - i as f64;
-    let h = 1.0 / G_NODES_PER_UNIT;
-    let ([g0, d0], [g1, d1]) = (table[i], table[i + 1]);
-    let f2 = f * f;
-    let f3 = f2 * f;
-    (2.0 * f3 - 3.0 * f2 + 1.0) * g0
-        + (f3 - 2.0 * f2 + f) * h * d0
-        + (-2.0 * f3 + 3.0 * f2) * g1
-        + (f3 - f2) * h * d1
-}
-
-/// (G(z), Φ(z)) at z = −9 + k/256, k = 0..=4608.
-fn g_table() -> &'static [[f64; 2]] {
-    static TABLE: std::sync::OnceLock<Vec<[f64; 2]>> = std::sync::OnceLock::new();
-    TABLE.get_or_init(|| {
-        let n = (2.0 * G_RANGE * G_NODES_PER_UNIT) as usize;
-        (0..=n)
-            .map(|k| {
-                let z = -G_RANGE + k as f64 / G_NODES_PER_UNIT;
-                // Φ from erfc on both sides: erfc keeps its relative precision in the far tail.
-                let cdf = 0.5 * libm::erfc(-z / std::f64::consts::SQRT_2);
-                let pdf = (-0.5 * z * z).exp() / (2.0 * std::f64::consts::PI).sqrt();
-                [z * cdf + pdf, cdf]
-            })
-            .collect()
-    })
 }
 
 #[cfg(test)]
@@ -416,18 +369,6 @@ mod tests {
                     );
                 }
             }
-        }
-    }
-
-    /// The table's G against erfc and exp directly, between and on its nodes.
-    #[test]
-    fn the_integrated_cdf_table_is_exact_to_1e_12() {
-        for k in 0..20_000 {
-            let z = -9.5 + 19.0 * k as f64 / 20_000.0 + 1e-4;
-            let cdf = 0.5 * libm::erfc(-z / std::f64::consts::SQRT_2);
-            let pdf = (-0.5 * z * z).exp() / (2.0 * std::f64::consts::PI).sqrt();
-            let exact = z * cdf + pdf;
-            assert!((integrated_cdf(z) - exact).abs() < 1e-12, "{z}");
         }
     }
 

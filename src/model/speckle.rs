@@ -7,6 +7,7 @@
 //! factor. Circular dots stay circular under rotation and translation; an axis-aligned stretch makes
 //! them axis-aligned ellipses, which still separate.
 
+use super::normal::cdf;
 use crate::image::Image;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -286,32 +287,34 @@ impl Footprint {
 }
 
 /// [`box_gauss`] of the pixels `lo..=hi`. With a full aperture a pixel's upper edge is the next
-/// one's lower edge, so each erf is evaluated once (the same arguments, the same values).
+/// one's lower edge, so each Φ is evaluated once (the same arguments, the same values).
 fn box_gauss_span(lo: usize, hi: usize, a: f64, m: f64, sigma: f64) -> Vec<f64> {
     if a != 1.0 {
         return (lo..=hi)
             .map(|c| box_gauss(c as f64, a, m, sigma))
             .collect();
     }
-    let s = std::f64::consts::SQRT_2 * sigma;
-    let edge = |c: usize| libm::erf((c as f64 - 0.5 - m) / s);
+    let edge = |c: usize| cdf((c as f64 - 0.5 - m) / sigma);
     let mut below = edge(lo);
     (lo..=hi)
         .map(|c| {
             let above = edge(c + 1);
-            let v = sigma * (std::f64::consts::PI / 2.0).sqrt() * (above - below) / a;
+            let v = sigma * SQRT_TAU * (above - below) / a;
             below = above;
             v
         })
         .collect()
 }
 
-/// Mean of exp(-(x-m)²/2σ²) over [c - a/2, c + a/2].
+/// √(2π): ∫ exp(−x²/2σ²) dx = σ√(2π).
+const SQRT_TAU: f64 = 2.506_628_274_631_000_7;
+
+/// Mean of exp(-(x-m)²/2σ²) over [c - a/2, c + a/2]: σ√(2π) times the difference of Φ across
+/// the aperture, over its width.
 fn box_gauss(c: f64, a: f64, m: f64, sigma: f64) -> f64 {
-    let s = std::f64::consts::SQRT_2 * sigma;
-    let hi = (c + 0.5 * a - m) / s;
-    let lo = (c - 0.5 * a - m) / s;
-    sigma * (std::f64::consts::PI / 2.0).sqrt() * (libm::erf(hi) - libm::erf(lo)) / a
+    let hi = (c + 0.5 * a - m) / sigma;
+    let lo = (c - 0.5 * a - m) / sigma;
+    sigma * SQRT_TAU * (cdf(hi) - cdf(lo)) / a
 }
 
 #[cfg(test)]
@@ -326,7 +329,7 @@ mod tests {
     }
 
     /// The full-aperture span shares each pixel's edges with its neighbours: the same arguments
-    /// to erf, so the same values as one box_gauss per pixel, bit for bit.
+    /// to Φ, so the same values as one box_gauss per pixel, bit for bit.
     #[test]
     fn a_full_aperture_span_is_box_gauss_per_pixel() {
         for (m, sigma) in [(20.3f64, 2.0f64), (0.49, 0.7), (1234.567, 9.3)] {
