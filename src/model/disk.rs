@@ -108,6 +108,45 @@ impl DiskDot {
             columns: nc,
         }
     }
+
+    /// A blurred disk's darkening of the pixels `cols` x `rows`: the sum of its strips, each a
+    /// separable rectangle, accumulated into one patch over only the pixels each strip reaches
+    /// (a strip 1/8 px high reaches a few rows), the patch then added as a hard disk's is.
+    fn blurred_coverage(
+        &self,
+        (c_lo, c_hi): (usize, usize),
+        (r_lo, r_hi): (usize, usize),
+        (fx, fy): (f64, f64),
+    ) -> Weights {
+        let (nc, nr) = (c_hi - c_lo + 1, r_hi - r_lo + 1);
+        let (t, half_widths) = self.strips();
+        let mut values = vec![0.0; nc * nr];
+        let (mut wx, mut wy) = (Vec::with_capacity(nc), Vec::with_capacity(nr));
+        for (k, w) in half_widths.iter().enumerate() {
+            let (x0, x1) = (self.x_px - w, self.x_px + w);
+            let y0 = self.y_px + t[k] * self.radius_y_px;
+            let y1 = self.y_px + t[k + 1] * self.radius_y_px;
+            let c0 = box_rect_span(&mut wx, (c_lo, c_hi), fx, (x0, x1), self.blur_x_px, 1.0);
+            let r0 = box_rect_span(
+                &mut wy,
+                (r_lo, r_hi),
+                fy,
+                (y0, y1),
+                self.blur_y_px,
+                self.depth,
+            );
+            for (r, &a) in (r0 - r_lo..).zip(&wy) {
+                let row = &mut values[r * nc + (c0 - c_lo)..][..wx.len()];
+                for (cell, &v) in row.iter_mut().zip(&wx) {
+                    *cell += a * v;
+                }
+            }
+        }
+        Weights::Dense {
+            values,
+            columns: nc,
+        }
+    }
 }
 
 /// S(t) = ∫₋₁ᵗ √(1 − s²) ds, t clamped to [−1, 1]: half the unit disk's area left of t.
@@ -202,49 +241,26 @@ impl Dot for DiskDot {
 
     fn footprint(&self, size: (usize, usize), aperture: (f64, f64)) -> Option<Footprint> {
         let (c_lo, c_hi, r_lo, r_hi) = Footprint::span(self, size, aperture)?;
-        if self.blur_x_px <= 0.0 && self.blur_y_px <= 0.0 {
-            return Some(Footprint {
-                c_lo,
-                r_lo,
-                weights: self.hard_coverage((c_lo, c_hi), (r_lo, r_hi), aperture),
-            });
-        }
-        let (fx, fy) = aperture;
-        let (t, half_widths) = self.strips();
-        let mut wx = Vec::with_capacity(half_widths.len() * (c_hi - c_lo + 1));
-        let mut wy = Vec::with_capacity(half_widths.len() * (r_hi - r_lo + 1));
-        for (k, w) in half_widths.iter().enumerate() {
-            let (x0, x1) = (self.x_px - w, self.x_px + w);
-            box_rect_span(&mut wx, (c_lo, c_hi), fx, (x0, x1), self.blur_x_px, 1.0);
-            let y0 = self.y_px + t[k] * self.radius_y_px;
-            let y1 = self.y_px + t[k + 1] * self.radius_y_px;
-            box_rect_span(
-                &mut wy,
-                (r_lo, r_hi),
-                fy,
-                (y0, y1),
-                self.blur_y_px,
-                self.depth,
-            );
-        }
+        let (cols, rows) = ((c_lo, c_hi), (r_lo, r_hi));
+        let weights = if self.blur_x_px <= 0.0 && self.blur_y_px <= 0.0 {
+            self.hard_coverage(cols, rows, aperture)
+        } else {
+            self.blurred_coverage(cols, rows, aperture)
+        };
         Some(Footprint {
             c_lo,
             r_lo,
-            weights: Weights::Separable {
-                wx,
-                wy,
-                terms: half_widths.len(),
-            },
+            weights,
         })
     }
 }
 
-/// [`box_rect`] of the pixels `lo..=hi`, times `scale`, appended to `out`. With a full aperture
-/// a pixel's upper edge is the next one's lower edge: each antiderivative is evaluated once.
-/// Pixels whose aperture ends more than [`NORMAL_RANGE`] σ from the interval are zero, and are written
-/// as zero without evaluating anything: beyond the interval's far end the two ramps' difference
-/// is constant, and computed it left rounding noise (1e-17 of the depth) that made
-/// [`Footprint`]'s sum walk every row below a strip of 1/8 px.
+/// [`box_rect`] of the pixels of `lo..=hi` the interval reaches, times `scale`, written to `out`
+/// (cleared first); returns the first of them. With a full aperture a pixel's upper edge is the
+/// next one's lower edge: each antiderivative is evaluated once. Pixels whose aperture ends more
+/// than [`NORMAL_RANGE`] σ from the interval are zero and left out: beyond the interval's far
+/// end the two ramps' difference is constant, and computed it left rounding noise (1e-17 of the
+/// depth) on every pixel below a strip.
 fn box_rect_span(
     out: &mut Vec<f64>,
     (lo, hi): (usize, usize),
@@ -252,18 +268,16 @@ fn box_rect_span(
     (x0, x1): (f64, f64),
     sigma: f64,
     scale: f64,
-) {
+) -> usize {
+    out.clear();
     let reach = NORMAL_RANGE * sigma.max(0.0) + 0.5 * a;
     let first = (x0 - reach).floor().max(lo as f64) as usize;
     let last = ((x1 + reach).ceil().max(0.0) as usize).min(hi);
     if first > last {
-        out.extend((lo..=hi).map(|_| 0.0));
-        return;
+        return lo;
     }
-    out.extend((lo..first).map(|_| 0.0));
     if sigma <= 0.0 {
-        // A hard edge: the aperture's overlap with the interval, the ramps' difference in closed
-        // form (a hard print's strips are 1/8 px: most of its footprint's values).
+        // A hard edge along this axis only: the aperture's overlap with the interval.
         out.extend((first..=last).map(|c| {
             let (lo, hi) = (c as f64 - 0.5 * a, c as f64 + 0.5 * a);
             scale * (hi.min(x1) - lo.max(x0)).max(0.0) / a
@@ -283,7 +297,7 @@ fn box_rect_span(
             v
         }));
     }
-    out.extend((last + 1..=hi).map(|_| 0.0));
+    first
 }
 
 /// The mean over the aperture [c − a/2, c + a/2] of the interval [x0, x1] blurred by a Gaussian

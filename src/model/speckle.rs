@@ -207,8 +207,7 @@ pub struct Footprint {
 /// How a [`Footprint`] holds its pixels' darkening.
 pub(super) enum Weights {
     /// `terms` separable parts: the darkening of pixel (c, r) is Σₖ wx[k][c − c_lo] ·
-    /// wy[k][r − r_lo] (the depth held in wy). A Gaussian is one term; a blurred disk is a sum of
-    /// strips ([`super::disk`]).
+    /// wy[k][r − r_lo] (the depth held in wy). A Gaussian dot is one term.
     Separable {
         /// `terms` rows of the columns' weights, one after the other.
         wx: Vec<f64>,
@@ -216,8 +215,8 @@ pub(super) enum Weights {
         wy: Vec<f64>,
         terms: usize,
     },
-    /// Every pixel's darkening, row after row, `columns` per row: a hard disk, whose coverage of
-    /// each pixel has a closed form ([`super::disk`]).
+    /// Every pixel's darkening, row after row, `columns` per row: a disk ([`super::disk`]), hard
+    /// (its coverage of each pixel in closed form) or blurred (a sum of strips).
     Dense { values: Vec<f64>, columns: usize },
 }
 
@@ -259,8 +258,8 @@ impl Footprint {
         }
     }
 
-    /// [`Footprint::add_to`] of separable terms. A term's rows where its weight is zero are
-    /// skipped: a blurred disk's strip is as high as its blur, and touches few of the dot's rows.
+    /// [`Footprint::add_to`] of separable terms; a term's rows where its weight is zero are
+    /// skipped.
     fn add_separable(
         &self,
         acc: &mut [f64],
