@@ -207,14 +207,14 @@ pub fn psd(img: &Image, along_x: bool) -> Vec<PsdBin> {
     let mut sums = vec![vec![0.0f64; nbins]; groups];
     let mut counts = vec![vec![0usize; nbins]; groups];
     let scale = 1.0 / (wsum2 * mean2);
-    // The lines one after the other in memory: columns are copied out once.
-    let lines: Vec<f32> = if along_x {
-        img.data().to_vec()
+    // The lines one after the other in memory: rows as they are, columns copied out once.
+    let lines: std::borrow::Cow<[f32]> = if along_x {
+        img.data().into()
     } else {
         (0..w)
-            .flat_map(|c| (0..h).map(move |r| (r, c)))
-            .map(|(r, c)| img.data()[r * w + c])
-            .collect()
+            .flat_map(|c| (0..h).map(move |r| img.data()[r * w + c]))
+            .collect::<Vec<f32>>()
+            .into()
     };
     let windowed = |line: usize| -> Vec<f64> {
         let values = &lines[line * len..][..len];

@@ -1,15 +1,17 @@
 //! Hard-edged disk dots (a toner or laser print), blurred by a Gaussian and integrated exactly
 //! over rectangular pixel apertures.
 //!
-//! A disk is cut into horizontal strips of equal height; each strip is replaced by the rectangle
-//! of the same area (its half-width the mean of the disk's over the strip, in closed form), so
-//! the disk's area is kept exactly and its outline to within a strip's height. A rectangle
-//! blurred by a Gaussian and averaged over a rectangular aperture separates into two
+//! A hard disk's coverage of each pixel's aperture has a closed form: the inclusion–exclusion
+//! of the disk's area below and left of the aperture's four corners ([`corner_area`]).
+//!
+//! A blurred disk is cut into horizontal strips of equal height; each strip is replaced by the
+//! rectangle of the same area (its half-width the mean of the disk's over the strip, in closed
+//! form), so the disk's area is kept exactly and its outline to within a strip's height. A
+//! rectangle blurred by a Gaussian and averaged over a rectangular aperture separates into two
 //! one-dimensional integrals, each a difference of the integrated normal CDF
-//! (G(z) = zΦ(z) + φ(z)): the disk is a sum of separable terms, one per strip. Strips are 1/8 px
-//! high on a hard edge; under a blur of σ they may be σ high, since the outline's error then
-//! lies at frequencies the blur removes (its transfer function exp(−2π²σ²f²) at f = 1/σ is
-//! 2.7e-9).
+//! (G(z) = zΦ(z) + φ(z)): the disk is a sum of separable terms, one per strip. Strips are σ
+//! high, at least 1/8 px, since the outline's error then lies at frequencies the blur removes
+//! (its transfer function exp(−2π²σ²f²) at f = 1/σ is 2.7e-9).
 
 use super::normal::{integrated_cdf, NORMAL_RANGE};
 use super::speckle::{Dot, Footprint, Weights};
@@ -51,7 +53,7 @@ impl DiskDot {
         (t, half_widths)
     }
 
-    /// A hard disk's darkening of the pixels `cols` x `rows`: the depth times the fraction of
+    /// A hard disk's darkening of the pixels `cols` x `rows`, row after row: the depth times the fraction of
     /// each pixel's aperture the ellipse covers, exactly. In the unit disk's coordinates
     /// (u, v) = ((x − x̄)/rx, (y − ȳ)/ry) the covered area of a rectangle is the inclusion–
     /// exclusion of [`corner_area`] at its four corners, times rx·ry; with a full aperture a
@@ -61,7 +63,7 @@ impl DiskDot {
         (c_lo, c_hi): (usize, usize),
         (r_lo, r_hi): (usize, usize),
         (fx, fy): (f64, f64),
-    ) -> Weights {
+    ) -> Vec<f64> {
         let (nc, nr) = (c_hi - c_lo + 1, r_hi - r_lo + 1);
         // Each pixel's lower and upper edge, as indices into the edges' list.
         let edges = |lo: usize, n: usize, a: f64, centre: f64, radius: f64| {
@@ -103,13 +105,10 @@ impl DiskDot {
                 values.push(scale * area.max(0.0));
             }
         }
-        Weights::Dense {
-            values,
-            columns: nc,
-        }
+        values
     }
 
-    /// A blurred disk's darkening of the pixels `cols` x `rows`: the sum of its strips, each a
+    /// A blurred disk's darkening of the pixels `cols` x `rows`, row after row: the sum of its strips, each a
     /// separable rectangle, accumulated into one patch over only the pixels each strip reaches
     /// (a strip 1/8 px high reaches a few rows), the patch then added as a hard disk's is.
     fn blurred_coverage(
@@ -117,7 +116,7 @@ impl DiskDot {
         (c_lo, c_hi): (usize, usize),
         (r_lo, r_hi): (usize, usize),
         (fx, fy): (f64, f64),
-    ) -> Weights {
+    ) -> Vec<f64> {
         let (nc, nr) = (c_hi - c_lo + 1, r_hi - r_lo + 1);
         let (t, half_widths) = self.strips();
         let mut values = vec![0.0; nc * nr];
@@ -142,10 +141,7 @@ impl DiskDot {
                 }
             }
         }
-        Weights::Dense {
-            values,
-            columns: nc,
-        }
+        values
     }
 }
 
@@ -242,7 +238,7 @@ impl Dot for DiskDot {
     fn footprint(&self, size: (usize, usize), aperture: (f64, f64)) -> Option<Footprint> {
         let (c_lo, c_hi, r_lo, r_hi) = Footprint::span(self, size, aperture)?;
         let (cols, rows) = ((c_lo, c_hi), (r_lo, r_hi));
-        let weights = if self.blur_x_px <= 0.0 && self.blur_y_px <= 0.0 {
+        let values = if self.blur_x_px <= 0.0 && self.blur_y_px <= 0.0 {
             self.hard_coverage(cols, rows, aperture)
         } else {
             self.blurred_coverage(cols, rows, aperture)
@@ -250,7 +246,10 @@ impl Dot for DiskDot {
         Some(Footprint {
             c_lo,
             r_lo,
-            weights,
+            weights: Weights::Dense {
+                values,
+                columns: c_hi - c_lo + 1,
+            },
         })
     }
 }

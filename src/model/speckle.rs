@@ -1,5 +1,5 @@
 //! Speckle made of dots, rendered by exact integration over rectangular pixel apertures: Gaussian
-//! dots here, hard-edged disks in `disk.rs`, each a sum of separable terms (a [`Footprint`]).
+//! dots here, hard-edged disks in `disk.rs`, each a [`Footprint`] over the pixels it reaches.
 //!
 //! A dot darkens the background by `depth · exp(-((x-xc)²/2σx² + (y-yc)²/2σy²))`. Its integral over
 //! the aperture [c - fx/2, c + fx/2] x [r - fy/2, r + fy/2] of pixel (c, r) separates into two
@@ -94,7 +94,7 @@ pub trait Dot: Clone + Send + Sync {
     fn y_px(&self) -> f64;
     /// How far the dot reaches from its centre along x and y, px, with an `aperture`.
     fn reach_px(&self, aperture: (f64, f64)) -> (f64, f64);
-    /// The dot's darkening of a `size` image as a sum of separable terms; None where it reaches
+    /// The dot's darkening of a `size` image; None where it reaches
     /// no pixel.
     fn footprint(&self, size: (usize, usize), aperture: (f64, f64)) -> Option<Footprint>;
 }
@@ -191,7 +191,6 @@ impl Dot for GaussianDot {
             weights: Weights::Separable {
                 wx: box_gauss_span(c_lo, c_hi, fx, self.x_px, self.sigma_x_px),
                 wy: wy.into_iter().map(|v| v * self.depth).collect(),
-                terms: 1,
             },
         })
     }
@@ -206,15 +205,9 @@ pub struct Footprint {
 
 /// How a [`Footprint`] holds its pixels' darkening.
 pub(super) enum Weights {
-    /// `terms` separable parts: the darkening of pixel (c, r) is Σₖ wx[k][c − c_lo] ·
-    /// wy[k][r − r_lo] (the depth held in wy). A Gaussian dot is one term.
-    Separable {
-        /// `terms` rows of the columns' weights, one after the other.
-        wx: Vec<f64>,
-        /// `terms` rows of the rows' weights (times the depth), one after the other.
-        wy: Vec<f64>,
-        terms: usize,
-    },
+    /// A product of one profile along the rows and one along the columns: the darkening of pixel
+    /// (c, r) is wx[c − c_lo] · wy[r − r_lo] (the depth held in wy). A Gaussian dot.
+    Separable { wx: Vec<f64>, wy: Vec<f64> },
     /// Every pixel's darkening, row after row, `columns` per row: a disk ([`super::disk`]), hard
     /// (its coverage of each pixel in closed form) or blurred (a sum of strips).
     Dense { values: Vec<f64>, columns: usize },
@@ -240,45 +233,24 @@ impl Footprint {
 
     /// Adds the darkening to `acc`, the `rows` rows from `r0` of a `width`-wide image.
     fn add_to(&self, acc: &mut [f64], width: usize, r0: usize, rows: usize) {
-        match &self.weights {
-            Weights::Separable { wx, wy, terms } => {
-                self.add_separable(acc, width, (r0, rows), (wx, wy, *terms))
-            }
-            Weights::Dense { values, columns } => {
-                let first = self.r_lo.max(r0);
-                let last = (self.r_lo + values.len() / columns).min(r0 + rows);
-                for r in first..last {
-                    let row = &mut acc[(r - r0) * width + self.c_lo..][..*columns];
-                    let weights = &values[(r - self.r_lo) * columns..][..*columns];
+        let (columns, patch_rows) = match &self.weights {
+            Weights::Separable { wx, wy } => (wx.len(), wy.len()),
+            Weights::Dense { values, columns } => (*columns, values.len() / columns),
+        };
+        for r in self.r_lo.max(r0)..(self.r_lo + patch_rows).min(r0 + rows) {
+            let row = &mut acc[(r - r0) * width + self.c_lo..][..columns];
+            match &self.weights {
+                Weights::Separable { wx, wy } => {
+                    let a = wy[r - self.r_lo];
+                    for (cell, &v) in row.iter_mut().zip(wx) {
+                        *cell += a * v;
+                    }
+                }
+                Weights::Dense { values, .. } => {
+                    let weights = &values[(r - self.r_lo) * columns..][..columns];
                     for (cell, &v) in row.iter_mut().zip(weights) {
                         *cell += v;
                     }
-                }
-            }
-        }
-    }
-
-    /// [`Footprint::add_to`] of separable terms; a term's rows where its weight is zero are
-    /// skipped.
-    fn add_separable(
-        &self,
-        acc: &mut [f64],
-        width: usize,
-        (r0, rows): (usize, usize),
-        (wx, wy, terms): (&[f64], &[f64], usize),
-    ) {
-        let (nc, nr) = (wx.len() / terms, wy.len() / terms);
-        let first = self.r_lo.max(r0);
-        let last = (self.r_lo + nr).min(r0 + rows);
-        for (wx, wy) in wx.chunks_exact(nc).zip(wy.chunks_exact(nr)) {
-            for r in first..last {
-                let a = wy[r - self.r_lo];
-                if a == 0.0 {
-                    continue;
-                }
-                let row = &mut acc[(r - r0) * width..][..width];
-                for (cell, &vx) in row[self.c_lo..][..nc].iter_mut().zip(wx) {
-                    *cell += a * vx;
                 }
             }
         }
