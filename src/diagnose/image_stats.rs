@@ -18,7 +18,7 @@
 //! sub-blocks, pixels), used by the χ² of [`super::bic`].
 
 use crate::image::Image;
-use rustfft::{num_complex::Complex, FftPlanner};
+use ffdic_fft::{Complex, Planner64};
 use serde::{Deserialize, Serialize};
 
 /// Side of the centred crop the spectra and noise are computed on.
@@ -185,7 +185,7 @@ pub fn psd(img: &Image, along_x: bool) -> Vec<PsdBin> {
         .map(|i| 0.5 - 0.5 * (2.0 * std::f64::consts::PI * i as f64 / len as f64).cos())
         .collect();
     let wsum2: f64 = window.iter().map(|x| x * x).sum();
-    let fft = FftPlanner::<f64>::new().plan_fft_forward(len);
+    let fft = Planner64::new().plan_fft_forward(len);
     let nbins = 12usize;
     let (fmin, fmax) = (2.0 / len as f64, 0.5);
     let edges: Vec<f64> = (0..=nbins)

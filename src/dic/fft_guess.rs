@@ -8,9 +8,8 @@
 //! direction is found without circular wrap-around.
 
 use crate::image::{Image, Roi};
+use ffdic_fft::{Complex, Planner32};
 use rayon::prelude::*;
-use rustfft::num_complex::Complex;
-use rustfft::FftPlanner;
 
 /// Side of the reference window: big enough for a sharp peak, small enough to stay cheap.
 const MAX_WINDOW_PX: usize = 384;
@@ -88,7 +87,7 @@ pub(super) fn offset_of_window(
         }
     }
 
-    let mut planner = FftPlanner::<f32>::new();
+    let mut planner = Planner32::new();
     fft2d(&mut planner, &mut a, l, false);
     fft2d(&mut planner, &mut b, l, false);
     // Half-way whitening (divide by sqrt|X|): sharper than plain cross-correlation, steadier
@@ -121,12 +120,7 @@ pub(super) fn offset_of_window(
 
 /// In-place 2D FFT of an n x n row-major array (rows in parallel, then columns through a
 /// transpose).
-pub(super) fn fft2d(
-    planner: &mut FftPlanner<f32>,
-    data: &mut [Complex<f32>],
-    n: usize,
-    inverse: bool,
-) {
+pub(super) fn fft2d(planner: &mut Planner32, data: &mut [Complex<f32>], n: usize, inverse: bool) {
     let fft = if inverse {
         planner.plan_fft_inverse(n)
     } else {

@@ -12,8 +12,7 @@
 use super::fft_guess::{fast_fft_len_at_most, fft2d, offset_of_window};
 use super::Warp;
 use crate::image::{Image, Roi};
-use rustfft::num_complex::Complex;
-use rustfft::FftPlanner;
+use ffdic_fft::{Complex, Planner32};
 
 /// Side of the square windows whose spectra are compared.
 const SPECTRUM_WINDOW_PX: usize = 256;
@@ -80,7 +79,7 @@ pub fn estimate_similarity(
     // The spectra must hold the same material: the deformed window sits where the rigid
     // offset puts it — but a rigid offset found under a large rotation may be a false peak, so
     // the window in place is tried as well, and the sharper log-polar peak wins.
-    let mut planner = FftPlanner::<f32>::new();
+    let mut planner = Planner32::new();
     let ref_spectrum = magnitude_spectrum(&mut planner, reference, (rx, ry), k)?;
     let n = LOG_POLAR_SAMPLES;
     let max_radius = k as f64 / 2.0 - 2.0;
@@ -149,7 +148,7 @@ pub fn estimate_similarity(
 /// Phase correlation of two log-polar spectra: (angle, scale, peak height). Rows are angle,
 /// columns log-radius; shifts beyond half an axis are negative.
 fn rotation_and_scale(
-    planner: &mut FftPlanner<f32>,
+    planner: &mut Planner32,
     mut a: Vec<Complex<f32>>,
     mut b: Vec<Complex<f32>>,
     log_step: f64,
@@ -200,7 +199,7 @@ fn rotation_and_scale(
 /// weighted by Reddy & Chatterji's high-pass (1 − cos πξ cos πη)(2 − cos πξ cos πη), which
 /// lets the texture's frequencies speak rather than the window's.
 fn magnitude_spectrum(
-    planner: &mut FftPlanner<f32>,
+    planner: &mut Planner32,
     image: &Image,
     (x0, y0): (usize, usize),
     k: usize,
