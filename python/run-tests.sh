@@ -22,21 +22,22 @@ VENV="${CARGO_TARGET_DIR:-$ROOT/target}/python-venv"
 STAMP="$VENV/.requirements.sha256"
 want="$(sha256sum "$HERE/tests/requirements.txt" | cut -d' ' -f1)"
 if [ ! -x "$VENV/bin/pytest" ] || [ "$(cat "$STAMP" 2>/dev/null)" != "$want" ]; then
-  echo "python: installing the pinned test requirements into $VENV"
+  echo "python: installing the pinned test requirements into $VENV (at ${SECONDS} s since this script began)"
   [ -x "$VENV/bin/python" ] || python3 -m venv "$VENV"
   "$VENV/bin/pip" install --quiet --disable-pip-version-check -r "$HERE/tests/requirements.txt"
   echo "$want" >"$STAMP"
 fi
 
-echo "python: pip install ./python"
+echo "python: pip install ./python (at ${SECONDS} s)"
 "$VENV/bin/pip" install --quiet --disable-pip-version-check --force-reinstall --no-deps ./python
 
-echo "python: pytest python/tests"
+echo "python: pytest python/tests (at ${SECONDS} s)"
 FFDIC_BIN="$BIN" "$VENV/bin/python" -m pytest python/tests -q -p no:cacheprovider
 
-echo "python: the example (python/examples/paper_study.py) on the mock bench"
+echo "python: the example (python/examples/paper_study.py) on the mock bench (at ${SECONDS} s)"
 EXAMPLE_DIR="$(mktemp -d "${TMPDIR:-/tmp}/ffdic-example.XXXXXX")"
 trap 'rm -rf "$EXAMPLE_DIR"' EXIT
 (cd "$EXAMPLE_DIR" && FFDIC_BIN="$BIN" "$VENV/bin/python" "$ROOT/python/examples/paper_study.py" >example.log 2>&1) || {
   cat "$EXAMPLE_DIR/example.log"; echo "python: the example failed" >&2; exit 1; }
 tail -n 5 "$EXAMPLE_DIR/example.log"
+echo "python: done (at ${SECONDS} s since this script began)"
