@@ -18,7 +18,7 @@
 //!    status if it still fails.
 
 use super::bspline::BSplineImage;
-use super::fft_guess::global_offset;
+use super::fft_guess::ReferenceSpectrum;
 use super::icgn::{Scratch, SubsetReference};
 use super::integer_search::integer_search;
 use super::mask::{analysed_points, RasterMask};
@@ -79,6 +79,9 @@ pub struct PreparedReference {
     analysed: Vec<bool>,
     /// Per grid point: grey-level standard deviation of its pre-filtered reference subset.
     subset_std: Vec<f64>,
+    /// The global offset's reference window, transformed once for every deformed frame; `None`
+    /// for a reference without texture (offset (0, 0)).
+    offset_reference: Option<ReferenceSpectrum>,
 }
 
 /// How a seed's first guess is made.
@@ -131,7 +134,11 @@ impl PreparedReference {
         let image = gaussian_blur(image, settings.prefilter_sigma_px);
         let (grad_x, grad_y) = BSplineImage::new(&image, settings.interpolation).gradient_images();
         let subset_std = subset_stds(&image, &grid, settings.half_subset());
+        let size = (image.width(), image.height());
+        let offset_reference =
+            ReferenceSpectrum::of_image(&image, grid.roi, settings.max_motion_px, size);
         Ok(Self {
+            offset_reference,
             subset_std,
             image,
             settings: settings.clone(),
@@ -184,7 +191,10 @@ impl PreparedReference {
         }
         let s = &self.settings;
         let deformed = &gaussian_blur(deformed, s.prefilter_sigma_px);
-        let offset = global_offset(&self.image, deformed, self.grid.roi, s.max_motion_px);
+        let offset = self
+            .offset_reference
+            .as_ref()
+            .map_or((0, 0), |r| r.offset_in(deformed));
         if watch.is_cancelled() {
             return Err(DicError::Cancelled);
         }

@@ -22,100 +22,154 @@ pub fn global_offset(
     roi: Roi,
     max_motion_px: usize,
 ) -> (i64, i64) {
-    // The window is centred on the ROI but may extend beyond it: the rigid offset is a property
-    // of the image pair, and a small template gives a noisy correlation peak.
-    let (cx, cy) = (roi.x + roi.width / 2, roi.y + roi.height / 2);
-    let (w, h) = (reference.width(), reference.height());
-    let kx = w.min(MAX_WINDOW_PX);
-    let ky = h.min(MAX_WINDOW_PX);
-    let rx = cx.saturating_sub(kx / 2).min(w - kx);
-    let ry = cy.saturating_sub(ky / 2).min(h - ky);
-
-    let (ref_mean, ref_std) = reference.crop(Roi::new(rx, ry, kx, ky)).mean_std();
-    if ref_std <= 0.0 {
-        return (0, 0);
-    }
-    let window: Vec<f32> = (0..kx * ky)
-        .map(|k| (reference.get(rx + k % kx, ry + k / kx) as f64 - ref_mean) as f32)
-        .collect();
-    offset_of_window(&window, (kx, ky), (rx, ry), deformed, max_motion_px)
+    let size = (deformed.width(), deformed.height());
+    ReferenceSpectrum::of_image(reference, roi, max_motion_px, size)
+        .map_or((0, 0), |r| r.offset_in(deformed))
 }
 
-/// Integer (dx, dy), each within ±`max_motion_px`, at which the zero-mean `window` (kx x ky,
-/// row-major, taken at (rx, ry) of some reference) best matches `deformed`.
-pub(super) fn offset_of_window(
-    window: &[f32],
-    (kx, ky): (usize, usize),
-    (rx, ry): (usize, usize),
-    deformed: &Image,
-    max_motion_px: usize,
-) -> (i64, i64) {
-    // A motion larger than the image leaves no overlap to find: clamping keeps the L x L frame
-    // (L ≈ window + 2m) from growing with a careless setting.
-    let m = max_motion_px.min(deformed.width().max(deformed.height()));
-    let l = fast_fft_len(kx.max(ky) + 2 * m);
-    let mut a = vec![Complex::new(0.0f32, 0.0); l * l];
-    for r in 0..ky {
-        for c in 0..kx {
-            a[r * l + c].re = window[r * kx + c];
+/// The reference side of [`global_offset`], transformed once: a prepared reference correlated
+/// with many deformed frames (every run of a pattern, every model frame of a diagnosis) pays two
+/// 2D FFTs per frame instead of three.
+pub(super) struct ReferenceSpectrum {
+    /// The forward 2D FFT of the zero-mean window, zero-padded into the L x L frame.
+    spectrum: Vec<Complex<f32>>,
+    /// L, the frame's side.
+    side: usize,
+    /// The largest motion searched, px (the setting, clamped to the deformed frame's size).
+    motion_px: usize,
+    /// Where the window was taken in the reference (its top-left pixel).
+    origin: (usize, usize),
+    /// The deformed frames' size the motion was clamped to.
+    deformed_size: (usize, usize),
+}
+
+impl ReferenceSpectrum {
+    /// The window of `reference` around `roi` (it may extend beyond it: the rigid offset is a
+    /// property of the image pair, and a small template gives a noisy correlation peak),
+    /// transformed; `None` when the window has no texture.
+    pub(super) fn of_image(
+        reference: &Image,
+        roi: Roi,
+        max_motion_px: usize,
+        deformed_size: (usize, usize),
+    ) -> Option<Self> {
+        let (cx, cy) = (roi.x + roi.width / 2, roi.y + roi.height / 2);
+        let (w, h) = (reference.width(), reference.height());
+        let kx = w.min(MAX_WINDOW_PX);
+        let ky = h.min(MAX_WINDOW_PX);
+        let rx = cx.saturating_sub(kx / 2).min(w - kx);
+        let ry = cy.saturating_sub(ky / 2).min(h - ky);
+
+        let (ref_mean, ref_std) = reference.crop(Roi::new(rx, ry, kx, ky)).mean_std();
+        if ref_std <= 0.0 {
+            return None;
         }
+        let window: Vec<f32> = (0..kx * ky)
+            .map(|k| (reference.get(rx + k % kx, ry + k / kx) as f64 - ref_mean) as f32)
+            .collect();
+        Some(Self::of_window(
+            &window,
+            (kx, ky),
+            (rx, ry),
+            deformed_size,
+            max_motion_px,
+        ))
     }
-    // The deformed window; samples outside the image are filled with its mean (zero after
-    // removing the mean) so they add nothing to the correlation.
-    let dx0 = rx as i64 - m as i64;
-    let dy0 = ry as i64 - m as i64;
-    let inside = |c: i64, r: i64| {
-        c >= 0 && r >= 0 && (c as usize) < deformed.width() && (r as usize) < deformed.height()
-    };
-    let (mut sum, mut n) = (0.0f64, 0usize);
-    for r in 0..l as i64 {
-        for c in 0..l as i64 {
-            if inside(dx0 + c, dy0 + r) {
-                sum += deformed.get((dx0 + c) as usize, (dy0 + r) as usize) as f64;
-                n += 1;
+
+    /// The zero-mean `window` (kx x ky, row-major, taken at (rx, ry) of some reference),
+    /// transformed for deformed frames of `deformed_size`, searched up to `max_motion_px`.
+    pub(super) fn of_window(
+        window: &[f32],
+        (kx, ky): (usize, usize),
+        (rx, ry): (usize, usize),
+        deformed_size: (usize, usize),
+        max_motion_px: usize,
+    ) -> Self {
+        // A motion larger than the image leaves no overlap to find: clamping keeps the L x L
+        // frame (L ≈ window + 2m) from growing with a careless setting.
+        let m = max_motion_px.min(deformed_size.0.max(deformed_size.1));
+        let l = fast_fft_len(kx.max(ky) + 2 * m);
+        let mut a = vec![Complex::new(0.0f32, 0.0); l * l];
+        for r in 0..ky {
+            for c in 0..kx {
+                a[r * l + c].re = window[r * kx + c];
             }
         }
-    }
-    let def_mean = if n > 0 { sum / n as f64 } else { 0.0 };
-    let mut b = vec![Complex::new(0.0f32, 0.0); l * l];
-    for r in 0..l as i64 {
-        for c in 0..l as i64 {
-            if inside(dx0 + c, dy0 + r) {
-                let v = deformed.get((dx0 + c) as usize, (dy0 + r) as usize) as f64 - def_mean;
-                b[r as usize * l + c as usize].re = v as f32;
-            }
+        fft2d(&mut Planner32::new(), &mut a, l, false);
+        Self {
+            spectrum: a,
+            side: l,
+            motion_px: m,
+            origin: (rx, ry),
+            deformed_size,
         }
     }
 
-    let mut planner = Planner32::new();
-    fft2d(&mut planner, &mut a, l, false);
-    fft2d(&mut planner, &mut b, l, false);
-    // Half-way whitening (divide by sqrt|X|): sharper than plain cross-correlation, steadier
-    // than full phase correlation, whose flat weighting lets the padding edges speak.
-    for (x, y) in a.iter_mut().zip(&b) {
-        let cross = x.conj() * y;
-        let mag = cross.norm().sqrt();
-        *x = if mag > 1e-20 {
-            cross / mag
-        } else {
-            Complex::new(0.0, 0.0)
+    /// Integer (dx, dy), each within ±m, at which the window best matches `deformed` (of the
+    /// size this spectrum was made for).
+    pub(super) fn offset_in(&self, deformed: &Image) -> (i64, i64) {
+        assert_eq!(
+            (deformed.width(), deformed.height()),
+            self.deformed_size,
+            "a reference spectrum is made for one size of deformed frame"
+        );
+        let (l, m) = (self.side, self.motion_px);
+        // The deformed window; samples outside the image are filled with its mean (zero after
+        // removing the mean) so they add nothing to the correlation.
+        let dx0 = self.origin.0 as i64 - m as i64;
+        let dy0 = self.origin.1 as i64 - m as i64;
+        let inside = |c: i64, r: i64| {
+            c >= 0 && r >= 0 && (c as usize) < deformed.width() && (r as usize) < deformed.height()
         };
-    }
-    fft2d(&mut planner, &mut a, l, true);
-
-    // Only shifts within ±m: the frame is larger than window + 2m (a 5-smooth length), and a
-    // peak in the excess would be a motion the user ruled out.
-    let reach = (2 * m + 1).min(l);
-    let (mut best, mut best_at) = (f32::NEG_INFINITY, (0usize, 0usize));
-    for sy in 0..reach {
-        for (sx, v) in a[sy * l..sy * l + reach].iter().enumerate() {
-            if v.re > best {
-                best = v.re;
-                best_at = (sx, sy);
+        let (mut sum, mut n) = (0.0f64, 0usize);
+        for r in 0..l as i64 {
+            for c in 0..l as i64 {
+                if inside(dx0 + c, dy0 + r) {
+                    sum += deformed.get((dx0 + c) as usize, (dy0 + r) as usize) as f64;
+                    n += 1;
+                }
             }
         }
+        let def_mean = if n > 0 { sum / n as f64 } else { 0.0 };
+        let mut b = vec![Complex::new(0.0f32, 0.0); l * l];
+        for r in 0..l as i64 {
+            for c in 0..l as i64 {
+                if inside(dx0 + c, dy0 + r) {
+                    let v = deformed.get((dx0 + c) as usize, (dy0 + r) as usize) as f64 - def_mean;
+                    b[r as usize * l + c as usize].re = v as f32;
+                }
+            }
+        }
+
+        let mut planner = Planner32::new();
+        fft2d(&mut planner, &mut b, l, false);
+        // Half-way whitening (divide by sqrt|X|): sharper than plain cross-correlation, steadier
+        // than full phase correlation, whose flat weighting lets the padding edges speak.
+        for (x, y) in self.spectrum.iter().zip(b.iter_mut()) {
+            let cross = x.conj() * *y;
+            let mag = cross.norm().sqrt();
+            *y = if mag > 1e-20 {
+                cross / mag
+            } else {
+                Complex::new(0.0, 0.0)
+            };
+        }
+        fft2d(&mut planner, &mut b, l, true);
+
+        // Only shifts within ±m: the frame is larger than window + 2m (a 5-smooth length), and
+        // a peak in the excess would be a motion the user ruled out.
+        let reach = (2 * m + 1).min(l);
+        let (mut best, mut best_at) = (f32::NEG_INFINITY, (0usize, 0usize));
+        for sy in 0..reach {
+            for (sx, v) in b[sy * l..sy * l + reach].iter().enumerate() {
+                if v.re > best {
+                    best = v.re;
+                    best_at = (sx, sy);
+                }
+            }
+        }
+        (best_at.0 as i64 - m as i64, best_at.1 as i64 - m as i64)
     }
-    (best_at.0 as i64 - m as i64, best_at.1 as i64 - m as i64)
 }
 
 /// In-place 2D FFT of an n x n row-major array (rows in parallel, then columns through a

@@ -9,7 +9,7 @@
 //! turned by 10° moves its subsets' corners by ≈5 px relative to their centres, where IC-GN
 //! from a translation no longer converges and an integer search finds nothing.
 
-use super::fft_guess::{fast_fft_len_at_most, fft2d, offset_of_window};
+use super::fft_guess::{fast_fft_len_at_most, fft2d, ReferenceSpectrum};
 use super::Warp;
 use crate::image::{Image, Roi};
 use ffdic_fft::{Complex, Planner32};
@@ -136,7 +136,9 @@ pub fn estimate_similarity(
     for v in window.iter_mut() {
         *v = if v.is_nan() { 0.0 } else { *v - mean };
     }
-    let (ox, oy) = offset_of_window(&window, (kx, ky), (tx0, ty0), deformed, max_motion_px);
+    let size = (deformed.width(), deformed.height());
+    let (ox, oy) = ReferenceSpectrum::of_window(&window, (kx, ky), (tx0, ty0), size, max_motion_px)
+        .offset_in(deformed);
     Some(Similarity {
         angle_rad,
         scale,
