@@ -1,0 +1,52 @@
+//! The planners' transforms against the discrete Fourier transform written out. An integration
+//! test, not a unit test: a unit-test harness would compile every rustfft algorithm again (the
+//! crate's whole cost), while this file only calls the built library.
+
+use ffdic_fft::{Complex, Planner32, Planner64};
+
+/// Each planner's transform against the DFT written out, at a power of two, a prime that
+/// rustfft serves with a SIMD butterfly (31) and one it serves with Bluestein's algorithm (67).
+#[test]
+fn transforms_match_the_dft_written_out() {
+    for len in [16usize, 31, 67] {
+        let x: Vec<Complex<f64>> = (0..len)
+            .map(|i| Complex::new((i as f64 * 0.37).sin() + 0.1 * i as f64, (i as f64).cos()))
+            .collect();
+        let dft: Vec<Complex<f64>> = (0..len)
+            .map(|k| {
+                x.iter()
+                    .enumerate()
+                    .fold(Complex::new(0.0, 0.0), |acc, (n, v)| {
+                        let phase = -2.0 * std::f64::consts::PI * (k * n) as f64 / len as f64;
+                        acc + v * Complex::new(phase.cos(), phase.sin())
+                    })
+            })
+            .collect();
+        let mut y64 = x.clone();
+        Planner64::new().plan_fft_forward(len).process(&mut y64);
+        let mut y32: Vec<Complex<f32>> = x
+            .iter()
+            .map(|v| Complex::new(v.re as f32, v.im as f32))
+            .collect();
+        let mut p32 = Planner32::new();
+        p32.plan_fft_forward(len).process(&mut y32);
+        let scale: f64 = dft.iter().map(|v| v.norm()).fold(0.0, f64::max);
+        for k in 0..len {
+            assert!(
+                (y64[k] - dft[k]).norm() < 1e-12 * scale,
+                "f64, len {len}, bin {k}"
+            );
+            let d32 = Complex::new(y32[k].re as f64, y32[k].im as f64) - dft[k];
+            assert!(d32.norm() < 1e-5 * scale, "f32, len {len}, bin {k}");
+        }
+        // The inverse undoes the forward up to the factor len.
+        p32.plan_fft_inverse(len).process(&mut y32);
+        for (v, orig) in y32.iter().zip(&x) {
+            let back = Complex::new(v.re as f64, v.im as f64) / len as f64;
+            assert!(
+                (back - orig).norm() < 1e-5 * scale,
+                "f32 round trip, len {len}"
+            );
+        }
+    }
+}
