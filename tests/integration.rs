@@ -24,6 +24,7 @@ mod api_sweeps;
 mod aravis_fake_camera;
 mod architecture;
 mod browser_cross_origin;
+mod build_sharing;
 mod cli_analyze;
 mod cli_calibrate;
 mod cli_image_formats;
