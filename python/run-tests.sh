@@ -2,7 +2,7 @@
 # The Python package as a user installs it, tested: a venv in target/python-venv with the pinned
 # test requirements, `pip install ./python` (maturin from PyPI builds the wheel: release profile,
 # the workspace's target dir; scripts/test-all.sh asks for the dev profile through
-# MATURIN_PEP517_ARGS), pytest over python/tests, then the example end to end.
+# MATURIN_PEP517_ARGS), pytest over python/tests, then the examples end to end.
 #
 #   python/run-tests.sh [DAEMON_BINARY]     (default: target/debug/ffdic)
 #
@@ -40,4 +40,9 @@ trap 'rm -rf "$EXAMPLE_DIR"' EXIT
 (cd "$EXAMPLE_DIR" && FFDIC_BIN="$BIN" "$VENV/bin/python" "$ROOT/python/examples/paper_study.py" >example.log 2>&1) || {
   cat "$EXAMPLE_DIR/example.log"; echo "python: the example failed" >&2; exit 1; }
 tail -n 5 "$EXAMPLE_DIR/example.log"
+
+echo "python: the Bluesky example (python/examples/bluesky_scan.py) on the mock bench (at ${SECONDS} s)"
+(cd "$EXAMPLE_DIR" && FFDIC_BIN="$BIN" "$VENV/bin/python" "$ROOT/python/examples/bluesky_scan.py" >bluesky.log 2>&1) || {
+  cat "$EXAMPLE_DIR/bluesky.log"; echo "python: the Bluesky example failed" >&2; exit 1; }
+tail -n 8 "$EXAMPLE_DIR/bluesky.log"
 echo "python: done (at ${SECONDS} s since this script began)"

@@ -35,7 +35,7 @@ from typing import Any, Callable, Dict, Iterator, List, Mapping, Optional, Tuple
 
 import numpy as np
 
-__all__ = ["Client", "ProblemError", "RunFailed", "Event", "JobResult", "TERMINAL_EVENTS"]
+__all__ = ["Client", "ProblemError", "RunFailed", "Event", "JobResult", "Snapshot", "TERMINAL_EVENTS"]
 
 API_PREFIX = "/api/v1"
 
@@ -173,6 +173,33 @@ class JobResult(dict):  # type: ignore[type-arg]
         self.winner_model_toml: Optional[str] = winner_model_toml
 
 
+@dataclass(frozen=True)
+class Snapshot:
+    """One frame from :meth:`Client.snapshot`.
+
+    Attributes:
+        image: the frame, a 2-D uint16 numpy array (rows = image height), in DN.
+        quality: with ``quality=True``, the daemon's speckle-quality figures of the frame (the
+            ``X-Speckle-Quality`` header as a dict); else ``None``.
+    """
+
+    image: np.ndarray
+    quality: Optional[Dict[str, Any]]
+
+
+def _decode_tiff(data: bytes) -> np.ndarray:
+    """A TIFF the daemon sent, as a numpy array, by the native module (the client itself needs
+    only the standard library and numpy)."""
+    try:
+        from ffdic._ffdic import decode_tiff
+    except ImportError as e:  # pragma: no cover - depends on the build
+        raise ImportError(
+            "frames are decoded by the native module ffdic._ffdic, which is not built: "
+            "`pip install ./python` (Client.frame_bytes gives a stored frame's raw TIFF)"
+        ) from e
+    return decode_tiff(data)
+
+
 def _json_default(value: Any) -> Any:
     """numpy scalars and arrays in a request body become plain JSON numbers and lists."""
     if isinstance(value, np.generic):
@@ -292,9 +319,13 @@ class Client:
         return ProblemError(doc, status=e.code)
 
     def _bytes(self, method: str, path: str, **kw: Any) -> bytes:
+        return self._bytes_and_headers(method, path, **kw)[0]
+
+    def _bytes_and_headers(self, method: str, path: str, **kw: Any) -> Tuple[bytes, Any]:
+        """The body of a 2xx answer and its headers (an ``email.message.Message``)."""
         resp = self._open(method, path, **kw)
         try:
-            return resp.read()
+            return resp.read(), resp.headers
         except (http.client.HTTPException, OSError) as e:
             raise ConnectionError(
                 f"lost the connection to the ffdic daemon at {self.url} ({method} {path}): {e}"
@@ -371,6 +402,23 @@ class Client:
         ``roi``, ``binning``); returns what the camera really set. 409 while an experiment holds
         the bench."""
         return self._json("PATCH", "/camera", json_body=settings)  # type: ignore[no-any-return]
+
+    def snapshot(self, *, quality: bool = False, subset_px: Optional[int] = None) -> "Snapshot":
+        """``POST /camera/snapshot``: one frame from the camera as it is set now, as a 2-D numpy
+        array (rows = image height, uint16 as the daemon's 16-bit TIFF holds it), decoded by the
+        native module ``ffdic._ffdic.decode_tiff``. With ``quality=True`` the daemon takes a
+        second frame of the same scene and :attr:`Snapshot.quality` holds the speckle-quality
+        figures of the first (mean intensity gradient, speckle size, SSSIG over ``subset_px``
+        subsets, the temporal noise ``noise_dn`` and the displacement error ``std_u_px``,
+        ``std_v_px`` it predicts). 409 while an experiment holds the bench."""
+        query: Dict[str, Any] = {"format": "tiff"}
+        if quality:
+            query["quality"] = "true"
+        if subset_px is not None:
+            query["subset_px"] = int(subset_px)
+        data, headers = self._bytes_and_headers("POST", "/camera/snapshot", query=query)
+        header = headers.get("X-Speckle-Quality")
+        return Snapshot(_decode_tiff(data), json.loads(header) if header else None)
 
     def stage(self) -> Dict[str, Any]:
         """``GET /stage``: the stage's info (axes, travel in mm), position in mm and whether it
@@ -452,6 +500,33 @@ class Client:
         to stop and returns its record (its status turns ``cancelled`` shortly after). 409 when
         it has already ended."""
         return self._json("POST", f"{self._events_path(run_id, kind)}/cancel")  # type: ignore[no-any-return]
+
+    # --- calibrations -----------------------------------------------------------------------
+
+    def start_calibration(
+        self,
+        plan: Optional[Mapping[str, Any]] = None,
+        *,
+        idempotency_key: Optional[str] = None,
+        **fields: Any,
+    ) -> str:
+        """``POST /calibrations``: queues a calibration (a move plan run on the bench, then
+        diagnosed in rounds into a camera card) and returns its run id. ``plan`` and ``fields``
+        are merged (fields win) into a ``CalibrationPlan``: ``name``, ``pattern``,
+        ``move_sizes_mm``, ``phase_scan_step_px``, ``phase_scan_count``, ``static_frames``,
+        ``rounds`` (1 to 8), ``model``, ``dic``, ``seed``. Follow it with
+        ``follow(run_id, kind="job")``; its card is :meth:`calibration_card`."""
+        body: Dict[str, Any] = dict(plan or {})
+        body.update(fields)
+        return self._submit("/calibrations", body, idempotency_key)
+
+    def calibration_card(self, run_id: str) -> Dict[str, Any]:
+        """``GET /calibrations/{id}/card``: the camera card of a calibration that succeeded:
+        ``card`` (``stage``: scale per axis and the stage's angle with standard errors;
+        ``geometry`` and ``imaging``: each effect's ``params`` and ``stderr``; the discrepancy
+        before and with the card), ``model`` (the stored model's name), ``rounds``, ``plan``
+        and ``experiment``. 404 until the card is written."""
+        return self._json("GET", f"/calibrations/{_quote(run_id)}/card")  # type: ignore[no-any-return]
 
     # --- events -----------------------------------------------------------------------------
 
@@ -597,15 +672,7 @@ class Client:
     def frame(self, run_id: str, name: str) -> np.ndarray:
         """An experiment's stored frame as a 2-D numpy array (rows = image height), uint16 or
         float32 as stored, decoded by the native module ``ffdic._ffdic.decode_tiff``."""
-        data = self.frame_bytes(run_id, name)
-        try:
-            from ffdic._ffdic import decode_tiff
-        except ImportError as e:  # pragma: no cover - depends on the build
-            raise ImportError(
-                "Client.frame decodes TIFFs with the native module ffdic._ffdic, which is not "
-                "built: `maturin develop` in python/ (frame_bytes gives the raw TIFF)"
-            ) from e
-        return decode_tiff(data)
+        return _decode_tiff(self.frame_bytes(run_id, name))
 
     def plot(self, run_id: str, name: str) -> str:
         """``GET /experiments/{id}/plots/{name}``: an SVG figure as text, e.g. ``figure5_u.svg``,
