@@ -91,8 +91,22 @@ fn a_sample3_step_series_is_a_dataset_in_one_command_with_the_bias_of_every_step
             assert!(std > 0.0 && std < 0.01, "{}: std {std}", r["id"]);
         }
     }
-    // The text output carries the same table.
-    let text = ffdic(&["compare", d, "--schemes", "native", "--no-history"]);
+    // The text output carries the same table, and the plot draws it against the commanded
+    // move: a bias with its ±2 SE bar and a std per run and axis (the S-curve of a step series).
+    let plots = root.path().join("plots");
+    let text = ffdic(&[
+        "compare",
+        d,
+        "--schemes",
+        "native",
+        "--no-history",
+        "--out",
+        plots.to_str().unwrap(),
+    ]);
+    let svg = std::fs::read_to_string(plots.join("accuracy_vs_commanded.svg")).unwrap();
+    assert_eq!(svg.matches(r#"class="error-bar""#).count(), 2 * runs.len());
+    assert_eq!(svg.matches(r#"class="point""#).count(), 4 * runs.len());
+    assert!(svg.contains("bias of u") && svg.contains("std of v"));
     let text = String::from_utf8_lossy(&text.stdout);
     assert!(
         text.contains("accuracy against the commanded move")

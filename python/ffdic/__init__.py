@@ -11,7 +11,7 @@ from __future__ import annotations
 import enum
 import json
 import os
-from typing import Any, Dict, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -37,6 +37,7 @@ __all__ = [
     "Status",
     "analyze",
     "compare",
+    "dataset_init",
     "decode_tiff",
     "diagnose",
     "read_image",
@@ -53,7 +54,7 @@ SchemeAxis = Union[Tuple[int, int, int], Mapping[str, int]]
 
 def analyze(
     reference: np.ndarray,
-    deformed: np.ndarray,
+    deformed: Union[np.ndarray, Sequence[np.ndarray]],
     *,
     subset: Optional[int] = None,
     step: Optional[int] = None,
@@ -67,9 +68,10 @@ def analyze(
     max_displacement_std: Optional[float] = None,
     outlier_threshold: Optional[float] = None,
     outlier_test: bool = True,
+    mask: Optional[np.ndarray] = None,
     threads: Optional[int] = None,
-) -> AnalysisResult:
-    """2D DIC of ``deformed`` against ``reference``.
+) -> Union[AnalysisResult, List[AnalysisResult]]:
+    """2D DIC of ``deformed`` against ``reference``; with a list of frames, a sequence.
 
     Both are 2-D numpy arrays of one shape (uint8, uint16, float32 or float64; C- or
     F-ordered). A C-contiguous float32 array is read where it lies, without a copy. Every
@@ -80,12 +82,24 @@ def analyze(
     0.1 px, outlier threshold 2 (``outlier_test=False`` turns the test off). ``threads``
     bounds the worker threads (default: every core). Releases the GIL while it runs.
 
+    ``mask`` (one pair only): a 2-D array of the reference's shape, true or non-zero where
+    points are analysed (``ffdic analyze --mask``); a point whose centre lies on a masked pixel
+    gets the status ``masked`` and is not correlated. ``deformed`` as a list of frames analyses them as a sequence,
+    as ``ffdic analyze REF F1 F2 …`` does: each result holds the displacement accumulated
+    since ``reference`` at the reference's points, the reference moving on to the previous
+    frame when too many points are lost (``AnalysisResult.reference_index`` says which one
+    served); a list of results comes back.
+
     Bad input (not 2-D, shapes that differ, an unsupported dtype, NaN or infinite pixels,
     settings out of range) raises ``ValueError``.
     """
+    if mask is not None:
+        mask = np.asarray(mask)
+        if mask.dtype == np.bool_:
+            mask = mask.astype(np.uint8)
     return _ffdic.analyze(
         reference,
-        deformed,
+        list(deformed) if isinstance(deformed, (list, tuple)) else deformed,
         subset=subset,
         step=step,
         roi=None if roi is None else (int(roi[0]), int(roi[1]), int(roi[2]), int(roi[3])),
@@ -98,6 +112,7 @@ def analyze(
         max_displacement_std=max_displacement_std,
         outlier_threshold=outlier_threshold,
         outlier_test=outlier_test,
+        mask=mask,
         threads=threads,
     )
 
@@ -153,6 +168,45 @@ def render(
     array}}``.
     """
     result: Dict[str, Any] = _ffdic.render(experiment, model, seed, data_dir)
+    return result
+
+
+def dataset_init(
+    folder: Union[str, "os.PathLike[str]"],
+    *,
+    scale_px_per_mm: float,
+    step_mm: Optional[Tuple[float, float]] = None,
+    step_px: Optional[Tuple[float, float]] = None,
+    reference: Optional[str] = None,
+    repeats: Sequence[str] = (),
+    name: Optional[str] = None,
+    pattern: Optional[str] = None,
+    stage_repeatability_um: Optional[float] = None,
+    force: bool = False,
+) -> Dict[str, Any]:
+    """A folder of frames captured by hand made a dataset: writes ``folder/dataset.json`` as
+    ``ffdic dataset init`` does and returns the manifest as a dict.
+
+    The folder's TIFF frames are one ``reference`` (default: ``reference.tif``, ``ref.tif``, a
+    name starting with ``ref``, else the first by name), its static ``repeats`` (the camera's
+    noise floor), and the rest in name order as a step series: frame k moved by k steps of
+    ``step_mm`` (the stage's move, mm) or ``step_px`` (px, converted with
+    ``scale_px_per_mm``). Every problem of the description is named at once (``ValueError``);
+    an existing ``dataset.json`` is replaced only with ``force=True``. Then
+    ``compare(folder, schemes=["native"])`` gives each step's bias against its commanded move.
+    """
+    result: Dict[str, Any] = _ffdic.dataset_init(
+        folder,
+        scale_px_per_mm=scale_px_per_mm,
+        step_mm=step_mm,
+        step_px=step_px,
+        reference=reference,
+        repeats=list(repeats),
+        name=name,
+        pattern=pattern,
+        stage_repeatability_um=stage_repeatability_um,
+        force=force,
+    )
     return result
 
 

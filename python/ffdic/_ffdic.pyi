@@ -50,11 +50,13 @@ class AnalysisResult:
     #: Whether the images were copied out of their arrays (False for C-contiguous float32).
     reference_copied: bool
     deformed_copied: bool
+    #: In a sequence, the frame this one was correlated against (0: the reference given).
+    reference_index: int
     def _repr_html_(self) -> str: ...
 
 def analyze(
     reference: npt.ArrayLike,
-    deformed: npt.ArrayLike,
+    deformed: Union[npt.ArrayLike, List[npt.ArrayLike]],
     *,
     subset: Optional[int] = None,
     step: Optional[int] = None,
@@ -68,8 +70,9 @@ def analyze(
     max_displacement_std: Optional[float] = None,
     outlier_threshold: Optional[float] = None,
     outlier_test: bool = True,
+    mask: Optional[npt.ArrayLike] = None,
     threads: Optional[int] = None,
-) -> AnalysisResult: ...
+) -> Union[AnalysisResult, List[AnalysisResult]]: ...
 def reduce(frame: npt.ArrayLike, scheme_json: str = "ff50") -> npt.NDArray[np.float32]: ...
 def decode_tiff(data: bytes) -> npt.NDArray[Any]: ...
 def read_image(path: Union[str, PathLike[str]]) -> npt.NDArray[Any]: ...
@@ -78,6 +81,19 @@ def render(
     model: Optional[str] = None,
     seed: Optional[int] = None,
     data_dir: str = "data",
+) -> Dict[str, Any]: ...
+def dataset_init(
+    folder: Union[str, PathLike[str]],
+    *,
+    scale_px_per_mm: float,
+    step_mm: Optional[Tuple[float, float]] = None,
+    step_px: Optional[Tuple[float, float]] = None,
+    reference: Optional[str] = None,
+    repeats: List[str] = ...,
+    name: Optional[str] = None,
+    pattern: Optional[str] = None,
+    stage_repeatability_um: Optional[float] = None,
+    force: bool = False,
 ) -> Dict[str, Any]: ...
 def compare(
     dataset: Union[str, PathLike[str]],

@@ -3,10 +3,13 @@
 
 use crate::errors::{dic_error, json_to_python, runtime_error, value_error};
 use crate::input::InputImage;
-use ffdic::dic::{DicResult, DicSettings, PoiResult, PoiStatus, PreparedReference};
-use ffdic::image::Roi;
+use ffdic::dic::{
+    analyze_sequence, DicResult, DicSettings, PoiResult, PoiStatus, PreparedReference, RasterMask,
+};
+use ffdic::image::{Image, Roi};
 use numpy::IntoPyArray;
 use pyo3::prelude::*;
+use pyo3::types::PyList;
 use std::time::Instant;
 
 /// The result of one analysis: per-point arrays (row-major over the grid of `grid_shape`),
@@ -66,6 +69,10 @@ pub struct AnalysisResult {
     reference_copied: bool,
     #[pyo3(get)]
     deformed_copied: bool,
+    /// In a sequence, the frame this one was correlated against (0: the reference given;
+    /// k: the k-th deformed frame, after the reference moved). Always 0 for a pair.
+    #[pyo3(get)]
+    reference_index: usize,
     // For __repr__ and _repr_html_.
     summary_rows: Vec<(&'static str, [f64; 3], &'static str)>,
     counts: (usize, usize),
@@ -111,13 +118,16 @@ impl AnalysisResult {
     }
 }
 
-/// DIC of `deformed` against `reference` (2-D arrays of one shape). Every keyword defaults to
-/// `ffdic analyze`'s value. Releases the GIL while it runs; `threads` bounds its worker
-/// threads (default: every core).
+/// DIC of `deformed` against `reference` (2-D arrays of one shape), or of each frame of a
+/// sequence (`deformed` a list of arrays: displacements accumulated since the reference, the
+/// reference moving on when the correlation drops, as `ffdic analyze REF F1 F2 …`). Every
+/// keyword defaults to `ffdic analyze`'s value; `mask` (pairs only) is a 2-D array of the
+/// reference's shape, non-zero where points are analysed. Releases the GIL while it runs;
+/// `threads` bounds its worker threads (default: every core).
 #[pyfunction]
 #[pyo3(signature = (reference, deformed, *, subset=None, step=None, roi=None, strain_window=None,
     interp=None, shape=None, prefilter_sigma=None, min_zncc=None, max_motion=None,
-    max_displacement_std=None, outlier_threshold=None, outlier_test=true, threads=None))]
+    max_displacement_std=None, outlier_threshold=None, outlier_test=true, mask=None, threads=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn analyze(
     py: Python<'_>,
@@ -135,8 +145,9 @@ pub fn analyze(
     max_displacement_std: Option<f64>,
     outlier_threshold: Option<f64>,
     outlier_test: bool,
+    mask: Option<&Bound<'_, PyAny>>,
     threads: Option<usize>,
-) -> PyResult<AnalysisResult> {
+) -> PyResult<PyObject> {
     // The library's defaults, overridden by what the caller gave.
     let d = DicSettings::default();
     let interpolation = match interp {
@@ -169,15 +180,6 @@ pub fn analyze(
         ..d
     };
     settings.validate().map_err(dic_error)?;
-    let reference = InputImage::from_python(reference, "reference")?;
-    let deformed = InputImage::from_python(deformed, "deformed")?;
-    if reference.shape() != deformed.shape() {
-        return Err(value_error(format!(
-            "reference and deformed differ in shape: {:?} and {:?}",
-            reference.shape(),
-            deformed.shape()
-        )));
-    }
     if threads == Some(0) {
         return Err(value_error("threads: at least 1 (None: every core)"));
     }
@@ -190,26 +192,104 @@ pub fn analyze(
         ),
         None => None,
     };
-    let (ref_view, def_view) = (reference.view(), deformed.view());
-    let (result, elapsed_s) = py.allow_threads(|| {
-        let run = || -> Result<DicResult, ffdic::dic::DicError> {
-            PreparedReference::new(ref_view, &settings)?.correlate(def_view, None)
-        };
+    let reference = InputImage::from_python(reference, "reference")?;
+    if let Ok(frames) = deformed.downcast::<PyList>() {
+        if mask.is_some() {
+            return Err(value_error(
+                "mask applies to one image pair (a sequence's points move from frame to frame)",
+            ));
+        }
+        let frames = frames
+            .iter()
+            .enumerate()
+            .map(|(k, f)| {
+                let name = format!("deformed[{k}]");
+                same_shape(&reference, InputImage::from_python(&f, &name)?, &name)
+            })
+            .collect::<PyResult<Vec<_>>>()?;
+        let reference_image = reference.to_image();
+        let images: Vec<Image> = frames.iter().map(InputImage::to_image).collect();
         let started = Instant::now();
-        let result = match &pool {
-            Some(pool) => pool.install(run),
-            None => run(),
-        };
-        (result, started.elapsed().as_secs_f64())
-    });
-    let result = result.map_err(dic_error)?;
-    build(
+        let sequence = py
+            .allow_threads(|| {
+                in_pool(pool.as_ref(), || {
+                    analyze_sequence(&reference_image, images, &settings, |_| {})
+                })
+            })
+            .map_err(dic_error)?;
+        let elapsed_s = started.elapsed().as_secs_f64() / sequence.len().max(1) as f64;
+        let results = sequence
+            .iter()
+            .zip(&frames)
+            .map(|(frame, input)| {
+                let mut r = build(
+                    py,
+                    &frame.result,
+                    elapsed_s,
+                    reference.copied(),
+                    input.copied(),
+                )?;
+                r.reference_index = frame.reference_index;
+                Ok(Py::new(py, r)?.into_any())
+            })
+            .collect::<PyResult<Vec<PyObject>>>()?;
+        return Ok(PyList::new(py, results)?.into_any().unbind());
+    }
+    let deformed = same_shape(
+        &reference,
+        InputImage::from_python(deformed, "deformed")?,
+        "deformed",
+    )?;
+    let mask = match mask {
+        Some(m) => {
+            let m = same_shape(&reference, InputImage::from_python(m, "mask")?, "mask")?;
+            Some(RasterMask::from_image(&m.to_image()))
+        }
+        None => None,
+    };
+    let (ref_view, def_view) = (reference.view(), deformed.view());
+    let started = Instant::now();
+    let result = py
+        .allow_threads(|| {
+            in_pool(pool.as_ref(), || {
+                PreparedReference::with_mask(ref_view, &settings, mask.as_ref())?
+                    .correlate(def_view, None)
+            })
+        })
+        .map_err(dic_error)?;
+    let elapsed_s = started.elapsed().as_secs_f64();
+    let r = build(
         py,
         &result,
         elapsed_s,
         reference.copied(),
         deformed.copied(),
-    )
+    )?;
+    Ok(Py::new(py, r)?.into_any())
+}
+
+/// `image` (named `name`) when it has the reference's shape, else a `ValueError` naming both.
+fn same_shape<'a>(
+    reference: &InputImage<'_>,
+    image: InputImage<'a>,
+    name: &str,
+) -> PyResult<InputImage<'a>> {
+    if reference.shape() != image.shape() {
+        return Err(value_error(format!(
+            "reference and {name} differ in shape: {:?} and {:?}",
+            reference.shape(),
+            image.shape()
+        )));
+    }
+    Ok(image)
+}
+
+/// `run` on `pool`'s threads, or on the global pool (every core) without one.
+fn in_pool<T: Send>(pool: Option<&rayon::ThreadPool>, run: impl FnOnce() -> T + Send) -> T {
+    match pool {
+        Some(pool) => pool.install(run),
+        None => run(),
+    }
 }
 
 fn column(py: Python<'_>, points: &[PoiResult], f: impl Fn(&PoiResult) -> f64) -> PyObject {
@@ -269,6 +349,7 @@ fn build(
         elapsed_s,
         reference_copied,
         deformed_copied,
+        reference_index: 0,
         summary_rows: vec![
             ("u", row(s.u), "px"),
             ("v", row(s.v), "px"),

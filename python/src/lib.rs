@@ -3,6 +3,7 @@
 //! and adds the HTTP client. Heavy calls release the GIL.
 
 mod analysis;
+mod dataset;
 mod errors;
 mod frames;
 mod input;
@@ -26,6 +27,7 @@ fn _ffdic(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(frames::decode_tiff, m)?)?;
     m.add_function(wrap_pyfunction!(frames::read_image, m)?)?;
     m.add_function(wrap_pyfunction!(frames::render, m)?)?;
+    m.add_function(wrap_pyfunction!(dataset::dataset_init, m)?)?;
     m.add_function(wrap_pyfunction!(study::compare, m)?)?;
     m.add_function(wrap_pyfunction!(study::diagnose, m)?)?;
     Ok(())

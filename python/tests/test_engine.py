@@ -16,9 +16,11 @@ from __future__ import annotations
 
 import csv
 import json
+import struct
 import subprocess
 import threading
 import time
+import zlib
 from pathlib import Path
 from typing import Any, Dict, List
 
@@ -123,6 +125,89 @@ def test_float32_c_arrays_are_read_in_place_and_every_layout_agrees(sample3: Dic
             assert same(getattr(r, field), getattr(base, field)), (name, field)
     # A transposed (F-ordered) pair is the same image, not its transpose: same u, not u<->v.
     assert np.nanmean(base.u) > 0.4
+
+
+def write_png_gray8(path: Path, image: np.ndarray) -> None:
+    """An 8-bit grey PNG written with the standard library (zlib), no ffdic code."""
+    height, width = image.shape
+    raw = b"".join(b"\x00" + row.tobytes() for row in image.astype(np.uint8))
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    header = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(raw))
+                     + chunk(b"IEND", b""))
+
+
+def test_a_mask_equals_the_cli_mask(tmp_path: Path, sample3: Dict[str, np.ndarray]) -> None:
+    mask = np.ones((512, 512), dtype=bool)
+    mask[:, :256] = False  # the left half is not analysed
+    mask[400:, 300:] = False
+    write_png_gray8(tmp_path / "mask.png", mask * 255)
+    out = tmp_path / "cli"
+    cli("analyze", str(SAMPLE3 / "reference.tif"), str(SAMPLE3 / "shift_05.tif"), "--subset", "31",
+        "--step", "16", "--mask", str(tmp_path / "mask.png"), "--out", str(out))
+    points = read_points_csv(out / "points.csv")
+    r = ffdic.analyze(sample3["reference"], sample3["shift_05"], subset=31, step=16, mask=mask)
+    for name in ["x", "y", "u", "v", "exx", "zncc"]:
+        assert same(getattr(r, name), points[name]), name
+    names = np.array(r.status_names)
+    assert list(names) == list(points["status"])
+    # Every point whose centre lies on a masked pixel is masked, and only those.
+    on_mask = ~mask[r.y.astype(int), r.x.astype(int)]
+    assert on_mask.sum() > 0 and np.all(names[on_mask] == "masked")
+    assert not np.any(names[~on_mask] == "masked")
+    with pytest.raises(ValueError, match="differ in shape"):
+        ffdic.analyze(sample3["reference"], sample3["shift_05"], mask=mask[:, :500])
+    with pytest.raises(ValueError, match="one image pair"):
+        ffdic.analyze(sample3["reference"], [sample3["shift_05"]], mask=mask)
+
+
+def test_a_sequence_equals_the_cli_sequence(tmp_path: Path) -> None:
+    names = [f"shift_{k:02d}.tif" for k in (1, 3, 6, 10)]
+    out = tmp_path / "cli"
+    cli("analyze", str(SAMPLE3 / "reference.tif"), *[str(SAMPLE3 / n) for n in names],
+        "--subset", "41", "--step", "40", "--out", str(out))
+    frames = [ffdic.read_image(SAMPLE3 / n) for n in names]
+    results = ffdic.analyze(ffdic.read_image(SAMPLE3 / "reference.tif"), frames, **SMALL)
+    assert isinstance(results, list) and len(results) == len(names)
+    doc = json.loads((out / "settings.json").read_text())
+    for k, (r, frame_doc) in enumerate(zip(results, doc["frames"])):
+        points = read_points_csv(out / f"points_{k + 1:04d}.csv")
+        for name in ["x", "y", "u", "v", "exx"]:
+            assert same(getattr(r, name), points[name]), (k, name)
+        assert r.reference_index == frame_doc["reference_index"]
+    # Sample 3's truth: shift_k moved by 0.1·k px in x and y.
+    for r, k in zip(results, (1, 3, 6, 10)):
+        valid = r.status == int(ffdic.Status.CONVERGED)
+        assert abs(np.mean(r.u[valid]) - 0.1 * k) < 0.01 and abs(np.mean(r.v[valid]) - 0.1 * k) < 0.01
+
+
+def test_dataset_init_writes_the_manifest_the_cli_writes(tmp_path: Path) -> None:
+    by_python, by_cli = tmp_path / "python", tmp_path / "cli"
+    for folder in (by_python, by_cli):
+        folder.mkdir()
+        for f in ["reference.tif", "shift_00.tif", "shift_01.tif", "shift_02.tif", "shift_03.tif"]:
+            (folder / f).write_bytes((SAMPLE3 / f).read_bytes())
+    manifest = ffdic.dataset_init(by_python, scale_px_per_mm=10.0, step_px=(0.1, 0.1),
+                                  repeats=["shift_00.tif"], name="s3", stage_repeatability_um=2.0)
+    cli("dataset", "init", str(by_cli), "--scale", "10", "--step-px", "0.1,0.1", "--repeat",
+        "shift_00.tif", "--name", "s3", "--stage-repeatability-um", "2")
+    assert json.loads((by_python / "dataset.json").read_text()) == json.loads((by_cli / "dataset.json").read_text())
+    assert manifest == json.loads((by_python / "dataset.json").read_text())
+    assert [r["deformed"] for r in manifest["runs"]] == ["shift_01.tif", "shift_02.tif", "shift_03.tif"]
+    assert manifest["runs"][2]["stage"]["dx_mm"] == pytest.approx(0.03)
+    # Once: an existing manifest stays unless force=True; every problem is named at once.
+    with pytest.raises(ValueError, match="force=True"):
+        ffdic.dataset_init(by_python, scale_px_per_mm=10.0, step_px=(0.1, 0.1))
+    with pytest.raises(ValueError) as problems:
+        ffdic.dataset_init(by_python, scale_px_per_mm=10.0, step_mm=(0.0, 0.0), force=True,
+                           reference="missing.tif", repeats=["gone.tif"])
+    for part in ["missing.tif", "gone.tif", "not zero"]:
+        assert part in str(problems.value), str(problems.value)
+    with pytest.raises(ValueError, match="not both"):
+        ffdic.dataset_init(by_python, scale_px_per_mm=10.0, step_mm=(1, 0), step_px=(1, 0), force=True)
 
 
 def test_the_gil_is_released(sample3: Dict[str, np.ndarray]) -> None:

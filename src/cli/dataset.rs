@@ -3,7 +3,7 @@
 
 use anyhow::{bail, Result};
 use clap::{Args, Subcommand};
-use ffdic::dataset::{guess_reference, Manifest, StepSeries};
+use ffdic::dataset::{init_folder, FolderInit, Manifest, Step};
 use std::path::{Path, PathBuf};
 
 #[derive(Debug, Args)]
@@ -64,54 +64,24 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     }
 }
 
-/// The folder's TIFF frames, by name.
-fn frames_in(dir: &Path) -> Result<Vec<String>> {
-    Ok(super::files_with_extensions(dir, &["tif", "tiff"])?
-        .iter()
-        .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
-        .collect())
-}
-
 fn run_init(args: &InitArgs) -> Result<()> {
-    if !(args.scale.is_finite() && args.scale > 0.0) {
-        bail!("--scale {}: px per mm, a positive number", args.scale);
-    }
-    let target = args.dir.join("dataset.json");
-    if target.exists() && !args.force {
-        bail!("{} exists (--force replaces it)", target.display());
-    }
-    let frames = frames_in(&args.dir)?;
-    let Some(reference) = args.reference.clone().or_else(|| guess_reference(&frames)) else {
-        bail!("{} holds no .tif or .tiff frame", args.dir.display());
-    };
-    let step_mm = match (args.step_mm, args.step_px) {
-        (Some(mm), _) => mm,
-        (None, Some((u, v))) => (u / args.scale, v / args.scale),
+    let step = match (args.step_mm, args.step_px) {
+        (Some((dx, dy)), _) => Step::Mm(dx, dy),
+        (None, Some((u, v))) => Step::Px(u, v),
         (None, None) => bail!("the step: --step-mm DX,DY or --step-px U,V"),
     };
-    let name = args.name.clone().unwrap_or_else(|| {
-        std::fs::canonicalize(&args.dir)
-            .ok()
-            .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
-            .unwrap_or_else(|| "dataset".into())
-    });
-    let series = StepSeries {
-        name,
+    let init = FolderInit {
         scale_px_per_mm: args.scale,
-        frames,
-        reference,
+        step,
+        reference: args.reference.clone(),
         repeats: args.repeat.clone(),
-        step_mm,
+        name: args.name.clone(),
         pattern: args.pattern.clone(),
         stage_repeatability_um: args.stage_repeatability_um,
+        force: args.force,
     };
-    let manifest = series
-        .manifest()
-        .map_err(|e| anyhow::anyhow!("{}: {e}", args.dir.display()))?;
-    manifest.write(&args.dir)?;
-    // Read back as every command will: the file written is one they accept.
-    Manifest::read(&args.dir)?;
-    print_summary(&manifest, &target);
+    let manifest = init_folder(&args.dir, &init)?;
+    print_summary(&manifest, &args.dir.join("dataset.json"));
     Ok(())
 }
 

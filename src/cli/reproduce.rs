@@ -10,12 +10,13 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use ffdic::diagnose::Diagnosis;
 use ffdic::experiment::{findings_text, paper_findings, ExperimentRequest, SchemeSpec, StudyRow};
-use ffdic::report::{figures_text, study_json};
+use ffdic::report::{figures_text, paper_figures_text, study_json};
 use ffdic::service::{
     mock_bench, CameraConfig, CompareRequest, DaemonConfig, JobResult, MockBinning, MockReduction,
     NewModel, Service, PAPER_BENCH_DISTORTION_TOML,
 };
 use ffdic::store::{RunId, RunRecord, RunStatus};
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -79,6 +80,7 @@ pub fn run(args: &ReproduceArgs) -> Result<()> {
         PAPER_BENCH_DISTORTION_TOML,
         "config/models/paper-bench-distortion.toml",
     )?;
+    let truth_effects = bench_effects(&truth);
     let mut config = DaemonConfig::embedded();
     config.data_dir = args.data.clone();
     config.bench.scale_px_per_mm = spec.camera.scale_px_per_mm;
@@ -134,7 +136,13 @@ pub fn run(args: &ReproduceArgs) -> Result<()> {
     let story = if args.no_model {
         None
     } else {
-        Some(model_story(&service, &record.id, &spec, !args.json)?)
+        Some(model_story(
+            &service,
+            &record.id,
+            &spec,
+            &truth_effects,
+            !args.json,
+        )?)
     };
     service.stop(Duration::from_secs(5));
     let run_dir = service.store.run_dir(&record.id);
@@ -156,6 +164,7 @@ pub fn run(args: &ReproduceArgs) -> Result<()> {
         println!("{doc}");
     } else {
         print!("{}", figures_text(&rows));
+        print!("{}", paper_figures_text(&rows));
         print!("{}", findings_text(&paper_findings(&captures)));
         println!(
             "\nrun {} in {} (frames/ as ffdic-dataset/1, results/study.csv, study.json, plots/figure5_*.svg, figure6_*.svg)",
@@ -206,8 +215,11 @@ struct ModelStory {
     #[serde(with = "ffdic::model::effects::verdict_serde")]
     verdict: Option<ffdic::model::CandidateId>,
     /// The winner's fitted parameters and standard errors.
-    params: std::collections::BTreeMap<String, f64>,
-    stderr: std::collections::BTreeMap<String, f64>,
+    params: BTreeMap<String, f64>,
+    stderr: BTreeMap<String, f64>,
+    /// The mock bench's truth: every effect of its model with its numeric parameters, what the
+    /// diagnosis is held against (a lab's bench has no such line).
+    bench_truth: BenchEffects,
     delta_bic: Option<f64>,
     /// The model with the winner added, and the discrepancy against it.
     model: Option<String>,
@@ -216,10 +228,37 @@ struct ModelStory {
     jobs: Vec<String>,
 }
 
+/// Effect name → its numeric parameters, as the model's TOML states them.
+type BenchEffects = BTreeMap<String, BTreeMap<String, f64>>;
+
+/// The effects of the bench's model with their numeric parameters, read from its TOML (the
+/// model's own serialisation: every effect, present and future, without a list here).
+fn bench_effects(truth: &ffdic::model::ModelConfig) -> BenchEffects {
+    let doc: toml::Table = toml::from_str(&truth.to_toml()).unwrap_or_default();
+    let Some(toml::Value::Table(effects)) = doc.get("effects") else {
+        return BenchEffects::new();
+    };
+    effects
+        .iter()
+        .filter_map(|(name, params)| {
+            let params = params.as_table()?;
+            let numbers = params
+                .iter()
+                .filter_map(|(k, v)| {
+                    let x = v.as_float().or_else(|| v.as_integer().map(|i| i as f64))?;
+                    Some((k.clone(), x))
+                })
+                .collect();
+            Some((name.clone(), numbers))
+        })
+        .collect()
+}
+
 fn model_story(
     service: &Service,
     experiment: &RunId,
     spec: &ffdic::experiment::ExperimentSpec,
+    bench_truth: &BenchEffects,
     show: bool,
 ) -> Result<ModelStory> {
     let dataset_id = service
@@ -298,6 +337,7 @@ fn model_story(
             .as_ref()
             .map(|c| c.stderr.clone())
             .unwrap_or_default(),
+        bench_truth: bench_truth.clone(),
         delta_bic: winner.as_ref().map(|c| c.delta_bic),
         model,
         after_px,
@@ -310,14 +350,25 @@ fn story_text(s: &ModelStory) -> String {
         "\nmodel against measurement (dataset {}):\n  baseline model: discrepancy {:.5} px\n",
         s.dataset, s.baseline_px
     );
+    let effect = ffdic::model::effects::verdict_name(&s.verdict);
+    let truth = s.bench_truth.get(&effect);
     match (&s.model, s.after_px) {
         (Some(model), Some(after)) => {
             let params: Vec<String> = s
                 .params
                 .iter()
-                .map(|(k, v)| match s.stderr.get(k) {
-                    Some(se) => format!("{k} = {v:.4e} ± {se:.1e}"),
-                    None => format!("{k} = {v:.4e}"),
+                .map(|(k, v)| {
+                    let fitted = match s.stderr.get(k) {
+                        Some(se) => format!("{k} = {v:.4e} ± {se:.1e}"),
+                        None => format!("{k} = {v:.4e}"),
+                    };
+                    match (truth.and_then(|t| t.get(k)), s.stderr.get(k)) {
+                        (Some(t), Some(se)) if *se > 0.0 => {
+                            format!("{fitted} (bench truth {t:.4e}: {:+.1} SE)", (v - t) / se)
+                        }
+                        (Some(t), _) => format!("{fitted} (bench truth {t:.4e})"),
+                        (None, _) => fitted,
+                    }
                 })
                 .collect();
             t += &format!(
@@ -329,6 +380,26 @@ fn story_text(s: &ModelStory) -> String {
         }
         _ => t += "  diagnosis: no significant missing effect (verdict none)\n",
     }
+    if s.model.is_some() && truth.is_none() {
+        t += &format!("  the mock bench's truth has no {effect}: a false alarm\n");
+    }
+    let truth_line: Vec<String> = s
+        .bench_truth
+        .iter()
+        .map(|(name, params)| {
+            // Zero is an absent term (k2, p1, p2 of a radial distortion): left out.
+            let p: Vec<String> = params
+                .iter()
+                .filter(|(_, v)| **v != 0.0)
+                .map(|(k, v)| format!("{k} {v}"))
+                .collect();
+            match p.is_empty() {
+                true => name.clone(),
+                false => format!("{name} ({})", p.join(", ")),
+            }
+        })
+        .collect();
+    t += &format!("  the mock bench's truth: {}\n", truth_line.join("; "));
     t += &format!("  jobs: {}\n", s.jobs.join(", "));
     t
 }

@@ -2,8 +2,108 @@
 //! reference, optional static repeats of it, and the other frames in name order as a step
 //! series — frame k (from 1) moved by k steps. What a lab has after capturing a series by hand.
 
-use super::manifest::{is_plain_file_name, Manifest, PatternInfo, Run, StageMove};
+use super::manifest::{is_plain_file_name, DatasetError, Manifest, PatternInfo, Run, StageMove};
 use serde_json::Map;
+use std::path::Path;
+
+/// The frame files a folder's step series is made of, by extension (any case).
+pub const FRAME_EXTENSIONS: [&str; 2] = ["tif", "tiff"];
+
+/// The step between consecutive frames, in the stage's mm or in the images' px.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Step {
+    Mm(f64, f64),
+    Px(f64, f64),
+}
+
+/// What `init_folder` is told about a folder (`ffdic dataset init`'s flags, Python's
+/// `ffdic.dataset_init` keywords).
+#[derive(Clone, Debug, PartialEq)]
+pub struct FolderInit {
+    pub scale_px_per_mm: f64,
+    pub step: Step,
+    /// Default: `guess_reference`.
+    pub reference: Option<String>,
+    pub repeats: Vec<String>,
+    /// Default: the folder's name.
+    pub name: Option<String>,
+    pub pattern: Option<String>,
+    pub stage_repeatability_um: Option<f64>,
+    /// Replace an existing `dataset.json`.
+    pub force: bool,
+}
+
+/// Writes `dir/dataset.json` for a folder of frames as `init` describes it, reads it back as
+/// every command will, and returns it. Nothing is written on an error; every problem of the
+/// description is named at once.
+pub fn init_folder(dir: &Path, init: &FolderInit) -> Result<Manifest, DatasetError> {
+    let target = dir.join("dataset.json");
+    let invalid = |message: String| DatasetError::Invalid {
+        path: target.clone(),
+        message,
+    };
+    let scale = init.scale_px_per_mm;
+    if !(scale.is_finite() && scale > 0.0) {
+        return Err(invalid(format!(
+            "scale {scale}: px per mm, a positive number"
+        )));
+    }
+    if target.exists() && !init.force {
+        return Err(invalid(
+            "exists (`--force` on the command line, `force=True` in Python, replaces it)".into(),
+        ));
+    }
+    let frames = frames_in(dir)?;
+    let Some(reference) = init.reference.clone().or_else(|| guess_reference(&frames)) else {
+        return Err(invalid(format!(
+            "the folder holds no frame ({})",
+            FRAME_EXTENSIONS.map(|e| format!(".{e}")).join(", ")
+        )));
+    };
+    let step_mm = match init.step {
+        Step::Mm(dx, dy) => (dx, dy),
+        Step::Px(u, v) => (u / scale, v / scale),
+    };
+    let name = init.name.clone().unwrap_or_else(|| {
+        std::fs::canonicalize(dir)
+            .ok()
+            .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+            .unwrap_or_else(|| "dataset".into())
+    });
+    let series = StepSeries {
+        name,
+        scale_px_per_mm: scale,
+        frames,
+        reference,
+        repeats: init.repeats.clone(),
+        step_mm,
+        pattern: init.pattern.clone(),
+        stage_repeatability_um: init.stage_repeatability_um,
+    };
+    let manifest = series.manifest().map_err(invalid)?;
+    manifest.write(dir)?;
+    Manifest::read(dir)
+}
+
+/// The folder's frame files (`FRAME_EXTENSIONS`), by name.
+fn frames_in(dir: &Path) -> Result<Vec<String>, DatasetError> {
+    let entries = std::fs::read_dir(dir).map_err(|source| DatasetError::Read {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let mut frames: Vec<String> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_file())
+        .filter(|p| {
+            p.extension()
+                .and_then(|e| e.to_str())
+                .is_some_and(|e| FRAME_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+        })
+        .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .collect();
+    frames.sort();
+    Ok(frames)
+}
 
 /// What a folder's frames are, as the user states it.
 #[derive(Clone, Debug, PartialEq)]

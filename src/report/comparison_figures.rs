@@ -4,7 +4,7 @@
 //! the image statistics measured beside the model's.
 
 use super::{Heatmap, Mark, XyPlot, XySeries};
-use crate::diagnose::{Comparison, ImageComparison};
+use crate::diagnose::{Accuracy, Comparison, ImageComparison};
 
 fn file_safe(s: &str) -> String {
     s.chars()
@@ -23,6 +23,7 @@ pub fn comparison_svgs(cmp: &Comparison) -> Vec<(String, String)> {
     let mut out = residual_map_svgs(cmp);
     out.extend(residual_profile_svgs(cmp));
     out.push(("residual_vs_fraction.svg".into(), fraction_svg(cmp)));
+    out.push(("accuracy_vs_commanded.svg".into(), accuracy_svg(cmp)));
     for im in &cmp.images {
         out.extend(image_svgs(im));
     }
@@ -84,6 +85,7 @@ fn residual_profile_svgs(cmp: &Comparison) -> Vec<(String, String)> {
                     name: format!("Δ{comp} {} {}", r.id, r.scheme),
                     points: prof.iter().map(|p| (p[0], p[k])).collect(),
                     mark: Mark::LinePoints,
+                    y_err: Vec::new(),
                 });
             }
         }
@@ -114,9 +116,51 @@ fn fraction_svg(cmp: &Comparison) -> String {
             name: format!("Δ{comp} against fraction of {comp}"),
             points: pts,
             mark: Mark::Points,
+            y_err: Vec::new(),
         });
     }
     frac.to_svg(700, 460)
+}
+
+/// The measured side against the commanded move, each run and scheme a point: the bias (mean −
+/// commanded) with ±2 standard errors and the std, px of the analysed images, against the
+/// commanded displacement — for a sub-pixel step series the S-curve of interpolation bias
+/// (Schreier, Braasch & Sutton, Opt. Eng. 39 (2000)); for moves of several sizes, how the
+/// error grows with the move (the stage's own error included).
+fn accuracy_svg(cmp: &Comparison) -> String {
+    let mut plot = XyPlot::new(
+        "Bias and std against the commanded move",
+        "commanded displacement [px]",
+        "bias (± 2 SE) and std [px]",
+    );
+    plot.zero_line = true;
+    for (k, comp) in [(0usize, "u"), (1, "v")] {
+        let mut runs: Vec<&Accuracy> = cmp.runs.iter().map(|r| &r.accuracy).collect();
+        runs.sort_by(|a, b| a.commanded_px[k].total_cmp(&b.commanded_px[k]));
+        // An axis the stage never moved along has nothing to show against its commanded value.
+        if runs.iter().all(|a| a.commanded_px[k] == 0.0) {
+            continue;
+        }
+        plot.series.push(XySeries {
+            name: format!("bias of {comp}"),
+            points: runs
+                .iter()
+                .map(|a| (a.commanded_px[k], a.bias_px[k]))
+                .collect(),
+            mark: Mark::LinePoints,
+            y_err: runs.iter().map(|a| 2.0 * a.bias_se_px[k]).collect(),
+        });
+        plot.series.push(XySeries {
+            name: format!("std of {comp}"),
+            points: runs
+                .iter()
+                .map(|a| (a.commanded_px[k], a.std_px[k]))
+                .collect(),
+            mark: Mark::Points,
+            y_err: Vec::new(),
+        });
+    }
+    plot.to_svg(700, 460)
 }
 
 /// The image statistics of one frame, measured beside model: its power spectra, and for a
@@ -144,6 +188,7 @@ fn image_svgs(im: &ImageComparison) -> Vec<(String, String)> {
             name: name.into(),
             points: s.iter().map(|b| (b.f, b.value)).collect(),
             mark: Mark::LinePoints,
+            y_err: Vec::new(),
         });
     }
     out.push((format!("spectrum_{tag}.svg"), spec.to_svg(700, 520)));
@@ -158,6 +203,7 @@ fn image_svgs(im: &ImageComparison) -> Vec<(String, String)> {
                 name: name.into(),
                 points: s.iter().map(|p| (p.mean_dn, p.variance_dn2)).collect(),
                 mark: Mark::LinePoints,
+                y_err: Vec::new(),
             });
         }
         out.push((format!("noise_vs_mean_{tag}.svg"), ptc.to_svg(700, 460)));

@@ -22,6 +22,7 @@ pub fn history_svg(title: &str, points: &[HistoryPoint], width_px: u32, height_p
             .map(|(i, p)| ((i + 1) as f64, p.discrepancy_px))
             .collect(),
         mark: Mark::LinePoints,
+        y_err: Vec::new(),
     });
     plot.x_tick_labels = points
         .iter()

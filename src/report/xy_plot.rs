@@ -18,6 +18,9 @@ pub struct XySeries {
     /// Non-finite points (and non-positive ones on a log axis) are skipped.
     pub points: Vec<(f64, f64)>,
     pub mark: Mark,
+    /// Half-widths of each point's error bar on the y axis, in y's units (empty: no bars;
+    /// otherwise one per point, drawn as `<line class="error-bar">`, a non-finite one skipped).
+    pub y_err: Vec<f64>,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -73,7 +76,16 @@ impl XyPlot {
         let pts: Vec<(f64, f64)> = self
             .series
             .iter()
-            .flat_map(|s| s.points.iter().copied())
+            .flat_map(|s| {
+                // The error bars' ends are inside the axes too.
+                let bars = s
+                    .points
+                    .iter()
+                    .zip(&s.y_err)
+                    .filter(|(_, e)| e.is_finite())
+                    .flat_map(|(&(x, y), &e)| [(x, y - e), (x, y + e)]);
+                s.points.iter().copied().chain(bars)
+            })
             .filter(|p| self.usable(*p))
             .map(|(x, y)| (scale(x, log_x), scale(y, log_y)))
             .collect();
@@ -186,6 +198,7 @@ impl XyPlot {
                 .filter(|p| self.usable(*p))
                 .map(|(x, y)| (a.sx(scale(x, self.log_x)), a.sy(scale(y, self.log_y))))
                 .collect();
+            self.write_error_bars(s, a, series, colour);
             if matches!(series.mark, Mark::Line | Mark::LinePoints) && p.len() > 1 {
                 let path: Vec<String> = p.iter().map(|(x, y)| format!("{x:.1},{y:.1}")).collect();
                 let _ = write!(
@@ -209,6 +222,25 @@ impl XyPlot {
                 left + 18.0,
                 ly + 9.0,
                 escape(&series.name)
+            );
+        }
+    }
+}
+
+impl XyPlot {
+    /// A vertical bar from y − e to y + e at each point of `series` that has a finite e.
+    fn write_error_bars(&self, s: &mut String, a: &Axes, series: &XySeries, colour: &str) {
+        for (&(x, y), &e) in series.points.iter().zip(&series.y_err) {
+            let (lo, hi) = ((x, y - e), (x, y + e));
+            if !(e.is_finite() && self.usable(lo) && self.usable(hi)) {
+                continue;
+            }
+            let sx = a.sx(scale(x, self.log_x));
+            let _ = write!(
+                s,
+                r#"<line class="error-bar" x1="{sx:.1}" x2="{sx:.1}" y1="{:.1}" y2="{:.1}" stroke="{colour}" stroke-width="1"/>"#,
+                a.sy(scale(lo.1, self.log_y)),
+                a.sy(scale(hi.1, self.log_y))
             );
         }
     }
@@ -267,10 +299,27 @@ mod tests {
             name: "measured".into(),
             points: vec![(0.1, 1.0), (0.2, 0.1), (0.3, -1.0)],
             mark: Mark::LinePoints,
+            y_err: Vec::new(),
         });
         let svg = p.to_svg(600, 400);
         assert_eq!(svg.matches(r#"class="point""#).count(), 2);
         assert_eq!(svg.matches(r#"class="line""#).count(), 1);
         assert!(svg.contains("f [cycles/px]"));
+    }
+
+    #[test]
+    fn error_bars_are_drawn_and_inside_the_axes() {
+        let mut p = XyPlot::new("S-curve", "commanded [px]", "bias [px]");
+        p.series.push(XySeries {
+            name: "bias".into(),
+            points: vec![(0.1, 0.001), (0.2, 0.002), (0.3, 0.0)],
+            mark: Mark::Points,
+            y_err: vec![0.01, f64::NAN, 0.004],
+        });
+        let svg = p.to_svg(600, 400);
+        assert_eq!(svg.matches(r#"class="error-bar""#).count(), 2, "{svg}");
+        // The first bar reaches 0.011, beyond every point: the y axis is widened to hold it.
+        let axes = p.axes(600.0, 400.0, 22.0);
+        assert!(axes.y.1 >= 0.011 && axes.y.0 <= -0.009, "{:?}", axes.y);
     }
 }

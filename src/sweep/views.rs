@@ -415,6 +415,7 @@ pub fn bias_svgs(merged: &Merged) -> Vec<(String, String)> {
                             name: format!("dots {p}"),
                             points,
                             mark: Mark::LinePoints,
+                            y_err: Vec::new(),
                         }
                     })
                     .collect();

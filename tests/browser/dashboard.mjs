@@ -348,6 +348,11 @@ async function main() {
     const residualPlots = await page.locator("#comparison-plots .figure svg").count();
     log(`compared with the baseline: ${baselinePx} px; ${residualPlots} residual / statistics plots`);
     if (residualPlots < 1) fail("the comparison shows no residual plot");
+    const accuracyRows = await page.locator("#accuracy-table tbody tr").count();
+    const sCurve = await page.locator('#comparison-plots .figure[data-plot="accuracy_vs_commanded.svg"] svg line.error-bar').count();
+    log(`accuracy against the commanded move: ${accuracyRows} rows; ${sCurve} error bars on its plot`);
+    if (accuracyRows < 1) fail("the comparison shows no accuracy against the commanded move");
+    if (sCurve < 1) fail("the plot of bias and std against the commanded move has no error bar");
     await shot(page, "3-dataset-compared");
 
     await page.locator("#diagnose-btn").click();

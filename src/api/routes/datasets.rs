@@ -362,7 +362,7 @@ pub async fn analyse(
 #[utoipa::path(post, path = "/datasets/{id}/comparisons", tag = "datasets", request_body = CompareRequest,
     params(("id" = String, Path, description = "Dataset id"),
            ("Idempotency-Key" = Option<String>, Header, description = "Repeat-safe submission")),
-    responses((status = 202, description = "Queued as a job; Location names it. Its results/comparison.json and plots/*.svg hold the comparison, which the dataset's history keeps", body = Object),
+    responses((status = 202, description = "Queued as a job; Location names it. Its results/comparison.json and plots/*.svg hold the comparison, which the dataset's history keeps. Each run's `accuracy` is the measured side against the commanded move (commanded_px, bias_px ± bias_se_px, std_px, and in µm); plots/accuracy_vs_commanded.svg draws bias (± 2 SE) and std against the commanded displacement: for a step series, its S-curve", body = Object),
               (status = 429, description = "The lane already has jobs.max_queued_per_lane jobs waiting; Retry-After says when to try again", body = Problem),
               (status = 404, body = Problem), (status = 422, body = Problem)))]
 pub async fn compare(

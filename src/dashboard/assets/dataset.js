@@ -164,7 +164,29 @@ async function showComparison(job) {
       el("td", { class: "num" }, pxUm(r.std_px, scale)),
       el("td", { class: "num" }, pxUm(r.mean_diff_px && r.mean_diff_px[0], scale)),
       el("td", { class: "num" }, pxUm(r.mean_diff_px && r.mean_diff_px[1], scale)))))));
+  showAccuracy(cmp);
   await showPlots(job, $("#comparison-plots"));
+}
+
+/** The measured side against the commanded move, in the order of the commanded moves. */
+function showAccuracy(cmp) {
+  const runs = [...(cmp.runs || [])].filter((r) => r.accuracy)
+    .sort((a, b) => Math.hypot(...a.accuracy.commanded_px) - Math.hypot(...b.accuracy.commanded_px));
+  const pm = (x, se) => `${num(x, 3)} ± ${num(se, 2)}`;
+  clear($("#comparison-accuracy"), runs.length ? el("table", { id: "accuracy-table" },
+    el("thead", {}, el("tr", {}, ["run", "scheme", "commanded u, v [px]", "bias u [px]", "bias v [px]", "std u, v [px]", "bias [µm]", "std [µm]"]
+      .map((h, i) => el("th", { class: i > 1 ? "num" : "" }, h)))),
+    el("tbody", {}, runs.map((r) => {
+      const a = r.accuracy;
+      return el("tr", { "data-run": r.id },
+        el("td", {}, r.id), el("td", {}, r.scheme),
+        el("td", { class: "num" }, `${num(a.commanded_px[0])}, ${num(a.commanded_px[1])}`),
+        el("td", { class: "num" }, pm(a.bias_px[0], a.bias_se_px[0])),
+        el("td", { class: "num" }, pm(a.bias_px[1], a.bias_se_px[1])),
+        el("td", { class: "num" }, `${num(a.std_px[0], 3)}, ${num(a.std_px[1], 3)}`),
+        el("td", { class: "num" }, `${num(a.bias_um[0], 3)}, ${num(a.bias_um[1], 3)}`),
+        el("td", { class: "num" }, `${num(a.std_um[0], 3)}, ${num(a.std_um[1], 3)}`));
+    }))) : el("p", { class: "muted" }, "no run with a commanded move"));
 }
 
 async function showPlots(job, container) {
