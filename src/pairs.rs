@@ -12,7 +12,7 @@
 
 use crate::dataset::Run;
 use crate::dic::{DicError, DicResult, DicSettings, PreparedReference, Watch};
-use crate::image::{read_tiff, Image, ImageError};
+use crate::image::{read_image, Image, ImageError};
 use crate::reduce::{reduce, AxisScheme, ReduceError, Scheme};
 use std::borrow::Cow;
 use std::path::Path;
@@ -114,7 +114,7 @@ pub fn correlate_pairs<V: PairVisitor + Sync>(
             Some(k) => kept.remove(k),
             None => prepare(dir, run, schemes, dic, &|| visitor.cancelled())?,
         };
-        let (deformed, _) = read_tiff(&dir.join(&run.deformed)).map_err(PairError::from)?;
+        let (deformed, _) = read_image(&dir.join(&run.deformed)).map_err(PairError::from)?;
         let size = |i: &Image| (i.width(), i.height());
         if size(&frame.image) != size(&deformed) {
             return Err(PairError::SizeMismatch {
@@ -173,7 +173,7 @@ fn prepare(
     dic: &DicSettings,
     cancelled: &dyn Fn() -> bool,
 ) -> Result<PreparedFrame, PairError> {
-    let (image, info) = read_tiff(&dir.join(&run.reference))?;
+    let (image, info) = read_image(&dir.join(&run.reference))?;
     let schemes = match &run.capture {
         Some(capture) => vec![hardware_geometry(capture)],
         None => schemes.to_vec(),

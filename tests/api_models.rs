@@ -270,6 +270,11 @@ async fn compare_diagnose_add_the_winner_and_the_history_falls() {
     assert_eq!(entries[0]["model"], "baseline");
     assert_eq!(entries[1]["model"], name.as_str());
     assert!(entries[1]["discrepancy_px"].as_f64() < entries[0]["discrepancy_px"].as_f64());
+    // Both compared the same manifest: one content key, its run count.
+    let manifest = entries[0]["manifest_version"].as_str().unwrap();
+    assert_eq!(manifest.len(), 12, "{history}");
+    assert_eq!(entries[1]["manifest_version"], manifest);
+    assert_eq!(entries[0]["manifest_runs"], 3, "{history}");
     let chart = client()
         .get(server.url(&format!("/datasets/{id}/history.svg")))
         .send()

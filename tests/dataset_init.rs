@@ -107,6 +107,15 @@ fn a_sample3_step_series_is_a_dataset_in_one_command_with_the_bias_of_every_step
     assert_eq!(svg.matches(r#"class="error-bar""#).count(), 2 * runs.len());
     assert_eq!(svg.matches(r#"class="point""#).count(), 4 * runs.len());
     assert!(svg.contains("bias of u") && svg.contains("std of v"));
+    // The figure that leads: a bar per run and scheme (one scheme here), and the residual
+    // profiles as one plot per scheme.
+    let summary = std::fs::read_to_string(plots.join("summary.svg")).unwrap();
+    assert_eq!(
+        summary.matches(r#"class="bar""#).count(),
+        runs.len(),
+        "{summary}"
+    );
+    assert!(plots.join("residual_vs_x_native.svg").is_file());
     let text = String::from_utf8_lossy(&text.stdout);
     assert!(
         text.contains("accuracy against the commanded move")
@@ -114,4 +123,65 @@ fn a_sample3_step_series_is_a_dataset_in_one_command_with_the_bias_of_every_step
             && text.contains("the stage's repeatability 2.00 µm"),
         "{text}"
     );
+}
+
+/// The same frames as 8-bit grey PNG (re-encoded by the `png` crate from the values the `tiff`
+/// crate decodes: lossless, and neither is ffdic's reader) make the same dataset: every run's
+/// accuracy and the discrepancy are equal to the digit.
+#[test]
+fn a_step_series_in_png_frames_gives_the_numbers_of_its_tiffs() {
+    let root = tempfile::tempdir().unwrap();
+    let from = common::shared_data().join("dic-challenge-1/sample3");
+    let (tiffs, pngs) = (root.path().join("tiff"), root.path().join("png"));
+    std::fs::create_dir_all(&tiffs).unwrap();
+    std::fs::create_dir_all(&pngs).unwrap();
+    for stem in ["reference", "shift_00", "shift_01", "shift_03", "shift_06"] {
+        let tif = from.join(format!("{stem}.tif"));
+        std::fs::copy(&tif, tiffs.join(format!("{stem}.tif"))).unwrap();
+        let mut decoder = tiff::decoder::Decoder::new(std::fs::File::open(&tif).unwrap()).unwrap();
+        let (w, h) = decoder.dimensions().unwrap();
+        let tiff::decoder::DecodingResult::U8(values) = decoder.read_image().unwrap() else {
+            panic!("Sample 3 is 8-bit grey");
+        };
+        let file = std::fs::File::create(pngs.join(format!("{stem}.png"))).unwrap();
+        let mut e = png::Encoder::new(std::io::BufWriter::new(file), w, h);
+        e.set_color(png::ColorType::Grayscale);
+        e.set_depth(png::BitDepth::Eight);
+        e.write_header().unwrap().write_image_data(&values).unwrap();
+    }
+    let compare = |dir: &Path, ext: &str| -> serde_json::Value {
+        let d = dir.to_str().unwrap();
+        let repeat = format!("shift_00.{ext}");
+        ffdic_ok(&[
+            "dataset",
+            "init",
+            d,
+            "--scale",
+            "10",
+            "--repeat",
+            &repeat,
+            "--step-px",
+            "0.1,0.1",
+        ]);
+        let out = ffdic_ok(&[
+            "compare",
+            d,
+            "--schemes",
+            "native",
+            "--json",
+            "--no-history",
+        ]);
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    let (t, p) = (compare(&tiffs, "tif"), compare(&pngs, "png"));
+    assert_eq!(p["runs"].as_array().unwrap().len(), 3);
+    assert_eq!(t["discrepancy_px"], p["discrepancy_px"]);
+    for (a, b) in t["runs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(p["runs"].as_array().unwrap())
+    {
+        assert_eq!(a["accuracy"], b["accuracy"], "{}", a["id"]);
+    }
 }

@@ -187,7 +187,7 @@ def dataset_init(
     """A folder of frames captured by hand made a dataset: writes ``folder/dataset.json`` as
     ``ffdic dataset init`` does and returns the manifest as a dict.
 
-    The folder's TIFF frames are one ``reference`` (default: ``reference.tif``, ``ref.tif``, a
+    The folder's frames (TIFF, PNG or BMP) are one ``reference`` (default: ``reference.tif``, ``ref.tif``, a
     name starting with ``ref``, else the first by name), its static ``repeats`` (the camera's
     noise floor), and the rest in name order as a step series: frame k moved by k steps of
     ``step_mm`` (the stage's move, mm) or ``step_px`` (px, converted with

@@ -148,38 +148,20 @@ pub fn analyze(
     mask: Option<&Bound<'_, PyAny>>,
     threads: Option<usize>,
 ) -> PyResult<PyObject> {
-    // The library's defaults, overridden by what the caller gave.
-    let d = DicSettings::default();
-    let interpolation = match interp {
-        None => d.interpolation,
-        Some(s) => serde_json::from_value(serde_json::Value::String(s.into()))
-            .map_err(|_| value_error(format!("interp: '{s}' is not bspline3 or bspline5")))?,
-    };
-    let shape = match shape {
-        None => d.shape,
-        Some(s) => s
-            .parse()
-            .map_err(|e: String| value_error(format!("shape: {e}")))?,
-    };
-    let settings = DicSettings {
-        subset_px: subset.unwrap_or(d.subset_px),
-        step_px: step.unwrap_or(d.step_px),
-        roi: roi.map(|(x, y, w, h)| Roi::new(x, y, w, h)),
-        strain_window: strain_window.unwrap_or(d.strain_window),
-        interpolation,
+    let settings = dic_settings(
+        subset,
+        step,
+        roi,
+        strain_window,
+        interp,
         shape,
-        prefilter_sigma_px: prefilter_sigma.unwrap_or(d.prefilter_sigma_px),
-        min_zncc: min_zncc.unwrap_or(d.min_zncc),
-        max_motion_px: max_motion.unwrap_or(d.max_motion_px),
-        max_displacement_std_px: max_displacement_std.unwrap_or(d.max_displacement_std_px),
-        outlier_threshold: if outlier_test {
-            outlier_threshold.or(d.outlier_threshold)
-        } else {
-            None
-        },
-        ..d
-    };
-    settings.validate().map_err(dic_error)?;
+        prefilter_sigma,
+        min_zncc,
+        max_motion,
+        max_displacement_std,
+        outlier_threshold,
+        outlier_test,
+    )?;
     if threads == Some(0) {
         return Err(value_error("threads: at least 1 (None: every core)"));
     }
@@ -199,41 +181,7 @@ pub fn analyze(
                 "mask applies to one image pair (a sequence's points move from frame to frame)",
             ));
         }
-        let frames = frames
-            .iter()
-            .enumerate()
-            .map(|(k, f)| {
-                let name = format!("deformed[{k}]");
-                same_shape(&reference, InputImage::from_python(&f, &name)?, &name)
-            })
-            .collect::<PyResult<Vec<_>>>()?;
-        let reference_image = reference.to_image();
-        let images: Vec<Image> = frames.iter().map(InputImage::to_image).collect();
-        let started = Instant::now();
-        let sequence = py
-            .allow_threads(|| {
-                in_pool(pool.as_ref(), || {
-                    analyze_sequence(&reference_image, images, &settings, |_| {})
-                })
-            })
-            .map_err(dic_error)?;
-        let elapsed_s = started.elapsed().as_secs_f64() / sequence.len().max(1) as f64;
-        let results = sequence
-            .iter()
-            .zip(&frames)
-            .map(|(frame, input)| {
-                let mut r = build(
-                    py,
-                    &frame.result,
-                    elapsed_s,
-                    reference.copied(),
-                    input.copied(),
-                )?;
-                r.reference_index = frame.reference_index;
-                Ok(Py::new(py, r)?.into_any())
-            })
-            .collect::<PyResult<Vec<PyObject>>>()?;
-        return Ok(PyList::new(py, results)?.into_any().unbind());
+        return analyze_frames(py, &reference, frames, &settings, pool.as_ref());
     }
     let deformed = same_shape(
         &reference,
@@ -266,6 +214,101 @@ pub fn analyze(
         deformed.copied(),
     )?;
     Ok(Py::new(py, r)?.into_any())
+}
+
+/// DIC settings: the library's defaults, overridden by what the caller gave, validated.
+#[allow(clippy::too_many_arguments)]
+fn dic_settings(
+    subset: Option<usize>,
+    step: Option<usize>,
+    roi: Option<(usize, usize, usize, usize)>,
+    strain_window: Option<usize>,
+    interp: Option<&str>,
+    shape: Option<&str>,
+    prefilter_sigma: Option<f64>,
+    min_zncc: Option<f64>,
+    max_motion: Option<usize>,
+    max_displacement_std: Option<f64>,
+    outlier_threshold: Option<f64>,
+    outlier_test: bool,
+) -> PyResult<DicSettings> {
+    let d = DicSettings::default();
+    let interpolation = match interp {
+        None => d.interpolation,
+        Some(s) => serde_json::from_value(serde_json::Value::String(s.into()))
+            .map_err(|_| value_error(format!("interp: '{s}' is not bspline3 or bspline5")))?,
+    };
+    let shape = match shape {
+        None => d.shape,
+        Some(s) => s
+            .parse()
+            .map_err(|e: String| value_error(format!("shape: {e}")))?,
+    };
+    let settings = DicSettings {
+        subset_px: subset.unwrap_or(d.subset_px),
+        step_px: step.unwrap_or(d.step_px),
+        roi: roi.map(|(x, y, w, h)| Roi::new(x, y, w, h)),
+        strain_window: strain_window.unwrap_or(d.strain_window),
+        interpolation,
+        shape,
+        prefilter_sigma_px: prefilter_sigma.unwrap_or(d.prefilter_sigma_px),
+        min_zncc: min_zncc.unwrap_or(d.min_zncc),
+        max_motion_px: max_motion.unwrap_or(d.max_motion_px),
+        max_displacement_std_px: max_displacement_std.unwrap_or(d.max_displacement_std_px),
+        outlier_threshold: if outlier_test {
+            outlier_threshold.or(d.outlier_threshold)
+        } else {
+            None
+        },
+        ..d
+    };
+    settings.validate().map_err(dic_error)?;
+    Ok(settings)
+}
+
+/// A sequence: every frame of `frames` against `reference`, accumulated (`analyze_sequence`).
+fn analyze_frames(
+    py: Python<'_>,
+    reference: &InputImage<'_>,
+    frames: &Bound<'_, PyList>,
+    settings: &DicSettings,
+    pool: Option<&rayon::ThreadPool>,
+) -> PyResult<PyObject> {
+    let frames = frames
+        .iter()
+        .enumerate()
+        .map(|(k, f)| {
+            let name = format!("deformed[{k}]");
+            same_shape(reference, InputImage::from_python(&f, &name)?, &name)
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    let reference_image = reference.to_image();
+    let images: Vec<Image> = frames.iter().map(InputImage::to_image).collect();
+    let started = Instant::now();
+    let sequence = py
+        .allow_threads(|| {
+            in_pool(pool, || {
+                analyze_sequence(&reference_image, images, settings, |_| {})
+            })
+        })
+        .map_err(dic_error)?;
+    let elapsed_s = started.elapsed().as_secs_f64() / sequence.len().max(1) as f64;
+    let results = sequence
+        .iter()
+        .zip(&frames)
+        .map(|(frame, input)| {
+            let mut r = build(
+                py,
+                &frame.result,
+                elapsed_s,
+                reference.copied(),
+                input.copied(),
+            )?;
+            r.reference_index = frame.reference_index;
+            Ok(Py::new(py, r)?.into_any())
+        })
+        .collect::<PyResult<Vec<PyObject>>>()?;
+    Ok(PyList::new(py, results)?.into_any().unbind())
 }
 
 /// `image` (named `name`) when it has the reference's shape, else a `ValueError` naming both.

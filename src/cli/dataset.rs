@@ -14,14 +14,14 @@ pub struct DatasetArgs {
 
 #[derive(Debug, Subcommand)]
 pub enum DatasetCommand {
-    /// Write DIR/dataset.json for a folder of TIFF frames: a reference, its static repeats, and
+    /// Write DIR/dataset.json for a folder of frames (TIFF, PNG, BMP): a reference, its static repeats, and
     /// the other frames in name order as a step series (frame k moved by k steps).
     Init(InitArgs),
 }
 
 #[derive(Debug, Args)]
 pub struct InitArgs {
-    /// The folder of frames (.tif, .tiff).
+    /// The folder of frames (.tif, .tiff, .png, .bmp).
     pub dir: PathBuf,
     /// The images' scale, px per mm (a ruler or a calibration target in the field of view).
     #[arg(long, value_name = "PX_PER_MM")]

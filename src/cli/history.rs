@@ -58,6 +58,10 @@ pub fn run(args: &HistoryArgs) -> Result<()> {
                 e.time.clone(),
                 e.model.clone(),
                 e.version.clone(),
+                match e.manifest_version.is_empty() {
+                    true => "—".into(),
+                    false => format!("{} ({} runs)", e.manifest_version, e.manifest_runs),
+                },
                 format!("{:.5}", e.discrepancy_px),
                 format!("{:+.1} %", 100.0 * (e.discrepancy_px / first - 1.0)),
             ]
@@ -66,7 +70,14 @@ pub fn run(args: &HistoryArgs) -> Result<()> {
     print!(
         "{}",
         ffdic::report::text_table(
-            &["time", "model", "version", "discrepancy [px]", "vs first"],
+            &[
+                "time",
+                "model",
+                "version",
+                "manifest",
+                "discrepancy [px]",
+                "vs first"
+            ],
             &rows
         )
     );

@@ -11,7 +11,7 @@
 
 use super::{check_stated_move, Manifest, MoveContradiction};
 use crate::dic::MIN_FRAME_SIDE_PX;
-use crate::image::{decode_tiff_within, FrameInfo, Image, ImageError};
+use crate::image::{decode_image_within, FrameInfo, Image, ImageError};
 use std::collections::HashSet;
 use std::path::Path;
 use std::rc::Rc;
@@ -200,7 +200,7 @@ impl<'a> Frames<'a> {
             self.held.remove(0);
         }
         let (image, info) =
-            decode_tiff_within(&bytes, Path::new(name), self.max_pixels).map_err(unreadable)?;
+            decode_image_within(&bytes, Path::new(name), self.max_pixels).map_err(unreadable)?;
         drop(bytes);
         self.decoded += 1;
         if image.width() < MIN_FRAME_SIDE_PX || image.height() < MIN_FRAME_SIDE_PX {

@@ -7,7 +7,7 @@ use serde_json::Map;
 use std::path::Path;
 
 /// The frame files a folder's step series is made of, by extension (any case).
-pub const FRAME_EXTENSIONS: [&str; 2] = ["tif", "tiff"];
+pub const FRAME_EXTENSIONS: [&str; 4] = ["tif", "tiff", "png", "bmp"];
 
 /// The step between consecutive frames, in the stage's mm or in the images' px.
 #[derive(Clone, Copy, Debug, PartialEq)]

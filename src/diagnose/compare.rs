@@ -28,7 +28,7 @@ use super::{CompareOptions, DiagnoseError, Progress};
 use crate::dataset::check_stated_move;
 use crate::dataset::{Manifest, Run};
 use crate::dic::{DicError, DicResult, PreparedReference, Watch};
-use crate::image::{read_tiff, Image};
+use crate::image::{read_image, Image};
 use crate::model::{DotProfile, ModelConfig, Placement, SpecklePattern};
 use crate::pairs::{correlate_pairs, PairVisitor, RunPair};
 use crate::reduce::{reduce, Scheme};
@@ -298,7 +298,7 @@ impl ReferenceStats {
         let crop = centre_crop(reference, STATS_CROP_PX);
         let repeat = match run.repeat.first() {
             Some(name) => {
-                let (r, _) = read_tiff(&dir.join(name))?;
+                let (r, _) = read_image(&dir.join(name))?;
                 check_sizes(run, reference, &r)?;
                 Some(centre_crop(&r, STATS_CROP_PX))
             }
@@ -943,6 +943,10 @@ pub(super) fn assemble(
     };
     let mut cmp = Comparison {
         dataset: meas.manifest.name.clone(),
+        manifest_version: super::history::short_hash(
+            &serde_json::to_string(&meas.manifest).expect("a manifest always serialises"),
+        ),
+        manifest_runs: meas.manifest.runs.len(),
         model: ModelInfo {
             name: model.name.clone(),
             version: model_version(model),

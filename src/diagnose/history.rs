@@ -25,6 +25,13 @@ pub struct HistoryEntry {
     /// Effects of the model, in vocabulary order.
     #[serde(default)]
     pub effects: Vec<String>,
+    /// The manifest compared, by content ([`short_hash`] of its JSON; empty in entries written
+    /// before it was recorded), and its number of runs: a dataset that grew is told apart from
+    /// the one it was.
+    #[serde(default)]
+    pub manifest_version: String,
+    #[serde(default)]
+    pub manifest_runs: usize,
 }
 
 impl HistoryEntry {
@@ -42,18 +49,24 @@ impl HistoryEntry {
             version: version.into(),
             discrepancy_px,
             effects,
+            manifest_version: String::new(),
+            manifest_runs: 0,
         }
     }
 
     /// The history entry of a comparison made now.
     pub fn of(cmp: &super::Comparison) -> Self {
-        Self::now(
-            &cmp.dataset,
-            &cmp.model.name,
-            &cmp.model.version,
-            cmp.discrepancy_px,
-            cmp.model.effects.names(),
-        )
+        Self {
+            manifest_version: cmp.manifest_version.clone(),
+            manifest_runs: cmp.manifest_runs,
+            ..Self::now(
+                &cmp.dataset,
+                &cmp.model.name,
+                &cmp.model.version,
+                cmp.discrepancy_px,
+                cmp.model.effects.names(),
+            )
+        }
     }
 }
 

@@ -102,6 +102,12 @@ pub struct DiscrepancyParts {
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Comparison {
     pub dataset: String,
+    /// The manifest compared, by content (a short hash of its JSON), and its number of runs:
+    /// what the history keys a comparison on besides the model's version.
+    #[serde(default)]
+    pub manifest_version: String,
+    #[serde(default)]
+    pub manifest_runs: usize,
     pub model: ModelInfo,
     /// RMS over every run and scheme of the per-run discrepancy, px.
     pub discrepancy_px: f64,

@@ -5,7 +5,7 @@
 //! luma on their channel scale — a grey palette (R = G = B) gives its grey level exactly — as
 //! TIFF palettes do.
 
-use super::tiff_io::{decode_tiff, FrameInfo};
+use super::tiff_io::{decode_tiff, decode_tiff_within, read_tiff_header, FrameInfo};
 use super::{Image, ImageError};
 use image::{DynamicImage, ImageFormat};
 use std::path::Path;
@@ -21,16 +21,8 @@ pub fn read_image(path: &Path) -> Result<(Image, FrameInfo), ImageError> {
 
 /// As [`read_image`], from the file's bytes; `path` names it in errors.
 pub fn decode_image(bytes: &[u8], path: &Path) -> Result<(Image, FrameInfo), ImageError> {
-    let format = match bytes {
-        [b'I', b'I', 42, 0, ..] | [b'M', b'M', 0, 42, ..] => return decode_tiff(bytes, path),
-        [0x89, b'P', b'N', b'G', ..] => ImageFormat::Png,
-        [b'B', b'M', ..] => ImageFormat::Bmp,
-        _ => {
-            return Err(ImageError::Format {
-                path: path.to_owned(),
-                reason: "its first bytes are none of TIFF, PNG or BMP".into(),
-            })
-        }
+    let Some(format) = format_of(bytes, path)? else {
+        return decode_tiff(bytes, path);
     };
     let decoded =
         image::load_from_memory_with_format(bytes, format).map_err(|e| ImageError::Format {
@@ -82,4 +74,74 @@ fn to_grey(decoded: DynamicImage) -> (Image, FrameInfo) {
             bit_depth,
         },
     )
+}
+
+/// The format of a frame's bytes, from its first bytes.
+fn format_of(bytes: &[u8], path: &Path) -> Result<Option<ImageFormat>, ImageError> {
+    match bytes {
+        [b'I', b'I', 42, 0, ..] | [b'M', b'M', 0, 42, ..] => Ok(None),
+        [0x89, b'P', b'N', b'G', ..] => Ok(Some(ImageFormat::Png)),
+        [b'B', b'M', ..] => Ok(Some(ImageFormat::Bmp)),
+        _ => Err(ImageError::Format {
+            path: path.to_owned(),
+            reason: "its first bytes are none of TIFF, PNG or BMP".into(),
+        }),
+    }
+}
+
+/// As [`decode_image`], refused from the header before a pixel is decoded when the frame has
+/// more than `max_pixels` pixels (what a dataset's frames are checked with).
+pub fn decode_image_within(
+    bytes: &[u8],
+    path: &Path,
+    max_pixels: usize,
+) -> Result<(Image, FrameInfo), ImageError> {
+    let Some(format) = format_of(bytes, path)? else {
+        return decode_tiff_within(bytes, path, max_pixels);
+    };
+    let info = header_of(bytes, format, path)?;
+    if info.width.saturating_mul(info.height) > max_pixels {
+        return Err(ImageError::TooLarge {
+            path: path.to_owned(),
+            width: info.width,
+            height: info.height,
+            max_pixels,
+        });
+    }
+    decode_image(bytes, path)
+}
+
+/// A frame's size and bit depth (per channel) from its header, TIFF, PNG or BMP.
+pub fn read_image_header(path: &Path) -> Result<FrameInfo, ImageError> {
+    let open = |source| ImageError::Open {
+        path: path.to_owned(),
+        source,
+    };
+    let mut file = std::fs::File::open(path).map_err(open)?;
+    // Enough for any of the three formats' headers (a PNG's IHDR ends at byte 33).
+    let mut head = Vec::with_capacity(64);
+    std::io::Read::read_to_end(&mut std::io::Read::take(&mut file, 64), &mut head).map_err(open)?;
+    match format_of(&head, path)? {
+        None => read_tiff_header(path),
+        Some(format) => header_of(&std::fs::read(path).map_err(open)?, format, path),
+    }
+}
+
+/// Size and bit depth of a PNG or BMP from its header.
+fn header_of(bytes: &[u8], format: ImageFormat, path: &Path) -> Result<FrameInfo, ImageError> {
+    use image::ImageDecoder;
+    let bad = |e: image::ImageError| ImageError::Format {
+        path: path.to_owned(),
+        reason: e.to_string(),
+    };
+    let decoder = image::ImageReader::with_format(std::io::Cursor::new(bytes), format)
+        .into_decoder()
+        .map_err(bad)?;
+    let (w, h) = decoder.dimensions();
+    let colour = decoder.color_type();
+    Ok(FrameInfo {
+        width: w as usize,
+        height: h as usize,
+        bit_depth: (colour.bits_per_pixel() / u16::from(colour.channel_count())) as u8,
+    })
 }

@@ -14,7 +14,7 @@ mod tiff_layout;
 mod view;
 
 pub use error::ImageError;
-pub use formats::{decode_image, read_image};
+pub use formats::{decode_image, decode_image_within, read_image, read_image_header};
 pub use gray::Image;
 pub use roi::Roi;
 pub use speckle_quality::{speckle_quality, SpeckleQuality, SpeckleQualityError};

@@ -3,7 +3,7 @@
 //! (interpolation bias is periodic in it: Schreier, Braasch & Sutton, Opt. Eng. 39 (2000)) — and
 //! the image statistics measured beside the model's.
 
-use super::{Heatmap, Mark, XyPlot, XySeries};
+use super::{distinct, BarChart, Heatmap, Mark, Series, XyPlot, XySeries};
 use crate::diagnose::{Accuracy, Comparison, ImageComparison};
 
 fn file_safe(s: &str) -> String {
@@ -20,7 +20,8 @@ fn file_safe(s: &str) -> String {
 
 /// Every plot of a comparison as (file name, SVG text).
 pub fn comparison_svgs(cmp: &Comparison) -> Vec<(String, String)> {
-    let mut out = residual_map_svgs(cmp);
+    let mut out = vec![(SUMMARY_SVG.to_string(), summary_svg(cmp))];
+    out.extend(residual_map_svgs(cmp));
     out.extend(residual_profile_svgs(cmp));
     out.push(("residual_vs_fraction.svg".into(), fraction_svg(cmp)));
     out.push(("accuracy_vs_commanded.svg".into(), accuracy_svg(cmp)));
@@ -28,6 +29,64 @@ pub fn comparison_svgs(cmp: &Comparison) -> Vec<(String, String)> {
         out.extend(image_svgs(im));
     }
     out
+}
+
+/// The figure that leads a comparison: where the model fails, at a glance.
+pub const SUMMARY_SVG: &str = "summary.svg";
+
+/// The discrepancy of every run (groups) and scheme (series), each bar split in words by its
+/// label into the part that dominates it: rigid (where the stage landed), field (an effect the
+/// model lacks) or std (noise).
+fn summary_svg(cmp: &Comparison) -> String {
+    let runs = distinct(cmp.runs.iter().map(|r| r.id.clone()));
+    let schemes = distinct(cmp.runs.iter().map(|r| r.scheme.clone()));
+    let find =
+        |run: &str, scheme: &str| cmp.runs.iter().find(|r| r.id == run && r.scheme == scheme);
+    let series = schemes
+        .iter()
+        .map(|scheme| Series {
+            name: scheme.clone(),
+            values: runs
+                .iter()
+                .map(|run| find(run, scheme).map_or(f64::NAN, |r| r.discrepancy_px))
+                .collect(),
+            labels: runs
+                .iter()
+                .map(|run| find(run, scheme).map(dominant_part))
+                .collect(),
+            errors: Vec::new(),
+        })
+        .collect();
+    BarChart {
+        title: format!(
+            "Discrepancy per run and scheme (total {:.4} ± {:.4} px)",
+            cmp.discrepancy_px, cmp.discrepancy_se_px
+        ),
+        y_label: "discrepancy [px]".into(),
+        groups: runs,
+        series,
+    }
+    .to_svg(760, 460)
+}
+
+/// The largest of a run's three parts, named.
+fn dominant_part(r: &crate::diagnose::RunComparison) -> String {
+    let parts = [
+        ("rigid", r.rigid_px),
+        ("field", r.field_px),
+        ("std", r.std_px),
+    ];
+    let (name, _) = parts
+        .iter()
+        .copied()
+        .fold(("—", f64::NEG_INFINITY), |best, p| {
+            if p.1 > best.1 {
+                p
+            } else {
+                best
+            }
+        });
+    name.to_string()
 }
 
 /// The residual maps (Δu and Δv) of each run and scheme.
@@ -64,35 +123,38 @@ fn residual_map_svgs(cmp: &Comparison) -> Vec<(String, String)> {
     out
 }
 
-/// The mean residual against x and against y, one line per run, scheme and component.
+/// The mean residual against x and against y: small multiples, one plot per scheme, a line per
+/// run and component (a few series each, in colours that do not repeat).
 fn residual_profile_svgs(cmp: &Comparison) -> Vec<(String, String)> {
     let mut out = Vec::new();
-    for (name, along_x) in [("x", true), ("y", false)] {
-        let mut plot = XyPlot::new(
-            &format!("Residual against {name}"),
-            &format!("{name} [px]"),
-            "mean residual [px]",
-        );
-        plot.zero_line = true;
-        for r in &cmp.runs {
-            let prof = if along_x {
-                &r.residual.profile_x
-            } else {
-                &r.residual.profile_y
-            };
-            for (k, comp) in [(1usize, "u"), (2, "v")] {
-                plot.series.push(XySeries {
-                    name: format!("Δ{comp} {} {}", r.id, r.scheme),
-                    points: prof.iter().map(|p| (p[0], p[k])).collect(),
-                    mark: Mark::LinePoints,
-                    y_err: Vec::new(),
-                });
+    for scheme in distinct(cmp.runs.iter().map(|r| r.scheme.clone())) {
+        for (name, along_x) in [("x", true), ("y", false)] {
+            let mut plot = XyPlot::new(
+                &format!("Residual against {name}, {scheme}"),
+                &format!("{name} [px]"),
+                "mean residual [px]",
+            );
+            plot.zero_line = true;
+            for r in cmp.runs.iter().filter(|r| r.scheme == scheme) {
+                let prof = if along_x {
+                    &r.residual.profile_x
+                } else {
+                    &r.residual.profile_y
+                };
+                for (k, comp) in [(1usize, "u"), (2, "v")] {
+                    plot.series.push(XySeries {
+                        name: format!("Δ{comp} {}", r.id),
+                        points: prof.iter().map(|p| (p[0], p[k])).collect(),
+                        mark: Mark::LinePoints,
+                        y_err: Vec::new(),
+                    });
+                }
             }
+            out.push((
+                format!("residual_vs_{name}_{}.svg", file_safe(&scheme)),
+                plot.to_svg(760, 460 + 16 * plot.series.len() as u32),
+            ));
         }
-        out.push((
-            format!("residual_vs_{name}.svg"),
-            plot.to_svg(760, 460 + 16 * plot.series.len() as u32),
-        ));
     }
     out
 }

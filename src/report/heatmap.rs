@@ -2,7 +2,7 @@
 //! grid point, a diverging colour scale symmetric about zero (or a sequential one), a colour-scale
 //! legend with its unit, and axis labels with units.
 
-use super::svg::{escape, format_tick, nice_ticks, start_document};
+use super::svg::{escape, start_document, ticks_inside};
 use std::fmt::Write;
 
 #[derive(Clone, Debug, PartialEq)]
@@ -212,10 +212,7 @@ impl Heatmap {
             s,
             r##"<rect class="legend" x="{lx:.1}" y="{top}" width="{lw}" height="{ph}" fill="none" stroke="#333"/>"##
         );
-        for t in nice_ticks(range.0, range.1, 4)
-            .into_iter()
-            .filter(|t| *t >= range.0 - 1e-12 && *t <= range.1 + 1e-12)
-        {
+        for (t, label) in ticks_inside(range.0, range.1) {
             let y = top + ph * (1.0 - (t - range.0) / (range.1 - range.0));
             let _ = write!(
                 s,
@@ -224,7 +221,7 @@ impl Heatmap {
                 lx + lw + 4.0,
                 lx + lw + 6.0,
                 y + 4.0,
-                format_tick(t)
+                label
             );
         }
         let _ = write!(
@@ -251,11 +248,7 @@ fn write_marker(s: &mut String, m: &HeatmapMarker, x: f64, y: f64) {
 /// The given labels inside [lo, hi], or numeric ticks when there are none.
 fn ticks(labels: &[(f64, String)], lo: f64, hi: f64) -> Vec<(f64, String)> {
     if labels.is_empty() {
-        nice_ticks(lo, hi, 5)
-            .into_iter()
-            .filter(|t| *t >= lo && *t <= hi)
-            .map(|t| (t, format_tick(t)))
-            .collect()
+        ticks_inside(lo, hi)
     } else {
         labels
             .iter()

@@ -23,10 +23,21 @@ pub use comparison_figures::comparison_svgs;
 pub use dic_summary::{dic_settings_json, dic_summary_json};
 pub use field_maps::{field_map_svgs, map_file_name};
 pub use heatmap::{Heatmap, HeatmapMarker};
-pub use history_chart::{history_chart, history_svg, HistoryPoint};
+pub use history_chart::history_chart;
 pub use paper_figures::paper_figures_text;
 pub use png::png_quicklook;
 pub use study_figures::{figure_svgs, figures_text, rows_json, study_csv, study_json};
 pub use study_rows::{Increase, IncreaseInterval, StudyRow};
 pub use table::{csv, text_table};
 pub use xy_plot::{Mark, XyPlot, XySeries};
+
+/// Distinct values in first-seen order (a plot's runs, schemes, versions).
+pub fn distinct<T: PartialEq>(items: impl Iterator<Item = T>) -> Vec<T> {
+    let mut out: Vec<T> = Vec::new();
+    for item in items {
+        if !out.contains(&item) {
+            out.push(item);
+        }
+    }
+    out
+}

@@ -54,6 +54,55 @@ pub fn format_tick(v: f64) -> String {
     }
 }
 
+/// At least three "nice" ticks inside [lo, hi] (a colour bar's or an axis's own range, which
+/// the ticks may not widen), labelled with as many decimals as their step needs so that no two
+/// read the same. `nice_ticks` alone can leave one: a range of ±4.5 gets steps of 5, and only
+/// the 0 falls inside.
+pub fn ticks_inside(lo: f64, hi: f64) -> Vec<(f64, String)> {
+    if !(lo.is_finite() && hi.is_finite() && hi > lo) {
+        return vec![(lo, format_tick(lo))];
+    }
+    let eps = 1e-9 * (hi - lo);
+    let mut ticks = Vec::new();
+    for n in 4..=12 {
+        ticks = nice_ticks(lo, hi, n)
+            .into_iter()
+            .filter(|t| *t >= lo - eps && *t <= hi + eps)
+            .collect();
+        if ticks.len() >= 3 {
+            break;
+        }
+    }
+    let step = match ticks.as_slice() {
+        [a, b, ..] => b - a,
+        _ => hi - lo,
+    };
+    ticks
+        .into_iter()
+        .map(|t| {
+            let t = if t.abs() < 1e-9 * step { 0.0 } else { t };
+            (t, format_tick_with_step(t, step))
+        })
+        .collect()
+}
+
+/// `format_tick`, with at least the decimals that `step` needs (32.499, 32.5, 32.501 rather
+/// than three times 32.5).
+fn format_tick_with_step(v: f64, step: f64) -> String {
+    let plain = format_tick(v);
+    let a = v.abs();
+    if v == 0.0 || !(1e-3..1e5).contains(&a) || !(step > 0.0) {
+        return plain;
+    }
+    let needed = (-step.log10().floor()).max(0.0) as usize;
+    let shown = plain.split('.').nth(1).map_or(0, str::len);
+    if shown >= needed {
+        plain
+    } else {
+        format!("{v:.needed$}")
+    }
+}
+
 /// Colour-blind-safe series colours (Okabe & Ito).
 pub const PALETTE: [&str; 6] = [
     "#0072B2", "#E69F00", "#009E73", "#CC79A7", "#56B4E9", "#D55E00",
@@ -82,5 +131,28 @@ mod tests {
         assert_eq!(format_tick(0.0025), "0.0025");
         assert_eq!(format_tick(150.0), "150");
         assert_eq!(escape("a<b & \"c\""), "a&lt;b &amp; &quot;c&quot;");
+    }
+
+    #[test]
+    fn at_least_three_distinct_ticks_inside_any_range() {
+        for (lo, hi) in [
+            (-4.5, 4.5),
+            (-4.2e-6, 4.2e-6),
+            (-0.0049, 0.0049),
+            (32.4985, 32.5012),
+            (0.0, 1.0),
+            (-1.0, 7.3),
+            (1e-7, 3e-7),
+        ] {
+            let t = ticks_inside(lo, hi);
+            assert!(t.len() >= 3, "[{lo}, {hi}]: {t:?}");
+            assert!(
+                t.iter().all(|(v, _)| *v >= lo - 1e-12 && *v <= hi + 1e-12),
+                "{t:?}"
+            );
+            let labels: std::collections::BTreeSet<&String> = t.iter().map(|(_, l)| l).collect();
+            assert_eq!(labels.len(), t.len(), "[{lo}, {hi}]: labels repeat: {t:?}");
+        }
+        assert_eq!(ticks_inside(-4.5, 4.5)[1].1, "-2");
     }
 }

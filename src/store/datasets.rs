@@ -48,12 +48,12 @@ impl Drop for StagingDir {
     }
 }
 
-/// Width, height and bit depth of a TIFF, from its header alone.
-fn tiff_header(path: &Path) -> Result<crate::image::FrameInfo> {
-    crate::image::read_tiff_header(path).map_err(|e| {
+/// Width, height and bit depth of a frame (TIFF, PNG or BMP), from its header alone.
+fn frame_header(path: &Path) -> Result<crate::image::FrameInfo> {
+    crate::image::read_image_header(path).map_err(|e| {
         StoreError::Dataset(DatasetError::Invalid {
             path: path.into(),
-            message: format!("not a readable TIFF: {e}"),
+            message: format!("not a readable frame: {e}"),
         })
     })
 }
@@ -125,7 +125,7 @@ impl RunStore {
         // The full-resolution frames' header (a hardware scheme's frames are smaller): the size
         // when the manifest states no camera, and the bit depth.
         let first = manifest.runs.iter().find(|r| r.capture.is_none());
-        let header = tiff_header(&dir.join(&first.unwrap_or(&manifest.runs[0]).reference));
+        let header = frame_header(&dir.join(&first.unwrap_or(&manifest.runs[0]).reference));
         let (width, height, bit_depth) = match (&manifest.camera, header) {
             (Some(c), header) => (c.width, c.height, header.ok().map(|h| h.bit_depth)),
             (None, header) => {
@@ -233,14 +233,26 @@ mod tests {
     use super::*;
 
     #[test]
-    fn frame_size_comes_from_the_tiff_header() {
+    fn frame_size_comes_from_the_frame_header() {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("a.tif");
         std::fs::write(&p, crate::image::tiff_u16_bytes(7, 2, &[1u16; 14]).unwrap()).unwrap();
-        let info = tiff_header(&p).unwrap();
+        let info = frame_header(&p).unwrap();
         assert_eq!((info.width, info.height, info.bit_depth), (7, 2, 16));
         std::fs::write(&p, b"II*\0garbage").unwrap();
-        assert!(matches!(tiff_header(&p), Err(StoreError::Dataset(_))));
+        assert!(matches!(frame_header(&p), Err(StoreError::Dataset(_))));
+        // A PNG (by its first bytes, whatever its name): 16-bit grey, 5x3.
+        let mut png_bytes = Vec::new();
+        {
+            let mut e = png::Encoder::new(&mut png_bytes, 5, 3);
+            e.set_color(png::ColorType::Grayscale);
+            e.set_depth(png::BitDepth::Sixteen);
+            let mut w = e.write_header().unwrap();
+            w.write_image_data(&[0u8; 30]).unwrap();
+        }
+        std::fs::write(&p, &png_bytes).unwrap();
+        let info = frame_header(&p).unwrap();
+        assert_eq!((info.width, info.height, info.bit_depth), (5, 3, 16));
     }
 
     #[test]

@@ -7,7 +7,7 @@ use super::plan::Plan;
 use super::spec::{NoiseLevel, PrintAxis};
 use crate::model::SpecklePattern;
 use crate::reduce::Scheme;
-use crate::report::{Heatmap, HeatmapMarker, Mark, XyPlot, XySeries};
+use crate::report::{distinct, Heatmap, HeatmapMarker, Mark, XyPlot, XySeries};
 use serde::Serialize;
 use std::collections::BTreeMap;
 
@@ -243,17 +243,6 @@ pub fn recommendations_text(merged: &Merged) -> String {
         );
     }
     s
-}
-
-/// Distinct values in first-seen order.
-fn distinct<T: PartialEq>(items: impl Iterator<Item = T>) -> Vec<T> {
-    let mut out: Vec<T> = Vec::new();
-    for item in items {
-        if !out.contains(&item) {
-            out.push(item);
-        }
-    }
-    out
 }
 
 /// Where the paper's patterns sit on a print axis (column index, fractional between two dot

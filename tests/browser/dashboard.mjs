@@ -153,6 +153,8 @@ async function main() {
     expect(snapshots === 1, `one click, one snapshot (${snapshots})`);
     const bins = await page.locator("#histogram rect.hist-bin").count();
     if (bins < 5) fail(`the snapshot histogram has ${bins} bins`);
+    const stats = await page.locator("#snapshot-stats").innerText();
+    expect(/saturated/.test(stats) && /clipped black/.test(stats), `the snapshot reports clipping at both ends: ${stats.replace(/\s+/g, " ")}`);
     if (expect(await appears(page, "#snapshot-zoom[data-loaded=true]", 10 * SECOND), "the snapshot has a 1:1 zoom")) {
       const zoom = await page.locator("#snapshot-zoom").evaluate((c) => ({ w: c.width, h: c.height, cssW: c.getBoundingClientRect().width }));
       expect(zoom.w > 0 && Math.abs(zoom.cssW - zoom.w) < 1.5, `the zoom shows native pixels (${zoom.w} px drawn ${zoom.cssW.toFixed(1)} px wide)`);
@@ -348,6 +350,13 @@ async function main() {
     const residualPlots = await page.locator("#comparison-plots .figure svg").count();
     log(`compared with the baseline: ${baselinePx} px; ${residualPlots} residual / statistics plots`);
     if (residualPlots < 1) fail("the comparison shows no residual plot");
+    const firstPlot = await page.locator("#comparison-plots .figure").first().getAttribute("data-plot");
+    expect(firstPlot === "summary.svg", `the comparison leads with its summary figure (${firstPlot})`);
+    const allFigures = await page.locator("#comparison-plots .figure").count();
+    await page.locator("#plot-picker").selectOption({ index: 1 });
+    const oneRun = await page.locator("#comparison-plots .figure:not(.hidden)").count();
+    expect(oneRun > 1 && oneRun < allFigures, `the picker narrows ${allFigures} figures to one run's ${oneRun}`);
+    await page.locator("#plot-picker").selectOption("");
     const accuracyRows = await page.locator("#accuracy-table tbody tr").count();
     const sCurve = await page.locator('#comparison-plots .figure[data-plot="accuracy_vs_commanded.svg"] svg line.error-bar').count();
     log(`accuracy against the commanded move: ${accuracyRows} rows; ${sCurve} error bars on its plot`);
@@ -393,16 +402,24 @@ async function main() {
     await shot(page, "5-dataset-winner-added");
 
     // ---- reload: the comparisons and diagnoses are still listed and reopen ----
-    const datasetUrl = page.url();
-    await page.reload();
+    // The page as first opened (a result shown puts `?job=` in the address).
+    const datasetUrl = page.url().split("?")[0];
+    await page.goto(datasetUrl);
     if (expect(await appears(page, "#job-list tr[data-kind=diagnosis]", 15 * SECOND), "the dataset page lists its jobs after a reload")) {
       const kinds = await page.locator("#job-list tr[data-kind]").evaluateAll((rs) => rs.map((r) => r.dataset.kind));
       expect(kinds.filter((k) => k === "comparison").length === 2 && kinds.filter((k) => k === "diagnosis").length === 1,
         `two comparisons and one diagnosis listed (${kinds.join(", ")})`);
-      await page.locator("#job-list tr[data-kind=diagnosis] button.open").first().click();
+      await page.locator("#job-list tr[data-kind=diagnosis] a.open").first().click();
       expect(await appears(page, `#diagnosis-verdict[data-verdict=${expectedVerdict}]`, 15 * SECOND, "visible"), "a listed diagnosis reopens");
-      await page.locator("#job-list tr[data-kind=comparison] button.open").first().click();
+      const diagnosisUrl = page.url();
+      expect(/\?job=dia-/.test(diagnosisUrl), `the address names the diagnosis shown: ${diagnosisUrl}`);
+      await page.locator("#job-list tr[data-kind=comparison] a.open").first().click();
       expect(await appears(page, "#comparison-discrepancy", 15 * SECOND, "visible"), "a listed comparison reopens");
+      // A result's URL, opened anew (bookmarked, pasted into a lab book), shows that result.
+      await page.goto(diagnosisUrl);
+      expect(await appears(page, `#diagnosis-verdict[data-verdict=${expectedVerdict}]`, 30 * SECOND, "visible"), "a diagnosis's own URL opens it");
+      const link = await page.locator("#diagnosis-link").getAttribute("href");
+      expect(diagnosisUrl.endsWith(link), `the diagnosis links to itself (${link})`);
     }
     await shot(page, "6-dataset-reloaded");
 

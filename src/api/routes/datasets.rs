@@ -1,9 +1,10 @@
 //! Measurement datasets (`ffdic-dataset/1`) made elsewhere: upload, list, and analyse as a job.
 //!
-//! An upload is `multipart/form-data`: one part `dataset.json` and one part per TIFF, each named
-//! by its file name (`curl -F dataset.json=@dataset.json -F b_ref.tif=@b_ref.tif …`). Everything
-//! lands in a staging folder first; only a dataset whose manifest is valid and whose every frame
-//! decodes is moved into place — anything else leaves nothing behind.
+//! An upload is `multipart/form-data`: one part `dataset.json` and one part per frame (TIFF, PNG
+//! or BMP), each named by its file name (`curl -F dataset.json=@dataset.json -F
+//! b_ref.tif=@b_ref.tif …`). Everything lands in a staging folder first; only a dataset whose
+//! manifest is valid and whose every frame decodes is moved into place — anything else leaves
+//! nothing behind.
 
 use super::blocking;
 use super::experiments::{accepted, idempotency_key};
@@ -12,7 +13,7 @@ use crate::api::page;
 use crate::api::problem::{ApiError, ApiResult, Problem};
 use crate::dataset::{check_frames, is_plain_file_name, FrameCheckError, Manifest};
 use crate::diagnose::{read_history, HistoryEntry};
-use crate::image::read_tiff_header;
+use crate::image::read_image_header;
 use crate::report::history_chart;
 use crate::service::{AnalysisRequest, CompareRequest, Service};
 use crate::store::{DatasetId, DatasetRecord, DatasetSource, RunKind};
@@ -46,7 +47,7 @@ fn multipart_error(e: axum::extract::multipart::MultipartError) -> ApiError {
 
 #[utoipa::path(post, path = "/datasets", tag = "datasets",
     request_body(content_type = "multipart/form-data",
-                 description = "dataset.json and the TIFF frames it names, one part each"),
+                 description = "dataset.json and the frames it names (TIFF, PNG or BMP), one part each"),
     responses((status = 201, description = "Stored; Location names it", body = Object),
               (status = 400, body = Problem), (status = 401, body = Problem),
               (status = 408, description = "The upload was slower than uploads.min_bytes_per_s or took longer than uploads.deadline_ms", body = Problem),
@@ -618,7 +619,7 @@ pub async fn details(
                 .or(record.bit_depth)
                 .or_else(|| {
                     let first = m.runs.first()?;
-                    read_tiff_header(&dir.join(&first.reference))
+                    read_image_header(&dir.join(&first.reference))
                         .ok()
                         .map(|info| info.bit_depth)
                 });

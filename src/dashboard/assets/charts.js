@@ -79,12 +79,15 @@ export function histogramSvg(counts, binWidth, maxValue, unit, title) {
 }
 
 /**
- * The discrepancy over model versions: one point per comparison (class "history-point",
- * data-discrepancy in px), labelled with the model and version.
+ * The discrepancy over model versions: a column per model version, in the order each was first
+ * compared (a re-run lands on its version's column, not at the end as if the error had risen
+ * back); one point per comparison (class "history-point", data-discrepancy in px, in the order
+ * made); a line per manifest (the dataset as compared: a grown manifest is its own line) through
+ * each version's latest comparison.
  */
 export function historySvg(entries, title) {
-  const [width, height] = [680, 320];
-  const [left, right, top, bottom] = [78, 24, 36, 70];
+  const [width, height] = [680, 340];
+  const [left, right, top, bottom] = [78, 24, 36, 90];
   const [pw, ph] = [width - left - right, height - top - bottom];
   const svg = frame(width, height, title);
   svg.classList.add("history-chart");
@@ -93,29 +96,47 @@ export function historySvg(entries, title) {
     svg.append(s("text", { x: width / 2, y: height / 2, "text-anchor": "middle", fill: "#5d6678" }, "no comparison yet"));
     return svg;
   }
+  const versionOf = (e) => `${e.model}\u0000${e.version ?? ""}`;
+  const versions = [...new Set(entries.map(versionOf))];
+  const manifests = [...new Set(entries.map((e) => e.manifest_version || ""))];
+  const colours = ["#0072B2", "#E69F00", "#009E73", "#CC79A7", "#56B4E9", "#D55E00"];
+  const colourOf = (e) => colours[manifests.indexOf(e.manifest_version || "") % colours.length];
   const yTicks = niceTicks(0, Math.max(...values) * 1.1, 5);
   const yMax = yTicks[yTicks.length - 1];
-  const n = entries.length;
-  const xOf = (i) => left + (n === 1 ? pw / 2 : (pw * (i + 0.5)) / n);
+  const n = versions.length;
+  const xOf = (k) => left + (n === 1 ? pw / 2 : (pw * (k + 0.5)) / n);
   const yOf = (v) => top + ph * (1 - v / yMax);
-  const label = (i) => {
-    const e = entries[i];
-    return e ? `${e.model}${e.version !== undefined && e.version !== null ? " v" + e.version : ""}` : "";
+  const label = (k) => {
+    const [model, version] = (versions[k] || "").split("\u0000");
+    return version ? `${model} v${version.slice(0, 6)}` : model;
   };
   axes(svg, {
-    left, top, pw, ph, xTicks: entries.map((_, i) => i), yTicks, xOf, yOf,
-    xLabel: "comparison, oldest first (model, version)", yLabel: "discrepancy [px]", xTickText: label,
+    left, top, pw, ph, xTicks: versions.map((_, k) => k), yTicks, xOf, yOf,
+    xLabel: "model version, in the order first compared", yLabel: "discrepancy [px]", xTickText: label,
   });
-  const pts = entries.map((e, i) => [xOf(i), yOf(Number(e.discrepancy_px))]);
-  svg.append(s("polyline", { class: "history-line", points: pts.map((p) => p.join(",")).join(" "), fill: "none", stroke: "#0072B2", "stroke-width": 2 }));
-  entries.forEach((e, i) => {
+  manifests.forEach((m, mi) => {
+    const latest = new Map();
+    for (const e of entries) if ((e.manifest_version || "") === m) latest.set(versionOf(e), e);
+    const pts = versions.map((v, k) => (latest.has(v) ? [xOf(k), yOf(Number(latest.get(v).discrepancy_px))] : null)).filter(Boolean);
+    svg.append(s("polyline", { class: "history-line", "data-manifest": m, points: pts.map((p) => p.join(",")).join(" "), fill: "none", stroke: colours[mi % colours.length], "stroke-width": 2 }));
+    if (manifests.length > 1) {
+      const runs = [...latest.values()].pop().manifest_runs;
+      svg.append(s("text", { x: left + 4 + 170 * mi, y: height - 8, fill: colours[mi % colours.length], "font-size": 11 },
+        m ? `— ${runs} runs (manifest ${m.slice(0, 6)})` : "— before manifests were recorded"));
+    }
+  });
+  entries.forEach((e) => {
+    const k = versions.indexOf(versionOf(e));
+    const [x, y] = [xOf(k), yOf(Number(e.discrepancy_px))];
     const c = s("circle", {
-      class: "history-point", cx: pts[i][0], cy: pts[i][1], r: 5, fill: "#0072B2",
+      class: "history-point", cx: x, cy: y, r: 5, fill: colourOf(e),
       "data-discrepancy": e.discrepancy_px, "data-model": e.model, "data-version": e.version ?? "",
+      "data-manifest": e.manifest_version || "",
     });
-    c.append(s("title", {}, `${label(i)}: ${Number(e.discrepancy_px).toPrecision(4)} px${(e.effects || []).length ? " — effects: " + e.effects.join(", ") : ""}`));
+    c.append(s("title", {}, `${label(k)}, ${e.time || ""}: ${Number(e.discrepancy_px).toPrecision(4)} px` +
+      `${e.manifest_runs ? `, ${e.manifest_runs} runs` : ""}${(e.effects || []).length ? " — effects: " + e.effects.join(", ") : ""}`));
     svg.append(c);
-    svg.append(s("text", { x: pts[i][0], y: pts[i][1] - 9, "text-anchor": "middle", "font-size": 11 }, Number(e.discrepancy_px).toPrecision(3)));
+    svg.append(s("text", { x: x + 8, y: y - 6, "font-size": 11 }, Number(e.discrepancy_px).toPrecision(3)));
   });
   return svg;
 }

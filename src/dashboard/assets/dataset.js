@@ -36,7 +36,7 @@ async function loadDataset() {
     const [d, details] = await Promise.all([api(base), api(`${base}/details`).catch(() => null)]);
     $("#dataset-name").textContent = d.name;
     const m = /^experiment:(.+)$/.exec(d.source || "");
-    const tifs = d.files.filter((f) => /\.tiff?$/i.test(f));
+    const frames = d.files.filter((f) => /\.(tiff?|png|bmp)$/i.test(f));
     scale = details ? details.scale_px_per_mm : null;
     const runs = details ? details.runs.map((r) => el("li", { "data-run": r.id },
       el("span", { class: "mono" }, r.id),
@@ -47,7 +47,7 @@ async function loadDataset() {
       ["name", d.name],
       ["source", m ? el("a", { href: `/experiments/${m[1]}` }, `experiment ${m[1]}`) : d.source],
       ["scale", details ? `${num(details.scale_px_per_mm)} px/mm (1 px = ${num(1000 / details.scale_px_per_mm, 3)} µm)` : "—"],
-      ["frames", `${tifs.length} TIFF, ${d.width} × ${d.height} px${details && details.bit_depth ? `, ${details.bit_depth} bit` : ""}`],
+      ["frames", `${frames.length}, ${d.width} × ${d.height} px${details && details.bit_depth ? `, ${details.bit_depth} bit` : ""}`],
       ["stage repeatability", details && details.stage_repeatability_um != null ? `${num(details.stage_repeatability_um)} µm (1σ)` : "—"],
       ["runs", runs.length ? el("ol", { class: "runs" }, runs) : String(d.runs)],
       ["created", when(d.created_at)],
@@ -76,12 +76,27 @@ async function loadJobs() {
       el("td", {}, badge(j.status)),
       el("td", { class: "num" }, headline(j)),
       el("td", {}, j.status === "succeeded" && j.kind !== "analysis"
-        ? el("button", { type: "button", class: "open secondary", onclick: () => guard(() => reopen(j)) }, "open")
+        ? el("a", {
+          class: "open", href: jobUrl(j.id),
+          onclick: (ev) => { ev.preventDefault(); guard(() => reopen(j)); },
+        }, "open")
         : el("span", { class: "muted small" }, j.message || ""))));
     clear($("#job-list"), rows.length ? rows : [el("tr", {}, el("td", { colspan: 6, class: "muted" }, "nothing yet: compare or diagnose above"))]);
   } catch (e) {
     clear($("#job-list"), el("tr", {}, el("td", { colspan: 6, class: "error" }, e.message)));
   }
+}
+
+/** The page of this dataset showing job `jobId`'s result: a URL to bookmark or paste. */
+function jobUrl(jobId) {
+  return `${location.pathname}?job=${encodeURIComponent(jobId)}`;
+}
+
+/** The address bar and the section's link name the job shown. */
+function showJobUrl(link, jobId) {
+  history.replaceState(null, "", jobUrl(jobId));
+  link.href = jobUrl(jobId);
+  link.dataset.job = jobId;
 }
 
 /** Shows a listed job's results again, as when it had just run. */
@@ -143,8 +158,13 @@ async function runJob(kind, body) {
   return final;
 }
 
+/** The comparison shown: its runs and schemes fill the figure picker. */
+let lastComparison = null;
+
 async function showComparison(job) {
   const cmp = await api(`/jobs/${job.id}/files/results/comparison.json`);
+  lastComparison = cmp;
+  showJobUrl($("#comparison-link"), job.id);
   $("#comparison").classList.remove("hidden");
   $("#comparison-model").textContent = `${cmp.model.name} (version ${cmp.model.version})`;
   clear($("#comparison-summary"), [
@@ -189,10 +209,38 @@ function showAccuracy(cmp) {
     }))) : el("p", { class: "muted" }, "no run with a commanded move"));
 }
 
+/** Figures every view of the picker keeps: the summary that leads, and the accuracy. */
+const ALWAYS_SHOWN = ["summary.svg", "accuracy_vs_commanded.svg"];
+
+/** A file-name-safe run or scheme, as the plots' names hold it (report/comparison_figures.rs). */
+const fileSafe = (t) => String(t).replace(/[^A-Za-z0-9_-]/g, "_");
+
+/** Whether figure `name` belongs to the picker's choice ("", "run:ID", "scheme:S", "images"). */
+function picked(name, choice) {
+  if (!choice || ALWAYS_SHOWN.includes(name)) return true;
+  const [kind, value] = choice.split(/:(.*)/s);
+  if (kind === "images") return /^(spectrum|noise_vs_mean|mean_map)_/.test(name);
+  if (kind === "run") return name.startsWith(`residual_${fileSafe(value)}_`);
+  if (kind === "scheme") return new RegExp(`_${fileSafe(value)}(_[uv])?\\.svg$`).test(name);
+  return true;
+}
+
 async function showPlots(job, container) {
-  const plots = (job.result_files || []).filter((f) => f.startsWith("plots/") && f.endsWith(".svg"));
+  const files = (job.result_files || []).filter((f) => f.startsWith("plots/") && f.endsWith(".svg"));
+  // The summary leads; the rest keep the order the job wrote them.
+  const plots = [...files.filter((f) => f === "plots/summary.svg"), ...files.filter((f) => f !== "plots/summary.svg")];
   const boxes = plots.map((p) => el("div", { class: "figure", "data-plot": p.slice(6) }));
-  clear(container, boxes.length ? boxes : [el("p", { class: "muted" }, "no plots")]);
+  const cmpRuns = lastComparison ? lastComparison.runs || [] : [];
+  const picker = el("select", { id: "plot-picker", "aria-label": "which figures to show" },
+    el("option", { value: "" }, `all ${boxes.length} figures`),
+    ...[...new Set(cmpRuns.map((r) => r.id))].map((r) => el("option", { value: `run:${r}` }, `run ${r}`)),
+    ...[...new Set(cmpRuns.map((r) => r.scheme))].map((sc) => el("option", { value: `scheme:${sc}` }, `scheme ${sc}`)),
+    el("option", { value: "images" }, "image statistics"));
+  picker.addEventListener("change", () => {
+    for (const b of boxes) b.classList.toggle("hidden", !picked(b.dataset.plot, picker.value));
+  });
+  const bar = el("p", { class: "small" }, "Show: ", picker);
+  clear(container, boxes.length ? [bar, ...boxes] : [el("p", { class: "muted" }, "no plots")]);
   await Promise.all(plots.map((p, i) => inlineSvg(boxes[i], `${API}/jobs/${job.id}/files/plots/${encodeURIComponent(p.slice(6))}`)
     .catch((e) => clear(boxes[i], el("p", { class: "error" }, e.message)))));
 }
@@ -223,6 +271,7 @@ function showUnexplained(d) {
 
 async function showDiagnosis(job, body) {
   const d = await api(`/jobs/${job.id}/files/results/diagnosis.json`);
+  showJobUrl($("#diagnosis-link"), job.id);
   lastDiagnosis = { job, d, body };
   $("#diagnosis").classList.remove("hidden");
   $("#diagnosis-model").textContent = `${d.model.name} (version ${d.model.version}), discrepancy ${pxUm(d.discrepancy_px, scale)}`;
@@ -421,6 +470,13 @@ async function main() {
   }
   await loadHistory();
   await loadJobs();
+  // A result's own URL (`?job=ID`) opens it.
+  const wanted = new URLSearchParams(location.search).get("job");
+  if (wanted) {
+    await guard(async () => {
+      await reopen(await api(`/jobs/${encodeURIComponent(wanted)}`));
+    });
+  }
 }
 
 main();

@@ -175,12 +175,13 @@ async function snapshot() {
     canvas.height = img.height;
     const ctx = canvas.getContext("2d");
     const rgba = ctx.createImageData(img.width, img.height);
-    let sum = 0, sat = 0, max = 0;
+    let sum = 0, sat = 0, dark = 0, max = 0;
     const full = img.bits === 16 ? 65535 : 255;
     for (let i = 0; i < img.data.length; i++) {
       const v = img.data[i];
       sum += v;
       if (v >= full) sat++;
+      if (v === 0) dark++;
       if (v > max) max = v;
       const g = Math.max(0, Math.min(255, Math.round((255 * (v - lo)) / (hi - lo))));
       rgba.data.set([g, g, g, 255], 4 * i);
@@ -203,6 +204,9 @@ async function snapshot() {
       ["mean", `${num(mean)} DN`],
       ["0.5 … 99.5 %", `${lo} … ${hi} DN`],
       ["saturated", `${sat} px (${num((100 * sat) / img.data.length, 2)} %)`],
+      // Pixels at 0 DN lost what lay below the black level: noise and dark speckles are cut,
+      // which biases DIC as saturation does (raise the exposure or the camera's black level).
+      ["clipped black (0 DN)", `${dark} px (${num((100 * dark) / img.data.length, 2)} %)`],
       ["taken", new Date().toLocaleTimeString()],
     ]);
     $("#snapshot").dataset.loaded = "true";
