@@ -225,7 +225,7 @@ pub fn comparison_text(cmp: &Comparison) -> String {
 /// The measured side against the commanded move, per run and scheme: the bias with its standard
 /// error and the std, px of the analysed image and µm on the target.
 fn accuracy_text(cmp: &Comparison) -> String {
-    let pm = |x: f64, se: f64| format!("{x:+.5} ± {se:.5}");
+    let pm = ffdic::report::plus_minus;
     let rows: Vec<Vec<String>> = cmp
         .runs
         .iter()

@@ -151,31 +151,57 @@ pub fn run(args: &ReproduceArgs) -> Result<()> {
             Some(JobResult::Study { rows, captures }) => (rows, captures),
             _ => bail!("experiment {} succeeded without a study", record.id),
         };
-    if args.json {
-        let mut doc = study_json(&rows, &captures);
-        if !captures.is_empty() {
-            doc["findings"] = serde_json::to_value(paper_findings(&captures))?;
-        }
-        doc["run"] = serde_json::json!(record.id.to_string());
-        doc["folder"] = serde_json::json!(run_dir.display().to_string());
-        if let Some(story) = &story {
-            doc["model"] = serde_json::to_value(story)?;
-        }
-        println!("{doc}");
-    } else {
-        print!("{}", figures_text(&rows));
-        print!("{}", paper_figures_text(&rows));
-        print!("{}", findings_text(&paper_findings(&captures)));
-        println!(
-            "\nrun {} in {} (frames/ as ffdic-dataset/1, results/study.csv, study.json, plots/figure5_*.svg, figure6_*.svg)",
-            record.id,
-            run_dir.display()
-        );
-        if let Some(story) = &story {
-            print!("{}", story_text(story));
-        }
+    let outcome = Outcome {
+        run: record.id.to_string(),
+        folder: run_dir.display().to_string(),
+        rows,
+        captures,
+        story,
+    };
+    match args.json {
+        true => println!("{}", outcome.json()?),
+        false => print!("{}", outcome.text()),
     }
     Ok(())
+}
+
+/// What `reproduce` found: the study (pooled rows and every capture's), where it lies, and the
+/// model's story.
+struct Outcome {
+    run: String,
+    folder: String,
+    rows: Vec<StudyRow>,
+    captures: Vec<StudyRow>,
+    story: Option<ModelStory>,
+}
+
+impl Outcome {
+    fn json(&self) -> Result<serde_json::Value> {
+        let mut doc = study_json(&self.rows, &self.captures);
+        if !self.captures.is_empty() {
+            doc["findings"] = serde_json::to_value(paper_findings(&self.captures))?;
+        }
+        doc["run"] = serde_json::json!(self.run);
+        doc["folder"] = serde_json::json!(self.folder);
+        if let Some(story) = &self.story {
+            doc["model"] = serde_json::to_value(story)?;
+        }
+        Ok(doc)
+    }
+
+    fn text(&self) -> String {
+        let mut t = figures_text(&self.rows);
+        t += &paper_figures_text(&self.rows);
+        t += &findings_text(&paper_findings(&self.captures));
+        t += &format!(
+            "\nrun {} in {} (frames/ as ffdic-dataset/1, results/study.csv, study.json, plots/figure5_*.svg, figure6_*.svg)\n",
+            self.run, self.folder
+        );
+        if let Some(story) = &self.story {
+            t += &story_text(story);
+        }
+        t
+    }
 }
 
 /// Waits for run `id` with a progress bar; an error unless it succeeded.

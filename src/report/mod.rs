@@ -28,7 +28,7 @@ pub use paper_figures::paper_figures_text;
 pub use png::png_quicklook;
 pub use study_figures::{figure_svgs, figures_text, rows_json, study_csv, study_json};
 pub use study_rows::{Increase, IncreaseInterval, StudyRow};
-pub use table::{csv, text_table};
+pub use table::{csv, plus_minus, text_table};
 pub use xy_plot::{Mark, XyPlot, XySeries};
 
 /// Distinct values in first-seen order (a plot's runs, schemes, versions).

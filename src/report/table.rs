@@ -71,6 +71,18 @@ pub fn csv(headers: &[&str], rows: &[Vec<String>]) -> String {
     out
 }
 
+/// "+0.0208 ± 0.0013": a signed value and its standard error, the error to two significant
+/// digits and the value to the same decimal place (the digits the uncertainty supports; a
+/// person reads no more into the number than it holds). Non-finite or zero errors fall back to
+/// five decimals.
+pub fn plus_minus(value: f64, se: f64) -> String {
+    if !(se.is_finite() && se > 0.0 && value.is_finite()) {
+        return format!("{value:+.5} ± {se:.5}");
+    }
+    let decimals = (1.0 - se.log10().floor()).clamp(0.0, 12.0) as usize;
+    format!("{value:+.decimals$} ± {se:.decimals$}")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -93,5 +105,14 @@ mod tests {
         let lines: Vec<&str> = t.lines().collect();
         assert_eq!(lines[2], "a        1.5");
         assert_eq!(lines[3], "bb    -10.25");
+    }
+
+    #[test]
+    fn plus_minus_keeps_the_digits_the_error_supports() {
+        assert_eq!(plus_minus(-0.020834, 0.0013), "-0.0208 ± 0.0013");
+        assert_eq!(plus_minus(0.104127, 0.0019), "+0.1041 ± 0.0019");
+        assert_eq!(plus_minus(12.3456, 0.25), "+12.35 ± 0.25");
+        assert_eq!(plus_minus(1234.5, 37.0), "+1234 ± 37");
+        assert_eq!(plus_minus(0.5, 0.0), "+0.50000 ± 0.00000");
     }
 }

@@ -111,6 +111,18 @@ export const TERMINAL = ["succeeded", "failed", "cancelled"];
 /** How long an ended run's event stream may take to replay its events, ms. */
 const REPLAY_GRACE_MS = 5000;
 
+/**
+ * "+0.0208 ± 0.0013": a signed value and its standard error, the error to two significant
+ * digits and the value to the same decimal place (report::plus_minus on the server).
+ */
+export function plusMinus(value, se) {
+  const [v, e] = [Number(value), Number(se)];
+  if (!Number.isFinite(v)) return "—";
+  if (!(Number.isFinite(e) && e > 0)) return `${v >= 0 ? "+" : ""}${v.toFixed(5)} ± ${Number.isFinite(e) ? e.toFixed(5) : "—"}`;
+  const decimals = Math.min(12, Math.max(0, 1 - Math.floor(Math.log10(e))));
+  return `${v >= 0 ? "+" : ""}${v.toFixed(decimals)} ± ${e.toFixed(decimals)}`;
+}
+
 /** µm for `px` full-resolution pixels at `scalePxPerMm` (µm = px / (px/mm) · 1000). */
 export function um(px, scalePxPerMm) {
   if (!Number.isFinite(Number(px)) || !(scalePxPerMm > 0)) return null;

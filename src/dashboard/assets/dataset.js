@@ -1,6 +1,6 @@
 // One dataset: compare it with a model, diagnose the missing effect, add the winner as a new
 // model version, and watch the discrepancy fall in the history chart.
-import { api, apiText, el, $, clear, num, when, badge, showError, setupToken, follow, progressBar, inlineSvg, pageId, pxUm, API, ApiError } from "./common.js";
+import { api, apiText, el, $, clear, num, when, badge, showError, setupToken, follow, progressBar, inlineSvg, pageId, pxUm, plusMinus, API, ApiError } from "./common.js";
 import { historySvg } from "./charts.js";
 
 setupToken();
@@ -192,7 +192,7 @@ async function showComparison(job) {
 function showAccuracy(cmp) {
   const runs = [...(cmp.runs || [])].filter((r) => r.accuracy)
     .sort((a, b) => Math.hypot(...a.accuracy.commanded_px) - Math.hypot(...b.accuracy.commanded_px));
-  const pm = (x, se) => `${num(x, 3)} ± ${num(se, 2)}`;
+  const pm = plusMinus;
   clear($("#comparison-accuracy"), runs.length ? el("table", { id: "accuracy-table" },
     el("thead", {}, el("tr", {}, ["run", "scheme", "commanded u, v [px]", "bias u [px]", "bias v [px]", "std u, v [px]", "bias [µm]", "std [µm]"]
       .map((h, i) => el("th", { class: i > 1 ? "num" : "" }, h)))),
