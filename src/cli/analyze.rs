@@ -193,11 +193,12 @@ fn settings(args: &AnalyzeArgs) -> Result<DicSettings> {
 fn deformed_paths(given: &[PathBuf]) -> Result<Vec<PathBuf>> {
     if let [dir] = given {
         if dir.is_dir() {
-            let tiffs = super::files_with_extensions(dir, &["tif", "tiff", "png", "bmp"])?;
-            if tiffs.is_empty() {
+            let frames = ffdic::image::frame_files(dir)
+                .with_context(|| format!("cannot list {}", dir.display()))?;
+            if frames.is_empty() {
                 bail!("{} holds no .tif, .tiff, .png or .bmp image", dir.display());
             }
-            return Ok(tiffs);
+            return Ok(frames);
         }
     }
     Ok(given.to_vec())

@@ -8,7 +8,6 @@ pub mod dataset;
 mod dataset_arg;
 pub mod diagnose;
 mod error_line;
-mod folder_files;
 pub mod history;
 mod logging;
 mod number_pair;
@@ -22,6 +21,5 @@ pub mod sweep;
 
 pub use dataset_arg::dataset_folder;
 pub use error_line::error_line;
-pub use folder_files::files_with_extensions;
 pub use number_pair::number_pair;
 pub use progress::ProgressBar;

@@ -3,11 +3,9 @@
 //! series — frame k (from 1) moved by k steps. What a lab has after capturing a series by hand.
 
 use super::manifest::{is_plain_file_name, DatasetError, Manifest, PatternInfo, Run, StageMove};
+use crate::image::{frame_files, FRAME_EXTENSIONS};
 use serde_json::Map;
 use std::path::Path;
-
-/// The frame files a folder's step series is made of, by extension (any case).
-pub const FRAME_EXTENSIONS: [&str; 4] = ["tif", "tiff", "png", "bmp"];
 
 /// The step between consecutive frames, in the stage's mm or in the images' px.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -85,24 +83,16 @@ pub fn init_folder(dir: &Path, init: &FolderInit) -> Result<Manifest, DatasetErr
     Manifest::read(dir)
 }
 
-/// The folder's frame files (`FRAME_EXTENSIONS`), by name.
+/// The folder's frame files, by name.
 fn frames_in(dir: &Path) -> Result<Vec<String>, DatasetError> {
-    let entries = std::fs::read_dir(dir).map_err(|source| DatasetError::Read {
+    let files = frame_files(dir).map_err(|source| DatasetError::Read {
         path: dir.to_path_buf(),
         source,
     })?;
-    let mut frames: Vec<String> = entries
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.is_file())
-        .filter(|p| {
-            p.extension()
-                .and_then(|e| e.to_str())
-                .is_some_and(|e| FRAME_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
-        })
+    Ok(files
+        .iter()
         .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
-        .collect();
-    frames.sort();
-    Ok(frames)
+        .collect())
 }
 
 /// What a folder's frames are, as the user states it.

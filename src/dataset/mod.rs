@@ -12,7 +12,7 @@ mod move_check;
 
 pub use capture::sensor_readout;
 pub use frame_check::{check_frames, CheckedFrames, FrameCheckError, FrameLimits};
-pub use init::{guess_reference, init_folder, FolderInit, Step, StepSeries, FRAME_EXTENSIONS};
+pub use init::{guess_reference, init_folder, FolderInit, Step, StepSeries};
 pub use manifest::{
     is_plain_file_name, CameraInfo, DatasetError, DotProfile, Manifest, PatternInfo, Run,
     StageMove, FORMAT, MAX_EDGE_SOFTNESS_PX, MAX_PRINT_FEATURE_PX,

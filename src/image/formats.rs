@@ -8,7 +8,26 @@
 use super::tiff_io::{decode_tiff, decode_tiff_within, read_tiff_header, FrameInfo};
 use super::{Image, ImageError};
 use image::{DynamicImage, ImageFormat};
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+/// The file extensions (any case) of the frame formats [`read_image`] reads: what a folder of
+/// frames is listed by.
+pub const FRAME_EXTENSIONS: [&str; 4] = ["tif", "tiff", "png", "bmp"];
+
+/// The frame files of folder `dir` (by [`FRAME_EXTENSIONS`]), sorted by name.
+pub fn frame_files(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_file())
+        .filter(|p| {
+            p.extension()
+                .and_then(|e| e.to_str())
+                .is_some_and(|e| FRAME_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+        })
+        .collect();
+    files.sort();
+    Ok(files)
+}
 
 /// Reads a frame: TIFF, PNG or BMP, by content.
 pub fn read_image(path: &Path) -> Result<(Image, FrameInfo), ImageError> {
@@ -99,7 +118,7 @@ pub fn decode_image_within(
     let Some(format) = format_of(bytes, path)? else {
         return decode_tiff_within(bytes, path, max_pixels);
     };
-    let info = header_of(bytes, format, path)?;
+    let info = header_of(std::io::Cursor::new(bytes), format, path)?;
     if info.width.saturating_mul(info.height) > max_pixels {
         return Err(ImageError::TooLarge {
             path: path.to_owned(),
@@ -117,24 +136,31 @@ pub fn read_image_header(path: &Path) -> Result<FrameInfo, ImageError> {
         path: path.to_owned(),
         source,
     };
-    let mut file = std::fs::File::open(path).map_err(open)?;
-    // Enough for any of the three formats' headers (a PNG's IHDR ends at byte 33).
-    let mut head = Vec::with_capacity(64);
-    std::io::Read::read_to_end(&mut std::io::Read::take(&mut file, 64), &mut head).map_err(open)?;
+    let mut file = std::io::BufReader::new(std::fs::File::open(path).map_err(open)?);
+    // Enough to tell the three formats apart; the decoder then reads the header alone.
+    let mut head = Vec::with_capacity(8);
+    std::io::Read::read_to_end(&mut std::io::Read::take(&mut file, 8), &mut head).map_err(open)?;
     match format_of(&head, path)? {
         None => read_tiff_header(path),
-        Some(format) => header_of(&std::fs::read(path).map_err(open)?, format, path),
+        Some(format) => {
+            std::io::Seek::rewind(&mut file).map_err(open)?;
+            header_of(file, format, path)
+        }
     }
 }
 
-/// Size and bit depth of a PNG or BMP from its header.
-fn header_of(bytes: &[u8], format: ImageFormat, path: &Path) -> Result<FrameInfo, ImageError> {
+/// Size and bit depth of a PNG or BMP from its header (nothing past it is read).
+fn header_of(
+    reader: impl std::io::BufRead + std::io::Seek,
+    format: ImageFormat,
+    path: &Path,
+) -> Result<FrameInfo, ImageError> {
     use image::ImageDecoder;
     let bad = |e: image::ImageError| ImageError::Format {
         path: path.to_owned(),
         reason: e.to_string(),
     };
-    let decoder = image::ImageReader::with_format(std::io::Cursor::new(bytes), format)
+    let decoder = image::ImageReader::with_format(reader, format)
         .into_decoder()
         .map_err(bad)?;
     let (w, h) = decoder.dimensions();

@@ -14,7 +14,9 @@ mod tiff_layout;
 mod view;
 
 pub use error::ImageError;
-pub use formats::{decode_image, decode_image_within, read_image, read_image_header};
+pub use formats::{
+    decode_image, decode_image_within, frame_files, read_image, read_image_header, FRAME_EXTENSIONS,
+};
 pub use gray::Image;
 pub use roi::Roi;
 pub use speckle_quality::{speckle_quality, SpeckleQuality, SpeckleQualityError};

@@ -71,22 +71,18 @@ fn summary_svg(cmp: &Comparison) -> String {
 
 /// The largest of a run's three parts, named.
 fn dominant_part(r: &crate::diagnose::RunComparison) -> String {
-    let parts = [
+    // Reversed: `max_by` keeps the last of equals, and a tie goes to the first named.
+    [
         ("rigid", r.rigid_px),
         ("field", r.field_px),
         ("std", r.std_px),
-    ];
-    let (name, _) = parts
-        .iter()
-        .copied()
-        .fold(("—", f64::NEG_INFINITY), |best, p| {
-            if p.1 > best.1 {
-                p
-            } else {
-                best
-            }
-        });
-    name.to_string()
+    ]
+    .into_iter()
+    .rev()
+    .filter(|(_, px)| !px.is_nan())
+    .max_by(|a, b| a.1.total_cmp(&b.1))
+    .map_or("—", |(name, _)| name)
+    .to_string()
 }
 
 /// The residual maps (Δu and Δv) of each run and scheme.

@@ -186,6 +186,23 @@ impl XyPlot {
         );
     }
 
+    /// A vertical bar from y − e to y + e at each point of `series` that has a finite e.
+    fn write_error_bars(&self, s: &mut String, a: &Axes, series: &XySeries, colour: &str) {
+        for (&(x, y), &e) in series.points.iter().zip(&series.y_err) {
+            let (lo, hi) = ((x, y - e), (x, y + e));
+            if !(e.is_finite() && self.usable(lo) && self.usable(hi)) {
+                continue;
+            }
+            let sx = a.sx(scale(x, self.log_x));
+            let _ = write!(
+                s,
+                r#"<line class="error-bar" x1="{sx:.1}" x2="{sx:.1}" y1="{:.1}" y2="{:.1}" stroke="{colour}" stroke-width="1"/>"#,
+                a.sy(scale(lo.1, self.log_y)),
+                a.sy(scale(hi.1, self.log_y))
+            );
+        }
+    }
+
     /// Each series' line and points, and its legend entry from `legend_top` down.
     fn write_series(&self, s: &mut String, a: &Axes, legend_top: f64) {
         let left = a.left;
@@ -222,25 +239,6 @@ impl XyPlot {
                 left + 18.0,
                 ly + 9.0,
                 escape(&series.name)
-            );
-        }
-    }
-}
-
-impl XyPlot {
-    /// A vertical bar from y − e to y + e at each point of `series` that has a finite e.
-    fn write_error_bars(&self, s: &mut String, a: &Axes, series: &XySeries, colour: &str) {
-        for (&(x, y), &e) in series.points.iter().zip(&series.y_err) {
-            let (lo, hi) = ((x, y - e), (x, y + e));
-            if !(e.is_finite() && self.usable(lo) && self.usable(hi)) {
-                continue;
-            }
-            let sx = a.sx(scale(x, self.log_x));
-            let _ = write!(
-                s,
-                r#"<line class="error-bar" x1="{sx:.1}" x2="{sx:.1}" y1="{:.1}" y2="{:.1}" stroke="{colour}" stroke-width="1"/>"#,
-                a.sy(scale(lo.1, self.log_y)),
-                a.sy(scale(hi.1, self.log_y))
             );
         }
     }
