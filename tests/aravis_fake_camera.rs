@@ -493,6 +493,7 @@ fn a_hardware_scheme_experiment_runs_through_gige_vision() {
         target_field_mm: None,
         travel_x_mm: Some((-5.0, 5.0)),
         travel_y_mm: Some((-5.0, 5.0)),
+        stage_resolution_mm: None,
         exposure_us: (10.0, 1e6),
         hardware_schemes: status.camera.info.hardware_schemes.clone(),
     };

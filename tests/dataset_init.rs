@@ -107,16 +107,37 @@ fn a_sample3_step_series_is_a_dataset_in_one_command_with_the_bias_of_every_step
     assert_eq!(svg.matches(r#"class="error-bar""#).count(), 2 * runs.len());
     assert_eq!(svg.matches(r#"class="point""#).count(), 4 * runs.len());
     assert!(svg.contains("bias of u") && svg.contains("std of v"));
-    // The figure that leads: a bar per run and scheme (one scheme here), and the residual
-    // profiles as one plot per scheme.
+    // The figure that leads: small multiples of the discrepancy and its three parts, a bar per
+    // run and scheme (one scheme here) in each, and the residual profiles as one plot per
+    // scheme.
     let summary = std::fs::read_to_string(plots.join("summary.svg")).unwrap();
+    assert_eq!(summary.matches(r#"<g class="panel""#).count(), 4);
     assert_eq!(
         summary.matches(r#"class="bar""#).count(),
-        runs.len(),
+        4 * runs.len(),
         "{summary}"
     );
     assert!(plots.join("residual_vs_x_native.svg").is_file());
     let text = String::from_utf8_lossy(&text.stdout);
+    // Each discrepancy and part carries its standard error, or is a bound where the debiasing
+    // left zero: never a bare "0.00000" that reads as perfect agreement.
+    let table: Vec<&str> = text
+        .lines()
+        .skip_while(|l| !l.starts_with("run "))
+        .skip(2)
+        .take(runs.len())
+        .collect();
+    assert_eq!(table.len(), runs.len(), "{text}");
+    for line in &table {
+        let bare_zero = line
+            .match_indices("0.00000")
+            .any(|(at, _)| !line[at..].trim_start_matches(['0', '.']).starts_with(" ±"));
+        assert!(!bare_zero, "{line}");
+        assert!(
+            line.matches(" ± ").count() + line.matches("< ").count() >= 6,
+            "{line}"
+        );
+    }
     assert!(
         text.contains("accuracy against the commanded move")
             && text.contains("bias u [px]")

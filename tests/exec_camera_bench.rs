@@ -89,6 +89,7 @@ fn an_experiment_through_the_exec_camera_captures_the_generators_frames_bit_for_
         target_field_mm: None,
         travel_x_mm: Some((-25.0, 25.0)),
         travel_y_mm: Some((-25.0, 25.0)),
+        stage_resolution_mm: None,
         exposure_us: (10.0, 1e6),
         hardware_schemes: Vec::new(),
     };

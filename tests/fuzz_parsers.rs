@@ -211,6 +211,7 @@ fn experiment_requests_and_files() {
         target_field_mm: Some((-75.0, -68.0, 75.0, 68.0)),
         travel_x_mm: Some((-25.0, 25.0)),
         travel_y_mm: Some((-25.0, 25.0)),
+        stage_resolution_mm: None,
         ..BenchLimits::analysis_only(26.0)
     };
     let json_seeds: Vec<Vec<u8>> = [

@@ -458,10 +458,12 @@ fn hardware_read_outs_compare_as_their_synthesised_twins() {
             .iter()
             .find(|t| t.id == r.twin && t.scheme == twin_scheme)
             .unwrap();
-        let se = r.discrepancy_se_px.hypot(twin.detail.discrepancy_se_px());
+        let se =
+            r.se.discrepancy_se_px
+                .hypot(twin.detail.discrepancy_se_px());
         println!(
             "{} ({}): D {:.5} ± {:.5} px; twin {} {}: D {:.5} px (rigid {:.5} / {:.5}, field {:.5} / {:.5})",
-            r.id, r.scheme, r.discrepancy_px, r.discrepancy_se_px, twin.id, twin_scheme,
+            r.id, r.scheme, r.discrepancy_px, r.se.discrepancy_se_px, twin.id, twin_scheme,
             twin.discrepancy_px, r.parts.rigid_px, twin.rigid_px, r.parts.field_px, twin.field_px
         );
         assert!(

@@ -2,6 +2,10 @@ use crate::bench::{Motion, SharedBench};
 use ffdic_hw::{HwError, HwResult, Stage, StageInfo, StagePosition};
 use std::time::{Duration, Instant};
 
+/// The mock stage's step, mm (0.1 µm: a microstepping stage's): it lands on whole steps, as a
+/// stage driven in device units does.
+pub const RESOLUTION_MM: f64 = 1e-4;
+
 /// Faults to inject into the mock stage.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct StageFaults {
@@ -30,6 +34,7 @@ impl MockStage {
                 axes: 2,
                 travel_x_mm: (-25.0, 25.0),
                 travel_y_mm: (-25.0, 25.0),
+                resolution_mm: RESOLUTION_MM,
             },
             bench,
             speed_mm_per_s,
@@ -87,6 +92,10 @@ impl Stage for MockStage {
                 });
             }
         }
+        let target = StagePosition {
+            x_mm: self.info.on_grid(target.x_mm),
+            y_mm: self.info.on_grid(target.y_mm),
+        };
         let now = Instant::now();
         let mut b = self.bench.lock().expect("bench lock");
         let start = b.position_at(now);

@@ -219,7 +219,8 @@ class StageAxis(StandardReadable, Locatable[float], Checkable[float]):
     ``set(x)`` moves this axis alone to ``x`` (``POST /stage/moves``, absolute; the other axis
     stays) and is done when the stage has settled; its readback (named as the axis, the hint)
     is the position the daemon reads back. A target outside the travel the stage reports
-    (``low_limit_travel``, ``high_limit_travel``, in the configuration) raises
+    (``low_limit_travel``, ``high_limit_travel``, in the configuration, beside ``resolution``:
+    the stage's step, to which the daemon rounds a move it is asked for) raises
     :class:`LimitsExceeded` before anything moves, as does ``check_value`` (which
     ``bluesky.simulators.check_limits`` calls for a whole plan).
     """
@@ -240,6 +241,10 @@ class StageAxis(StandardReadable, Locatable[float], Checkable[float]):
             )[0]
             self.high_limit_travel = soft_signal_r_and_setter(
                 float, units="mm", getter=self._limit_getter(1)
+            )[0]
+            # The step a move is commanded in: the daemon rounds a requested move to it.
+            self.resolution = soft_signal_r_and_setter(
+                float, units="mm", getter=self._resolution_mm
             )[0]
         self.user_setpoint = soft_signal_rw(float, units="mm")
         super().__init__(name=name)
@@ -263,6 +268,10 @@ class StageAxis(StandardReadable, Locatable[float], Checkable[float]):
             low, high = stage["info"][f"travel_{self._axis}_mm"]
             self._travel_mm = (float(low), float(high))
         return self._travel_mm
+
+    async def _resolution_mm(self) -> float:
+        stage = await _in_thread(self._client.stage)
+        return float(stage["info"].get("resolution_mm", 0.0))
 
     def _limit_getter(self, index: int) -> Callable[[], Any]:
         async def get() -> float:

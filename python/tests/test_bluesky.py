@@ -145,6 +145,7 @@ def test_a_scan_moves_the_stage_and_its_frames_show_the_move(
     travel = bench.stage()["info"]["travel_x_mm"]
     limits = descriptor["configuration"]["stage-x"]["data"]
     assert [limits["stage-x-low_limit_travel"], limits["stage-x-high_limit_travel"]] == travel
+    assert limits["stage-x-resolution"] == bench.stage()["info"]["resolution_mm"] > 0
     assert descriptor["data_keys"]["stage-x"]["units"] == "mm"
 
     events = named(docs, "event")

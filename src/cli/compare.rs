@@ -108,7 +108,8 @@ pub fn write_outputs(out: &std::path::Path, cmp: &Comparison) -> Result<()> {
 
 /// The runs read out in the camera's own binning or decimation, compared in that mode.
 fn hardware_text(hw: &ffdic::diagnose::HardwareComparison) -> String {
-    let f = |x: f64| format!("{x:.5}");
+    use ffdic::report::{length_pm, significant};
+    let f = |x: f64| significant(x, 3);
     let rows: Vec<Vec<String>> = hw
         .runs
         .iter()
@@ -117,10 +118,10 @@ fn hardware_text(hw: &ffdic::diagnose::HardwareComparison) -> String {
                 r.id.clone(),
                 r.twin.clone(),
                 r.scheme.clone(),
-                f(r.discrepancy_px),
-                f(r.parts.rigid_px),
-                f(r.parts.field_px),
-                f(r.parts.std_px),
+                length_pm(r.discrepancy_px, r.se.discrepancy_se_px),
+                length_pm(r.parts.rigid_px, r.se.rigid_se_px),
+                length_pm(r.parts.field_px, r.se.field_se_px),
+                length_pm(r.parts.std_px, r.se.std_se_px),
                 f(r.measured_random_px[0]),
                 f(r.model_random_px[0]),
                 f(r.measured_random_px[1]),
@@ -154,7 +155,8 @@ fn hardware_text(hw: &ffdic::diagnose::HardwareComparison) -> String {
 
 /// The comparison as a table for people.
 pub fn comparison_text(cmp: &Comparison) -> String {
-    let f = |x: f64| format!("{x:.5}");
+    use ffdic::report::{length_pm, plus_minus, significant};
+    let f = |x: f64| significant(x, 3);
     let rows: Vec<Vec<String>> = cmp
         .runs
         .iter()
@@ -162,12 +164,12 @@ pub fn comparison_text(cmp: &Comparison) -> String {
             vec![
                 r.id.clone(),
                 r.scheme.clone(),
-                f(r.discrepancy_px),
-                f(r.rigid_px),
-                f(r.field_px),
-                f(r.std_px),
-                f(r.mean_diff_px[0]),
-                f(r.mean_diff_px[1]),
+                length_pm(r.discrepancy_px, r.se.discrepancy_se_px),
+                length_pm(r.rigid_px, r.se.rigid_se_px),
+                length_pm(r.field_px, r.se.field_se_px),
+                length_pm(r.std_px, r.se.std_se_px),
+                plus_minus(r.mean_diff_px[0], r.se.mean_diff_se_px[0]),
+                plus_minus(r.mean_diff_px[1], r.se.mean_diff_se_px[1]),
                 f(r.measured.summary.u.std),
                 f(r.model.summary.u.std),
                 f(r.measured.summary.v.std),
@@ -192,6 +194,7 @@ pub fn comparison_text(cmp: &Comparison) -> String {
         ],
         &rows,
     );
+    s += LENGTHS_LEGEND;
     s += "\n";
     s += &accuracy_text(cmp);
     if let Some(hw) = &cmp.hardware {
@@ -207,14 +210,14 @@ pub fn comparison_text(cmp: &Comparison) -> String {
     s += "\n";
     s += &images_text(cmp);
     s += &format!(
-        "\nmodel {} ({}), dataset {}: discrepancy {:.5} px (rigid {:.5}, field {:.5}, std {:.5}); stage misalignment {:.6} rad, travel scale {:.6}{}\n",
+        "\nmodel {} ({}), dataset {}: discrepancy {} px (rigid {}, field {}, std {}); stage misalignment {:.6} rad, travel scale {:.6}{}\n",
         cmp.model.name,
         cmp.model.version,
         cmp.dataset,
-        cmp.discrepancy_px,
-        cmp.parts.rigid_px,
-        cmp.parts.field_px,
-        cmp.parts.std_px,
+        length_pm(cmp.discrepancy_px, cmp.discrepancy_se_px),
+        length_pm(cmp.parts.rigid_px, cmp.parts_se.rigid_px),
+        length_pm(cmp.parts.field_px, cmp.parts_se.field_px),
+        length_pm(cmp.parts.std_px, cmp.parts_se.std_px),
         cmp.model.nominal.misalignment_rad,
         cmp.model.nominal.travel_scale,
         stage_text(cmp)
@@ -222,9 +225,15 @@ pub fn comparison_text(cmp: &Comparison) -> String {
     s
 }
 
+/// What the discrepancy table's "±" and "<" say.
+const LENGTHS_LEGEND: &str = "D and its parts (rigid, field, std) debiased for noise, px, ± their \
+standard error from the noise of both analyses; < x: below its noise (debiased to zero), x twice \
+its standard error; Δ mean: measured − model; std: 3 significant digits\n";
+
 /// The measured side against the commanded move, per run and scheme: the bias with its standard
 /// error and the std, px of the analysed image and µm on the target.
 fn accuracy_text(cmp: &Comparison) -> String {
+    use ffdic::report::{rounded_to_error, significant};
     let pm = ffdic::report::plus_minus;
     let rows: Vec<Vec<String>> = cmp
         .runs
@@ -237,10 +246,18 @@ fn accuracy_text(cmp: &Comparison) -> String {
                 format!("{:.4}, {:.4}", a.commanded_px[0], a.commanded_px[1]),
                 pm(a.bias_px[0], a.bias_se_px[0]),
                 pm(a.bias_px[1], a.bias_se_px[1]),
-                format!("{:.5}", a.std_px[0]),
-                format!("{:.5}", a.std_px[1]),
-                format!("{:+.3}, {:+.3}", a.bias_um[0], a.bias_um[1]),
-                format!("{:.3}, {:.3}", a.std_um[0], a.std_um[1]),
+                significant(a.std_px[0], 3),
+                significant(a.std_px[1], 3),
+                format!(
+                    "{}, {}",
+                    rounded_to_error(a.bias_um[0], a.bias_se_um[0]),
+                    rounded_to_error(a.bias_um[1], a.bias_se_um[1])
+                ),
+                format!(
+                    "{}, {}",
+                    significant(a.std_um[0], 3),
+                    significant(a.std_um[1], 3)
+                ),
             ]
         })
         .collect();
@@ -278,12 +295,10 @@ fn images_text(cmp: &Comparison) -> String {
         .iter()
         .map(|im| {
             let slope = |p: &[ffdic::diagnose::PtcPoint]| match (p.first(), p.last()) {
-                (Some(a), Some(b)) if b.mean_dn > a.mean_dn => {
-                    format!(
-                        "{:.4}",
-                        (b.variance_dn2 - a.variance_dn2) / (b.mean_dn - a.mean_dn)
-                    )
-                }
+                (Some(a), Some(b)) if b.mean_dn > a.mean_dn => ffdic::report::significant(
+                    (b.variance_dn2 - a.variance_dn2) / (b.mean_dn - a.mean_dn),
+                    3,
+                ),
                 _ => "—".into(),
             };
             vec![

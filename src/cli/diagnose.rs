@@ -8,6 +8,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 use ffdic::diagnose::{diagnose_rounds, Candidate, Diagnosis, Rounds, MAX_ROUNDS};
 use ffdic::model::effects::{join_effects, verdict_name};
+use ffdic::report::{length_pm, parameters_text, plus_minus, significant};
 use std::path::PathBuf;
 
 #[derive(Debug, Args)]
@@ -47,8 +48,9 @@ fn significance(c: &Candidate) -> String {
     }
     if k.beyond_null && !k.drop_ok {
         why.push(format!(
-            "drop {:+.5} ± {:.5} px, image χ² drop {:.1} ± {:.1}",
-            k.drop_px, k.drop_se_px, k.image_chi2_drop, k.image_chi2_se
+            "drop {} px, image χ² drop {}",
+            plus_minus(k.drop_px, k.drop_se_px),
+            plus_minus(k.image_chi2_drop, k.image_chi2_se)
         ));
     }
     if !k.within_range {
@@ -61,26 +63,17 @@ fn significance(c: &Candidate) -> String {
 }
 
 pub fn diagnosis_text(d: &Diagnosis) -> String {
-    let g = |x: f64| format!("{x:.4e}");
     let rows: Vec<Vec<String>> = d
         .candidates
         .iter()
         .map(|c| {
-            let params: Vec<String> = c
-                .params
-                .iter()
-                .map(|(k, v)| match c.stderr.get(k) {
-                    Some(se) => format!("{k}={} ± {}", g(*v), g(*se)),
-                    None => format!("{k}={}", g(*v)),
-                })
-                .collect();
             vec![
                 c.effect.to_string(),
                 format!("{:.1}", c.delta_bic),
-                format!("{:.5}", c.discrepancy_px),
-                format!("{:+.5}", c.drop_px),
+                significant(c.discrepancy_px, 3),
+                plus_minus(c.drop_px, c.criteria.drop_se_px),
                 significance(c),
-                params.join(", "),
+                parameters_text(&c.params, &c.stderr),
             ]
         })
         .collect();
@@ -96,11 +89,10 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
         &rows,
     );
     s += &format!(
-        "\nmodel {} ({}): discrepancy {:.5} ± {:.5} px; verdict: {}\n",
+        "\nmodel {} ({}): discrepancy {} px; verdict: {}\n",
         d.model.name,
         d.model.version,
-        d.discrepancy_px,
-        d.discrepancy_se_px,
+        length_pm(d.discrepancy_px, d.discrepancy_se_px),
         verdict_name(&d.verdict)
     );
     for c in d
@@ -113,9 +105,9 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
     s += &format!("unexplained by the model: {}\n", d.unexplained.summary);
     if let Some(a) = &d.after {
         s += &format!(
-            "with {} added: {:.5} px{}\n",
+            "with {} added: {} px{}\n",
             verdict_name(&d.verdict),
-            a.discrepancy_px,
+            length_pm(a.discrepancy_px, a.discrepancy_se_px),
             d.explained_fraction.map_or(String::new(), |f| format!(
                 " ({:.0} % of the unexplained low-order field)",
                 100.0 * f
@@ -160,39 +152,31 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
 pub fn rounds_text(r: &Rounds) -> String {
     let mut s = String::from("\nrounds:\n");
     for (k, round) in r.rounds.iter().enumerate() {
-        let params: Vec<String> = round
-            .params
-            .iter()
-            .map(|(p, v)| match round.stderr.get(p) {
-                Some(se) => format!("{p}={v:.4e} ± {se:.4e}"),
-                None => format!("{p}={v:.4e}"),
-            })
-            .collect();
+        let params = parameters_text(&round.params, &round.stderr);
         s += &format!(
-            "  {}. {}: {:.5} ± {:.5} px → verdict {}{}{}\n",
+            "  {}. {}: {} px → verdict {}{}{}\n",
             k + 1,
             round.model,
-            round.discrepancy_px,
-            round.discrepancy_se_px,
+            length_pm(round.discrepancy_px, round.discrepancy_se_px),
             verdict_name(&round.verdict),
             if params.is_empty() {
                 String::new()
             } else {
-                format!(" ({})", params.join(", "))
+                format!(" ({params})")
             },
             round
                 .after_px
-                .map_or(String::new(), |a| format!(" → {a:.5} px"))
+                .map_or(String::new(), |a| format!(" → {} px", significant(a, 3)))
         );
     }
     s += &format!(
-        "found: {}; final discrepancy {:.5} px\nleft unexplained: {}\n",
+        "found: {}; final discrepancy {} px\nleft unexplained: {}\n",
         if r.verdicts.is_empty() {
             "none".to_string()
         } else {
             join_effects(&r.verdicts, ", ")
         },
-        r.final_discrepancy_px,
+        significant(r.final_discrepancy_px, 3),
         r.final_unexplained.summary
     );
     s

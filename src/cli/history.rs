@@ -62,7 +62,7 @@ pub fn run(args: &HistoryArgs) -> Result<()> {
                     true => "—".into(),
                     false => format!("{} ({} runs)", e.manifest_version, e.manifest_runs),
                 },
-                format!("{:.5}", e.discrepancy_px),
+                ffdic::report::length_pm(e.discrepancy_px, e.discrepancy_se_px),
                 format!("{:+.1} %", 100.0 * (e.discrepancy_px / first - 1.0)),
             ]
         })

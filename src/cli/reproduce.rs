@@ -237,7 +237,9 @@ pub(super) fn wait(
 #[derive(Debug, serde::Serialize)]
 struct ModelStory {
     dataset: String,
+    /// The discrepancy against the baseline model and its standard error, px.
     baseline_px: f64,
+    baseline_se_px: f64,
     #[serde(with = "ffdic::model::effects::verdict_serde")]
     verdict: Option<ffdic::model::CandidateId>,
     /// The winner's fitted parameters and standard errors.
@@ -250,6 +252,7 @@ struct ModelStory {
     /// The model with the winner added, and the discrepancy against it.
     model: Option<String>,
     after_px: Option<f64>,
+    after_se_px: Option<f64>,
     /// Jobs: comparison, diagnosis, comparison with the winner.
     jobs: Vec<String>,
 }
@@ -307,16 +310,16 @@ fn model_story(
         ..CompareRequest::default()
     };
     let mut jobs = Vec::new();
-    let mut comparison = |request: &CompareRequest, what: &'static str| -> Result<f64> {
+    let mut comparison = |request: &CompareRequest, what: &'static str| -> Result<(f64, f64)> {
         let (job, _) = service.submit_comparison(&dataset.id, request, None)?;
         wait(service, &job.id, what, show)?;
         jobs.push(job.id.to_string());
         match service.jobs.take_result(&job.id) {
-            Some(JobResult::Comparison(cmp)) => Ok(cmp.discrepancy_px),
+            Some(JobResult::Comparison(cmp)) => Ok((cmp.discrepancy_px, cmp.discrepancy_se_px)),
             _ => bail!("comparison {} succeeded without a comparison", job.id),
         }
     };
-    let baseline_px = comparison(&request, "comparing with the baseline model")?;
+    let (baseline_px, baseline_se_px) = comparison(&request, "comparing with the baseline model")?;
     let (job, _) = service.submit_diagnosis(&dataset.id, &request, None)?;
     wait(service, &job.id, "diagnosing", show)?;
     let Some(JobResult::Diagnosis(rounds)) = service.jobs.take_result(&job.id) else {
@@ -333,7 +336,7 @@ fn model_story(
         .iter()
         .find(|c| Some(&c.effect) == diagnosis.verdict.as_ref())
         .cloned();
-    let (model, after_px) = match &winner {
+    let (model, after) = match &winner {
         None => (None, None),
         Some(_) => {
             // The model with every verdict added (one round: the winner).
@@ -354,6 +357,7 @@ fn model_story(
     Ok(ModelStory {
         dataset: dataset.id.to_string(),
         baseline_px,
+        baseline_se_px,
         verdict: diagnosis.verdict,
         params: winner
             .as_ref()
@@ -366,15 +370,17 @@ fn model_story(
         bench_truth: bench_truth.clone(),
         delta_bic: winner.as_ref().map(|c| c.delta_bic),
         model,
-        after_px,
+        after_px: after.map(|a| a.0),
+        after_se_px: after.map(|a| a.1),
         jobs,
     })
 }
 
 fn story_text(s: &ModelStory) -> String {
     let mut t = format!(
-        "\nmodel against measurement (dataset {}):\n  baseline model: discrepancy {:.5} px\n",
-        s.dataset, s.baseline_px
+        "\nmodel against measurement (dataset {}):\n  baseline model: discrepancy {} px\n",
+        s.dataset,
+        ffdic::report::length_pm(s.baseline_px, s.baseline_se_px)
     );
     let effect = ffdic::model::effects::verdict_name(&s.verdict);
     let truth = s.bench_truth.get(&effect);
@@ -384,10 +390,8 @@ fn story_text(s: &ModelStory) -> String {
                 .params
                 .iter()
                 .map(|(k, v)| {
-                    let fitted = match s.stderr.get(k) {
-                        Some(se) => format!("{k} = {v:.4e} ± {se:.1e}"),
-                        None => format!("{k} = {v:.4e}"),
-                    };
+                    let se = s.stderr.get(k).copied().unwrap_or(f64::NAN);
+                    let fitted = format!("{k} = {}", ffdic::report::value_pm(*v, se));
                     match (truth.and_then(|t| t.get(k)), s.stderr.get(k)) {
                         (Some(t), Some(se)) if *se > 0.0 => {
                             format!("{fitted} (bench truth {t:.4e}: {:+.1} SE)", (v - t) / se)
@@ -398,10 +402,11 @@ fn story_text(s: &ModelStory) -> String {
                 })
                 .collect();
             t += &format!(
-                "  diagnosis: missing effect {} ({}; ΔBIC {:.1})\n  with it added ({model}): discrepancy {after:.5} px\n",
+                "  diagnosis: missing effect {} ({}; ΔBIC {:.1})\n  with it added ({model}): discrepancy {} px\n",
                 ffdic::model::effects::verdict_name(&s.verdict),
                 params.join(", "),
-                s.delta_bic.unwrap_or(f64::NAN)
+                s.delta_bic.unwrap_or(f64::NAN),
+                ffdic::report::length_pm(after, s.after_se_px.unwrap_or(f64::NAN))
             );
         }
         _ => t += "  diagnosis: no significant missing effect (verdict none)\n",

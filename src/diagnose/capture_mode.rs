@@ -197,7 +197,7 @@ pub fn compare_hardware(
                 pattern: labels[pattern_of_run[h.twin]].clone(),
                 scheme: h.capture.name.clone(),
                 discrepancy_px: d.discrepancy_px,
-                discrepancy_se_px: d.discrepancy_se_px(),
+                se: d.errors(),
                 parts: DiscrepancyParts {
                     rigid_px: d.rigid_px,
                     field_px: d.field_px,

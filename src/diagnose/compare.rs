@@ -8,7 +8,7 @@ use super::bic::chi2;
 use super::capture_mode::{
     compare_hardware, measure_hardware, model_hardware, HardwareMeasurement, HardwareModelSide,
 };
-use super::discrepancy::run_discrepancy;
+use super::discrepancy::{run_discrepancy, RunDiscrepancy};
 use super::image_stats::{centre_crop, frame_stats, FrameStats, STATS_CROP_PX};
 use super::nominal::{
     check_sizes, pattern_for, pattern_indices, pooled_noise_variance, white_level_guess, Nominal,
@@ -960,6 +960,11 @@ pub(super) fn assemble(
             field_px: rms(|r| r.field_px),
             std_px: rms(|r| r.std_px),
         },
+        parts_se: DiscrepancyParts {
+            rigid_px: rms_se(&out_runs, |d| (d.rigid_px, d.rigid_sq_var)),
+            field_px: rms_se(&out_runs, |d| (d.field_px, d.field_sq_var)),
+            std_px: rms_se(&out_runs, |d| (d.std_px, d.std_sq_var)),
+        },
         runs: out_runs,
         images,
         chi2: Chi2::default(),
@@ -1004,6 +1009,7 @@ fn run_comparisons(
                     .copied()
                     .unwrap_or_default()),
                 std_px: d.std_px,
+                se: d.errors(),
                 measured: Side {
                     summary: m.summary,
                     random_px: [d.measured_random_px.0, d.measured_random_px.1],
@@ -1060,20 +1066,28 @@ fn accuracy(
 /// It does not hold the model's speckle realisation: `diagnose` adds the scatter over model
 /// seeds.
 pub fn discrepancy_se(runs: &[RunComparison]) -> f64 {
-    let valid: Vec<&RunComparison> = runs
+    rms_se(runs, |d| (d.discrepancy_px, d.discrepancy_sq_var))
+}
+
+/// The standard error of an RMS over runs of one length (the discrepancy or one of its parts),
+/// `part` giving each run's length and the sampling variance of its square, propagated as
+/// [`discrepancy_se`] says.
+fn rms_se(runs: &[RunComparison], part: fn(&RunDiscrepancy) -> (f64, f64)) -> f64 {
+    let valid: Vec<(f64, f64)> = runs
         .iter()
-        .filter(|r| r.discrepancy_px.is_finite())
+        .map(|r| part(&r.detail))
+        .filter(|(d, _)| d.is_finite())
         .collect();
     let n = valid.len();
     if n == 0 {
         return f64::NAN;
     }
     let nf = n as f64;
-    let d2 = valid.iter().map(|r| r.discrepancy_px.powi(2)).sum::<f64>() / nf;
+    let d2 = valid.iter().map(|(d, _)| d.powi(2)).sum::<f64>() / nf;
     let shared = super::bic::shared_fraction(runs).max(1e-9);
     let var_d2 = valid
         .iter()
-        .map(|r| r.detail.discrepancy_sq_var)
+        .map(|(_, v)| *v)
         .filter(|v| v.is_finite())
         .sum::<f64>()
         / (nf * nf)

@@ -120,8 +120,16 @@ pub struct RunDiscrepancy {
     pub points: usize,
     /// √(rigid² + field² + std²), px.
     pub discrepancy_px: f64,
-    /// Sampling variance of discrepancy² from the noise of both analyses, px⁴.
+    /// Sampling variance of discrepancy² from the noise of both analyses, px⁴: the sum of the
+    /// three parts' below.
     pub discrepancy_sq_var: f64,
+    /// Sampling variances of rigid², field² and std², px⁴.
+    #[serde(default)]
+    pub rigid_sq_var: f64,
+    #[serde(default)]
+    pub field_sq_var: f64,
+    #[serde(default)]
+    pub std_sq_var: f64,
     /// Rigid part: the length of the mean of the field difference, debiased for its noise, px —
     /// a stage landing the fit could not explain, or a sub-pixel bias the model lacks.
     pub rigid_px: f64,
@@ -130,8 +138,10 @@ pub struct RunDiscrepancy {
     pub field_px: f64,
     /// Random part: √(Δσu² + Δσv²) debiased for the sampling error of the two stds, px.
     pub std_px: f64,
-    /// Mean of the difference, px (u, v).
+    /// Mean of the difference, px (u, v), and its standard error.
     pub mean_diff_px: (f64, f64),
+    #[serde(default)]
+    pub mean_diff_se_px: (f64, f64),
     /// Random error (std about the own quadratic surface) of each side, px (u, v).
     pub measured_random_px: (f64, f64),
     pub model_random_px: (f64, f64),
@@ -142,6 +152,24 @@ pub struct RunDiscrepancy {
     /// difference: the residual map.
     #[serde(skip)]
     pub common: Vec<CommonPoint>,
+}
+
+/// Standard errors of a run's discrepancy, its parts and its mean difference from the noise
+/// of both analyses, px ([`se_of_length`]: at a part debiased to zero, the noise level below
+/// which it cannot be told from zero).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct DiscrepancyErrors {
+    #[serde(default)]
+    pub discrepancy_se_px: f64,
+    #[serde(default)]
+    pub rigid_se_px: f64,
+    #[serde(default)]
+    pub field_se_px: f64,
+    #[serde(default)]
+    pub std_se_px: f64,
+    /// Of the mean difference (u, v).
+    #[serde(default)]
+    pub mean_diff_se_px: [f64; 2],
 }
 
 /// A point valid in both analyses.
@@ -173,6 +201,17 @@ impl RunDiscrepancy {
         se_of_length(self.discrepancy_px, self.discrepancy_sq_var)
     }
 
+    /// The standard errors of the discrepancy, its parts and the mean difference.
+    pub fn errors(&self) -> DiscrepancyErrors {
+        DiscrepancyErrors {
+            discrepancy_se_px: self.discrepancy_se_px(),
+            rigid_se_px: se_of_length(self.rigid_px, self.rigid_sq_var),
+            field_se_px: se_of_length(self.field_px, self.field_sq_var),
+            std_se_px: se_of_length(self.std_px, self.std_sq_var),
+            mean_diff_se_px: [self.mean_diff_se_px.0, self.mean_diff_se_px.1],
+        }
+    }
+
     /// Too few points valid in both analyses to fit the difference: every figure NaN.
     fn unmeasurable(points: usize) -> RunDiscrepancy {
         let nan2 = (f64::NAN, f64::NAN);
@@ -180,10 +219,14 @@ impl RunDiscrepancy {
             points,
             discrepancy_px: f64::NAN,
             discrepancy_sq_var: f64::NAN,
+            rigid_sq_var: f64::NAN,
+            field_sq_var: f64::NAN,
+            std_sq_var: f64::NAN,
             rigid_px: f64::NAN,
             field_px: f64::NAN,
             std_px: f64::NAN,
             mean_diff_px: nan2,
+            mean_diff_se_px: nan2,
             measured_random_px: nan2,
             model_random_px: nan2,
             residual_var_px2: nan2,
@@ -235,10 +278,10 @@ pub fn run_discrepancy(measured: &DicResult, model: &DicResult, inflation: f64) 
     let square_var = |signal: f64, s2: f64, k: f64| 4.0 * signal.max(0.0) * s2 + 2.0 * k * s2 * s2;
     let shape_u = shape(&fu, mean_du).max(0.0);
     let shape_v = shape(&fv, mean_dv).max(0.0);
-    let mut var_sq = square_var(mean_du * mean_du, noise(&fu), 1.0)
-        + square_var(mean_dv * mean_dv, noise(&fv), 1.0)
-        + square_var(shape_u, noise(&fu), p - 1.0)
-        + square_var(shape_v, noise(&fv), p - 1.0);
+    let rigid_sq_var = square_var(mean_du * mean_du, noise(&fu), 1.0)
+        + square_var(mean_dv * mean_dv, noise(&fv), 1.0);
+    let field_sq_var =
+        square_var(shape_u, noise(&fu), p - 1.0) + square_var(shape_v, noise(&fv), p - 1.0);
     let measured_random_px = (random_error(&xy, &mu), random_error(&xy, &mv));
     let model_random_px = (random_error(&xy, &ou), random_error(&xy, &ov));
     // A sample std over n_eff independent points has variance σ²/(2 n_eff): remove the
@@ -249,23 +292,28 @@ pub fn run_discrepancy(measured: &DicResult, model: &DicResult, inflation: f64) 
         + sq(measured_random_px.1, model_random_px.1))
     .max(0.0)
     .sqrt();
+    let mut std_sq_var = 0.0;
     for (a, b) in [
         (measured_random_px.0, model_random_px.0),
         (measured_random_px.1, model_random_px.1),
     ] {
         let se2 = (a * a + b * b) / (2.0 * n_eff);
         if se2.is_finite() {
-            var_sq += square_var((a - b).powi(2), se2, 1.0);
+            std_sq_var += square_var((a - b).powi(2), se2, 1.0);
         }
     }
     RunDiscrepancy {
         points: n,
         discrepancy_px: (rigid_px * rigid_px + field_px * field_px + std_px * std_px).sqrt(),
-        discrepancy_sq_var: var_sq,
+        discrepancy_sq_var: rigid_sq_var + field_sq_var + std_sq_var,
+        rigid_sq_var,
+        field_sq_var,
+        std_sq_var,
         rigid_px,
         field_px,
         std_px,
         mean_diff_px: (mean_du, mean_dv),
+        mean_diff_se_px: (noise(&fu).sqrt(), noise(&fv).sqrt()),
         measured_random_px,
         model_random_px,
         residual_var_px2: (fu.residual_var, fv.residual_var),

@@ -22,6 +22,9 @@ pub struct HistoryEntry {
     pub model: String,
     pub version: String,
     pub discrepancy_px: f64,
+    /// Its standard error (0 in entries written before it was recorded).
+    #[serde(default)]
+    pub discrepancy_se_px: f64,
     /// Effects of the model, in vocabulary order.
     #[serde(default)]
     pub effects: Vec<String>,
@@ -48,6 +51,7 @@ impl HistoryEntry {
             model: model.into(),
             version: version.into(),
             discrepancy_px,
+            discrepancy_se_px: 0.0,
             effects,
             manifest_version: String::new(),
             manifest_runs: 0,
@@ -59,6 +63,7 @@ impl HistoryEntry {
         Self {
             manifest_version: cmp.manifest_version.clone(),
             manifest_runs: cmp.manifest_runs,
+            discrepancy_se_px: cmp.discrepancy_se_px,
             ..Self::now(
                 &cmp.dataset,
                 &cmp.model.name,

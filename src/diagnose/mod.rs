@@ -123,7 +123,7 @@ pub use diagnose::{
     diagnose, diagnose_prepared, Candidate, Criteria, Diagnosis, Evidence, MODEL_SEEDS,
     PRINT_SEPARATION,
 };
-pub use discrepancy::{quadratic_fit, run_discrepancy, RunDiscrepancy};
+pub use discrepancy::{quadratic_fit, run_discrepancy, DiscrepancyErrors, RunDiscrepancy};
 pub use history::{
     append_history, history_dir_for, history_path, read_history, HistoryEntry, HISTORY_FILE,
 };

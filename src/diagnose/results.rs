@@ -2,7 +2,7 @@
 //! diagnosis are made of. They sit apart from the steps that compute them (`compare`, `bic`,
 //! `capture_mode`, `fit_image`, `stage`) so those steps import them without importing each other.
 
-use super::discrepancy::RunDiscrepancy;
+use super::discrepancy::{DiscrepancyErrors, RunDiscrepancy};
 use super::image_stats::FrameStats;
 use super::nominal::Nominal;
 use super::residuals::ResidualMap;
@@ -40,6 +40,9 @@ pub struct RunComparison {
     pub rigid_px: f64,
     pub field_px: f64,
     pub std_px: f64,
+    /// The standard errors of the discrepancy, its parts and `mean_diff_px`.
+    #[serde(flatten)]
+    pub se: DiscrepancyErrors,
     /// The stage landing offset the model rendered for this run, µm (x, y), and what the data
     /// said before the stage's envelope clipped it.
     pub stage_offset_um: [f64; 2],
@@ -91,7 +94,7 @@ pub struct ImageComparison {
 }
 
 /// Totals by part, px.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct DiscrepancyParts {
     #[serde(default)]
     pub rigid_px: f64,
@@ -115,6 +118,9 @@ pub struct Comparison {
     #[serde(default)]
     pub discrepancy_se_px: f64,
     pub parts: DiscrepancyParts,
+    /// The parts' standard errors, propagated as the total's.
+    #[serde(default)]
+    pub parts_se: DiscrepancyParts,
     pub runs: Vec<RunComparison>,
     pub images: Vec<ImageComparison>,
     pub chi2: Chi2,
@@ -165,8 +171,9 @@ pub struct HardwareRunComparison {
     pub scheme: String,
     /// In px of the captured (reduced) frames, as the synthesised schemes' are in theirs.
     pub discrepancy_px: f64,
-    /// Its standard error from the noise of both analyses.
-    pub discrepancy_se_px: f64,
+    /// Its standard errors (and its parts') from the noise of both analyses.
+    #[serde(flatten)]
+    pub se: DiscrepancyErrors,
     #[serde(flatten)]
     pub parts: DiscrepancyParts,
     /// Points valid in both analyses.

@@ -222,6 +222,7 @@ mod tests {
             target_field_mm: None,
             travel_x_mm: Some((-25.0, 25.0)),
             travel_y_mm: Some((-3.0, 25.0)),
+            stage_resolution_mm: None,
             exposure_us: (10.0, 1e6),
             hardware_schemes: Vec::new(),
         }
@@ -257,6 +258,7 @@ mod tests {
         let paper = BenchLimits {
             scale_px_per_mm: 26.0,
             travel_y_mm: Some((-25.0, 25.0)),
+            stage_resolution_mm: None,
             ..limits()
         };
         assert_eq!(

@@ -17,6 +17,9 @@ pub struct BenchLimits {
     /// the bench has no stage.
     pub travel_x_mm: Option<(f64, f64)>,
     pub travel_y_mm: Option<(f64, f64)>,
+    /// The stage's step, mm (`StageInfo::resolution_mm`): a requested move is rounded to it,
+    /// so what the spec and the manifest state is what the stage is told.
+    pub stage_resolution_mm: Option<f64>,
     /// Exposures the request may ask for, µs.
     pub exposure_us: (f64, f64),
     /// The camera's own binning and decimation (`GET /camera`): the `hw:` schemes an experiment
@@ -65,6 +68,7 @@ impl BenchLimits {
             target_field_mm: None,
             travel_x_mm: None,
             travel_y_mm: None,
+            stage_resolution_mm: None,
             exposure_us: EXPOSURE_US,
             hardware_schemes: Vec::new(),
         }
@@ -117,6 +121,20 @@ impl BenchLimits {
         Ok(())
     }
 
+    /// `mm` rounded to the stage's step (unchanged without a stage or a stated step).
+    pub fn on_stage_grid(&self, mm: f64) -> f64 {
+        match self.stage_resolution_mm {
+            Some(step) if step > 0.0 && mm.is_finite() => {
+                // Rounded in the step's decimals too, so 0.7692 is not printed 0.7692000000000001.
+                let decimals = (-step.log10()).ceil().clamp(0.0, 15.0) as i32 + 1;
+                let on_grid = (mm / step).round() * step;
+                let scale = 10f64.powi(decimals);
+                (on_grid * scale).round() / scale
+            }
+            _ => mm,
+        }
+    }
+
     /// Checks a position relative to the reference (home) against the stage's travel, naming
     /// the axis at fault.
     pub fn check_move(&self, dx_mm: f64, dy_mm: f64) -> Result<(), OutOfTravel> {
@@ -159,6 +177,7 @@ mod tests {
             target_field_mm: Some((-75.0, -68.0, 75.0, 68.0)),
             travel_x_mm: Some((-25.0, 25.0)),
             travel_y_mm: Some((-25.0, 25.0)),
+            stage_resolution_mm: None,
             exposure_us: EXPOSURE_US,
             hardware_schemes: Vec::new(),
         }
@@ -197,6 +216,14 @@ mod tests {
     fn moves_stay_within_the_travel() {
         let l = mock();
         assert!(l.check_move(5.0, 0.013).is_ok());
+        assert_eq!(l.on_stage_grid(0.7692307692307693), 0.7692307692307693);
+        let stepped = BenchLimits {
+            stage_resolution_mm: Some(1e-4),
+            ..mock()
+        };
+        assert_eq!(stepped.on_stage_grid(0.7692307692307693), 0.7692);
+        assert_eq!(stepped.on_stage_grid(-0.03846153846), -0.0385);
+        assert_eq!(format!("{}", stepped.on_stage_grid(20.0 / 26.0)), "0.7692");
         assert_eq!(l.check_move(25.5, 0.0).unwrap_err().axis, StageAxis::X);
         assert_eq!(l.check_move(0.0, -1e7).unwrap_err().axis, StageAxis::Y);
         assert_eq!(l.check_move(0.0, f64::NAN).unwrap_err().axis, StageAxis::Y);

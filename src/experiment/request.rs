@@ -351,6 +351,15 @@ impl ExperimentRequest {
         if moves.is_empty() {
             return Err(field_error("moves", "at least one move or step series"));
         }
+        // What the stage is told: each move on its grid of steps.
+        let moves: Vec<MoveSpec> = moves
+            .into_iter()
+            .map(|m| MoveSpec {
+                dx_mm: limits.on_stage_grid(m.dx_mm),
+                dy_mm: limits.on_stage_grid(m.dy_mm),
+                ..m
+            })
+            .collect();
         for (i, m) in moves.iter().enumerate() {
             limits
                 .check_move(m.dx_mm, m.dy_mm)
@@ -489,6 +498,7 @@ mod tests {
             target_field_mm: Some((-75.0, -68.0, 75.0, 68.0)),
             travel_x_mm: Some((-25.0, 25.0)),
             travel_y_mm: Some((-25.0, 25.0)),
+            stage_resolution_mm: None,
             ..BenchLimits::analysis_only(26.0)
         }
     }
@@ -501,6 +511,35 @@ mod tests {
         assert_eq!(p.moves.len(), 1);
         assert_eq!(p.moves[0].dx_mm, 5.0);
         assert_eq!(p.schemes.len(), 3);
+    }
+
+    #[test]
+    fn moves_are_what_the_stage_is_told_on_its_grid() {
+        let stepped = BenchLimits {
+            stage_resolution_mm: Some(1e-4),
+            ..limits()
+        };
+        let r: ExperimentRequest = serde_json::from_str(
+            r#"{"moves":[{"id":"m","dx_mm":0.7692307692307693,"dy_mm":-0.03846153846}],
+                "step_series":[{"id":"s","dx_step_mm":0.0038461538,"count":3}]}"#,
+        )
+        .unwrap();
+        let p = r.plan(&stepped).unwrap();
+        let got: Vec<(f64, f64)> = p.moves.iter().map(|m| (m.dx_mm, m.dy_mm)).collect();
+        assert_eq!(
+            got,
+            [
+                (0.7692, -0.0385),
+                (0.0038, 0.0),
+                (0.0077, 0.0),
+                (0.0115, 0.0)
+            ]
+        );
+        // Without a stated step, nothing is rounded.
+        assert_eq!(
+            r.plan(&limits()).unwrap().moves[0].dx_mm,
+            0.7692307692307693
+        );
     }
 
     #[test]

@@ -39,10 +39,16 @@ impl BarChart {
     /// The chart as a standalone SVG document. Every bar is a `<rect class="bar">` with
     /// `data-group` and `data-series` attributes, so tests and pages can find them.
     pub fn to_svg(&self, width_px: u32, height_px: u32) -> String {
+        self.to_svg_up_to(width_px, height_px, self.value_range().1)
+    }
+
+    /// The chart with its value axis reaching at least `max` (small multiples share one).
+    fn to_svg_up_to(&self, width_px: u32, height_px: u32, max: f64) -> String {
         let (w, h) = (width_px as f64, height_px as f64);
         let legend_h = 18.0 * self.series.len() as f64 + 8.0;
         let (left, right, top, bottom) = (78.0, 16.0, 40.0, 40.0 + legend_h);
-        let (min, max) = self.value_range();
+        let (min, own_max) = self.value_range();
+        let max = max.max(own_max);
         // Headroom for the labels over the bars.
         let ticks = nice_ticks(min, if max > 0.0 { max * 1.12 } else { 1.0 }, 5);
         let plot = Plot {
@@ -181,6 +187,44 @@ impl BarChart {
     }
 }
 
+/// Bar charts as small multiples (Tufte, The Visual Display of Quantitative Information, 1983):
+/// panels of `panel_w` x `panel_h` px, `columns` a row, on one value axis so that their bars
+/// compare across panels, under one `title`. Each panel is a `<g class="panel">`.
+pub fn small_multiples(
+    title: &str,
+    panels: &[BarChart],
+    columns: usize,
+    panel_w: u32,
+    panel_h: u32,
+) -> String {
+    let columns = columns.max(1);
+    let rows = panels.len().div_ceil(columns);
+    let top = 34.0;
+    let (w, h) = (
+        (columns as u32 * panel_w) as f64,
+        top + (rows as u32 * panel_h) as f64,
+    );
+    let max = panels
+        .iter()
+        .map(|p| p.value_range().1)
+        .fold(0.0f64, f64::max);
+    let mut s = start_document(w, h, title);
+    for (k, panel) in panels.iter().enumerate() {
+        let (x, y) = (
+            (k % columns) as f64 * panel_w as f64,
+            top + (k / columns) as f64 * panel_h as f64,
+        );
+        let _ = write!(
+            s,
+            r#"<g class="panel" data-panel="{}" transform="translate({x},{y})">{}</g>"#,
+            escape(&panel.title),
+            panel.to_svg_up_to(panel_w, panel_h, max)
+        );
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
 /// The plot area (from `top`, `pw` x `ph` px) and the value range it spans.
 struct Plot {
     top: f64,
@@ -220,25 +264,46 @@ mod tests {
         }
     }
 
+    /// The height of every bar, in document order.
+    fn bar_heights(svg: &str) -> Vec<f64> {
+        svg.split(r#"class="bar""#)
+            .skip(1)
+            .map(|part| {
+                let h = part.split("height=\"").nth(1).unwrap();
+                h[..h.find('"').unwrap()].parse().unwrap()
+            })
+            .collect()
+    }
+
     #[test]
     fn one_rect_per_finite_value_with_heights_proportional() {
         let svg = chart().to_svg(720, 420);
         assert_eq!(svg.matches(r#"class="bar""#).count(), 8);
         assert!(svg.contains("Figure &lt;5&gt;"));
         assert_eq!(svg.matches("+13.2 %").count(), 3);
-        let heights: Vec<f64> = svg
-            .split(r#"class="bar""#)
-            .skip(1)
-            .map(|part| {
-                let h = part.split("height=\"").nth(1).unwrap();
-                h[..h.find('"').unwrap()].parse().unwrap()
-            })
-            .collect();
+        let heights = bar_heights(&svg);
         // Group a: s0 = 0.01, s1 = 0.02 → the second bar is twice the first.
         // Order: group a (s0, s1, s2), group b (s0, s1, s2), group c (s0, s1).
         assert!((heights[1] / heights[0] - 2.0).abs() < 1e-3, "{heights:?}");
         assert!((heights[2] / heights[0] - 3.0).abs() < 1e-3);
         assert_eq!(svg.matches("<svg").count(), svg.matches("</svg>").count());
+    }
+
+    #[test]
+    fn small_multiples_share_one_value_axis() {
+        let tall = chart();
+        let mut low = chart();
+        for series in &mut low.series {
+            series.values.iter_mut().for_each(|v| *v /= 10.0);
+            series.errors.clear();
+        }
+        let svg = small_multiples("both", &[tall, low], 2, 400, 300);
+        assert_eq!(svg.matches(r#"<g class="panel""#).count(), 2);
+        assert_eq!(svg.matches("<svg").count(), svg.matches("</svg>").count());
+        // A bar of the low panel is a tenth of the same bar in the tall one: one axis.
+        let heights = bar_heights(&svg);
+        assert_eq!(heights.len(), 16);
+        assert!((heights[0] / heights[8] - 10.0).abs() < 0.05, "{heights:?}");
     }
 
     #[test]

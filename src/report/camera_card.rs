@@ -1,9 +1,8 @@
 //! A camera card as a person reads it: one row per number with its standard error and whether it
 //! is significant, the stage's map, the imaging chain, and the discrepancy the card leaves.
 
-use super::text_table;
+use super::{length_pm, parameters_text, text_table, value_pm};
 use crate::diagnose::{CameraCard, StageMap};
-use std::collections::BTreeMap;
 
 /// The card as text (the CLI's `calibrate` and the job's `results/card.txt`).
 pub fn camera_card_text(card: &CameraCard) -> String {
@@ -16,8 +15,7 @@ pub fn camera_card_text(card: &CameraCard) -> String {
             rows.push(vec![
                 g.effect.to_string(),
                 name.clone(),
-                format!("{v:.4e}"),
-                format!("{se:.1e}"),
+                value_pm(*v, se),
                 mark(*v, se).into(),
             ]);
         }
@@ -30,10 +28,7 @@ pub fn camera_card_text(card: &CameraCard) -> String {
         card.model.name,
         100.0 * card.false_alarm_rate
     );
-    out += &text_table(
-        &["effect", "parameter", "value", "SE", "significant"],
-        &rows,
-    );
+    out += &text_table(&["effect", "parameter", "value ± SE", "significant"], &rows);
     if let Some(s) = &card.stage {
         out += &format!(
             "stage: against the nominal {:.4} px/mm; {} runs scatter {:.4} px about the map (the stage is the length standard: its travel error and the camera's scale are one number)\n",
@@ -54,7 +49,7 @@ pub fn camera_card_text(card: &CameraCard) -> String {
         out += &format!("not fitted: {n}\n");
     }
     for i in &card.imaging {
-        let params = with_errors(&i.params, &i.stderr);
+        let params = parameters_text(&i.params, &i.stderr);
         match &i.separate_with {
             None => out += &format!("{}: {params}\n", i.effect),
             Some(how) => {
@@ -67,17 +62,15 @@ pub fn camera_card_text(card: &CameraCard) -> String {
     }
     let found = card.found();
     out += &format!(
-        "found: {}\ndiscrepancy: baseline {} {:.5} ± {:.5} px → card {:.5} ± {:.5} px\nleft unexplained: {}\n",
+        "found: {}\ndiscrepancy: baseline {} {} px → card {} px\nleft unexplained: {}\n",
         if found.is_empty() {
             "nothing significant".to_string()
         } else {
             found.join(", ")
         },
         card.baseline_model,
-        card.baseline_px,
-        card.baseline_se_px,
-        card.card_px,
-        card.card_se_px,
+        length_pm(card.baseline_px, card.baseline_se_px),
+        length_pm(card.card_px, card.card_se_px),
         card.unexplained.summary
     );
     out
@@ -108,21 +101,9 @@ fn stage_rows(s: &StageMap) -> Vec<Vec<String>> {
         vec![
             "stage".into(),
             name.into(),
-            format!("{v:.6}"),
-            format!("{se:.1e}"),
+            value_pm(v, se),
             if significant { "yes" } else { "no" }.into(),
         ]
     })
     .collect()
-}
-
-fn with_errors(params: &BTreeMap<String, f64>, stderr: &BTreeMap<String, f64>) -> String {
-    params
-        .iter()
-        .map(|(k, v)| match stderr.get(k) {
-            Some(se) => format!("{k} = {v:.4e} ± {se:.1e}"),
-            None => format!("{k} = {v:.4e}"),
-        })
-        .collect::<Vec<_>>()
-        .join(", ")
 }

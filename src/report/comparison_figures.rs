@@ -34,39 +34,89 @@ pub fn comparison_svgs(cmp: &Comparison) -> Vec<(String, String)> {
 /// The figure that leads a comparison: where the model fails, at a glance.
 pub const SUMMARY_SVG: &str = "summary.svg";
 
-/// The discrepancy of every run (groups) and scheme (series), each bar split in words by its
-/// label into the part that dominates it: rigid (where the stage landed), field (an effect the
-/// model lacks) or std (noise).
+/// The discrepancy and its three parts as small multiples on one axis: the total of every run
+/// (groups) and scheme (series), each bar labelled with the part that dominates it, then the
+/// parts alone — rigid (where the stage landed), field (an effect the model lacks), std
+/// (noise) — each with its ±2 SE bar, so a part below its noise shows as a bar of error alone.
 fn summary_svg(cmp: &Comparison) -> String {
+    use crate::diagnose::RunComparison;
+    type Part = fn(&RunComparison) -> (f64, f64);
     let runs = distinct(cmp.runs.iter().map(|r| r.id.clone()));
     let schemes = distinct(cmp.runs.iter().map(|r| r.scheme.clone()));
     let find =
         |run: &str, scheme: &str| cmp.runs.iter().find(|r| r.id == run && r.scheme == scheme);
-    let series = schemes
-        .iter()
-        .map(|scheme| Series {
-            name: scheme.clone(),
-            values: runs
-                .iter()
-                .map(|run| find(run, scheme).map_or(f64::NAN, |r| r.discrepancy_px))
-                .collect(),
-            labels: runs
-                .iter()
-                .map(|run| find(run, scheme).map(dominant_part))
-                .collect(),
-            errors: Vec::new(),
-        })
-        .collect();
-    BarChart {
-        title: format!(
-            "Discrepancy per run and scheme (total {:.4} ± {:.4} px)",
-            cmp.discrepancy_px, cmp.discrepancy_se_px
+    let panel = |title: String, part: Part, labelled: bool| BarChart {
+        title,
+        y_label: "[px]".into(),
+        groups: runs.clone(),
+        series: schemes
+            .iter()
+            .map(|scheme| {
+                let of = |run: &String| find(run, scheme).map(part);
+                Series {
+                    name: scheme.clone(),
+                    values: runs
+                        .iter()
+                        .map(|r| of(r).map_or(f64::NAN, |p| p.0))
+                        .collect(),
+                    labels: runs
+                        .iter()
+                        .map(|r| find(r, scheme).filter(|_| labelled).map(dominant_part))
+                        .collect(),
+                    errors: runs
+                        .iter()
+                        .map(|r| of(r).map(|(v, se)| [(v - 2.0 * se).max(0.0), v + 2.0 * se]))
+                        .collect(),
+                }
+            })
+            .collect(),
+    };
+    let pm = super::length_pm;
+    let parts: [(String, Part, bool); 4] = [
+        (
+            format!(
+                "discrepancy D: {} px",
+                pm(cmp.discrepancy_px, cmp.discrepancy_se_px)
+            ),
+            |r| (r.discrepancy_px, r.se.discrepancy_se_px),
+            true,
         ),
-        y_label: "discrepancy [px]".into(),
-        groups: runs,
-        series,
-    }
-    .to_svg(760, 460)
+        (
+            format!(
+                "rigid (stage landing, bias): {}",
+                pm(cmp.parts.rigid_px, cmp.parts_se.rigid_px)
+            ),
+            |r| (r.rigid_px, r.se.rigid_se_px),
+            false,
+        ),
+        (
+            format!(
+                "field (an effect missing): {}",
+                pm(cmp.parts.field_px, cmp.parts_se.field_px)
+            ),
+            |r| (r.field_px, r.se.field_se_px),
+            false,
+        ),
+        (
+            format!(
+                "std (random error): {}",
+                pm(cmp.parts.std_px, cmp.parts_se.std_px)
+            ),
+            |r| (r.std_px, r.se.std_se_px),
+            false,
+        ),
+    ];
+    let panels: Vec<BarChart> = parts
+        .into_iter()
+        .map(|(title, part, labelled)| panel(title, part, labelled))
+        .collect();
+    super::small_multiples(
+        "Discrepancy per run and scheme, and its three parts (bars ±2 SE; one axis)",
+        &panels,
+        2,
+        460,
+        340,
+    )
 }
 
 /// The largest of a run's three parts, named.

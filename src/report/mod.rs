@@ -17,7 +17,7 @@ mod svg;
 mod table;
 mod xy_plot;
 
-pub use bar_chart::{BarChart, Series};
+pub use bar_chart::{small_multiples, BarChart, Series};
 pub use camera_card::camera_card_text;
 pub use comparison_figures::comparison_svgs;
 pub use dic_summary::{dic_settings_json, dic_summary_json};
@@ -28,7 +28,10 @@ pub use paper_figures::paper_figures_text;
 pub use png::png_quicklook;
 pub use study_figures::{figure_svgs, figures_text, rows_json, study_csv, study_json};
 pub use study_rows::{Increase, IncreaseInterval, StudyRow};
-pub use table::{csv, plus_minus, text_table};
+pub use table::{
+    csv, length_pm, parameters_text, plus_minus, rounded_to_error, significant, text_table,
+    value_pm,
+};
 pub use xy_plot::{Mark, XyPlot, XySeries};
 
 /// Distinct values in first-seen order (a plot's runs, schemes, versions).

@@ -87,6 +87,7 @@ impl Service {
             target_field_mm: hardware.targets.as_ref().map(|t| t.field_mm()),
             travel_x_mm: hardware.stage.as_ref().map(|s| s.info().travel_x_mm),
             travel_y_mm: hardware.stage.as_ref().map(|s| s.info().travel_y_mm),
+            stage_resolution_mm: hardware.stage.as_ref().map(|s| s.info().resolution_mm),
             exposure_us: hardware
                 .camera
                 .info()

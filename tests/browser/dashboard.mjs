@@ -362,6 +362,10 @@ async function main() {
     log(`accuracy against the commanded move: ${accuracyRows} rows; ${sCurve} error bars on its plot`);
     if (accuracyRows < 1) fail("the comparison shows no accuracy against the commanded move");
     if (sCurve < 1) fail("the plot of bias and std against the commanded move has no error bar");
+    // Every length carries its error, and a part below its noise is a bound, never a bare zero.
+    const runCells = await page.locator("#comparison-runs tbody td.num").allInnerTexts();
+    const bare = runCells.filter((t) => !/±|^< |^—$/.test(t));
+    expect(runCells.length > 0 && bare.length === 0, `every discrepancy cell is "x ± se" or "< bound" (${bare.slice(0, 4).join(" | ")})`);
     await shot(page, "3-dataset-compared");
 
     await page.locator("#diagnose-btn").click();

@@ -17,6 +17,23 @@ pub struct StageInfo {
     /// Travel limits per axis, mm.
     pub travel_x_mm: (f64, f64),
     pub travel_y_mm: (f64, f64),
+    /// The smallest step a move is commanded in, mm: one device unit (a microstep, an encoder
+    /// count, the last decimal the controller is sent). Every move the stage makes is a whole
+    /// number of them, so a move is stated to this resolution and no finer; it says nothing of
+    /// the stage's accuracy or repeatability.
+    #[serde(default)]
+    pub resolution_mm: f64,
+}
+
+impl StageInfo {
+    /// `mm` on the stage's grid of commanded positions (unchanged without a resolution).
+    pub fn on_grid(&self, mm: f64) -> f64 {
+        if self.resolution_mm > 0.0 && mm.is_finite() {
+            (mm / self.resolution_mm).round() * self.resolution_mm
+        } else {
+            mm
+        }
+    }
 }
 
 /// A motorised translation stage. Blocking; one thread owns it. Moves return once commanded;

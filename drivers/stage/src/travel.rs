@@ -30,12 +30,14 @@ pub(crate) fn stage_info(
     model: String,
     x_travel_mm: (f64, f64),
     y_travel_mm: Option<(f64, f64)>,
+    resolution_mm: f64,
 ) -> StageInfo {
     StageInfo {
         model,
         axes: if y_travel_mm.is_some() { 2 } else { 1 },
         travel_x_mm: x_travel_mm,
         travel_y_mm: y_travel_mm.unwrap_or((0.0, 0.0)),
+        resolution_mm,
     }
 }
 
@@ -90,7 +92,7 @@ mod tests {
 
     #[test]
     fn one_axis_stage_accepts_only_y_zero() {
-        let info = stage_info("t".into(), (0.0, 25.0), None);
+        let info = stage_info("t".into(), (0.0, 25.0), None, 1e-6);
         let ok = StagePosition {
             x_mm: 25.0,
             y_mm: 0.0,

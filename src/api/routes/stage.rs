@@ -13,7 +13,7 @@ use serde_json::Value;
 use std::time::Duration;
 
 #[utoipa::path(get, path = "/stage", tag = "bench",
-    responses((status = 200, description = "Stage info, position, homed", body = Object),
+    responses((status = 200, description = "Stage info (model, axes, travel per axis, resolution_mm: the step a move is commanded in — a requested move is rounded to it), position, homed", body = Object),
               (status = 503, description = "No stage configured", body = Problem)))]
 pub async fn get_stage(State(svc): State<Service>) -> ApiResult<Json<Value>> {
     let bench = svc.bench.clone();

@@ -1,7 +1,7 @@
 // One calibration: live progress over SSE, then its camera card as a person reads it — every
 // number with its standard error and whether it is significant, the stage's map, the imaging
 // chain, what the card leaves unexplained, and how to use it (the text form is results/card.txt).
-import { api, el, $, clear, num, when, badge, showError, setupToken, runPage, progressBar, pageId, TERMINAL, API, eventLog, downloadLink, table } from "./common.js";
+import { api, el, $, clear, num, when, badge, showError, setupToken, runPage, progressBar, pageId, TERMINAL, API, eventLog, downloadLink, table, lengthPm, valuePm } from "./common.js";
 
 setupToken();
 const id = pageId();
@@ -47,7 +47,7 @@ function mark(v, se, z) {
 function geometryRows(card) {
   return card.geometry.flatMap((g) => Object.entries(g.params).map(([name, v]) => {
     const se = g.stderr[name];
-    return [g.effect, name, num(v, 5), num(se, 2), se === undefined ? "—" : mark(v, se, card.z_significant)];
+    return [g.effect, name, valuePm(v, se), se === undefined ? "—" : mark(v, se, card.z_significant)];
   }));
 }
 
@@ -59,12 +59,12 @@ function stageRows(s) {
     ["angle to the rows [rad]", "angle", s.angle_rad, s.angle_se_rad, 0],
     ["skew of the axes [rad]", "skew", s.skew_rad, s.skew_se_rad, 0],
   ].map(([name, test, v, se, against]) =>
-    [name, num(v, 7), num(se, 2), num(against, 6), s.significant.includes(test) ? "yes" : "no"]);
+    [name, valuePm(v, se), num(against, 6), s.significant.includes(test) ? "yes" : "no"]);
 }
 
 function paramsText(params, stderr) {
   return Object.entries(params)
-    .map(([k, v]) => (stderr[k] === undefined ? `${k} = ${num(v)}` : `${k} = ${num(v)} ± ${num(stderr[k], 2)}`))
+    .map(([k, v]) => `${k} = ${valuePm(v, stderr[k])}`)
     .join(", ");
 }
 
@@ -81,13 +81,13 @@ function showCard(doc) {
   const gap = Math.hypot(card.baseline_se_px, card.card_se_px);
   const fall = card.card_px > 0 ? ` (${num(card.baseline_px / card.card_px, 3)} times smaller)` : "";
   $("#card-discrepancy").textContent =
-    `Discrepancy on the calibration's own runs: ${card.baseline_model} ${num(card.baseline_px)} ± ${num(card.baseline_se_px, 2)} px → ` +
-    `the card ${num(card.card_px)} ± ${num(card.card_se_px, 2)} px` +
+    `Discrepancy on the calibration's own runs: ${card.baseline_model} ${lengthPm(card.baseline_px, card.baseline_se_px)} px → ` +
+    `the card ${lengthPm(card.card_px, card.card_se_px)} px` +
     (card.baseline_px - card.card_px > 2 * gap ? fall : ": the difference is within its standard errors, not a finding");
   $("#card-significance").textContent =
     `Significant: beyond ${num(z, 3)} standard errors, a ${num(100 * card.false_alarm_rate, 2)} % family-wise false-alarm rate over every number of the card.`;
   clear($("#card-geometry"), card.geometry.length
-    ? table(["effect", "parameter", "value", "SE", "significant"], geometryRows(card))
+    ? table(["effect", "parameter", "value ± SE", "significant"], geometryRows(card))
     : el("p", { class: "muted small" }, "no geometric term fitted"));
   clear($("#card-geometry-notes"), card.geometry.flatMap((g) => [
     ...Object.entries(g.derived || {}).map(([k, v]) => el("li", {}, `${g.effect}: ${k} = ${num(v)}`)),
@@ -95,7 +95,7 @@ function showCard(doc) {
   ]));
   const s = card.stage;
   clear($("#card-stage"), s
-    ? table(["", "value", "SE", "against", "significant"], stageRows(s))
+    ? table(["", "value ± SE", "against", "significant"], stageRows(s))
     : el("p", { class: "muted small" }, "not mapped: moves along both axes, at least three runs, are needed"));
   $("#card-stage-note").textContent = s
     ? `${s.runs} runs scatter ${num(s.residual_px, 3)} px about the map. The stage is the length standard: its travel error and the camera's scale are one number.`

@@ -1,6 +1,8 @@
 // Charts drawn in the page (the server draws the figures; these are the live ones): a histogram
 // of the snapshot and the history of a dataset's discrepancy. Axis labels carry units.
 
+import { lengthPm } from "./common.js";
+
 const NS = "http://www.w3.org/2000/svg";
 
 function s(tag, attrs = {}, text) {
@@ -133,7 +135,8 @@ export function historySvg(entries, title) {
       "data-discrepancy": e.discrepancy_px, "data-model": e.model, "data-version": e.version ?? "",
       "data-manifest": e.manifest_version || "",
     });
-    c.append(s("title", {}, `${label(k)}, ${e.time || ""}: ${Number(e.discrepancy_px).toPrecision(4)} px` +
+    const withError = e.discrepancy_se_px > 0 ? lengthPm(e.discrepancy_px, e.discrepancy_se_px) : Number(e.discrepancy_px).toPrecision(4);
+    c.append(s("title", {}, `${label(k)}, ${e.time || ""}: ${withError} px` +
       `${e.manifest_runs ? `, ${e.manifest_runs} runs` : ""}${(e.effects || []).length ? " — effects: " + e.effects.join(", ") : ""}`));
     svg.append(c);
     svg.append(s("text", { x: x + 8, y: y - 6, "font-size": 11 }, Number(e.discrepancy_px).toPrecision(3)));

@@ -120,7 +120,56 @@ export function plusMinus(value, se) {
   if (!Number.isFinite(v)) return "—";
   if (!(Number.isFinite(e) && e > 0)) return `${v >= 0 ? "+" : ""}${v.toFixed(5)} ± ${Number.isFinite(e) ? e.toFixed(5) : "—"}`;
   const decimals = Math.min(12, Math.max(0, 1 - Math.floor(Math.log10(e))));
-  return `${v >= 0 ? "+" : ""}${v.toFixed(decimals)} ± ${e.toFixed(decimals)}`;
+  const text = v.toFixed(decimals);
+  // A value that rounds to zero reads "+0.000", not "-0.000".
+  const signed = Number(text) === 0 ? `+${text.replace("-", "")}` : `${v >= 0 ? "+" : ""}${text}`;
+  return `${signed} ± ${e.toFixed(decimals)}`;
+}
+
+/** `v` to `d` decimals, a value that rounds to zero without a minus sign. */
+const fixed = (v, d) => (Number(v.toFixed(d)) === 0 ? v.toFixed(d).replace("-", "") : v.toFixed(d));
+
+/** Decimal places that show an error `e` to two significant digits (report::table on the server). */
+const decimalsFor = (e) => Math.min(12, Math.max(0, 1 - Math.floor(Math.log10(e))));
+
+/**
+ * "0.00202 ± 0.00004": a length debiased for noise and its standard error; "< 0.00038" where the
+ * debiasing left zero (below its noise: twice its standard error), never "0" (report::length_pm).
+ */
+export function lengthPm(value, se) {
+  const [v, e] = [Number(value), Number(se)];
+  if (value === null || value === undefined || !Number.isFinite(v)) return "—";
+  if (!(Number.isFinite(e) && e > 0)) return v.toFixed(5);
+  const d = decimalsFor(e);
+  return v <= 0 ? `< ${(2 * e).toFixed(d)}` : `${v.toFixed(d)} ± ${e.toFixed(d)}`;
+}
+
+/** A fitted parameter ± its error to the digits the error supports: "(1.042 ± 0.026)e-4" (report::value_pm). */
+export function valuePm(value, se) {
+  const [v, e] = [Number(value), Number(se)];
+  if (value === null || value === undefined || !Number.isFinite(v)) return "—";
+  if (se === null || se === undefined || !(Number.isFinite(e) && e > 0)) return num(v, 5);
+  const exponent = Math.floor(Math.log10(Math.max(Math.abs(v), e)));
+  if (exponent >= -3 && exponent < 4) {
+    const d = decimalsFor(e);
+    return `${fixed(v, d)} ± ${e.toFixed(d)}`;
+  }
+  const unit = 10 ** exponent;
+  const d = decimalsFor(e / unit);
+  return `(${fixed(v / unit, d)} ± ${(e / unit).toFixed(d)})e${exponent}`;
+}
+
+/**
+ * A stage position or move in mm to the stage's step `resolutionMm` (GET /stage: the step a move
+ * is commanded in), or without one to 9 decimals with the binary tail dropped: never
+ * 0.7692307692307693.
+ */
+export function mm(v, resolutionMm) {
+  const x = Number(v);
+  if (v === null || v === undefined || !Number.isFinite(x)) return "—";
+  const decimals = resolutionMm > 0 ? Math.min(9, Math.max(0, Math.ceil(-Math.log10(resolutionMm) - 1e-9))) : 9;
+  const text = x.toFixed(decimals);
+  return resolutionMm > 0 ? text : String(Number(text));
 }
 
 /** µm for `px` full-resolution pixels at `scalePxPerMm` (µm = px / (px/mm) · 1000). */

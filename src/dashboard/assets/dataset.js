@@ -1,6 +1,6 @@
 // One dataset: compare it with a model, diagnose the missing effect, add the winner as a new
 // model version, and watch the discrepancy fall in the history chart.
-import { api, apiText, el, $, clear, num, when, badge, showError, setupToken, follow, progressBar, inlineSvg, pageId, pxUm, plusMinus, API, ApiError } from "./common.js";
+import { api, apiText, el, $, clear, num, when, badge, showError, setupToken, follow, progressBar, inlineSvg, pageId, pxUm, plusMinus, lengthPm, valuePm, um, mm, API, ApiError } from "./common.js";
 import { historySvg } from "./charts.js";
 
 setupToken();
@@ -41,7 +41,7 @@ async function loadDataset() {
     const runs = details ? details.runs.map((r) => el("li", { "data-run": r.id },
       el("span", { class: "mono" }, r.id),
       r.pattern ? ` pattern ${r.pattern}: ` : ": ",
-      `move (${num(r.dx_mm)}, ${num(r.dy_mm)}) mm = (${num(r.dx_px)}, ${num(r.dy_px)}) px`,
+      `move (${mm(r.dx_mm)}, ${mm(r.dy_mm)}) mm = (${num(r.dx_px)}, ${num(r.dy_px)}) px`,
       r.static_repeats ? `, ${r.static_repeats} static repeat${r.static_repeats > 1 ? "s" : ""}` : "")) : [];
     clear($("#dataset-info"), [
       ["name", d.name],
@@ -167,25 +167,34 @@ async function showComparison(job) {
   showJobUrl($("#comparison-link"), job.id);
   $("#comparison").classList.remove("hidden");
   $("#comparison-model").textContent = `${cmp.model.name} (version ${cmp.model.version})`;
+  const part = (k) => lengthUm(cmp.parts && cmp.parts[k], cmp.parts_se && cmp.parts_se[k]);
   clear($("#comparison-summary"), [
-    ["discrepancy", el("strong", { id: "comparison-discrepancy", "data-discrepancy": cmp.discrepancy_px }, pxUm(cmp.discrepancy_px, scale))],
-    ["rigid (stage landing, bias)", pxUm(cmp.parts && cmp.parts.rigid_px, scale)],
-    ["systematic (field)", pxUm(cmp.parts && cmp.parts.field_px, scale)],
-    ["random (std)", pxUm(cmp.parts && cmp.parts.std_px, scale)],
+    ["discrepancy", el("strong", { id: "comparison-discrepancy", "data-discrepancy": cmp.discrepancy_px }, lengthUm(cmp.discrepancy_px, cmp.discrepancy_se_px))],
+    ["rigid (stage landing, bias)", part("rigid_px")],
+    ["systematic (field)", part("field_px")],
+    ["random (std)", part("std_px")],
     ["model effects", (cmp.model.effects && (Array.isArray(cmp.model.effects) ? cmp.model.effects : Object.keys(cmp.model.effects)).join(", ")) || "—"],
   ].flatMap(([k, v]) => [el("dt", {}, k), el("dd", {}, v)]));
   const runs = [...(cmp.runs || [])].sort((a, b) => b.discrepancy_px - a.discrepancy_px);
   clear($("#comparison-runs"), el("table", {},
-    el("thead", {}, el("tr", {}, ["run", "scheme", "discrepancy", "rigid", "field", "std", "mean Δu", "mean Δv"].map((h, i) => el("th", { class: i > 1 ? "num" : "" }, i > 1 ? `${h} [px (µm)]` : h)))),
+    el("thead", {}, el("tr", {}, ["run", "scheme", "discrepancy", "rigid", "field", "std", "mean Δu", "mean Δv"].map((h, i) => el("th", { class: i > 1 ? "num" : "" }, i > 1 ? `${h} [px]` : h)))),
     el("tbody", {}, runs.map((r) => el("tr", {},
       el("td", {}, r.id), el("td", {}, r.scheme),
-      el("td", { class: "num" }, pxUm(r.discrepancy_px, scale)), el("td", { class: "num" }, pxUm(r.rigid_px, scale)),
-      el("td", { class: "num" }, pxUm(r.field_px, scale)),
-      el("td", { class: "num" }, pxUm(r.std_px, scale)),
-      el("td", { class: "num" }, pxUm(r.mean_diff_px && r.mean_diff_px[0], scale)),
-      el("td", { class: "num" }, pxUm(r.mean_diff_px && r.mean_diff_px[1], scale)))))));
+      el("td", { class: "num" }, lengthPm(r.discrepancy_px, r.discrepancy_se_px)),
+      el("td", { class: "num" }, lengthPm(r.rigid_px, r.rigid_se_px)),
+      el("td", { class: "num" }, lengthPm(r.field_px, r.field_se_px)),
+      el("td", { class: "num" }, lengthPm(r.std_px, r.std_se_px)),
+      el("td", { class: "num" }, plusMinus(r.mean_diff_px && r.mean_diff_px[0], r.mean_diff_se_px && r.mean_diff_se_px[0])),
+      el("td", { class: "num" }, plusMinus(r.mean_diff_px && r.mean_diff_px[1], r.mean_diff_se_px && r.mean_diff_se_px[1])))))),
+    el("p", { class: "small muted" }, "± one standard error from the noise of both analyses; < x: below its noise (debiased to zero), x twice its standard error."));
   showAccuracy(cmp);
   await showPlots(job, $("#comparison-plots"));
+}
+
+/** "0.00202 ± 0.00004 px (0.155 µm)": a length, its error and its size on the target. */
+function lengthUm(px, se) {
+  const u = um(px, scale);
+  return `${lengthPm(px, se)} px${u === null || !(px > 0) ? "" : ` (${num(u, 3)} µm)`}`;
 }
 
 /** The measured side against the commanded move, in the order of the commanded moves. */
@@ -249,8 +258,7 @@ function paramText(c) {
   const keys = Object.keys(c.params || {});
   if (!keys.length) return "—";
   return keys.map((k) => {
-    const se = c.stderr && c.stderr[k];
-    return `${k} = ${num(c.params[k])}${se !== undefined && se !== null ? " ± " + num(se, 2) : ""}`;
+    return `${k} = ${valuePm(c.params[k], c.stderr && c.stderr[k])}`;
   }).join("; ");
 }
 
@@ -274,7 +282,7 @@ async function showDiagnosis(job, body) {
   showJobUrl($("#diagnosis-link"), job.id);
   lastDiagnosis = { job, d, body };
   $("#diagnosis").classList.remove("hidden");
-  $("#diagnosis-model").textContent = `${d.model.name} (version ${d.model.version}), discrepancy ${pxUm(d.discrepancy_px, scale)}`;
+  $("#diagnosis-model").textContent = `${d.model.name} (version ${d.model.version}), discrepancy ${lengthUm(d.discrepancy_px, d.discrepancy_se_px)}`;
   const v = $("#diagnosis-verdict");
   v.dataset.verdict = d.verdict;
   v.className = `verdict ${d.verdict !== "none" ? "found" : ""}`;
@@ -283,16 +291,16 @@ async function showDiagnosis(job, body) {
     : "Verdict: none — no candidate explains the discrepancy beyond its noise";
   const rounds = (d.rounds || []).length > 1 ? d.rounds : [];
   clear($("#diagnosis-rounds"), rounds.map((r) => el("li", { "data-verdict": r.verdict },
-    `${r.model}: ${num(r.discrepancy_px)} ± ${pxUm(r.discrepancy_se_px, scale)} → ${r.verdict}` +
+    `${r.model}: ${lengthUm(r.discrepancy_px, r.discrepancy_se_px)} → ${r.verdict}` +
     (r.after_px != null ? ` → ${pxUm(r.after_px, scale)}` : ""))));
   if ((d.verdicts || []).length > 1) {
     v.textContent = `Found, in order: ${d.verdicts.join(", ")} — discrepancy ${pxUm(d.discrepancy_px, scale)} → ${pxUm(d.final_discrepancy_px, scale)}`;
   }
   clear($("#candidates"), el("table", { id: "candidate-table" },
-    el("thead", {}, el("tr", {}, ["#", "effect", "fitted parameters ± standard error", "discrepancy with it [px (µm)]", "drop [px (µm)]", "ΔBIC", "significant"].map((h, i) => el("th", { class: i >= 3 && i <= 5 ? "num" : "" }, h)))),
+    el("thead", {}, el("tr", {}, ["#", "effect", "fitted parameters ± standard error", "discrepancy with it [px (µm)]", "drop [px] ± SE", "ΔBIC", "significant"].map((h, i) => el("th", { class: i >= 3 && i <= 5 ? "num" : "" }, h)))),
     el("tbody", {}, d.candidates.map((c, i) => el("tr", { class: c.effect === d.verdict ? "winner" : "", "data-effect": c.effect },
       el("td", {}, String(i + 1)), el("td", {}, c.effect), el("td", { class: "small" }, paramText(c)),
-      el("td", { class: "num" }, pxUm(c.discrepancy_px, scale)), el("td", { class: "num" }, pxUm(c.drop_px, scale)),
+      el("td", { class: "num" }, pxUm(c.discrepancy_px, scale)), el("td", { class: "num" }, plusMinus(c.drop_px, c.criteria && c.criteria.drop_se_px)),
       el("td", { class: "num" }, num(c.delta_bic, 5)), el("td", {}, c.significant ? "yes" : "no"))))));
   const notes = [];
   for (const c of d.confounded || []) {

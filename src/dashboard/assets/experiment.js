@@ -1,5 +1,5 @@
 // One experiment: live progress over SSE, then Figures 5 and 6, the study, maps and downloads.
-import { api, el, $, clear, num, when, badge, setupToken, runPage, progressBar, inlineSvg, pageId, um, TERMINAL, API, eventLog, downloadLink } from "./common.js";
+import { api, el, $, clear, num, when, badge, setupToken, runPage, progressBar, inlineSvg, pageId, um, mm, TERMINAL, API, eventLog, downloadLink } from "./common.js";
 
 setupToken();
 const id = pageId();
@@ -34,7 +34,7 @@ function showRecord(r) {
   clear($("#run-info"), [
     ["name", req.name || "—"],
     ["patterns", patterns.join(", ") || "—"],
-    ["moves", (req.moves || []).map((m) => `${m.id} (${m.dx_mm}, ${m.dy_mm}) mm` +
+    ["moves", (req.moves || []).map((m) => `${m.id} (${mm(m.dx_mm)}, ${mm(m.dy_mm)}) mm` +
       (scale ? ` = (${num(m.dx_mm * scale)}, ${num(m.dy_mm * scale)}) px` : "")).join("; ") || "—"],
     ["scale", scale ? `${num(scale)} px/mm (1 px = ${num(1000 / scale, 3)} µm)` : "—"],
     ["schemes", schemes.join(", ") || "—"],

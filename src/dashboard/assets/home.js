@@ -1,5 +1,5 @@
 // Home: the bench (state, snapshot with histogram, exposure and gain), experiments, datasets.
-import { api, el, $, clear, num, when, showError, setupToken, loadRunList } from "./common.js";
+import { api, el, $, clear, num, mm, when, showError, setupToken, loadRunList } from "./common.js";
 import { histogramSvg } from "./charts.js";
 
 setupToken();
@@ -35,7 +35,8 @@ async function loadBench() {
     const st = b.stage;
     kv($("#stage-state"), st ? [
       ["stage", st.info.model],
-      ["position", st.position ? `x ${num(st.position.x_mm, 5)} mm, y ${num(st.position.y_mm, 5)} mm` : "unknown"],
+      ["position", st.position ? `x ${mm(st.position.x_mm, st.info.resolution_mm)} mm, y ${mm(st.position.y_mm, st.info.resolution_mm)} mm` : "unknown"],
+      ["step", st.info.resolution_mm > 0 ? `${num(1000 * st.info.resolution_mm)} µm (moves are commanded in whole steps)` : "—"],
       ["homed", st.homed === undefined ? "—" : (st.homed ? "yes" : "no")],
       ["travel x", `${st.info.travel_x_mm[0]} … ${st.info.travel_x_mm[1]} mm`],
       ["travel y", `${st.info.travel_y_mm[0]} … ${st.info.travel_y_mm[1]} mm`],

@@ -72,7 +72,12 @@ impl AptStage {
         let model = format!("Thorlabs APT controller on {}", link.name());
         let mut stage = Self {
             link,
-            info: stage_info(model, config.x_travel_mm, y_travel),
+            info: stage_info(
+                model,
+                config.x_travel_mm,
+                y_travel,
+                1.0 / config.counts_per_mm,
+            ),
             timeout_ms: config.timeout_ms,
             counts_per_mm: config.counts_per_mm,
             channel: config.channel,

@@ -53,7 +53,12 @@ impl Smc100Stage {
         }
         let mut stage = Self {
             link: Link::new(port),
-            info: stage_info(String::new(), config.x_travel_mm, None),
+            info: stage_info(
+                String::new(),
+                config.x_travel_mm,
+                None,
+                protocol::RESOLUTION_MM,
+            ),
             timeout_ms: config.timeout_ms,
             axes: axes.clone(),
         };
@@ -72,6 +77,7 @@ impl Smc100Stage {
             format!("Newport SMC100/CONEX-CC {id} on {}", stage.link.name()),
             travel[0],
             travel.get(1).copied(),
+            protocol::RESOLUTION_MM,
         );
         Ok(stage)
     }

@@ -52,6 +52,9 @@ pub fn command(address: u8, mnemonic: &str) -> String {
     format!("{address}{mnemonic}\r\n")
 }
 
+/// The last decimal [`command_mm`] writes, mm: the finest step this driver commands.
+pub const RESOLUTION_MM: f64 = 1e-6;
+
 /// `1PA5.250000\r\n`: a command with a value in mm, to 1 nm (the controller's own resolution is
 /// coarser; fixed notation because the controller does not read exponents).
 pub fn command_mm(address: u8, mnemonic: &str, value_mm: f64) -> String {

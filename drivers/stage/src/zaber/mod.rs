@@ -66,7 +66,12 @@ impl ZaberStage {
         }));
         let mut stage = Self {
             link: Link::new(port),
-            info: stage_info(String::new(), config.x_travel_mm, None),
+            info: stage_info(
+                String::new(),
+                config.x_travel_mm,
+                None,
+                1.0 / config.microsteps_per_mm,
+            ),
             timeout_ms: config.timeout_ms,
             microsteps_per_mm: config.microsteps_per_mm,
             axes: axes.clone(),
@@ -95,6 +100,7 @@ impl ZaberStage {
             ),
             travel[0],
             travel.get(1).copied(),
+            1.0 / config.microsteps_per_mm,
         );
         Ok(stage)
     }
