@@ -249,19 +249,13 @@ pub enum CameraConfig {
         #[serde(default = "default_mock_decimation")]
         hardware_decimation_max: u32,
     },
-    /// A GenICam camera through Aravis (build with `--features aravis`).
-    Aravis {
-        /// Device id or IP address.
-        device: String,
-        #[serde(default = "default_buffers")]
-        buffers: usize,
-    },
-    /// A V4L2 camera (build with `--features v4l2`).
-    V4l2 {
-        device: PathBuf,
-        #[serde(default = "default_buffers")]
-        buffers: usize,
-    },
+    /// A GenICam camera through Aravis (opened with `--features aravis`): the driver's own
+    /// config (`device`, `buffers`, `timeout_ms`, `packet_size`), so a field the driver gains
+    /// reaches the daemon by construction.
+    Aravis(ffdic_aravis::AravisConfig),
+    /// A V4L2 camera (opened with `--features v4l2`): the driver's own config (`device`,
+    /// `buffers`, `timeout_ms`, `preferred_fourcc`, `discard_frames`, `gain`).
+    V4l2(ffdic_v4l2::V4l2Config),
     /// Frames a command renders or replays, one run per frame with the bench state in its
     /// environment (`ffdic_exec`: a lab's simulator, a recording, the independent generator).
     Exec(ffdic_exec::ExecCameraConfig),
@@ -321,10 +315,6 @@ impl MockReduction {
 fn default_bench_model() -> String {
     "paper-bench".into()
 }
-fn default_buffers() -> usize {
-    8
-}
-
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum StageConfig {
@@ -465,7 +455,7 @@ impl DaemonConfig {
                 binning: *hardware_binning,
                 decimation_max: *hardware_decimation_max,
             }),
-            CameraConfig::Aravis { .. } | CameraConfig::V4l2 { .. } | CameraConfig::Exec(_) => None,
+            CameraConfig::Aravis(_) | CameraConfig::V4l2(_) | CameraConfig::Exec(_) => None,
         }
     }
 
@@ -485,7 +475,7 @@ impl DaemonConfig {
                 principal_dx_px: 0.0,
                 principal_dy_px: 0.0,
             }),
-            CameraConfig::Aravis { .. } | CameraConfig::V4l2 { .. } | CameraConfig::Exec(_) => None,
+            CameraConfig::Aravis(_) | CameraConfig::V4l2(_) | CameraConfig::Exec(_) => None,
         }
     }
 }
@@ -529,7 +519,7 @@ mod tests {
     fn lab_examples_parse_into_their_drivers() {
         let aravis = include_str!("../../config/lab-aravis.toml");
         let c = DaemonConfig::from_toml(aravis, Path::new("lab-aravis.toml")).unwrap();
-        assert!(matches!(c.camera, CameraConfig::Aravis { .. }));
+        assert!(matches!(c.camera, CameraConfig::Aravis(_)));
         match &c.stage {
             StageConfig::Smc100(s) => {
                 assert_eq!(s.port, "/dev/ttyUSB0");
@@ -539,11 +529,51 @@ mod tests {
         }
         let v4l2 = include_str!("../../config/lab-v4l2.toml");
         let c = DaemonConfig::from_toml(v4l2, Path::new("lab-v4l2.toml")).unwrap();
-        assert!(matches!(c.camera, CameraConfig::V4l2 { .. }));
+        assert!(matches!(c.camera, CameraConfig::V4l2(_)));
         match &c.stage {
             StageConfig::Zaber(z) => assert_eq!(z.microsteps_per_mm, 20_997.375),
             other => panic!("expected zaber, got {other:?}"),
         }
+    }
+
+    /// The V4L2 table is the driver's own config: a gain calibration written in `ffdic.toml`
+    /// reaches the driver, which maps dB onto a device's control range with it (a synthetic
+    /// range: this kernel has no V4L2 device), and a field the driver does not know is an error.
+    #[test]
+    fn a_v4l2_gain_in_the_config_reaches_the_driver() {
+        let text = include_str!("../../config/lab-v4l2.toml").replace(
+            "buffers = 4\n",
+            "buffers = 4\ngain = { db_per_unit = 0.1, unit_at_0_db = 16 }\ndiscard_frames = 2\n",
+        );
+        let c = DaemonConfig::from_toml(&text, Path::new("lab-v4l2.toml")).unwrap();
+        let CameraConfig::V4l2(v4l2) = &c.camera else {
+            panic!("a v4l2 camera: {:?}", c.camera);
+        };
+        assert_eq!(v4l2.discard_frames, 2);
+        let range = ffdic_v4l2::controls::ControlRange {
+            min: 0,
+            max: 480,
+            step: 1,
+            default: 16,
+        };
+        let (units, db) =
+            ffdic_v4l2::controls::gain_to_device(6.0, &range, v4l2.gain.as_ref()).unwrap();
+        assert_eq!((units, db), (76, 6.0));
+        // Without the calibration the driver accepts only 0 dB.
+        let plain = DaemonConfig::from_toml(
+            include_str!("../../config/lab-v4l2.toml"),
+            Path::new("lab-v4l2.toml"),
+        )
+        .unwrap();
+        let CameraConfig::V4l2(plain) = &plain.camera else {
+            panic!("a v4l2 camera");
+        };
+        assert_eq!(plain.buffers, 4);
+        assert!(ffdic_v4l2::controls::gain_to_device(6.0, &range, plain.gain.as_ref()).is_err());
+        let typo = include_str!("../../config/lab-v4l2.toml")
+            .replace("buffers = 4\n", "buffers = 4\ndiscard_frame = 2\n");
+        let e = DaemonConfig::from_toml(&typo, Path::new("lab-v4l2.toml")).unwrap_err();
+        assert!(e.to_string().contains("discard_frame"), "{e}");
     }
 
     #[test]

@@ -132,8 +132,8 @@ pub fn open_bench(config: &DaemonConfig) -> Result<BenchHardware, HardwareError>
             let (c, t) = mock_camera(geometry, truth, reduction, shared)?;
             (c, Some(t))
         }
-        CameraConfig::Aravis { device, buffers } => (open_aravis(device, *buffers)?, None),
-        CameraConfig::V4l2 { device, buffers } => (open_v4l2(device, *buffers)?, None),
+        CameraConfig::Aravis(aravis) => (open_aravis(aravis)?, None),
+        CameraConfig::V4l2(v4l2) => (open_v4l2(v4l2)?, None),
         CameraConfig::Exec(exec) => {
             let (c, t) = open_exec(exec, config.bench.scale_px_per_mm, position)?;
             (c, Some(t))
@@ -292,35 +292,25 @@ fn open_serial_stage(config: ffdic_stage::StageConfig) -> Result<Box<dyn Stage>,
 }
 
 #[cfg(feature = "aravis")]
-fn open_aravis(device: &str, buffers: usize) -> Result<Box<dyn Camera>, HardwareError> {
-    let config = ffdic_aravis::AravisConfig {
-        device: device.to_string(),
-        buffers,
-        ..Default::default()
-    };
+fn open_aravis(config: &ffdic_aravis::AravisConfig) -> Result<Box<dyn Camera>, HardwareError> {
     Ok(Box::new(
-        ffdic_aravis::AravisCamera::open_with(&config).map_err(HardwareError::Camera)?,
+        ffdic_aravis::AravisCamera::open_with(config).map_err(HardwareError::Camera)?,
     ))
 }
 
 #[cfg(not(feature = "aravis"))]
-fn open_aravis(_: &str, _: usize) -> Result<Box<dyn Camera>, HardwareError> {
+fn open_aravis(_: &ffdic_aravis::AravisConfig) -> Result<Box<dyn Camera>, HardwareError> {
     Err(HardwareError::FeatureMissing("aravis"))
 }
 
 #[cfg(feature = "v4l2")]
-fn open_v4l2(device: &std::path::Path, buffers: usize) -> Result<Box<dyn Camera>, HardwareError> {
-    let config = ffdic_v4l2::V4l2Config {
-        device: device.to_owned(),
-        buffers,
-        ..Default::default()
-    };
+fn open_v4l2(config: &ffdic_v4l2::V4l2Config) -> Result<Box<dyn Camera>, HardwareError> {
     Ok(Box::new(
-        ffdic_v4l2::V4l2Camera::open(&config).map_err(HardwareError::Camera)?,
+        ffdic_v4l2::V4l2Camera::open(config).map_err(HardwareError::Camera)?,
     ))
 }
 
 #[cfg(not(feature = "v4l2"))]
-fn open_v4l2(_: &std::path::Path, _: usize) -> Result<Box<dyn Camera>, HardwareError> {
+fn open_v4l2(_: &ffdic_v4l2::V4l2Config) -> Result<Box<dyn Camera>, HardwareError> {
     Err(HardwareError::FeatureMissing("v4l2"))
 }

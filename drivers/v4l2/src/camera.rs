@@ -11,9 +11,10 @@
 
 use crate::config::V4l2Config;
 use crate::controls::{
-    self, exposure_from_device, exposure_to_device, gain_to_device, Controls,
-    CID_EXPOSURE_ABSOLUTE, CID_EXPOSURE_AUTO, EXPOSURE_MANUAL,
+    exposure_from_device, exposure_to_device, gain_to_device, CID_EXPOSURE_ABSOLUTE,
+    CID_EXPOSURE_AUTO, EXPOSURE_MANUAL,
 };
+use crate::device_controls::{self as controls, Controls};
 use crate::error::map_io;
 use crate::format::{fourcc_name, V4l2Format};
 use crate::intake::{ActiveFormat, BadBuffer, BufferMeta, Intake, Taken};

@@ -12,16 +12,25 @@
 //!
 //! Caveat: `v4l` 0.14 panics in `Drop` when VIDIOC_STREAMOFF or the buffer release fails with an
 //! errno other than ENODEV; a healthy or unplugged device never does that.
+//!
+//! Without the default feature `camera` the crate is its config and the pure parts (formats,
+//! unpacking, control mapping, buffer intake): what the daemon's config embeds, built without
+//! the `v4l` crate.
 
+#[cfg(feature = "camera")]
 mod camera;
 mod config;
 pub mod controls;
+#[cfg(feature = "camera")]
+mod device_controls;
+#[cfg(feature = "camera")]
 mod error;
 pub mod format;
 pub mod intake;
 pub mod sequence;
 pub mod unpack;
 
+#[cfg(feature = "camera")]
 pub use camera::V4l2Camera;
 pub use config::V4l2Config;
 pub use controls::GainCalibration;
