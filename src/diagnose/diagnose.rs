@@ -277,7 +277,7 @@ fn fit_candidate(
         FillFactor => Some(fit_fill_factor(meas, before, model, stop)),
         SensorNoise => fit_sensor_noise(meas, before, model),
         Vignetting => fit_vignetting(meas, before, model),
-        IlluminationChange => fit_illumination_change(meas, before, model),
+        IlluminationChange => fit_illumination_change(before, model),
         MotionBlur => fit_motion_blur(meas, before, model, stop),
         StageError => super::stage::fit_stage_error(before, model),
         // Always part of the nominal experiment (fitted) or known (the frames' ADC), or not

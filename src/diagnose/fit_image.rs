@@ -359,7 +359,6 @@ pub fn fit_vignetting(
     let v = -slope / c;
     let se_v = se_slope / c.abs();
     let existing = model.vignetting.map_or(0.0, |x| x.v);
-    let _ = meas;
     Some(ImageFit {
         geometric: Default::default(),
         effect: EffectId::Vignetting.into(),
@@ -374,11 +373,7 @@ pub fn fit_vignetting(
     })
 }
 
-pub fn fit_illumination_change(
-    meas: &Measurement,
-    before: &Comparison,
-    model: &Effects,
-) -> Option<ImageFit> {
+pub fn fit_illumination_change(before: &Comparison, model: &Effects) -> Option<ImageFit> {
     let noise = before.model.nominal.noise_floor_dn.powi(2);
     let refs: Vec<&super::results::ImageComparison> =
         before.images.iter().filter(|i| i.run.is_none()).collect();
@@ -417,7 +412,6 @@ pub fn fit_illumination_change(
     se_g = se_g.max(cse * g);
     let mean_ref = refs.iter().map(|r| r.measured.mean_dn).sum::<f64>() / refs.len() as f64;
     se_o = se_o.max(se_g * mean_ref);
-    let _ = meas;
     Some(ImageFit {
         geometric: Default::default(),
         effect: EffectId::IlluminationChange.into(),

@@ -130,10 +130,6 @@ impl JobContext {
     pub fn store(&self) -> &RunStore {
         &self.store
     }
-
-    pub fn is_cancelled(&self) -> bool {
-        self.cancel.is_cancelled()
-    }
 }
 
 impl RunSink for JobContext {

@@ -6,7 +6,6 @@ use crate::run_event::EventKind;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use std::fmt;
-use std::str::FromStr;
 
 /// Now, as RFC 3339 UTC with milliseconds (`2026-11-22T10:15:00.123Z`).
 pub fn now_rfc3339() -> String {
@@ -133,28 +132,8 @@ impl RunStatus {
     }
 }
 
-macro_rules! text_enum {
-    ($t:ty) => {
-        impl fmt::Display for $t {
-            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-                f.write_str(self.as_str())
-            }
-        }
-
-        impl FromStr for $t {
-            type Err = String;
-            fn from_str(s: &str) -> Result<Self, String> {
-                Self::ALL
-                    .into_iter()
-                    .find(|v| v.as_str() == s)
-                    .ok_or_else(|| format!("unknown {} '{s}'", stringify!($t)))
-            }
-        }
-    };
-}
-
-text_enum!(RunKind);
-text_enum!(RunStatus);
+crate::text_enum::text_enum!(RunKind, "RunKind");
+crate::text_enum::text_enum!(RunStatus, "RunStatus");
 
 /// One run: `runs/{id}/run.json`, rewritten whole on every change until the run has ended.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -168,12 +168,6 @@ impl AravisCamera {
         self.apply(&settings)
     }
 
-    /// `acquire` with the configured `timeout_ms` per frame.
-    pub fn grab(&mut self, count: usize) -> HwResult<Vec<Frame>> {
-        let timeout = self.config.timeout();
-        self.acquire(count, timeout)
-    }
-
     /// The Aravis camera, or Disconnected after a lost connection was dropped.
     fn cam(&self) -> HwResult<&aravis::Camera> {
         self.camera.as_ref().ok_or_else(|| {

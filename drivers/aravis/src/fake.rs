@@ -20,7 +20,6 @@ use aravis::glib::translate::{from_glib_full, ToGlibPtr};
 use aravis::{FakeCamera, GvFakeCamera};
 use std::ffi::c_void;
 use std::panic::{catch_unwind, AssertUnwindSafe};
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 
 /// What the simulator asks the fill for: one frame as the camera is set to read it out.
@@ -129,7 +128,6 @@ pub const FAKE_DECIMATION_MAX: u32 = 4;
 /// What the fill callback reads; owned by `FakeGvCamera`, borrowed by the simulator's thread.
 struct FillState {
     fill: FillFn,
-    served: AtomicU64,
     /// The simulator whose registers the fill reads (alive as long as `FakeGvCamera::fake`).
     camera: *mut aravis_sys::ArvFakeCamera,
     /// Whether the SFNC extension's registers exist.
@@ -211,12 +209,7 @@ impl FakeGvCamera {
                 unsafe { aravis_sys::arv_fake_camera_write_register(camera, register, value) };
             }
         }
-        let state = Box::into_raw(Box::new(FillState {
-            fill,
-            served: AtomicU64::new(0),
-            camera,
-            sfnc,
-        }));
+        let state = Box::into_raw(Box::new(FillState { fill, camera, sfnc }));
         // SAFETY: `fake` is a live ArvFakeCamera; `state` stays valid until `Drop` has put the
         // default pattern back (which takes the same mutex the fill runs under).
         unsafe {
@@ -241,12 +234,6 @@ impl FakeGvCamera {
 
     pub fn serial(&self) -> &str {
         &self.serial
-    }
-
-    /// Frames rendered so far.
-    pub fn frames_served(&self) -> u64 {
-        // SAFETY: `state` lives as long as `self`.
-        unsafe { (*self.state).served.load(Ordering::SeqCst) }
     }
 
     /// Stops the simulator: the camera vanishes from the network (no more GVCP answers or
@@ -343,5 +330,4 @@ unsafe extern "C" fn fill_trampoline(
         }
         _ => out.fill(0),
     }
-    state.served.fetch_add(1, Ordering::SeqCst);
 }

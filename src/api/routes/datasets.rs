@@ -372,7 +372,7 @@ pub async fn compare(
     headers: HeaderMap,
     ApiJson(request): ApiJson<CompareRequest>,
 ) -> ApiResult<Response> {
-    submit_model_job(svc, RunKind::Comparison, &id, &headers, request).await
+    submit_model_job(svc, ModelJob::Comparison, &id, &headers, request).await
 }
 
 #[utoipa::path(post, path = "/datasets/{id}/diagnoses", tag = "datasets", request_body = CompareRequest,
@@ -387,13 +387,20 @@ pub async fn diagnose(
     headers: HeaderMap,
     ApiJson(request): ApiJson<CompareRequest>,
 ) -> ApiResult<Response> {
-    submit_model_job(svc, RunKind::Diagnosis, &id, &headers, request).await
+    submit_model_job(svc, ModelJob::Diagnosis, &id, &headers, request).await
+}
+
+/// The two jobs that hold a model against a dataset.
+#[derive(Clone, Copy)]
+enum ModelJob {
+    Comparison,
+    Diagnosis,
 }
 
 /// Queues a comparison or a diagnosis of dataset `raw_id`: 202 + Location of the job.
 async fn submit_model_job(
     svc: Service,
-    kind: RunKind,
+    kind: ModelJob,
     raw_id: &str,
     headers: &HeaderMap,
     request: CompareRequest,
@@ -401,8 +408,8 @@ async fn submit_model_job(
     let id = dataset_id(raw_id)?;
     let key = idempotency_key(headers)?;
     let (record, created) = blocking(move || match kind {
-        RunKind::Diagnosis => svc.submit_diagnosis(&id, &request, key.as_deref()),
-        _ => svc.submit_comparison(&id, &request, key.as_deref()),
+        ModelJob::Diagnosis => svc.submit_diagnosis(&id, &request, key.as_deref()),
+        ModelJob::Comparison => svc.submit_comparison(&id, &request, key.as_deref()),
     })
     .await??;
     let location = format!("/api/v1/jobs/{}", record.id);
@@ -525,7 +532,7 @@ fn results_file(kind: RunKind) -> Option<&'static str> {
     match kind {
         RunKind::Comparison => Some("results/comparison.json"),
         RunKind::Diagnosis => Some("results/diagnosis.json"),
-        _ => None,
+        RunKind::Experiment | RunKind::Analysis | RunKind::Sweep | RunKind::Calibration => None,
     }
 }
 

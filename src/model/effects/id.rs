@@ -89,21 +89,7 @@ impl EffectId {
     }
 }
 
-impl fmt::Display for EffectId {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
-
-impl FromStr for EffectId {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        EffectId::ALL
-            .into_iter()
-            .find(|e| e.as_str() == s)
-            .ok_or_else(|| format!("unknown effect '{s}'"))
-    }
-}
+crate::text_enum::text_enum!(EffectId, "effect");
 
 /// What a diagnosis fits and may name: a catalogue effect, or a user effect of the model
 /// (`[effects.user.NAME]`) by its name. On the wire, the effect's name or `user.NAME`.
