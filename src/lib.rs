@@ -22,7 +22,7 @@ pub mod service;
 pub mod stats;
 pub mod store;
 pub mod sweep;
-mod text_enum;
+pub mod text_enum;
 
 /// The crate version, recorded in every result's settings.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");
