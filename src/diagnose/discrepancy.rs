@@ -159,17 +159,21 @@ pub struct RunDiscrepancy {
 /// which it cannot be told from zero).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct DiscrepancyErrors {
-    #[serde(default)]
+    #[serde(default, deserialize_with = "crate::dic::f64_or_nan")]
     pub discrepancy_se_px: f64,
-    #[serde(default)]
+    #[serde(default, deserialize_with = "crate::dic::f64_or_nan")]
     pub rigid_se_px: f64,
-    #[serde(default)]
+    #[serde(default, deserialize_with = "crate::dic::f64_or_nan")]
     pub field_se_px: f64,
-    #[serde(default)]
+    #[serde(default, deserialize_with = "crate::dic::f64_or_nan")]
     pub std_se_px: f64,
     /// Of the mean difference (u, v).
-    #[serde(default)]
+    #[serde(default = "nan_pair", deserialize_with = "crate::dic::interval_or_nan")]
     pub mean_diff_se_px: [f64; 2],
+}
+
+fn nan_pair() -> [f64; 2] {
+    [f64::NAN, f64::NAN]
 }
 
 /// A point valid in both analyses.

@@ -21,9 +21,12 @@ pub struct HistoryEntry {
     pub dataset: String,
     pub model: String,
     pub version: String,
+    /// NaN (written `null`) where no run could be measured.
+    #[serde(deserialize_with = "crate::dic::f64_or_nan")]
     pub discrepancy_px: f64,
-    /// Its standard error (0 in entries written before it was recorded).
-    #[serde(default)]
+    /// Its standard error (0 in entries written before it was recorded; NaN, written `null`,
+    /// where it could not be estimated).
+    #[serde(default, deserialize_with = "crate::dic::f64_or_nan")]
     pub discrepancy_se_px: f64,
     /// Effects of the model, in vocabulary order.
     #[serde(default)]
@@ -173,6 +176,20 @@ mod tests {
         assert_eq!(h.len(), 2);
         assert_eq!(h[1].model, "baseline+lens_distortion");
         assert!(h[0].time.ends_with('Z'));
+    }
+
+    /// A comparison whose error could not be estimated (NaN, which JSON writes as `null`) is
+    /// recorded and read back, not a history that no longer reads (the fuzzer's 500).
+    #[test]
+    fn an_entry_without_an_error_reads_back() {
+        let dir = tempfile::tempdir().unwrap();
+        let entry = HistoryEntry {
+            discrepancy_se_px: f64::NAN,
+            ..HistoryEntry::now("ds", "baseline", "abc", f64::NAN, vec![])
+        };
+        append_history(dir.path(), &entry).unwrap();
+        let h = read_history(dir.path()).unwrap();
+        assert!(h[0].discrepancy_px.is_nan() && h[0].discrepancy_se_px.is_nan());
     }
 
     #[test]
