@@ -10,7 +10,7 @@
 //! correlated as it is, once, under its hardware scheme ([`hardware_geometry`]); every other run
 //! under each scheme given.
 
-use crate::dataset::Run;
+use crate::dataset::{check_pair, PairCheck, Run};
 use crate::dic::{DicError, DicResult, DicSettings, PreparedReference, Watch};
 use crate::image::{read_image, Image, ImageError};
 use crate::reduce::{reduce, AxisScheme, ReduceError, Scheme};
@@ -32,14 +32,8 @@ pub struct RunPair<'a> {
 pub enum PairError {
     #[error(transparent)]
     Image(#[from] ImageError),
-    #[error("run {run}: reference is {ref_w}x{ref_h}, deformed {def_w}x{def_h}")]
-    SizeMismatch {
-        run: String,
-        ref_w: usize,
-        ref_h: usize,
-        def_w: usize,
-        def_h: usize,
-    },
+    #[error("run {run}: {source}")]
+    Frames { run: String, source: PairCheck },
     #[error("run {run}, scheme {scheme}: {source}")]
     Reduce {
         run: String,
@@ -115,17 +109,10 @@ pub fn correlate_pairs<V: PairVisitor + Sync>(
             None => prepare(dir, run, schemes, dic, &|| visitor.cancelled())?,
         };
         let (deformed, _) = read_image(&dir.join(&run.deformed)).map_err(PairError::from)?;
-        let size = |i: &Image| (i.width(), i.height());
-        if size(&frame.image) != size(&deformed) {
-            return Err(PairError::SizeMismatch {
-                run: run.id.clone(),
-                ref_w: frame.image.width(),
-                ref_h: frame.image.height(),
-                def_w: deformed.width(),
-                def_h: deformed.height(),
-            }
-            .into());
-        }
+        check_pair(&frame.image, &deformed).map_err(|source| PairError::Frames {
+            run: run.id.clone(),
+            source,
+        })?;
         let pair = RunPair {
             index,
             run,

@@ -338,110 +338,178 @@ fn effect_variants() -> Vec<String> {
         .collect()
 }
 
-/// The `_ =>` arms of `match`es whose arms name an `EffectId` variant, in code without comments
-/// and literals: (line, arm).
-fn wildcards_on_effects(code: &str, variants: &[String]) -> Vec<usize> {
-    // Byte offsets throughout: every character the scan looks at is ASCII.
+/// The enums the workspace defines (src/ and the driver, mock and FFT crates): closed
+/// vocabularies whose every variant a `match` should name.
+fn closed_enums() -> Vec<String> {
+    let mut files = Vec::new();
+    for dir in ["src", "drivers", "mocks", "fft"] {
+        rust_files(&root().join(dir), &mut files);
+    }
+    let mut names = BTreeSet::new();
+    for file in files {
+        let code = code_only(&std::fs::read_to_string(&file).unwrap());
+        for line in code.lines() {
+            let t = line.trim_start();
+            let t = t
+                .strip_prefix("pub(crate) ")
+                .or_else(|| t.strip_prefix("pub(super) "))
+                .or_else(|| t.strip_prefix("pub "))
+                .unwrap_or(t);
+            if let Some(rest) = t.strip_prefix("enum ") {
+                let name: String = rest
+                    .chars()
+                    .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                    .collect();
+                if !name.is_empty() {
+                    names.insert(name);
+                }
+            }
+        }
+    }
+    names.into_iter().collect()
+}
+
+/// Whether `text` names a variant of one of `enums` as `Enum::Variant`.
+fn names_a_variant_of(text: &str, enums: &[String]) -> bool {
+    enums.iter().any(|e| {
+        text.match_indices(&format!("{e}::")).any(|(k, _)| {
+            let before = text[..k].chars().last();
+            let after = text[k + e.len() + 2..].chars().next();
+            !matches!(before, Some(c) if c.is_alphanumeric() || c == '_')
+                && matches!(after, Some(c) if c.is_ascii_uppercase())
+        })
+    })
+}
+
+/// The patterns of a `match`'s arms whose body opens at `open` (the `{`), each with the byte
+/// offset where it starts: the text between one arm's end (a `,` or the `}` of a block body at
+/// the body's depth) and the next `=>`.
+fn arm_patterns(code: &str, open: usize) -> Vec<(usize, &str)> {
     let bytes = code.as_bytes();
+    let (mut depth, mut start, mut in_pattern) = (0i32, open + 1, true);
+    let mut arms = Vec::new();
+    let mut i = open;
+    while i < bytes.len() {
+        match bytes[i] {
+            b'{' | b'(' | b'[' => depth += 1,
+            b'}' | b')' | b']' => {
+                depth -= 1;
+                if depth == 0 {
+                    break;
+                }
+                if depth == 1 && bytes[i] == b'}' && !in_pattern {
+                    (start, in_pattern) = (i + 1, true);
+                }
+            }
+            b',' if depth == 1 => (start, in_pattern) = (i + 1, true),
+            b'=' if depth == 1 && in_pattern && bytes.get(i + 1) == Some(&b'>') => {
+                arms.push((start, &code[start..i]));
+                in_pattern = false;
+            }
+            _ => {}
+        }
+        i += 1;
+    }
+    arms
+}
+
+/// The catch-all arms of `match`es whose patterns name a variant of a closed enum
+/// (`Enum::Variant`, or an `EffectId` variant bare, as `use EffectId::*` writes it), in code
+/// without comments and literals: the line of each. A catch-all is `_`; on the effects also a
+/// lone binding (`other =>`), which swallows a new effect as `_` does. (Elsewhere a binding is
+/// how an error is forwarded whole — `other => Wrap(other)` — which a new variant should be.)
+fn wildcards_on_closed_enums(code: &str, enums: &[String], variants: &[String]) -> Vec<usize> {
+    let bytes = code.as_bytes();
+    let names_an_effect = |pattern: &str| {
+        pattern.contains("EffectId::")
+            || variants.iter().any(|v| {
+                pattern.match_indices(v.as_str()).any(|(k, _)| {
+                    let before = pattern[..k].chars().last();
+                    let after = pattern[k + v.len()..].chars().next();
+                    !matches!(before, Some(c) if c.is_alphanumeric() || c == ':' || c == '_')
+                        && !matches!(after, Some(c) if c.is_alphanumeric() || c == '_' || c == ':')
+                })
+            })
+    };
     let mut found = Vec::new();
-    let text = code;
     let mut search = 0;
-    while let Some(at) = text[search..].find("match ") {
+    while let Some(at) = code[search..].find("match ") {
         let at = search + at;
         search = at + 6;
         if at > 0 && (bytes[at - 1].is_ascii_alphanumeric() || bytes[at - 1] == b'_') {
             continue;
         }
-        let Some(open) = text[at..].find('{').map(|o| at + o) else {
+        let Some(open) = code[at..].find('{').map(|o| at + o) else {
             break;
         };
-        // The body at depth 1: its arms' patterns and the `_ =>` among them.
-        let (mut depth, mut i, mut top) = (0i32, open, Vec::<u8>::new());
-        let mut top_positions = Vec::new();
-        while i < bytes.len() {
-            match bytes[i] {
-                b'{' | b'(' | b'[' => depth += 1,
-                b'}' | b')' | b']' => depth -= 1,
-                _ => {}
-            }
-            if depth == 0 {
-                break;
-            }
-            if depth == 1 {
-                top.push(bytes[i]);
-                top_positions.push(i);
-            } else if depth == 2 && bytes[i] == b'(' {
-                // Tuple patterns `(EffectId::X, "name")` belong to the arm.
-                top.push(b'(');
-                top_positions.push(i);
-            }
-            i += 1;
-        }
-        let top = String::from_utf8_lossy(&top).into_owned();
-        let arms_text: String = text[open..i.min(bytes.len())].to_string();
-        let names_effect = arms_text.contains("EffectId::")
-            || variants.iter().any(|v| {
-                arms_text.match_indices(v.as_str()).any(|(k, _)| {
-                    let before = arms_text[..k].chars().last();
-                    let after = arms_text[k + v.len()..].chars().next();
-                    !matches!(before, Some(c) if c.is_alphanumeric() || c == ':' || c == '_')
-                        && !matches!(after, Some(c) if c.is_alphanumeric() || c == '_' || c == ':')
-                })
-            });
-        if !names_effect {
+        let arms = arm_patterns(code, open);
+        let on_effects = arms.iter().any(|(_, p)| names_an_effect(p));
+        if !on_effects && !arms.iter().any(|(_, p)| names_a_variant_of(p, enums)) {
             continue;
         }
-        // `_ =>`, and a lone lowercase binding (`other =>`), swallow a new effect alike.
-        for (k, _) in top.match_indices(" =>") {
-            let word: String = top[..k]
-                .chars()
-                .rev()
-                .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
-                .collect::<Vec<_>>()
-                .into_iter()
-                .rev()
-                .collect();
-            let before = top[..k - word.len()].trim_end().chars().last();
-            let catch_all = !word.is_empty()
-                && word.starts_with(|c: char| c.is_ascii_lowercase() || c == '_')
-                && matches!(before, Some(',' | '{' | '}') | None);
-            if catch_all {
-                let pos = top_positions[k - word.len()];
-                found.push(text[..pos].lines().count());
+        for (start, pattern) in &arms {
+            let p = pattern.trim();
+            let binding = !p.is_empty()
+                && p.starts_with(|c: char| c.is_ascii_lowercase())
+                && p.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
+            if p == "_" || on_effects && binding {
+                let offset = start + (pattern.len() - pattern.trim_start().len());
+                found.push(code[..offset + 1].lines().count());
             }
         }
     }
     found
 }
 
-/// Issue 32: an effect is one unit the compiler walks a contributor through — no `match` that
-/// names effects ends in a wildcard that would swallow a new one.
+/// Issues 32 and 35: an effect, a job kind, a driver is one unit the compiler walks a
+/// contributor through — no `match` that names the variants of a closed enum ends in a wildcard
+/// that would swallow a new one.
 #[test]
-fn no_wildcard_arm_on_an_effect_in_src() {
+fn no_wildcard_arm_on_a_closed_enum_in_src() {
     let variants = effect_variants();
     assert!(variants.len() >= 14, "{variants:?}");
+    let enums = closed_enums();
+    for e in [
+        "EffectId",
+        "RunKind",
+        "EventKind",
+        "CameraConfig",
+        "PoiStatus",
+    ] {
+        assert!(enums.iter().any(|n| n == e), "{e} in {enums:?}");
+    }
+    let count = |code: &str| wildcards_on_closed_enums(code, &enums, &variants);
     // The counter finds what it looks for.
     let sample = "fn f(e: EffectId) -> u8 {\n    match e {\n        EffectId::Scale => 1,\n        _ => 0,\n    }\n}\nfn g(p: P) -> u8 {\n    match p {\n        P::A => 1,\n        _ => 0,\n    }\n}\n";
-    assert_eq!(wildcards_on_effects(sample, &variants), vec![4]);
+    assert_eq!(count(sample), vec![4]);
     let binding = "fn f(e: EffectId) -> u8 {\n    match e {\n        EffectId::Scale => 1,\n        other => other as u8,\n    }\n}\n";
-    assert_eq!(wildcards_on_effects(binding, &variants), vec![4]);
+    assert_eq!(count(binding), vec![4]);
     let guarded = "fn f(e: EffectId, n: u8) -> u8 {\n    match e {\n        Rotation | Scale if n > 0 => 1,\n        EffectId::Scale => 2,\n    }\n}\n";
-    assert!(wildcards_on_effects(guarded, &variants).is_empty());
+    assert!(count(guarded).is_empty());
     let tuple = "fn h(e: EffectId, n: &str) -> u8 {\n    match (e, n) {\n        (EffectId::PsfBlur, \"s\") => 1,\n        _ => 0,\n    }\n}\n";
-    assert_eq!(wildcards_on_effects(tuple, &variants).len(), 1);
+    assert_eq!(count(tuple).len(), 1);
+    // Any closed enum of the workspace, not only the effects.
+    let kind = "fn k(r: RunKind) -> u8 {\n    match r {\n        RunKind::Study => 1,\n        _ => 0,\n    }\n}\n";
+    assert_eq!(count(kind), vec![4]);
+    // A foreign enum (serde_json's Value) is not a closed vocabulary of ours.
+    let foreign = "fn v(x: &Value) -> u8 {\n    match x {\n        serde_json::Value::Null => 1,\n        _ => 0,\n    }\n}\n";
+    assert!(count(foreign).is_empty());
     let mut files = Vec::new();
     rust_files(&root().join("src"), &mut files);
     let mut found = Vec::new();
     for file in files {
         let code = code_only(&std::fs::read_to_string(&file).unwrap());
-        for line in wildcards_on_effects(&code, &variants) {
+        for line in count(&code) {
             found.push(format!(
                 "{}:{line}",
                 file.strip_prefix(root()).unwrap().display()
             ));
         }
     }
-    assert!(found.is_empty(), "wildcard arms on EffectId: {found:#?}");
+    assert!(
+        found.is_empty(),
+        "wildcard arms on closed enums: {found:#?}"
+    );
 }
 
 /// Issue 34: the README is for a user who has just cloned the repository — short enough to read

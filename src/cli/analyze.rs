@@ -314,7 +314,12 @@ fn no_valid_point(result: &DicResult, settings: &DicSettings) -> String {
             "--min-zncc {} is stricter than noisy images reach",
             settings.min_zncc
         ),
-        _ => format!(
+        PoiStatus::LowCorrelation
+        | PoiStatus::NotConverged
+        | PoiStatus::Implausible
+        | PoiStatus::Outlier
+        | PoiStatus::Converged
+        | PoiStatus::Masked => format!(
             "the images may not show the same speckle, or the motion exceeds --max-motion ({} px) \
              or is more than a translation with moderate rotation and strain",
             settings.max_motion_px

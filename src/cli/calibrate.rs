@@ -91,14 +91,15 @@ fn on_bench(
     service.stop(Duration::from_secs(5));
     let record = record?;
     let folder = service.store.run_dir(&record.id);
-    match service.jobs.take_result(&record.id) {
-        Some(JobResult::Calibration { rounds, card, .. }) => Ok((
-            *rounds,
-            *card,
-            format!("run {} in {}", record.id, folder.display()),
-        )),
-        _ => bail!("calibration {} succeeded without a card", record.id),
-    }
+    let Some(JobResult::Calibration { rounds, card, .. }) = service.jobs.take_result(&record.id)
+    else {
+        bail!("calibration {} succeeded without a card", record.id)
+    };
+    Ok((
+        *rounds,
+        *card,
+        format!("run {} in {}", record.id, folder.display()),
+    ))
 }
 
 /// The frames' size: the manifest's camera, else the first reference frame's.

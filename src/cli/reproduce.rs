@@ -146,11 +146,9 @@ pub fn run(args: &ReproduceArgs) -> Result<()> {
     };
     service.stop(Duration::from_secs(5));
     let run_dir = service.store.run_dir(&record.id);
-    let (rows, captures): (Vec<StudyRow>, Vec<StudyRow>) =
-        match service.jobs.take_result(&record.id) {
-            Some(JobResult::Study { rows, captures }) => (rows, captures),
-            _ => bail!("experiment {} succeeded without a study", record.id),
-        };
+    let Some(JobResult::Study { rows, captures }) = service.jobs.take_result(&record.id) else {
+        bail!("experiment {} succeeded without a study", record.id)
+    };
     let outcome = Outcome {
         run: record.id.to_string(),
         folder: run_dir.display().to_string(),
@@ -314,10 +312,10 @@ fn model_story(
         let (job, _) = service.submit_comparison(&dataset.id, request, None)?;
         wait(service, &job.id, what, show)?;
         jobs.push(job.id.to_string());
-        match service.jobs.take_result(&job.id) {
-            Some(JobResult::Comparison(cmp)) => Ok((cmp.discrepancy_px, cmp.discrepancy_se_px)),
-            _ => bail!("comparison {} succeeded without a comparison", job.id),
-        }
+        let Some(JobResult::Comparison(cmp)) = service.jobs.take_result(&job.id) else {
+            bail!("comparison {} succeeded without a comparison", job.id)
+        };
+        Ok((cmp.discrepancy_px, cmp.discrepancy_se_px))
     };
     let (baseline_px, baseline_se_px) = comparison(&request, "comparing with the baseline model")?;
     let (job, _) = service.submit_diagnosis(&dataset.id, &request, None)?;

@@ -16,11 +16,11 @@ pub fn sensor_readout(scheme: &HardwareScheme) -> SensorReadout {
         decimation: (dx as usize, dy as usize),
         value: match scheme.binning_mode() {
             Some(BinningMode::Sum) => BinnedValue::Sum,
-            _ => BinnedValue::Average,
+            Some(BinningMode::Average | BinningMode::VendorDefault) | None => BinnedValue::Average,
         },
         domain: match scheme.binning_domain {
             Some(BinningDomain::Charge) => ModelDomain::Charge,
-            _ => ModelDomain::Digital,
+            Some(BinningDomain::Digital | BinningDomain::Unknown) | None => ModelDomain::Digital,
         },
     }
 }

@@ -16,6 +16,37 @@ use std::collections::HashSet;
 use std::path::Path;
 use std::rc::Rc;
 
+/// Why two frames of one run cannot be analysed together.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum PairCheck {
+    #[error("reference is {}x{}, deformed {}x{}", reference.0, reference.1, other.0, other.1)]
+    SizeMismatch {
+        reference: (usize, usize),
+        other: (usize, usize),
+    },
+    #[error("frames of {width}x{height} px are too small to compare")]
+    TooSmall { width: usize, height: usize },
+}
+
+/// The one check of a run's pair of frames (its reference and its deformed frame or a repeat),
+/// wherever frames are read: an upload's [`check_frames`], the pair loop every analysis,
+/// comparison and diagnosis runs on, and a diagnosis' static repeats. Both frames of the same
+/// size, and at least [`MIN_FRAME_SIDE_PX`] on each side.
+pub fn check_pair(reference: &Image, other: &Image) -> Result<(), PairCheck> {
+    let size = |i: &Image| (i.width(), i.height());
+    if size(reference) != size(other) {
+        return Err(PairCheck::SizeMismatch {
+            reference: size(reference),
+            other: size(other),
+        });
+    }
+    let (width, height) = size(reference);
+    if width < MIN_FRAME_SIDE_PX || height < MIN_FRAME_SIDE_PX {
+        return Err(PairCheck::TooSmall { width, height });
+    }
+    Ok(())
+}
+
 /// How much a dataset's check may take.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct FrameLimits {
@@ -101,13 +132,7 @@ pub fn check_frames(
         }
         let (reference, _) = frames.get(&run.id, &run.reference)?;
         let (deformed, _) = frames.get(&run.id, &run.deformed)?;
-        let size = |i: &Image| (i.width(), i.height());
-        if size(&reference) != size(&deformed) {
-            return Err(FrameCheckError::SizeMismatch {
-                run: run.id.clone(),
-                name: run.deformed.clone(),
-            });
-        }
+        check_pair(&reference, &deformed).map_err(|e| pair_refused(e, run, &run.deformed))?;
         let scale = run.frame_px_per_mm(manifest.scale_px_per_mm);
         let key = (
             run.reference.clone(),
@@ -134,18 +159,28 @@ pub fn check_frames(
                     return Err(FrameCheckError::Abandoned);
                 }
                 let (repeat, _) = frames.get(&run.id, name)?;
-                if size(&repeat) != size(&reference) {
-                    return Err(FrameCheckError::SizeMismatch {
-                        run: run.id.clone(),
-                        name: name.clone(),
-                    });
-                }
+                check_pair(&reference, &repeat).map_err(|e| pair_refused(e, run, name))?;
             }
         }
     }
     Ok(CheckedFrames {
         decoded: frames.decoded,
     })
+}
+
+/// [`check_pair`]'s refusal of `run`'s frame `name` beside its reference, naming the file.
+fn pair_refused(e: PairCheck, run: &super::Run, name: &str) -> FrameCheckError {
+    match e {
+        PairCheck::SizeMismatch { .. } => FrameCheckError::SizeMismatch {
+            run: run.id.clone(),
+            name: name.into(),
+        },
+        PairCheck::TooSmall { width, height } => FrameCheckError::TooSmall {
+            name: name.into(),
+            width,
+            height,
+        },
+    }
 }
 
 /// Frames decoded on demand: the last two are held (a run's reference and deformed frame), so
@@ -306,5 +341,32 @@ mod tests {
         let (dir, m) = dataset(2, 1.0);
         let e = check_frames(dir.path(), &m, LIMITS, &|| true).unwrap_err();
         assert!(matches!(e, FrameCheckError::Abandoned));
+    }
+
+    #[test]
+    fn a_pair_is_checked_for_size_then_for_its_smallest_side() {
+        let m = MIN_FRAME_SIDE_PX;
+        let frame = |w, h| Image::filled(w, h, 0.0);
+        assert_eq!(check_pair(&frame(m, m + 1), &frame(m, m + 1)), Ok(()));
+        let e = check_pair(&frame(m + 2, m), &frame(m, m + 2)).unwrap_err();
+        assert_eq!(
+            e,
+            PairCheck::SizeMismatch {
+                reference: (m + 2, m),
+                other: (m, m + 2)
+            }
+        );
+        assert_eq!(
+            e.to_string(),
+            format!("reference is {}x{m}, deformed {m}x{}", m + 2, m + 2)
+        );
+        let e = check_pair(&frame(m - 1, m), &frame(m - 1, m)).unwrap_err();
+        assert_eq!(
+            e,
+            PairCheck::TooSmall {
+                width: m - 1,
+                height: m
+            }
+        );
     }
 }

@@ -11,7 +11,9 @@ mod manifest_schema;
 mod move_check;
 
 pub use capture::sensor_readout;
-pub use frame_check::{check_frames, CheckedFrames, FrameCheckError, FrameLimits};
+pub use frame_check::{
+    check_frames, check_pair, CheckedFrames, FrameCheckError, FrameLimits, PairCheck,
+};
 pub use init::{guess_reference, init_folder, FolderInit, Step, StepSeries};
 pub use manifest::{
     is_plain_file_name, CameraInfo, DatasetError, DotProfile, Manifest, PatternInfo, Run,

@@ -238,3 +238,59 @@ pub fn delta_bic(before: &Chi2, after: &Chi2, k: usize) -> f64 {
         + image_change(before, after)
         + k as f64 * (before.observations.max(1) as f64).ln()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn chi2(field: f64, std: f64, image_parts: [(f64, usize); IMAGE_KINDS]) -> Chi2 {
+        Chi2 {
+            field,
+            std,
+            image: image_parts.iter().map(|p| p.0).sum(),
+            total: 0.0,
+            observations: 1000,
+            image_observations: image_parts.iter().map(|p| p.1).sum(),
+            image_parts,
+        }
+    }
+
+    #[test]
+    fn delta_bic_of_a_known_comparison() {
+        // The field χ² falls from 900 to 400, std from 50 to 48, the images are well described
+        // (χ² at their count) and stay: ΔBIC = −500 − 2 + 0 + 2·ln 1000 = −488.18.
+        let parts = [(100.0, 100), (20.0, 20), (0.0, 0), (1.0, 1)];
+        let before = chi2(900.0, 50.0, parts);
+        let after = chi2(400.0, 48.0, parts);
+        let expected = -502.0 + 2.0 * 1000f64.ln();
+        assert!((delta_bic(&before, &after, 2) - expected).abs() < 1e-9);
+        assert!(delta_bic(&before, &after, 2) < SIGNIFICANT_DELTA_BIC);
+        // A candidate that changes nothing pays its parameters' price.
+        assert_eq!(delta_bic(&before, &before, 3), 3.0 * 1000f64.ln());
+    }
+
+    #[test]
+    fn an_overdispersed_image_statistic_counts_only_as_far_as_its_scatter() {
+        // Spectra at χ²/n = 4 with the candidate: a drop of 200 counts as 50.
+        let before = chi2(0.0, 0.0, [(600.0, 100), (20.0, 20), (0.0, 0), (1.0, 1)]);
+        let after = chi2(0.0, 0.0, [(400.0, 100), (20.0, 20), (0.0, 0), (1.0, 1)]);
+        assert!((image_change(&before, &after) + 50.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn shared_frames_reduce_the_effective_count() {
+        // Three schemes of one run of one pattern: one look, not three.
+        let one_run = [("r", "a"); 3];
+        assert!((shared_fraction_of(one_run.into_iter()) - 1.0 / 3.0).abs() < 1e-12);
+        // Runs of distinct patterns and one scheme each are independent looks.
+        let distinct = [("r1", "a"), ("r2", "b"), ("r3", "c"), ("r4", "d")];
+        assert!((shared_fraction_of(distinct.into_iter()) - 1.0).abs() < 1e-12);
+        // Subsets of 29 px every 10 px: (29/10)² = 8.41.
+        let dic = DicSettings {
+            subset_px: 29,
+            step_px: 10,
+            ..DicSettings::default()
+        };
+        assert!((inflation(&dic) - 8.41).abs() < 1e-12);
+    }
+}

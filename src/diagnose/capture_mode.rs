@@ -19,8 +19,9 @@
 use super::bic::inflation;
 use super::discrepancy::run_discrepancy;
 use super::image_stats::{centre_crop, frame_stats, FrameStats, STATS_CROP_PX};
-use super::nominal::{check_sizes, Nominal, Scene};
+use super::nominal::Nominal;
 use super::results::{DiscrepancyParts, HardwareComparison, HardwareRunComparison};
+use super::scene::{Scene, Shot};
 use super::{CompareOptions, DiagnoseError};
 use crate::dataset::{sensor_readout, Manifest, Run};
 use crate::dic::{DicResult, PreparedReference};
@@ -93,7 +94,6 @@ impl PairVisitor for MeasuredCaptures<'_> {
     type Error = DiagnoseError;
 
     fn frames(&mut self, pair: &RunPair<'_>) -> Result<(), DiagnoseError> {
-        check_sizes(pair.run, pair.reference, pair.deformed)?;
         if self.reference_stats.as_ref().map(|r| &r.0) != Some(&pair.run.reference) {
             self.reference_stats = Some((pair.run.reference.clone(), stats_of(pair.reference)));
         }
@@ -144,9 +144,9 @@ pub fn model_hardware(
             let readout = sensor_readout(&h.capture);
             let pattern = pattern_of_run[h.twin];
             let seed = FRAME_SEED_BASE + 2 * k as u64;
-            let reference = scene.render_read_out(pattern, (0.0, 0.0), false, seed, &readout);
+            let reference = scene.render_read_out(pattern, Shot::still(seed), &readout);
             let at = nominal.landed_command(h.twin, (h.run.stage.dx_mm, h.run.stage.dy_mm));
-            let moved = scene.render_read_out(pattern, at, true, seed + 1, &readout);
+            let moved = scene.render_read_out(pattern, Shot::moved(at, seed + 1), &readout);
             let dic_error = |source| DiagnoseError::Dic {
                 run: h.run.id.clone(),
                 scheme: h.capture.name.clone(),

@@ -363,4 +363,99 @@ mod tests {
         let truth = 0.3 + 0.01 * x - 0.02 * y + 1e-4 * x * y - 3e-4 * y * y;
         assert!((at - truth).abs() < 1e-9, "{at} against {truth}");
     }
+
+    use crate::diagnose::test_fields::synthetic_result;
+    use crate::dic::DicSettings;
+
+    /// A 640x480 frame analysed at the paper's grid (subset 29, step 10): 2,600 points or so.
+    fn analysis(field: impl Fn(f64, f64) -> (f64, f64), noise_px: f64, seed: u64) -> DicResult {
+        let settings = DicSettings {
+            subset_px: 29,
+            step_px: 10,
+            ..DicSettings::default()
+        };
+        synthetic_result((640, 480), &settings, field, noise_px, seed)
+    }
+
+    #[test]
+    fn a_rigid_offset_is_the_rigid_part_and_nothing_else() {
+        // The measured side landed (0.03, 0.04) px away from the model's: 0.05 px rigid, both
+        // sides with the same noise (0.01 px), no field, no change of the random error.
+        let measured = analysis(|_, _| (0.53, 0.04), 0.01, 1);
+        let model = analysis(|_, _| (0.50, 0.0), 0.01, 2);
+        let d = run_discrepancy(&measured, &model, 1.0);
+        let e = d.errors();
+        assert!(
+            (d.rigid_px - 0.05).abs() < 3.0 * e.rigid_se_px.max(1e-4),
+            "{d:?}"
+        );
+        assert!(
+            d.field_px < 3.0 * e.field_se_px,
+            "{} ± {}",
+            d.field_px,
+            e.field_se_px
+        );
+        assert!(
+            d.std_px < 3.0 * e.std_se_px,
+            "{} ± {}",
+            d.std_px,
+            e.std_se_px
+        );
+        // The noise of each side is read back about its surface.
+        assert!((d.measured_random_px.0 / 0.01 - 1.0).abs() < 0.1);
+        assert!((d.model_random_px.1 / 0.01 - 1.0).abs() < 0.1);
+    }
+
+    #[test]
+    fn a_scale_change_is_the_field_part_at_its_rms() {
+        // u = s·(x − 320), v = s·(y − 240) with s = 1e-4: a linear field whose RMS about its mean
+        // over the grid is s·√(var x + var y).
+        let s = 1e-4;
+        let measured = analysis(|x, y| (s * (x - 320.0), s * (y - 240.0)), 0.005, 3);
+        let model = analysis(|_, _| (0.0, 0.0), 0.005, 4);
+        let d = run_discrepancy(&measured, &model, 1.0);
+        let var = |v: Vec<f64>| {
+            let m = v.iter().sum::<f64>() / v.len() as f64;
+            v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len() as f64
+        };
+        let xs: Vec<f64> = measured.points.iter().map(|p| p.x).collect();
+        let ys: Vec<f64> = measured.points.iter().map(|p| p.y).collect();
+        let truth = s * (var(xs) + var(ys)).sqrt();
+        let se = d.errors().field_se_px;
+        assert!(
+            (d.field_px - truth).abs() < 3.0 * se,
+            "{} ± {se} against {truth}",
+            d.field_px
+        );
+        assert!(d.rigid_px < 3.0 * d.errors().rigid_se_px.max(1e-5));
+    }
+
+    #[test]
+    fn a_larger_random_error_is_the_std_part() {
+        // The measured side is twice as noisy: Δσ = 0.01 px per component, √2 · 0.01 in all.
+        let measured = analysis(|_, _| (0.2, 0.1), 0.02, 5);
+        let model = analysis(|_, _| (0.2, 0.1), 0.01, 6);
+        let d = run_discrepancy(&measured, &model, 1.0);
+        let truth = 0.01 * 2f64.sqrt();
+        let se = d.errors().std_se_px;
+        assert!(
+            (d.std_px - truth).abs() < 3.0 * se,
+            "{} ± {se} against {truth}",
+            d.std_px
+        );
+    }
+
+    proptest::proptest! {
+        /// The SE of a length from its square's variance: SE(D²)/(2D) for a clear signal, √SE(D²)
+        /// at zero, and never negative.
+        #[test]
+        fn the_length_error_follows_its_square(d in 0.0f64..1.0, se_sq in 1e-12f64..1e-2) {
+            let se = se_of_length(d, se_sq * se_sq);
+            proptest::prop_assert!(se >= 0.0);
+            proptest::prop_assert!(se <= se_sq.sqrt() + 1e-15);
+            if d * d > 100.0 * se_sq {
+                proptest::prop_assert!((se / (se_sq / (2.0 * d)) - 1.0).abs() < 0.03);
+            }
+        }
+    }
 }

@@ -257,3 +257,94 @@ fn variance_factor(sums: &[Sums], values: &[f64], j: usize, k: usize, inflation:
     }
     factor
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::test_fields::field_points;
+
+    /// A run's field difference as the fit reads it, at full resolution.
+    fn sample<'a>(
+        scheme: &'a Scheme,
+        points: &'a [CommonPoint],
+        t: (f64, f64),
+        run: usize,
+    ) -> FieldSample<'a> {
+        FieldSample {
+            scheme,
+            move_px: t,
+            centre: (1280.0, 1080.0),
+            r0: 1280f64.hypot(1080.0),
+            points,
+            var: (1e-4, 1e-4),
+            inflation: 1.0,
+            pattern: run,
+            run,
+        }
+    }
+
+    #[test]
+    fn a_scale_and_a_rotation_are_recovered_from_their_physics() {
+        // The moved frame is imaged at magnification 1 + s and turned by θ: a reference point p
+        // lands at R(θ)(1 + s)(p + t), so the field the model lacks is that minus p + t — written
+        // here from the geometry, not from the fit's basis.
+        let (s, theta): (f64, f64) = (2e-5, -3e-5);
+        let physics = |p: (f64, f64), t: (f64, f64)| {
+            let (x, y) = ((1.0 + s) * (p.0 + t.0), (1.0 + s) * (p.1 + t.1));
+            let (sin, cos) = theta.sin_cos();
+            (cos * x - sin * y - p.0 - t.0, sin * x + cos * y - p.1 - t.1)
+        };
+        let native = Scheme::parse("native").unwrap();
+        let moves = [(130.0, 0.0), (0.0, 65.0), (-130.0, 13.0)];
+        let points: Vec<Vec<CommonPoint>> = moves
+            .iter()
+            .enumerate()
+            .map(|(k, &t)| field_points(t, physics, 0.01, k as u64))
+            .collect();
+        let samples: Vec<FieldSample> = moves
+            .iter()
+            .zip(&points)
+            .enumerate()
+            .map(|(k, (&t, p))| sample(&native, p, t, k))
+            .collect();
+        let params = [GeometricParam::Scale, GeometricParam::Rotation];
+        let fit = fit_geometric(&samples, &params).unwrap();
+        for (i, truth) in [s, theta].into_iter().enumerate() {
+            let (v, se) = (fit.values[i], fit.stderr[i]);
+            assert!(
+                (v - truth).abs() < 3.0 * se,
+                "{:?}: {v} ± {se} against {truth}",
+                params[i]
+            );
+            assert!(se < 0.05 * truth.abs(), "{se}");
+        }
+        assert!(fit.chi2_drop > 100.0, "{}", fit.chi2_drop);
+        // Noise alone: nothing beyond the null.
+        let quiet: Vec<Vec<CommonPoint>> = moves
+            .iter()
+            .enumerate()
+            .map(|(k, &t)| field_points(t, |_, _| (0.0, 0.0), 0.01, 10 + k as u64))
+            .collect();
+        let samples: Vec<FieldSample> = moves
+            .iter()
+            .zip(&quiet)
+            .enumerate()
+            .map(|(k, (&t, p))| sample(&native, p, t, k))
+            .collect();
+        let fit = fit_geometric(&samples, &params).unwrap();
+        assert!(fit
+            .values
+            .iter()
+            .zip(&fit.stderr)
+            .all(|(v, se)| v.abs() < 4.0 * se));
+    }
+
+    #[test]
+    fn fields_one_move_cannot_tell_apart_make_no_fit() {
+        // Without a move the travel scale has no field at all: a singular normal matrix.
+        let native = Scheme::parse("native").unwrap();
+        let points = field_points((0.0, 0.0), |_, _| (0.0, 0.0), 0.01, 1);
+        let samples = [sample(&native, &points, (0.0, 0.0), 0)];
+        assert!(fit_geometric(&samples, &[GeometricParam::TravelScale]).is_none());
+    }
+}

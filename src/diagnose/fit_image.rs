@@ -10,27 +10,18 @@
 //!   knows); coarse grid, then golden section.
 //! - `fill_factor` fx, fy: the same spectra (the aperture multiplies the x spectrum by
 //!   sinc²(fx·f), the y spectrum by sinc²(fy·f)); coarse grid, then Nelder–Mead.
-//! - `sensor_noise`: photon transfer, var = mean/gain + (read/gain)² (EMVA 1288): weighted linear
-//!   least squares on the measured noise-against-mean curve from the static repeats, then one
-//!   levelled correction of the slope by the same estimator run on the model's frames;
-//!   `full_well_e` is not identifiable from unsaturated frames and is set to the ADC's full scale
-//!   times the gain (not fitted, no standard error).
-//! - `vignetting` v: weighted least squares of the measured/model mean-intensity map ratio against
-//!   r²/r0² (c·(1 − v r²)).
-//! - `illumination_change` gain, offset: from the moved frames' mean and noise-corrected contrast
-//!   relative to their references, each levelled by the model's own ratio.
+//! - `sensor_noise`, `vignetting` and `illumination_change`: from the statistics alone, without
+//!   a rendering per trial ([`super::fit_image_stats`]).
 //! - `motion_blur` length (0–4 px) along the largest move: that moved frame's spectra along x and
 //!   y; grid, then golden section.
 
 use super::bic::image_chi2;
-use super::compare::Measurement;
-use super::image_stats::{psd, ptc, FrameStats, PsdBin, STATS_CROP_PX};
-use super::nominal::Scene;
+use super::image_stats::{psd, FrameStats, PsdBin, STATS_CROP_PX};
+use super::measurement::Measurement;
 use super::optimise::{curvature_stderr, minimise_1d, nelder_mead, unless_stopped};
 use super::results::{Comparison, ImageFit};
-use crate::model::effects::{
-    FillFactor, IlluminationChange, MotionBlur, PsfBlur, SensorNoise, Vignetting,
-};
+use super::scene::{Scene, Shot};
+use crate::model::effects::{FillFactor, MotionBlur, PsfBlur};
 use crate::model::EffectId;
 use crate::model::Effects;
 use std::collections::BTreeMap;
@@ -85,7 +76,7 @@ fn ratio_chi2(m_moved: &[PsdBin], m_ref: &[PsdBin], o_moved: &[PsdBin], o_ref: &
 
 /// The comparison before a fit built a scene from the same nominal model and manifest, and the
 /// target's size depends on nothing else: building it again cannot fail.
-const TARGET_BUILT: &str = "the comparison before this fit built the same target";
+pub(super) const TARGET_BUILT: &str = "the comparison before this fit built the same target";
 
 /// The reference crops of every pattern rendered with `effects`.
 fn reference_crops(
@@ -101,11 +92,11 @@ fn reference_crops(
     )
     .expect(TARGET_BUILT);
     (0..meas.labels.len())
-        .map(|pi| scene.render(pi, (0.0, 0.0), false, 0, Some(STATS_CROP_PX)))
+        .map(|pi| scene.render(pi, Shot::REFERENCE, Some(STATS_CROP_PX)))
         .collect()
 }
 
-fn map(pairs: &[(&str, f64)]) -> BTreeMap<String, f64> {
+pub(super) fn map(pairs: &[(&str, f64)]) -> BTreeMap<String, f64> {
     pairs.iter().map(|(k, v)| (k.to_string(), *v)).collect()
 }
 
@@ -197,235 +188,6 @@ pub fn fit_fill_factor(
     }
 }
 
-/// Weighted straight line var = a·mean + b over photon-transfer points: (a, b, cov).
-fn ptc_line(points: &[super::image_stats::PtcPoint]) -> Option<(f64, f64, [[f64; 2]; 2])> {
-    let (mut s, mut sx, mut sy, mut sxx, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    for p in points {
-        if !(p.se > 0.0) {
-            continue;
-        }
-        let w = 1.0 / (p.se * p.se);
-        s += w;
-        sx += w * p.mean_dn;
-        sy += w * p.variance_dn2;
-        sxx += w * p.mean_dn * p.mean_dn;
-        sxy += w * p.mean_dn * p.variance_dn2;
-    }
-    let det = s * sxx - sx * sx;
-    if !(det > 0.0) {
-        return None;
-    }
-    let a = (s * sxy - sx * sy) / det;
-    let b = (sxx * sy - sx * sxy) / det;
-    // Scale the covariance by the reduced χ² when the points scatter more than their errors.
-    let n = points.len() as f64;
-    let chi: f64 = points
-        .iter()
-        .map(|p| ((p.variance_dn2 - a * p.mean_dn - b) / p.se).powi(2))
-        .sum();
-    let scale = (chi / (n - 2.0).max(1.0)).max(1.0);
-    Some((
-        a,
-        b,
-        [
-            [s / det * scale, -sx / det * scale],
-            [-sx / det * scale, sxx / det * scale],
-        ],
-    ))
-}
-
-pub fn fit_sensor_noise(
-    meas: &Measurement,
-    before: &Comparison,
-    model: &Effects,
-) -> Option<ImageFit> {
-    let points: Vec<_> = meas
-        .reference_stats
-        .iter()
-        .flat_map(|s| s.ptc.iter().copied())
-        .collect();
-    let (a, b, cov) = ptc_line(&points)?;
-    let bits = before.model.nominal.bit_depth;
-    let full_scale = 2f64.powi(bits as i32) - 1.0;
-    let make = |a: f64, b: f64| {
-        let gain = 1.0 / a.max(1e-9);
-        SensorNoise {
-            full_well_e: full_scale * gain,
-            read_noise_e: b.max(0.0).sqrt() * gain,
-            gain,
-        }
-    };
-    let mut sn = make(a, b);
-    let mut a_fit = a;
-    let mut b_fit = b;
-    // Levelled correction: the same estimator on the model's frames with the candidate.
-    if a > 0.0 {
-        let effects = Effects {
-            sensor_noise: Some(sn),
-            ..model.clone()
-        };
-        let scene = Scene::new(
-            &before.model.nominal,
-            &effects,
-            &meas.manifest,
-            meas.options.seed,
-        )
-        .expect(TARGET_BUILT);
-        let mut model_points = Vec::new();
-        for pi in 0..meas.labels.len() {
-            let r0 = scene.render(pi, (0.0, 0.0), false, 0, Some(STATS_CROP_PX));
-            let r1 = scene.render(pi, (0.0, 0.0), false, 1, Some(STATS_CROP_PX));
-            model_points.extend(ptc(&r0, Some(&r1)));
-        }
-        if let Some((am, bm, _)) = ptc_line(&model_points) {
-            if am > 0.0 {
-                a_fit = a * a / am;
-                b_fit = b + (b - bm);
-                sn = make(a_fit, b_fit);
-            }
-        }
-    }
-    let se_a = cov[0][0].sqrt();
-    let se_b = cov[1][1].sqrt();
-    let gain = sn.gain;
-    let se_gain = se_a / (a_fit * a_fit).max(1e-300);
-    // read = √b / a: δread² = (δb/(2√b a))² + (√b δa/a²)².
-    let sb = b_fit.max(1e-12).sqrt();
-    let se_read =
-        ((se_b / (2.0 * sb * a_fit)).powi(2) + (sb * se_a / (a_fit * a_fit)).powi(2)).sqrt();
-    Some(ImageFit {
-        geometric: Default::default(),
-        effect: EffectId::SensorNoise.into(),
-        params: map(&[
-            ("gain", gain),
-            ("read_noise_e", sn.read_noise_e),
-            ("full_well_e", sn.full_well_e),
-        ]),
-        stderr: map(&[("gain", se_gain), ("read_noise_e", se_read)]),
-        effects: Effects {
-            sensor_noise: Some(sn),
-            ..model.clone()
-        },
-        k: 2,
-        beyond_null: a_fit > 2.0 * se_a,
-    })
-}
-
-pub fn fit_vignetting(
-    meas: &Measurement,
-    before: &Comparison,
-    model: &Effects,
-) -> Option<ImageFit> {
-    let (w, h) = (meas.width as f64, meas.height as f64);
-    let (cx, cy) = ((w - 1.0) / 2.0, (h - 1.0) / 2.0);
-    let r0 = 0.5 * (w * w + h * h).sqrt();
-    // ratio = c − (c v)·r²: normal equations in (c, cv).
-    let (mut s, mut sx, mut sy, mut sxx, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    let mut pts = Vec::new();
-    for im in before.images.iter().filter(|i| i.run.is_none()) {
-        let (m, o) = (&im.measured.mean_map, &im.model.mean_map);
-        for j in 0..m.ny.min(o.ny) {
-            for i in 0..m.nx.min(o.nx) {
-                let k = j * m.nx + i;
-                let ratio = m.values[k] / o.values[k];
-                let se = ((m.se[k] / m.values[k]).powi(2) + (o.se[k] / o.values[k]).powi(2)).sqrt()
-                    * ratio;
-                if !(se > 0.0 && ratio.is_finite()) {
-                    continue;
-                }
-                let r2 = ((m.xs[i] - cx).powi(2) + (m.ys[j] - cy).powi(2)) / (r0 * r0);
-                let wgt = 1.0 / (se * se);
-                s += wgt;
-                sx += wgt * r2;
-                sy += wgt * ratio;
-                sxx += wgt * r2 * r2;
-                sxy += wgt * r2 * ratio;
-                pts.push((r2, ratio, se));
-            }
-        }
-    }
-    let det = s * sxx - sx * sx;
-    if !(det > 0.0) {
-        return None;
-    }
-    let slope = (s * sxy - sx * sy) / det;
-    let c = (sxx * sy - sx * sxy) / det;
-    let chi: f64 = pts
-        .iter()
-        .map(|(x, y, se)| ((y - c - slope * x) / se).powi(2))
-        .sum();
-    let scale = (chi / (pts.len() as f64 - 2.0).max(1.0)).max(1.0);
-    let se_slope = (s / det * scale).sqrt();
-    let v = -slope / c;
-    let se_v = se_slope / c.abs();
-    let existing = model.vignetting.map_or(0.0, |x| x.v);
-    Some(ImageFit {
-        geometric: Default::default(),
-        effect: EffectId::Vignetting.into(),
-        params: map(&[("v", v + existing)]),
-        stderr: map(&[("v", se_v)]),
-        effects: Effects {
-            vignetting: Some(Vignetting { v: v + existing }),
-            ..model.clone()
-        },
-        k: 1,
-        beyond_null: v.abs() > 2.0 * se_v,
-    })
-}
-
-pub fn fit_illumination_change(before: &Comparison, model: &Effects) -> Option<ImageFit> {
-    let noise = before.model.nominal.noise_floor_dn.powi(2);
-    let refs: Vec<&super::results::ImageComparison> =
-        before.images.iter().filter(|i| i.run.is_none()).collect();
-    let (mut gains, mut offsets) = (Vec::new(), Vec::new());
-    for im in before.images.iter().filter(|i| i.run.is_some()) {
-        let Some(r) = refs.iter().find(|r| r.pattern == im.pattern) else {
-            continue;
-        };
-        let sig = |s: &FrameStats| ((s.contrast * s.mean_dn).powi(2) - noise).max(1e-12).sqrt();
-        let g = (sig(&im.measured) / sig(&r.measured)) / (sig(&im.model) / sig(&r.model));
-        let expected_mean = r.measured.mean_dn * im.model.mean_dn / r.model.mean_dn;
-        gains.push(g);
-        offsets.push(im.measured.mean_dn - g * expected_mean);
-    }
-    if gains.is_empty() {
-        return None;
-    }
-    let stats = |v: &[f64]| {
-        let n = v.len() as f64;
-        let m = v.iter().sum::<f64>() / n;
-        let sd = if v.len() > 1 {
-            (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
-        } else {
-            0.0
-        };
-        (m, sd / n.sqrt())
-    };
-    let (g, mut se_g) = stats(&gains);
-    let (o, mut se_o) = stats(&offsets);
-    // One run: the contrast's own standard error bounds the gain's.
-    let cse = refs
-        .iter()
-        .map(|r| r.measured.contrast_se / r.measured.contrast)
-        .fold(0.0, f64::max)
-        * 2f64.sqrt();
-    se_g = se_g.max(cse * g);
-    let mean_ref = refs.iter().map(|r| r.measured.mean_dn).sum::<f64>() / refs.len() as f64;
-    se_o = se_o.max(se_g * mean_ref);
-    Some(ImageFit {
-        geometric: Default::default(),
-        effect: EffectId::IlluminationChange.into(),
-        params: map(&[("gain", g), ("offset", o)]),
-        stderr: map(&[("gain", se_g), ("offset", se_o)]),
-        effects: Effects {
-            illumination_change: Some(IlluminationChange { gain: g, offset: o }),
-            ..model.clone()
-        },
-        k: 2,
-        beyond_null: (g - 1.0).abs() > 2.0 * se_g || o.abs() > 2.0 * se_o,
-    })
-}
-
 /// `stop`: as for [`fit_psf_blur`].
 pub fn fit_motion_blur(
     meas: &Measurement,
@@ -470,7 +232,7 @@ pub fn fit_motion_blur(
         .iter()
         .map(|&i| {
             let pi = meas.pattern_of_run[i];
-            let r = ref_scene.render(pi, (0.0, 0.0), false, 0, Some(STATS_CROP_PX));
+            let r = ref_scene.render(pi, Shot::REFERENCE, Some(STATS_CROP_PX));
             (
                 &meas.moved_stats[i],
                 &meas.reference_stats[pi],
@@ -491,14 +253,13 @@ pub fn fit_motion_blur(
             .iter()
             .map(|&i| {
                 let r = &runs[i];
+                let at = before
+                    .model
+                    .nominal
+                    .landed_command(i, (r.stage.dx_mm, r.stage.dy_mm));
                 scene.render(
                     meas.pattern_of_run[i],
-                    before
-                        .model
-                        .nominal
-                        .landed_command(i, (r.stage.dx_mm, r.stage.dy_mm)),
-                    true,
-                    2 + i as u64,
+                    Shot::of_run(i, at),
                     Some(STATS_CROP_PX),
                 )
             })

@@ -94,3 +94,48 @@ pub fn gauss_newton(
     }
     Some((at, fit?))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::test_fields::field_points;
+    use crate::reduce::Scheme;
+
+    #[test]
+    fn a_field_nonlinear_in_its_parameter_is_found_from_afar() {
+        // u = a·sin(x/w), v = 0 with a = 0.02 px, w = 500 px: nonlinear in w. Gauss–Newton from
+        // w = 400 finds both within three standard errors.
+        let (a, w) = (0.02, 500.0);
+        let field = |p: (f64, f64), _: (f64, f64), v: &[f64]| (v[0] * (p.0 / v[1]).sin(), 0.0);
+        let points = field_points((130.0, 0.0), |p, t| field(p, t, &[a, w]), 0.005, 3);
+        let native = Scheme::parse("native").unwrap();
+        let samples = [FieldSample {
+            scheme: &native,
+            move_px: (130.0, 0.0),
+            centre: (1280.0, 1080.0),
+            r0: 1280f64.hypot(1080.0),
+            points: &points,
+            var: (2.5e-5, 2.5e-5),
+            inflation: 1.0,
+            pattern: 0,
+            run: 0,
+        }];
+        let (values, fit) = gauss_newton(
+            &samples,
+            &field,
+            vec![0.01, 400.0],
+            &[(-1.0, 1.0), (100.0, 2000.0)],
+            &[1e-4, 1.0],
+        )
+        .unwrap();
+        for (i, truth) in [a, w].into_iter().enumerate() {
+            let se = fit.stderr[i];
+            assert!(
+                (values[i] - truth).abs() < 3.0 * se,
+                "{}: {} ± {se}",
+                i,
+                values[i]
+            );
+        }
+    }
+}

@@ -230,3 +230,78 @@ fn separating_catalogue_run(a: EffectId, b: EffectId) -> String {
             .into()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::test_fields::manifest;
+
+    #[test]
+    fn the_papers_one_move_design_cannot_tell_distortion_from_scale() {
+        // One 5 mm move (130 px of a 2560 px frame): distortion is identifiable (5 % of the
+        // field), but not apart from a scale change, which needs a second move size.
+        let d = design_of(&manifest(&[(5.0, 0.0)], &["a"], false), 2560);
+        assert_eq!(d.moved_runs, 1);
+        assert_eq!(d.move_sizes_px, vec![130.0]);
+        assert!((d.largest_move_fraction - 130.0 / 2560.0).abs() < 1e-12);
+        assert!(d.not_identifiable(EffectId::LensDistortion).is_none());
+        assert!(
+            d.not_identifiable(EffectId::PsfBlur).is_some(),
+            "no dot size stated"
+        );
+        assert!(
+            d.not_identifiable(EffectId::SensorNoise).is_some(),
+            "no repeats"
+        );
+        assert!(
+            d.not_identifiable(EffectId::StageError).is_some(),
+            "no repeatability"
+        );
+        let c = d.confounded(&[EffectId::LensDistortion, EffectId::Scale]);
+        assert_eq!(c.len(), 1);
+        assert_eq!(c[0].separate_with, SEVERAL_SIZES);
+    }
+
+    #[test]
+    fn moves_of_several_sizes_and_a_step_series_separate_what_one_move_cannot() {
+        let mut moves = vec![(1.25, 0.0), (2.5, 0.0), (5.0, 0.0)];
+        // Three sub-pixel steps along each axis (0.2, 0.4, 0.6 px at 26 px/mm).
+        for k in 1..=3 {
+            let mm = 0.2 * k as f64 / 26.0;
+            moves.push((mm, 0.0));
+            moves.push((0.0, mm));
+        }
+        let d = design_of(&manifest(&moves, &["a"], true), 2560);
+        assert_eq!((d.subpixel_steps_x, d.subpixel_steps_y), (3, 3));
+        assert_eq!(d.move_sizes_px.len(), 6, "{:?}", d.move_sizes_px);
+        assert!(d.not_identifiable(EffectId::PsfBlur).is_none());
+        let all = [
+            EffectId::LensDistortion,
+            EffectId::Scale,
+            EffectId::FillFactor,
+            EffectId::PsfBlur,
+        ];
+        assert!(d.confounded(&all).is_empty(), "{:?}", d.confounded(&all));
+        // Two steps along y are not a series: aperture and blur stay confounded.
+        let fewer: Vec<_> = moves.iter().copied().take(moves.len() - 1).collect();
+        let c = design_of(&manifest(&fewer, &["a"], true), 2560).confounded(&all);
+        assert_eq!(c.len(), 1);
+        assert_eq!(c[0].separate_with, STEP_SERIES);
+    }
+
+    #[test]
+    fn a_static_dataset_reveals_no_motion_effect() {
+        let d = design_of(&manifest(&[(0.0, 0.0), (0.0, 0.0)], &["a"], true), 2560);
+        assert_eq!(d.moved_runs, 0);
+        for effect in [
+            EffectId::Rotation,
+            EffectId::Scale,
+            EffectId::TargetTilt,
+            EffectId::MotionBlur,
+            EffectId::LensDistortion,
+        ] {
+            assert!(d.not_identifiable(effect).is_some(), "{effect}");
+        }
+        assert!(d.not_identifiable(EffectId::Vignetting).is_none());
+    }
+}

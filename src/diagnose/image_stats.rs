@@ -360,6 +360,27 @@ pub fn centred_crop(width: usize, height: usize, side: usize) -> (usize, usize, 
 mod tests {
     use super::*;
 
+    proptest::proptest! {
+        /// A centred crop keeps the frame's centre exactly and is never larger than asked or
+        /// than the frame.
+        #[test]
+        fn a_centred_crop_keeps_the_centre(w in 1usize..3000, h in 1usize..3000, side in 1usize..1024) {
+            let (x0, y0, cw, ch) = centred_crop(w, h, side);
+            proptest::prop_assert!(cw <= side.min(w) && ch <= side.min(h));
+            proptest::prop_assert_eq!(2 * x0 + cw, w);
+            proptest::prop_assert_eq!(2 * y0 + ch, h);
+        }
+    }
+
+    #[test]
+    fn a_percentile_reads_the_sorted_values() {
+        let mut v: Vec<f64> = (0..101).rev().map(f64::from).collect();
+        assert_eq!(percentile(&mut v, 0.0), 0.0);
+        assert_eq!(percentile(&mut v, 0.5), 50.0);
+        assert_eq!(percentile(&mut v, 0.995), 100.0);
+        assert!(percentile(&mut [], 0.5).is_nan());
+    }
+
     #[test]
     fn white_noise_has_a_flat_spectrum_and_the_right_variance() {
         use rand::SeedableRng;

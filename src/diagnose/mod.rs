@@ -53,8 +53,8 @@
 //! `discrepancy_px` = √(rigid² + field² + std²) per run and scheme; in total the RMS over all
 //! runs and schemes. Its standard error (`discrepancy_se_px`): the sampling variance of each
 //! square (a noncentral χ²) propagated over the analyses, the frames they share counted
-//! ([`compare::discrepancy_se`]); `diagnose` takes the larger of that and the scatter of the
-//! discrepancy over [`MODEL_SEEDS`] renderings of the model with different seeds.
+//! (`compare::discrepancy_se`); `diagnose` takes the larger of that and the scatter of the
+//! discrepancy over `MODEL_SEEDS` renderings of the model with different seeds.
 //!
 //! The same comparison keeps the paper's raw std statistics of both sides, the strain std, and
 //! image statistics (mean-intensity map, contrast, noise against mean, power spectra along x and
@@ -81,10 +81,13 @@
 
 mod basis;
 mod bic;
-pub mod capture_mode;
+mod calibrate_scene;
+mod candidates;
+mod capture_mode;
 mod card;
 mod card_distortion;
-pub mod compare;
+mod card_stage;
+mod compare;
 // The brief names the file after its job; the module is the entry point of the folder's job.
 #[allow(clippy::module_inception)]
 mod diagnose;
@@ -92,44 +95,49 @@ mod discrepancy;
 mod fit_geometric;
 mod fit_geometric_effect;
 mod fit_image;
+mod fit_image_stats;
 mod fit_user_effect;
 mod floor_read_out;
 mod gauss_newton;
 mod history;
 mod identifiability;
 mod image_stats;
-pub mod nominal;
+mod measurement;
+mod nominal;
 mod optimise;
-pub mod print;
+mod print;
 mod residual_shape;
 mod residuals;
 mod results;
-pub mod rounds;
-pub mod stage;
+mod rounds;
+mod scene;
+mod stage;
 mod stage_landing;
+#[cfg(test)]
+mod test_fields;
 mod unexplained;
 mod unexplained_words;
+mod verdict;
 
-pub use basis::{geometric_basis, GeometricParam};
-pub use bic::{delta_bic, SIGNIFICANT_DELTA_BIC};
-pub use card::{
-    calibrate, camera_card, CameraCard, CardEffect, ImagingEntry, StageMap, CARD_FALSE_ALARM_RATE,
-};
-pub use compare::{
-    compare, compare_prepared, compare_with_scene, load_measurement, model_version, Measurement,
-    SceneFrom,
-};
-pub use diagnose::{
-    diagnose, diagnose_prepared, Candidate, Criteria, Diagnosis, Evidence, MODEL_SEEDS,
-    PRINT_SEPARATION,
-};
-pub use discrepancy::{quadratic_fit, run_discrepancy, DiscrepancyErrors, RunDiscrepancy};
-pub use history::{
-    append_history, history_dir_for, history_path, read_history, HistoryEntry, HISTORY_FILE,
-};
-pub use identifiability::{design_of, Confounded, DatasetDesign, NotIdentifiable};
-pub use image_stats::{noise_variance, FrameStats, MeanMap, PsdBin, PtcPoint};
-pub use nominal::{Nominal, BASELINE_TOML};
+// The public surface: what `service`, `report`, `cli`, the Python bindings and the tests call,
+// then the types of the documents those calls return (ARCHITECTURE.md lists both).
+pub use card::calibrate;
+pub use compare::{compare, compare_prepared, model_version};
+pub use diagnose::{diagnose, diagnose_prepared};
+pub use history::{append_history, history_dir_for, read_history};
+pub use image_stats::noise_variance;
+pub use measurement::{load_measurement, Measurement};
+pub use nominal::BASELINE_TOML;
+pub use rounds::{diagnose_rounds, diagnose_rounds_prepared, MAX_ROUNDS};
+
+pub use basis::GeometricParam;
+pub use card::{CameraCard, CardEffect, ImagingEntry};
+pub use card_stage::StageMap;
+pub use discrepancy::{DiscrepancyErrors, RunDiscrepancy};
+pub use history::HistoryEntry;
+pub use identifiability::{Confounded, NotIdentifiable};
+pub use image_stats::{FrameStats, MeanMap, PsdBin, PtcPoint};
+pub use nominal::{Nominal, PatternEstimate};
 pub use print::{PrintCalibration, PrintKnowledge};
 pub use residual_shape::{ImageMismatch, RunShape, Shape};
 pub use residuals::ResidualMap;
@@ -137,9 +145,10 @@ pub use results::{
     Accuracy, Chi2, Comparison, DiscrepancyParts, HardwareComparison, HardwareRunComparison,
     ImageComparison, ModelInfo, RunComparison, Side,
 };
-pub use rounds::{diagnose_rounds, diagnose_rounds_prepared, Round, Rounds, MAX_ROUNDS};
+pub use rounds::{Round, Rounds};
 pub use stage_landing::{RepeatabilitySource, StageLanding};
-pub use unexplained::{Unexplained, FALSE_ALARM_RATE as UNEXPLAINED_FALSE_ALARM_RATE};
+pub use unexplained::Unexplained;
+pub use verdict::{Candidate, Criteria, Diagnosis, Evidence, Method, Withheld};
 
 use crate::dataset::DatasetError;
 use crate::dic::{DicError, DicSettings};
@@ -189,15 +198,9 @@ impl From<crate::pairs::PairError> for DiagnoseError {
         match e {
             PairError::Cancelled => DiagnoseError::Cancelled,
             PairError::Image(e) => DiagnoseError::Image(e),
-            PairError::SizeMismatch {
+            PairError::Frames { run, source } => DiagnoseError::Frames {
                 run,
-                ref_w,
-                ref_h,
-                def_w,
-                def_h,
-            } => DiagnoseError::Frames {
-                run,
-                message: format!("reference is {ref_w}x{ref_h}, deformed {def_w}x{def_h}"),
+                message: source.to_string(),
             },
             PairError::Reduce { source, .. } => DiagnoseError::Reduce(source),
             PairError::Dic {

@@ -13,25 +13,15 @@
 //! shifted by the run's landing offset, all fitted to the measured mean displacements
 //! ([`super::stage`]).
 
-use super::image_stats::{centred_crop, noise_variance, percentile};
+use super::image_stats::{noise_variance, percentile};
 use super::print::{
     characterised, stated_placement, stated_profile, PrintCalibration, PrintKnowledge,
 };
 use super::stage_landing::StageLanding;
-use super::DiagnoseError;
 use crate::dataset::{Manifest, Run};
 use crate::image::Image;
-use crate::model::derive_seed;
-use crate::model::effects::user::{rendered_fields, UserField};
 use crate::model::effects::{Quantization, StageMisalignment};
-use crate::model::{
-    project_prepared, render_frame, render_frame_read_out, Camera, DotProfile, Effects, FrameSpec,
-    Placement, SensorReadout, SpecklePattern, TargetDot, TooManyDots,
-};
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, Normal};
-use rayon::prelude::*;
+use crate::model::{Camera, DotProfile, Effects, Placement, SpecklePattern};
 use serde::{Deserialize, Serialize};
 
 /// FWHM = 2·sqrt(2 ln 2)·σ.
@@ -181,229 +171,6 @@ impl Nominal {
         let k = self.scale_px_per_mm;
         let [ox, oy] = self.stage.applied_offset_px(run);
         [k * (c * sx - s * sy) + ox, k * (s * sx + c * sy) + oy]
-    }
-}
-
-/// The model's frames for a dataset: the nominal experiment, the model's effects, the dots of
-/// every pattern (fixed seed).
-pub struct Scene {
-    pub nominal: Nominal,
-    pub effects: Effects,
-    /// The model's user effects bound once ([`rendered_fields`]): a geometric displacement
-    /// projects each point several times.
-    user: Vec<(UserField, Vec<f64>)>,
-    dots: Vec<Vec<TargetDot>>,
-    seed: u64,
-}
-
-impl Scene {
-    /// Errs when the target the runs need (field of view plus the largest move) would hold more
-    /// dots than a layout may: a manifest's moves are input, and size this allocation.
-    pub fn new(
-        nominal: &Nominal,
-        model: &Effects,
-        manifest: &Manifest,
-        seed: u64,
-    ) -> Result<Self, TooManyDots> {
-        Self::of_patterns(nominal, model, manifest, seed, &|_| true)
-    }
-
-    /// [`Scene::new`] holding the dots of the patterns `wanted` names only: a print's
-    /// calibration renders one pattern some fifty times, and laying out the others each time
-    /// was a fifth of a comparison.
-    pub fn of_patterns(
-        nominal: &Nominal,
-        model: &Effects,
-        manifest: &Manifest,
-        seed: u64,
-        wanted: &dyn Fn(usize) -> bool,
-    ) -> Result<Self, TooManyDots> {
-        let travel = manifest
-            .runs
-            .iter()
-            .map(|r| r.stage.dx_mm.abs().max(r.stage.dy_mm.abs()))
-            .fold(0.0, f64::max)
-            * nominal.travel_scale.abs().max(1.0);
-        let camera = nominal.camera(0);
-        let dots = nominal
-            .patterns
-            .iter()
-            .enumerate()
-            .map(|(i, p)| {
-                if !wanted(i) {
-                    return Ok(Vec::new());
-                }
-                p.pattern.dots(
-                    camera.field_mm(travel + 2.0),
-                    derive_seed(seed, i as u64, 0xD075),
-                )
-            })
-            .collect::<Result<_, _>>()?;
-        Ok(Self {
-            nominal: nominal.clone(),
-            effects: nominal.render_effects(model),
-            user: rendered_fields(&model.user),
-            dots,
-            seed,
-        })
-    }
-
-    /// A scene for geometry only (no dots: [`Scene::geometric_displacement`], not rendering).
-    pub fn geometry_only(nominal: &Nominal, model: &Effects) -> Self {
-        Self {
-            nominal: nominal.clone(),
-            effects: nominal.render_effects(model),
-            user: rendered_fields(&model.user),
-            dots: Vec::new(),
-            seed: 0,
-        }
-    }
-
-    /// Renders pattern `pattern` at a commanded stage position; `frame` numbers the exposure (its
-    /// noise seed); `crop` renders only the centred window of that size.
-    pub fn render(
-        &self,
-        pattern: usize,
-        at_mm: (f64, f64),
-        moved: bool,
-        frame: u64,
-        crop: Option<usize>,
-    ) -> Image {
-        self.render_in(pattern, at_mm, moved, frame, crop, None)
-    }
-
-    /// [`Scene::render`] of the whole frame as the camera reads it out in `readout` (its own
-    /// binning or decimation; see [`super::floor_read_out`] for where the noise goes).
-    pub fn render_read_out(
-        &self,
-        pattern: usize,
-        at_mm: (f64, f64),
-        moved: bool,
-        frame: u64,
-        readout: &SensorReadout,
-    ) -> Image {
-        self.render_in(pattern, at_mm, moved, frame, None, Some(readout))
-    }
-
-    fn render_in(
-        &self,
-        pattern: usize,
-        (dx_mm, dy_mm): (f64, f64),
-        moved: bool,
-        frame: u64,
-        crop: Option<usize>,
-        readout: Option<&SensorReadout>,
-    ) -> Image {
-        let n = &self.nominal;
-        let mut camera = n.camera(pattern);
-        let mut effects = self.effects.clone();
-        if let Some(side) = crop {
-            let (_, _, w, h) = centred_crop(n.width, n.height, side);
-            let full_r0 = camera.half_diagonal_px();
-            camera.width = w;
-            camera.height = h;
-            let crop_r0 = camera.half_diagonal_px();
-            if let Some(d) = effects.lens_distortion.as_mut() {
-                if d.norm_radius_px <= 0.0 {
-                    d.norm_radius_px = full_r0;
-                }
-            }
-            if let Some(v) = effects.vignetting.as_mut() {
-                v.v *= (crop_r0 / full_r0).powi(2);
-            }
-        }
-        let (sx, sy) = n.scaled_move(dx_mm, dy_mm);
-        let seed = derive_seed(self.seed, 0xF7A3 + pattern as u64, frame);
-        let spec = FrameSpec {
-            stage_dx_mm: sx,
-            stage_dy_mm: sy,
-            moved,
-            seed,
-        };
-        let all = &self.dots[pattern];
-        // A crop sees a small part of the target: hand the renderer only the dots near it (in mm,
-        // with room for the move, the dots' reach and a generous allowance for distortion).
-        let near: Vec<TargetDot>;
-        let dots: &[TargetDot] = if crop.is_some() {
-            let reach = all.iter().map(|d| d.shape.reach_mm()).fold(0.0, f64::max);
-            let (x0, y0, x1, y1) = camera.field_mm(2.0 + reach);
-            let (pad_x, pad_y) = (0.05 * (x1 - x0), 0.05 * (y1 - y0));
-            let (mx, my) = (sx, sy);
-            near = all
-                .iter()
-                .filter(|d| {
-                    let (x, y) = (d.x_mm + mx, d.y_mm + my);
-                    x > x0 - pad_x && x < x1 + pad_x && y > y0 - pad_y && y < y1 + pad_y
-                })
-                .copied()
-                .collect();
-            &near
-        } else {
-            all
-        };
-        let readout = readout.filter(|r| !r.is_full_resolution());
-        if effects.sensor_noise.is_some() || n.noise_floor_dn <= 0.0 {
-            return match readout {
-                Some(r) => render_frame_read_out(&camera, &effects, dots, &spec, r),
-                None => render_frame(&camera, &effects, dots, &spec),
-            };
-        }
-        // The dataset's own sensor: signal-independent noise, then the ADC.
-        let bits = effects.quantization.take().map_or(16, |q| q.bits);
-        let full = 2f64.powi(bits as i32) - 1.0;
-        camera.exposure_level *= n.full_scale_dn() / 65535.0;
-        let mut img = render_frame(&camera, &effects, dots, &spec);
-        let sigma = n.noise_floor_dn;
-        if let Some(r) = readout {
-            return super::floor_read_out::read_out_with_floor(&img, r, sigma, full, seed);
-        }
-        let w = img.width();
-        img.data_mut()
-            .par_chunks_mut(w)
-            .enumerate()
-            .for_each(|(row, line)| {
-                let mut rng = ChaCha8Rng::seed_from_u64(
-                    seed ^ (row as u64 + 1).wrapping_mul(0xA24B_AED4_963E_E407),
-                );
-                let normal = Normal::new(0.0, sigma).expect("finite sigma");
-                for v in line.iter_mut() {
-                    let x = *v as f64 + normal.sample(&mut rng);
-                    *v = x.round().clamp(0.0, full) as f32;
-                }
-            });
-        img
-    }
-
-    /// The model's geometric displacement (full-resolution px) at a reference-image position for
-    /// a commanded move: the target point seen at `p` in the reference, projected in the moved
-    /// frame. Exact for every geometric effect of the model (no rendering, no DIC).
-    pub fn geometric_displacement(&self, (dx_mm, dy_mm): (f64, f64), p: (f64, f64)) -> (f64, f64) {
-        let camera = self.nominal.camera(0);
-        let (sx, sy) = self.nominal.scaled_move(dx_mm, dy_mm);
-        let reference = FrameSpec {
-            stage_dx_mm: 0.0,
-            stage_dy_mm: 0.0,
-            moved: false,
-            seed: 0,
-        };
-        let moved = FrameSpec {
-            stage_dx_mm: sx,
-            stage_dy_mm: sy,
-            moved: true,
-            seed: 0,
-        };
-        let (cx, cy) = camera.centre();
-        let s = camera.scale_px_per_mm;
-        // Invert the reference projection by fixed-point iteration (distortion is small).
-        let (mut x, mut y) = ((p.0 - cx) / s, (p.1 - cy) / s);
-        for _ in 0..6 {
-            let (qx, qy, _) =
-                project_prepared(&camera, &self.effects, &self.user, &reference, x, y);
-            x += (p.0 - qx) / s;
-            y += (p.1 - qy) / s;
-        }
-        let (qx, qy, _) = project_prepared(&camera, &self.effects, &self.user, &moved, x, y);
-        (qx - p.0, qy - p.1)
     }
 }
 
@@ -633,29 +400,33 @@ pub fn pattern_indices(manifest: &Manifest) -> (Vec<String>, Vec<usize>) {
     (labels, idx)
 }
 
-/// Checks that a frame pair can be compared.
-pub fn check_sizes(run: &Run, a: &Image, b: &Image) -> Result<(), DiagnoseError> {
-    if (a.width(), a.height()) != (b.width(), b.height()) {
-        return Err(DiagnoseError::Frames {
-            run: run.id.clone(),
-            message: format!(
-                "reference is {}x{}, deformed {}x{}",
-                a.width(),
-                a.height(),
-                b.width(),
-                b.height()
-            ),
-        });
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::test_fields::manifest;
+
+    #[test]
+    fn patterns_are_numbered_in_order_of_first_appearance() {
+        let m = manifest(&[(1.0, 0.0); 5], &["c", "a", "c", "b"], false);
+        let (labels, of_run) = pattern_indices(&m);
+        assert_eq!(labels, ["c", "a", "b"]);
+        assert_eq!(of_run, [0, 1, 0, 2, 0]);
     }
-    if a.width() < crate::dic::MIN_FRAME_SIDE_PX || a.height() < crate::dic::MIN_FRAME_SIDE_PX {
-        return Err(DiagnoseError::Frames {
-            run: run.id.clone(),
-            message: format!(
-                "frames of {}x{} px are too small to compare",
-                a.width(),
-                a.height()
-            ),
-        });
+
+    #[test]
+    fn the_white_level_is_the_bright_end_of_the_smoothed_frame() {
+        // A dark speckle on a 1000 DN white, with single hot pixels a 3x3 mean dilutes.
+        let (w, h) = (64, 64);
+        let mut img = Image::filled(w, h, 1000.0);
+        for r in (0..h).step_by(4) {
+            for c in (0..w).step_by(4) {
+                img.set(c, r, 200.0);
+            }
+        }
+        img.set(30, 31, 60_000.0);
+        let white = white_level_guess(&img);
+        assert!((900.0..=1000.0).contains(&white), "{white}");
+        // A black frame still has a white level to divide by.
+        assert_eq!(white_level_guess(&Image::filled(8, 8, 0.0)), 1.0);
     }
-    Ok(())
 }

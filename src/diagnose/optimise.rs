@@ -1,5 +1,11 @@
 //! The optimisers of the fits: golden section (after a coarse grid), Nelder–Mead in a box, and
 //! standard errors from the curvature of χ² at the minimum (σ² = 2/∂²χ²).
+//!
+//! Golden section: Kiefer, Proc. AMS 4 (1953), the bracket shrinking by 1/φ per evaluation.
+//! Nelder & Mead, Computer J. 7 (1965), with their standard coefficients (reflection 1,
+//! expansion 2, inside contraction and shrink ½) and only the inside contraction; a point
+//! outside the box is clamped onto it, as Box's complex method does (Computer J. 8, 1965). The curvature's σ² = 2/∂²χ² is the 1σ interval
+//! of one parameter where Δχ² = 1 (Press et al., Numerical Recipes, 3rd ed., §15.6).
 
 /// `objective`, or +∞ without evaluating it once `stop` says so: an optimisation whose job was
 /// cancelled runs its remaining steps for nothing (each one a rendering otherwise), and its
@@ -211,5 +217,101 @@ mod tests {
         let f = |x: f64| ((x - 0.2).powi(2)).min((x - 0.8).powi(2) - 0.01);
         let x = minimise_1d(&f, 0.0, 1.0, 11);
         assert!((x - 0.8).abs() < 1e-3, "{x}");
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::test_runner::Config::with_cases(64))]
+
+        /// Any parabola's minimum inside the bracket is found to the bracket's final width.
+        #[test]
+        fn golden_finds_any_parabola_minimum(x0 in -5.0f64..5.0, curvature in 0.01f64..100.0) {
+            let f = |x: f64| curvature * (x - x0).powi(2);
+            let (x, _) = golden(&f, -6.0, 6.0, 40);
+            // 12 · 0.618^40 ≈ 5e-8.
+            proptest::prop_assert!((x - x0).abs() < 1e-6, "{} against {}", x, x0);
+        }
+
+        /// A χ² bowl in two dimensions (σ 1 along x, 1/√k along y), any centre in the box and
+        /// any anisotropy. The simplex stops once its values agree to 1e-3 (a thousandth of a
+        /// χ²'s 1σ rise), and a simplex flattened along the narrow axis can agree that well
+        /// before it reaches the floor: over 3,000 cases the worst end was χ² = 0.024 (0.16 σ
+        /// off along x). What this guarantees is an end within a quarter of a standard error
+        /// (χ² < 1/16); a restart from the end would tighten it (not done: it would move the
+        /// fill factor's fits).
+        #[test]
+        fn nelder_mead_finds_a_bowls_centre(a in -2.0f64..2.0, b in -2.0f64..2.0, k in 1.0f64..20.0) {
+            let f = |x: &[f64]| (x[0] - a).powi(2) + k * (x[1] - b).powi(2);
+            let x = nelder_mead(&f, &[0.0, 0.0], &[0.5, 0.5], &[-3.0, -3.0], &[3.0, 3.0], 500);
+            proptest::prop_assert!(f(&x) < 1.0 / 16.0, "χ² = {} at {:?}", f(&x), x);
+        }
+
+        /// χ² = Σ ((x − a)/σ)² has σ as the curvature's standard error, in the interior and, by
+        /// the one-sided stencil, at either bound.
+        #[test]
+        fn curvature_gives_back_sigma(a in -1.0f64..1.0, sigma in 0.01f64..10.0) {
+            let chi2 = |x: &[f64]| ((x[0] - a) / sigma).powi(2);
+            let h = [0.1 * sigma];
+            for (lo, hi) in [(-2.0, 2.0), (a, 2.0), (-2.0, a)] {
+                let se = curvature_stderr(&chi2, &[a], &h, &[lo], &[hi]);
+                proptest::prop_assert!((se[0] / sigma - 1.0).abs() < 1e-6, "{} against {}", se[0], sigma);
+            }
+        }
+    }
+
+    #[test]
+    fn nelder_mead_follows_rosenbrocks_valley() {
+        // The banana valley from the classic start (−1.2, 1): f(−1.2, 1) = 24.2, minimum 0 at (1, 1).
+        let f = |x: &[f64]| 100.0 * (x[1] - x[0] * x[0]).powi(2) + (1.0 - x[0]).powi(2);
+        let x = nelder_mead(
+            &f,
+            &[-1.2, 1.0],
+            &[0.1, 0.1],
+            &[-3.0, -3.0],
+            &[3.0, 3.0],
+            2000,
+        );
+        // The simplex stops once its values agree to 1e-3, somewhere on the valley's floor near
+        // the minimum: f below that spread, not the exact point.
+        assert!(f(&x) < 1e-2, "f = {} at {x:?}", f(&x));
+        assert!(
+            (x[0] - 1.0).abs() < 0.1 && (x[1] - 1.0).abs() < 0.2,
+            "{x:?}"
+        );
+    }
+
+    #[test]
+    fn nelder_mead_stops_at_a_bound_when_the_minimum_is_beyond_it() {
+        // The unconstrained minimum (2, 0.5) lies beyond x ≤ 1: the box's answer is (1, 0.5).
+        let f = |x: &[f64]| (x[0] - 2.0).powi(2) + (x[1] - 0.5).powi(2);
+        let x = nelder_mead(
+            &f,
+            &[0.0, 0.0],
+            &[0.3, 0.3],
+            &[-1.0, -1.0],
+            &[1.0, 1.0],
+            500,
+        );
+        assert!(x.iter().zip([-1.0, -1.0]).all(|(v, lo)| *v >= lo));
+        assert!(x.iter().zip([1.0, 1.0]).all(|(v, hi)| *v <= hi));
+        assert!(
+            (x[0] - 1.0).abs() < 0.03 && (x[1] - 0.5).abs() < 0.05,
+            "{x:?}"
+        );
+    }
+
+    #[test]
+    fn a_stopped_objective_is_not_evaluated() {
+        let calls = Cell::new(0);
+        let f = |_: &[f64]| {
+            calls.set(calls.get() + 1);
+            1.0
+        };
+        let stopped = Cell::new(false);
+        let stop = || stopped.get();
+        let g = unless_stopped(&f, &stop);
+        assert_eq!(g(&[0.0]), 1.0);
+        stopped.set(true);
+        assert_eq!(g(&[0.0]), f64::INFINITY);
+        assert_eq!(calls.get(), 1);
     }
 }

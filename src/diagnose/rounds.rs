@@ -6,9 +6,11 @@
 //! geometric candidate (`fit_geometric_effect`): the rounds are stepwise regression with
 //! re-estimation, not a greedy sequence that keeps what its first verdict absorbed.
 
-use super::compare::{compare_prepared, load_measurement, Measurement};
-use super::diagnose::{diagnose_prepared, Diagnosis};
+use super::compare::compare_prepared;
+use super::diagnose::diagnose_prepared;
+use super::measurement::{load_measurement, Measurement};
 use super::unexplained::Unexplained;
+use super::verdict::Diagnosis;
 use super::{CompareOptions, DiagnoseError, Progress};
 use crate::model::ModelConfig;
 use crate::model::{CandidateId, EffectId};

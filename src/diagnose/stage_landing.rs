@@ -66,3 +66,54 @@ impl StageLanding {
         Some((sigma_px * to_um, se_px * to_um))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+
+    #[test]
+    fn the_envelope_is_the_stated_repeatability_in_px() {
+        let mut l = StageLanding::default();
+        assert_eq!(l.envelope_px(26.0), f64::INFINITY);
+        l.repeatability_um = Some(2.0);
+        let expected = StageError::ENVELOPE_SIGMAS * 2.0 * 26.0 / 1000.0;
+        assert!((l.envelope_px(26.0) - expected).abs() < 1e-12);
+        // A run the fit has not placed lands where commanded.
+        assert_eq!(l.applied_offset_px(3), [0.0, 0.0]);
+    }
+
+    #[test]
+    fn landings_from_synthetic_offsets_give_back_the_repeatability() {
+        // 400 runs landing N(0, σ) per axis, σ = 1.5 µm at 26 px/mm, each measured with an
+        // independent error of 0.0005 px (below the estimate's own sampling error, which is then
+        // its standard error): the estimate is within 3 of its standard errors.
+        let (sigma_um, scale, noise_px) = (1.5, 26.0, 0.0005);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let land = Normal::new(0.0, sigma_um * scale / 1000.0).unwrap();
+        let noise = Normal::new(0.0, noise_px).unwrap();
+        let n = 400;
+        let l = StageLanding {
+            landing_px: (0..n)
+                .map(|_| [0, 1].map(|_| land.sample(&mut rng) + noise.sample(&mut rng)))
+                .collect(),
+            landing_se_px: vec![noise_px; n],
+            ..StageLanding::default()
+        };
+        let (est, se) = l.observed_repeatability_um(scale).unwrap();
+        assert!(
+            (est - sigma_um).abs() < 3.0 * se,
+            "{est} ± {se} against {sigma_um}"
+        );
+        // σ/√(2·dof) with dof = 798.
+        assert!((se / est - 1.0 / (2.0 * 798f64).sqrt()).abs() < 1e-9);
+        // One run has no degrees of freedom left.
+        let one = StageLanding {
+            landing_px: vec![[0.1, 0.0]],
+            landing_se_px: vec![0.0],
+            ..StageLanding::default()
+        };
+        assert!(one.observed_repeatability_um(scale).is_none());
+    }
+}

@@ -402,8 +402,8 @@ pub fn check_run_name(name: &str) -> Result<(), FieldError> {
 /// The `hw:` name of a scheme spec, if it names a hardware scheme.
 fn hardware_name(spec: &SchemeSpec) -> Option<&str> {
     match spec {
-        SchemeSpec::Preset(name) if is_hardware_scheme_name(name) => Some(name),
-        _ => None,
+        SchemeSpec::Preset(name) => is_hardware_scheme_name(name).then_some(name.as_str()),
+        SchemeSpec::Custom(_) => None,
     }
 }
 

@@ -176,7 +176,7 @@ impl SensorChain {
             }
             // Without a noise model the charge is summed exactly and digitised once.
             (BinningDomain::Charge, None) => self.quantise(combine(block.iter().sum())),
-            _ => {
+            (BinningDomain::Charge, Some(_)) | (BinningDomain::Digital, _) => {
                 let sum: f64 = block
                     .iter()
                     .map(|&dn| self.quantise(self.read_pixel(dn, rng)))

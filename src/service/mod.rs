@@ -215,12 +215,7 @@ impl Service {
         request: &CompareRequest,
         idempotency_key: Option<&str>,
     ) -> Result<(RunRecord, bool), SubmitError> {
-        self.submit_model_job(
-            crate::store::RunKind::Comparison,
-            dataset,
-            request,
-            idempotency_key,
-        )
+        self.submit_model_job(ModelJob::Comparison, dataset, request, idempotency_key)
     }
 
     /// Queues a diagnosis of a stored dataset against a model on the compute lane.
@@ -230,17 +225,12 @@ impl Service {
         request: &CompareRequest,
         idempotency_key: Option<&str>,
     ) -> Result<(RunRecord, bool), SubmitError> {
-        self.submit_model_job(
-            crate::store::RunKind::Diagnosis,
-            dataset,
-            request,
-            idempotency_key,
-        )
+        self.submit_model_job(ModelJob::Diagnosis, dataset, request, idempotency_key)
     }
 
     fn submit_model_job(
         &self,
-        kind: crate::store::RunKind,
+        job: ModelJob,
         dataset: &DatasetId,
         request: &CompareRequest,
         idempotency_key: Option<&str>,
@@ -248,15 +238,21 @@ impl Service {
         let options = request.options()?;
         let model = self.requested_model(&request.model)?;
         self.store.get_dataset(dataset)?;
-        let work = match kind {
-            crate::store::RunKind::Diagnosis => work::diagnosis(
-                self.clone(),
-                dataset.clone(),
-                model,
-                options,
-                request.rounds,
+        let (kind, work) = match job {
+            ModelJob::Diagnosis => (
+                crate::store::RunKind::Diagnosis,
+                work::diagnosis(
+                    self.clone(),
+                    dataset.clone(),
+                    model,
+                    options,
+                    request.rounds,
+                ),
             ),
-            _ => work::comparison(self.clone(), dataset.clone(), model, options),
+            ModelJob::Comparison => (
+                crate::store::RunKind::Comparison,
+                work::comparison(self.clone(), dataset.clone(), model, options),
+            ),
         };
         let body = serde_json::to_value(request).expect("a request serialises");
         Ok(self.jobs.submit(
@@ -332,4 +328,11 @@ impl From<jobs::QueueError> for SubmitError {
             jobs::QueueError::Store(s) => SubmitError::Store(s),
         }
     }
+}
+
+/// The two jobs that hold a model against a dataset.
+#[derive(Clone, Copy, Debug)]
+enum ModelJob {
+    Comparison,
+    Diagnosis,
 }

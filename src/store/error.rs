@@ -69,10 +69,22 @@ impl StoreError {
                 source.kind(),
                 std::io::ErrorKind::StorageFull | std::io::ErrorKind::QuotaExceeded
             ),
-            StoreError::Sqlite(rusqlite::Error::SqliteFailure(e, _)) => {
-                e.code == rusqlite::ErrorCode::DiskFull
-            }
-            _ => false,
+            StoreError::Sqlite(e) => matches!(
+                e,
+                rusqlite::Error::SqliteFailure(f, _) if f.code == rusqlite::ErrorCode::DiskFull
+            ),
+            StoreError::QuotaFull { .. }
+            | StoreError::BadId(_)
+            | StoreError::BadPath(_)
+            | StoreError::NotFound(_)
+            | StoreError::Finished(_)
+            | StoreError::Transition { .. }
+            | StoreError::Dataset(_)
+            | StoreError::Conflict(_)
+            | StoreError::InUse(_)
+            | StoreError::BadEvent(_)
+            | StoreError::Locked { .. }
+            | StoreError::Corrupt { .. } => false,
         }
     }
 }

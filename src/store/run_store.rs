@@ -313,9 +313,8 @@ impl RunStore {
     pub fn end_queued(&self, ids: &[RunId], next: RunStatus, message: &str) -> Result<Vec<RunId>> {
         let mut ended = Vec::new();
         for id in ids {
-            match self.get(id) {
-                Ok(r) if r.status == RunStatus::Queued => {}
-                _ => continue,
+            if !self.get(id).is_ok_and(|r| r.status == RunStatus::Queued) {
+                continue;
             }
             match self.transition(id, next, message, Sync::Batched) {
                 Ok(rec) => ended.push(rec),
