@@ -483,3 +483,80 @@ fn write_fit(
         },
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::test_fields::field_points;
+    use crate::reduce::Scheme;
+
+    #[test]
+    fn radial_distortion_written_from_browns_model_is_found_as_k1() {
+        // Brown (1966): a point seen at q from the centre is displaced by k1·q·|q|²/r0². A run
+        // moved by t shows, where the model has none, D(p + t) − D(p) — written here from the
+        // lens, not from the fit's basis. Two moves along x and y, noise 0.01 px per point.
+        let r0 = 1280f64.hypot(1080.0);
+        let k1 = 2e-3;
+        let brown = |q: (f64, f64)| {
+            let r2 = (q.0 * q.0 + q.1 * q.1) / (r0 * r0);
+            (k1 * q.0 * r2, k1 * q.1 * r2)
+        };
+        let lens = |p: (f64, f64), t: (f64, f64)| {
+            let (a, b) = (brown((p.0 + t.0, p.1 + t.1)), brown(p));
+            (a.0 - b.0, a.1 - b.1)
+        };
+        let native = Scheme::parse("native").unwrap();
+        let moves = [(130.0, 0.0), (0.0, 130.0), (65.0, 0.0)];
+        let points: Vec<_> = moves
+            .iter()
+            .enumerate()
+            .map(|(k, &t)| field_points(t, lens, 0.01, k as u64))
+            .collect();
+        let samples: Vec<FieldSample> = moves
+            .iter()
+            .zip(&points)
+            .enumerate()
+            .map(|(k, (&t, p))| FieldSample {
+                scheme: &native,
+                move_px: t,
+                centre: (1280.0, 1080.0),
+                r0,
+                points: p,
+                var: (1e-4, 1e-4),
+                inflation: 1.0,
+                pattern: k,
+                run: k,
+            })
+            .collect();
+        let setting = GeometricSetting {
+            scale_px_per_mm: 26.0,
+            working_distance_mm: None,
+            r0,
+            observations: points.iter().map(Vec::len).sum::<usize>() * 2,
+        };
+        let fit = fit_geometric_effect(
+            &samples,
+            &setting,
+            &Effects::default(),
+            EffectId::LensDistortion,
+            &[],
+        )
+        .unwrap();
+        let (v, se) = (fit.params["k1"], fit.stderr["k1"]);
+        assert!((v - k1).abs() < 3.0 * se, "k1 = {v} ± {se} against {k1}");
+        assert!(fit.beyond_null);
+        assert_eq!(fit.effects.lens_distortion.map(|d| d.k1), Some(v));
+        // A centred lens has no decentring: whatever p1, p2 the nested fit admits are noise.
+        // (It admits them here: with three runs the difference of two Wald χ² whose covariances
+        // the per-run scatter inflates differently is not the χ² of the added terms — 36,800
+        // against a price of 2 ln n ≈ 18 while p1, p2 are within 1 SE of zero. Reported in the
+        // stop's note; changing it changes verdicts, which this refactor may not.)
+        for p in ["p1", "p2"] {
+            let (v, se) = (
+                fit.params.get(p).copied().unwrap_or(0.0),
+                fit.stderr.get(p).copied().unwrap_or(1.0),
+            );
+            assert!(v.abs() < 3.0 * se, "{p} = {v} ± {se}");
+        }
+    }
+}

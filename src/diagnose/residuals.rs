@@ -66,3 +66,41 @@ pub fn residual_map(measured: &DicResult, d: &RunDiscrepancy) -> ResidualMap {
         dv,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::discrepancy::run_discrepancy;
+    use crate::diagnose::test_fields::synthetic_result;
+    use crate::dic::{DicSettings, PoiStatus};
+
+    #[test]
+    fn the_map_holds_each_points_difference_and_its_profiles_the_means() {
+        // u differs by 1e-4·(x − 320) px, v by nothing; one point is invalid in the model.
+        let settings = DicSettings {
+            subset_px: 21,
+            step_px: 40,
+            ..DicSettings::default()
+        };
+        let measured = synthetic_result(
+            (640, 480),
+            &settings,
+            |x, _| (1e-4 * (x - 320.0), 0.0),
+            0.0,
+            1,
+        );
+        let mut model = synthetic_result((640, 480), &settings, |_, _| (0.0, 0.0), 0.0, 2);
+        model.points[5].status = PoiStatus::LowCorrelation;
+        let d = run_discrepancy(&measured, &model, 1.0);
+        let map = residual_map(&measured, &d);
+        assert_eq!(map.du.len(), map.xs.len() * map.ys.len());
+        assert!(map.du[5].is_nan() && map.dv[5].is_nan());
+        let (k, p) = (6, &measured.points[6]);
+        assert!((map.du[k] - 1e-4 * (p.x - 320.0)).abs() < 1e-12);
+        // Every column's mean is its x's difference; every row's mean the grid's mean of it.
+        for [x, du, dv] in &map.profile_x {
+            assert!((du - 1e-4 * (x - 320.0)).abs() < 1e-12 && dv.abs() < 1e-12);
+        }
+        assert_eq!(map.profile_y.len(), map.ys.len());
+    }
+}
