@@ -15,6 +15,7 @@ use ffdic::experiment::{
     run_experiment, BenchGeometry, BenchHandle, BenchLimits, BenchTimeouts, ExperimentRequest,
     MoveSpec, PatternSpec,
 };
+use ffdic::service::job::CalibrationJob;
 use ffdic::service::{open_bench, DaemonConfig};
 use serde_json::json;
 use std::path::Path;
@@ -366,7 +367,9 @@ fn a_calibration_through_the_exec_camera_finds_what_the_bench_hides() {
         rounds: 3,
         ..Default::default()
     };
-    let (record, _) = service.submit_calibration(&plan, None).unwrap();
+    let (record, _) = service
+        .submit(CalibrationJob::plan(&service, plan).unwrap(), None)
+        .unwrap();
     let record = loop {
         let r = service.store.get(&record.id).unwrap();
         if r.status.is_terminal() {

@@ -224,7 +224,7 @@ fn sweep_refinements() -> Vec<(&'static str, &'static str, Value)> {
             "axes",
             json!({ "description": format!(
                 "The axes; their lengths multiplied by `seeds` give the task count, at most {} (or the daemon's `[sweeps] max_tasks`). Give `dot_diameter_px` or `patterns` (or both).",
-                crate::service::MAX_DAEMON_SWEEP_TASKS) }),
+                crate::service::job::MAX_DAEMON_SWEEP_TASKS) }),
         ),
         (
             "SweepAxes",
@@ -262,7 +262,7 @@ fn sweep_refinements() -> Vec<(&'static str, &'static str, Value)> {
 
 /// `crate::model::Camera` as a sweep's full-resolution sensor.
 fn sweep_camera() -> Value {
-    let side = crate::service::MAX_DAEMON_SENSOR_SIDE_PX;
+    let side = crate::service::job::MAX_DAEMON_SENSOR_SIDE_PX;
     let offset = json!({ "type": "number", "minimum": -(side as f64), "maximum": side,
                          "description": "Principal point relative to the image centre, px; within the sensor." });
     json!({

@@ -10,9 +10,8 @@ use clap::Args;
 use ffdic::diagnose::{calibrate, CameraCard, Rounds};
 use ffdic::experiment::CalibrationPlan;
 use ffdic::report::camera_card_text;
-use ffdic::service::{
-    calibration_options, card_prefix, open_bench, DaemonConfig, JobResult, Service,
-};
+use ffdic::service::job::{calibration_options, card_prefix, CalibrationJob};
+use ffdic::service::{open_bench, DaemonConfig, JobResult, Service};
 use ffdic::store::ModelFolder;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -86,7 +85,7 @@ fn on_bench(
     let hardware = open_bench(&config)?;
     let (service, _) = Service::start(config, hardware)?;
     service.jobs.keep_results();
-    let (record, _) = service.submit_calibration(plan, None)?;
+    let (record, _) = service.submit(CalibrationJob::plan(&service, plan.clone())?, None)?;
     let record = super::reproduce::wait(&service, &record.id, "capturing, then diagnosing", show);
     service.stop(Duration::from_secs(5));
     let record = record?;

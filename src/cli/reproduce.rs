@@ -11,9 +11,10 @@ use clap::Args;
 use ffdic::diagnose::Diagnosis;
 use ffdic::experiment::{findings_text, paper_findings, ExperimentRequest, SchemeSpec, StudyRow};
 use ffdic::report::{figures_text, paper_figures_text, study_json};
+use ffdic::service::job::{CompareRequest, ComparisonJob, DiagnosisJob, ExperimentJob};
 use ffdic::service::{
-    mock_bench, CameraConfig, CompareRequest, DaemonConfig, JobResult, MockBinning, MockReduction,
-    NewModel, Service, PAPER_BENCH_DISTORTION_TOML,
+    mock_bench, CameraConfig, DaemonConfig, JobResult, MockBinning, MockReduction, NewModel,
+    Service, PAPER_BENCH_DISTORTION_TOML,
 };
 use ffdic::store::{RunId, RunRecord, RunStatus};
 use std::collections::BTreeMap;
@@ -126,7 +127,7 @@ pub fn run(args: &ReproduceArgs) -> Result<()> {
         seed: args.seed.unwrap_or(spec.seed),
         ..ExperimentRequest::default()
     };
-    let (record, _) = service.submit_experiment(&request, None)?;
+    let (record, _) = service.submit(ExperimentJob::plan(&service, request)?, None)?;
     let record = wait(
         &service,
         &record.id,
@@ -309,7 +310,10 @@ fn model_story(
     };
     let mut jobs = Vec::new();
     let mut comparison = |request: &CompareRequest, what: &'static str| -> Result<(f64, f64)> {
-        let (job, _) = service.submit_comparison(&dataset.id, request, None)?;
+        let (job, _) = service.submit(
+            ComparisonJob::plan(service, &dataset.id, request.clone())?,
+            None,
+        )?;
         wait(service, &job.id, what, show)?;
         jobs.push(job.id.to_string());
         let Some(JobResult::Comparison(cmp)) = service.jobs.take_result(&job.id) else {
@@ -318,7 +322,10 @@ fn model_story(
         Ok((cmp.discrepancy_px, cmp.discrepancy_se_px))
     };
     let (baseline_px, baseline_se_px) = comparison(&request, "comparing with the baseline model")?;
-    let (job, _) = service.submit_diagnosis(&dataset.id, &request, None)?;
+    let (job, _) = service.submit(
+        DiagnosisJob::plan(service, &dataset.id, request.clone())?,
+        None,
+    )?;
     wait(service, &job.id, "diagnosing", show)?;
     let Some(JobResult::Diagnosis(rounds)) = service.jobs.take_result(&job.id) else {
         bail!("diagnosis {} succeeded without a diagnosis", job.id);

@@ -179,8 +179,8 @@ impl Default for JobLimits {
 }
 
 /// How large a sweep (`POST /sweeps`) this daemon takes: it shares its cores with the bench and
-/// every other job. At most the compiled ceilings ([`super::MAX_DAEMON_SWEEP_TASKS`],
-/// [`super::MAX_DAEMON_SENSOR_SIDE_PX`]); larger sweeps belong to `ffdic sweep` on a cluster.
+/// every other job. At most the compiled ceilings ([`super::job::MAX_DAEMON_SWEEP_TASKS`],
+/// [`super::job::MAX_DAEMON_SENSOR_SIDE_PX`]); larger sweeps belong to `ffdic sweep` on a cluster.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SweepLimits {
@@ -191,8 +191,8 @@ pub struct SweepLimits {
 impl Default for SweepLimits {
     fn default() -> Self {
         Self {
-            max_tasks: super::MAX_DAEMON_SWEEP_TASKS,
-            max_sensor_side_px: super::MAX_DAEMON_SENSOR_SIDE_PX,
+            max_tasks: super::job::MAX_DAEMON_SWEEP_TASKS,
+            max_sensor_side_px: super::job::MAX_DAEMON_SENSOR_SIDE_PX,
         }
     }
 }
@@ -401,15 +401,15 @@ impl DaemonConfig {
             return Err(parse("http.max_connections must be at least 1".into()));
         }
         let sweeps = &config.sweeps;
-        if !(1..=super::MAX_DAEMON_SWEEP_TASKS).contains(&sweeps.max_tasks)
-            || !(crate::sweep::MIN_SENSOR_SIDE_PX..=super::MAX_DAEMON_SENSOR_SIDE_PX)
+        if !(1..=super::job::MAX_DAEMON_SWEEP_TASKS).contains(&sweeps.max_tasks)
+            || !(crate::sweep::MIN_SENSOR_SIDE_PX..=super::job::MAX_DAEMON_SENSOR_SIDE_PX)
                 .contains(&sweeps.max_sensor_side_px)
         {
             return Err(parse(format!(
                 "sweeps: max_tasks 1 to {}, max_sensor_side_px {} to {}",
-                super::MAX_DAEMON_SWEEP_TASKS,
+                super::job::MAX_DAEMON_SWEEP_TASKS,
                 crate::sweep::MIN_SENSOR_SIDE_PX,
-                super::MAX_DAEMON_SENSOR_SIDE_PX
+                super::job::MAX_DAEMON_SENSOR_SIDE_PX
             )));
         }
         Ok(config)

@@ -2,16 +2,13 @@
 //! bench actor and the job lanes, wired together. The HTTP layer (`api/`) and the CLI call this;
 //! neither runs an experiment any other way.
 
-mod calibration_job;
 mod config;
 mod hardware;
+pub mod job;
 mod jobs;
 mod models;
 mod scaled_sink;
-mod sweep_job;
-mod work;
 
-pub use calibration_job::{calibration_options, card_prefix};
 pub use config::{
     load_bench_model, BenchConfig, CameraConfig, ConfigError, DaemonConfig, HttpLimits, JobLimits,
     MockBinning, MockReduction, StageConfig, SweepLimits, UploadLimits, DEFAULT_CONFIG_TOML,
@@ -23,13 +20,9 @@ pub use models::{
     embedded_model, find_analysis_model, ModelDetail, ModelLookupError, ModelSource,
     ModelStoreError, ModelSummary, NewModel, EMBEDDED_MODELS, PAPER_BENCH_DISTORTION_TOML,
 };
-pub use sweep_job::{plan_sweep, MAX_DAEMON_SENSOR_SIDE_PX, MAX_DAEMON_SWEEP_TASKS};
-pub use work::{AnalysisRequest, CompareRequest};
 
-use crate::experiment::{
-    BenchHandle, BenchHardware, BenchLimits, BenchTimeouts, ExperimentRequest, EXPOSURE_US,
-};
-use crate::store::{DatasetId, RecoveryReport, Retention, RunRecord, RunStore, StoreError};
+use crate::experiment::{BenchHandle, BenchHardware, BenchLimits, BenchTimeouts, EXPOSURE_US};
+use crate::store::{RecoveryReport, Retention, RunStore, StoreError};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -156,115 +149,6 @@ impl Service {
         Ok(())
     }
 
-    /// Queues an experiment on the bench lane (validated first: a bad request queues nothing).
-    pub fn submit_experiment(
-        &self,
-        request: &ExperimentRequest,
-        idempotency_key: Option<&str>,
-    ) -> Result<(RunRecord, bool), SubmitError> {
-        let plan = request.plan(&self.limits)?;
-        if !self.limits.has_stage() {
-            return Err(SubmitError::NoStage);
-        }
-        // Every frame at full resolution (the hardware schemes' are smaller): an upper bound.
-        // The run's writes are held to the quota as well; this refuses before the bench moves.
-        self.store
-            .check_runs_room(plan.frame_count() as u64 * self.frame_bytes)?;
-        let work = work::experiment(self.clone(), plan);
-        let body = serde_json::to_value(request).expect("a request serialises");
-        Ok(self.jobs.submit(
-            crate::store::RunKind::Experiment,
-            Lane::Bench,
-            body,
-            idempotency_key,
-            None,
-            work,
-        )?)
-    }
-
-    /// Queues the fill-factor study of a stored dataset on the compute lane.
-    pub fn submit_analysis(
-        &self,
-        dataset: &DatasetId,
-        request: &AnalysisRequest,
-        idempotency_key: Option<&str>,
-    ) -> Result<(RunRecord, bool), SubmitError> {
-        let plan = request.plan()?;
-        let record = self.store.get_dataset(dataset)?;
-        plan.check_work(
-            (record.width, record.height),
-            record.runs,
-            self.config.jobs.max_analysis_subset_pixels,
-        )?;
-        let work = work::analysis(self.clone(), dataset.clone(), plan);
-        let body = serde_json::to_value(request).expect("a request serialises");
-        Ok(self.jobs.submit(
-            crate::store::RunKind::Analysis,
-            Lane::Compute,
-            body,
-            idempotency_key,
-            Some(dataset.clone()),
-            work,
-        )?)
-    }
-
-    /// Queues a comparison of a stored dataset with a model on the compute lane.
-    pub fn submit_comparison(
-        &self,
-        dataset: &DatasetId,
-        request: &CompareRequest,
-        idempotency_key: Option<&str>,
-    ) -> Result<(RunRecord, bool), SubmitError> {
-        self.submit_model_job(ModelJob::Comparison, dataset, request, idempotency_key)
-    }
-
-    /// Queues a diagnosis of a stored dataset against a model on the compute lane.
-    pub fn submit_diagnosis(
-        &self,
-        dataset: &DatasetId,
-        request: &CompareRequest,
-        idempotency_key: Option<&str>,
-    ) -> Result<(RunRecord, bool), SubmitError> {
-        self.submit_model_job(ModelJob::Diagnosis, dataset, request, idempotency_key)
-    }
-
-    fn submit_model_job(
-        &self,
-        job: ModelJob,
-        dataset: &DatasetId,
-        request: &CompareRequest,
-        idempotency_key: Option<&str>,
-    ) -> Result<(RunRecord, bool), SubmitError> {
-        let options = request.options()?;
-        let model = self.requested_model(&request.model)?;
-        self.store.get_dataset(dataset)?;
-        let (kind, work) = match job {
-            ModelJob::Diagnosis => (
-                crate::store::RunKind::Diagnosis,
-                work::diagnosis(
-                    self.clone(),
-                    dataset.clone(),
-                    model,
-                    options,
-                    request.rounds,
-                ),
-            ),
-            ModelJob::Comparison => (
-                crate::store::RunKind::Comparison,
-                work::comparison(self.clone(), dataset.clone(), model, options),
-            ),
-        };
-        let body = serde_json::to_value(request).expect("a request serialises");
-        Ok(self.jobs.submit(
-            kind,
-            Lane::Compute,
-            body,
-            idempotency_key,
-            Some(dataset.clone()),
-            work,
-        )?)
-    }
-
     /// The model a request names (embedded or stored); an unknown or broken one blames the
     /// request's `model` field.
     fn requested_model(&self, name: &str) -> Result<crate::model::ModelConfig, SubmitError> {
@@ -328,11 +212,4 @@ impl From<jobs::QueueError> for SubmitError {
             jobs::QueueError::Store(s) => SubmitError::Store(s),
         }
     }
-}
-
-/// The two jobs that hold a model against a dataset.
-#[derive(Clone, Copy, Debug)]
-enum ModelJob {
-    Comparison,
-    Diagnosis,
 }

@@ -2,11 +2,12 @@
 //! daemon). A calibration is a run like any other: its events, cancellation and files are also
 //! under `/jobs/{id}`; its frames become a dataset and its card's model a stored model.
 
-use super::experiments::{accepted, idempotency_key, ListQuery};
+use super::experiments::ListQuery;
 use super::jobs::{file, load, run_id};
 use crate::api::json::ApiJson;
 use crate::api::problem::{ApiResult, Problem};
 use crate::experiment::CalibrationPlan;
+use crate::service::job::CalibrationJob;
 use crate::service::Service;
 use crate::store::{RunKind, RunRecord};
 use axum::extract::{Path, Query, State};
@@ -27,12 +28,10 @@ pub async fn create(
     headers: HeaderMap,
     ApiJson(plan): ApiJson<CalibrationPlan>,
 ) -> ApiResult<Response> {
-    let key = idempotency_key(&headers)?;
-    let s = svc.clone();
-    let (record, created) =
-        super::blocking(move || s.submit_calibration(&plan, key.as_deref())).await??;
-    let location = format!("/api/v1/calibrations/{}", record.id);
-    Ok(accepted(record, created, location))
+    super::queue(&svc, &headers, "/api/v1/calibrations", move |s| {
+        CalibrationJob::plan(s, plan)
+    })
+    .await
 }
 
 #[utoipa::path(get, path = "/calibrations", tag = "calibrations", params(ListQuery),

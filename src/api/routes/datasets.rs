@@ -7,7 +7,6 @@
 //! nothing behind.
 
 use super::blocking;
-use super::experiments::{accepted, idempotency_key};
 use crate::api::json::ApiJson;
 use crate::api::page;
 use crate::api::problem::{ApiError, ApiResult, Problem};
@@ -15,7 +14,11 @@ use crate::dataset::{check_frames, is_plain_file_name, FrameCheckError, Manifest
 use crate::diagnose::{read_history, HistoryEntry};
 use crate::image::read_image_header;
 use crate::report::history_chart;
-use crate::service::{AnalysisRequest, CompareRequest, Service};
+use crate::service::job::{
+    dataset_page_row, AnalysisJob, AnalysisRequest, CompareRequest, ComparisonJob, DatasetPageRow,
+    DiagnosisJob,
+};
+use crate::service::Service;
 use crate::store::{DatasetId, DatasetRecord, DatasetSource, RunKind};
 use axum::extract::{Multipart, Path, State};
 use axum::http::{header, HeaderMap, StatusCode};
@@ -352,12 +355,10 @@ pub async fn analyse(
     ApiJson(request): ApiJson<AnalysisRequest>,
 ) -> ApiResult<Response> {
     let id = dataset_id(&id)?;
-    let key = idempotency_key(&headers)?;
-    let s = svc.clone();
-    let (record, created) =
-        blocking(move || s.submit_analysis(&id, &request, key.as_deref())).await??;
-    let location = format!("/api/v1/jobs/{}", record.id);
-    Ok(accepted(record, created, location))
+    super::queue(&svc, &headers, "/api/v1/jobs", move |s| {
+        AnalysisJob::plan(s, &id, request)
+    })
+    .await
 }
 
 #[utoipa::path(post, path = "/datasets/{id}/comparisons", tag = "datasets", request_body = CompareRequest,
@@ -372,7 +373,11 @@ pub async fn compare(
     headers: HeaderMap,
     ApiJson(request): ApiJson<CompareRequest>,
 ) -> ApiResult<Response> {
-    submit_model_job(svc, ModelJob::Comparison, &id, &headers, request).await
+    let id = dataset_id(&id)?;
+    super::queue(&svc, &headers, "/api/v1/jobs", move |s| {
+        ComparisonJob::plan(s, &id, request)
+    })
+    .await
 }
 
 #[utoipa::path(post, path = "/datasets/{id}/diagnoses", tag = "datasets", request_body = CompareRequest,
@@ -387,33 +392,11 @@ pub async fn diagnose(
     headers: HeaderMap,
     ApiJson(request): ApiJson<CompareRequest>,
 ) -> ApiResult<Response> {
-    submit_model_job(svc, ModelJob::Diagnosis, &id, &headers, request).await
-}
-
-/// The two jobs that hold a model against a dataset.
-#[derive(Clone, Copy)]
-enum ModelJob {
-    Comparison,
-    Diagnosis,
-}
-
-/// Queues a comparison or a diagnosis of dataset `raw_id`: 202 + Location of the job.
-async fn submit_model_job(
-    svc: Service,
-    kind: ModelJob,
-    raw_id: &str,
-    headers: &HeaderMap,
-    request: CompareRequest,
-) -> ApiResult<Response> {
-    let id = dataset_id(raw_id)?;
-    let key = idempotency_key(headers)?;
-    let (record, created) = blocking(move || match kind {
-        ModelJob::Diagnosis => svc.submit_diagnosis(&id, &request, key.as_deref()),
-        ModelJob::Comparison => svc.submit_comparison(&id, &request, key.as_deref()),
+    let id = dataset_id(&id)?;
+    super::queue(&svc, &headers, "/api/v1/jobs", move |s| {
+        DiagnosisJob::plan(s, &id, request)
     })
-    .await??;
-    let location = format!("/api/v1/jobs/{}", record.id);
-    Ok(accepted(record, created, location))
+    .await
 }
 
 /// `GET /datasets/{id}/history`: every comparison of the dataset, oldest first.
@@ -461,10 +444,6 @@ pub async fn history_svg(
     let svg = history_chart(&entries);
     Ok(([(header::CONTENT_TYPE, "image/svg+xml")], svg).into_response())
 }
-
-/// Kinds of run a dataset page lists: what was done to the dataset.
-const DATASET_JOB_KINDS: [RunKind; 3] =
-    [RunKind::Comparison, RunKind::Diagnosis, RunKind::Analysis];
 
 /// Most jobs `GET /datasets/{id}/jobs` lists.
 const DATASET_JOBS_LIMIT: usize = 200;
@@ -529,10 +508,9 @@ impl DatasetJob {
 
 /// The results file whose headline a job's row shows.
 fn results_file(kind: RunKind) -> Option<&'static str> {
-    match kind {
-        RunKind::Comparison => Some("results/comparison.json"),
-        RunKind::Diagnosis => Some("results/diagnosis.json"),
-        RunKind::Experiment | RunKind::Analysis | RunKind::Sweep | RunKind::Calibration => None,
+    match dataset_page_row(kind) {
+        DatasetPageRow::Headline(file) => Some(file),
+        DatasetPageRow::Listed | DatasetPageRow::NotListed => None,
     }
 }
 
@@ -549,7 +527,12 @@ pub async fn jobs(
     Ok(Json(
         blocking(move || -> ApiResult<Vec<DatasetJob>> {
             store.get_dataset(&id)?;
-            let runs = store.list_for_dataset(&id, &DATASET_JOB_KINDS, DATASET_JOBS_LIMIT)?;
+            // What was done to the dataset.
+            let kinds: Vec<RunKind> = RunKind::ALL
+                .into_iter()
+                .filter(|k| !matches!(dataset_page_row(*k), DatasetPageRow::NotListed))
+                .collect();
+            let runs = store.list_for_dataset(&id, &kinds, DATASET_JOBS_LIMIT)?;
             Ok(runs
                 .into_iter()
                 .map(|run| {

@@ -6,6 +6,7 @@ use crate::api::page;
 use crate::api::problem::{ApiError, ApiResult, Problem};
 use crate::api::sse::{self, SseResponse};
 use crate::experiment::ExperimentRequest;
+use crate::service::job::ExperimentJob;
 use crate::service::{Service, SubmitError};
 use crate::store::{RunKind, RunRecord, RunStatus, MAX_IDEMPOTENCY_KEY_LEN};
 use axum::extract::{Path, Query, State};
@@ -70,12 +71,10 @@ pub async fn create(
     headers: HeaderMap,
     ApiJson(request): ApiJson<ExperimentRequest>,
 ) -> ApiResult<Response> {
-    let key = idempotency_key(&headers)?;
-    let s = svc.clone();
-    let (record, created) =
-        super::blocking(move || s.submit_experiment(&request, key.as_deref())).await??;
-    let location = format!("/api/v1/experiments/{}", record.id);
-    Ok(accepted(record, created, location))
+    super::queue(&svc, &headers, "/api/v1/experiments", move |s| {
+        ExperimentJob::plan(s, request)
+    })
+    .await
 }
 
 #[derive(Debug, Deserialize, utoipa::IntoParams)]

@@ -1,10 +1,11 @@
 //! Design maps through the daemon: start a sweep, list them, fetch one's map. A sweep is a run
 //! like any other: its events, cancellation and files are under `/jobs/{id}`.
 
-use super::experiments::{accepted, idempotency_key, ListQuery};
+use super::experiments::ListQuery;
 use super::jobs::{file, load, run_id};
 use crate::api::json::ApiJson;
 use crate::api::problem::{ApiResult, Problem};
+use crate::service::job::SweepJob;
 use crate::service::Service;
 use crate::store::{RunKind, RunRecord};
 use crate::sweep::SweepSpec;
@@ -25,12 +26,10 @@ pub async fn create(
     headers: HeaderMap,
     ApiJson(spec): ApiJson<SweepSpec>,
 ) -> ApiResult<Response> {
-    let key = idempotency_key(&headers)?;
-    let s = svc.clone();
-    let (record, created) =
-        super::blocking(move || s.submit_sweep(&spec, key.as_deref())).await??;
-    let location = format!("/api/v1/sweeps/{}", record.id);
-    Ok(accepted(record, created, location))
+    super::queue(&svc, &headers, "/api/v1/sweeps", move |s| {
+        SweepJob::plan(s, spec)
+    })
+    .await
 }
 
 #[utoipa::path(get, path = "/sweeps", tag = "sweeps", params(ListQuery),

@@ -5,10 +5,8 @@
 //! card, the rounds, the plan and the experiment it became), `results/card.txt` and
 //! `results/diagnosis.json`.
 
-use super::jobs::{JobContext, JobError, JobOutput, JobResult, Lane, Work};
-use super::scaled_sink::ScaledSink;
-use super::work::{capture_dataset, diagnose_failure, progress_reporter};
-use super::{NewModel, Service, SubmitError};
+use super::experiment::capture_dataset;
+use super::{diagnose_failure, progress_reporter, Job};
 use crate::diagnose::{calibrate, CompareOptions};
 use crate::experiment::{
     check_dic, check_schemes, CalibrationPlan, ExperimentPlan, ExperimentRequest, FieldError,
@@ -16,19 +14,28 @@ use crate::experiment::{
 };
 use crate::model::ModelConfig;
 use crate::report::camera_card_text;
-use crate::store::{RunKind, RunRecord};
+use crate::service::jobs::{JobContext, JobError, JobOutput, JobResult, Lane};
+use crate::service::scaled_sink::ScaledSink;
+use crate::service::{NewModel, Service, SubmitError};
+use crate::store::{DatasetId, RunKind};
 use serde_json::json;
 
 /// The share of a calibration's progress its capture takes.
 const CAPTURE_SHARE: f64 = 0.5;
 
-impl Service {
-    /// Queues a calibration on the bench lane (validated first: a bad plan queues nothing).
-    pub fn submit_calibration(
-        &self,
-        calibration: &CalibrationPlan,
-        idempotency_key: Option<&str>,
-    ) -> Result<(RunRecord, bool), SubmitError> {
+/// A calibration, checked: its rounds, its experiment against the bench, the runs' quota, its
+/// model and its DIC.
+pub struct CalibrationJob {
+    service: Service,
+    plan: ExperimentPlan,
+    request: ExperimentRequest,
+    calibration: CalibrationPlan,
+    model: ModelConfig,
+    options: CompareOptions,
+}
+
+impl CalibrationJob {
+    pub fn plan(service: &Service, calibration: CalibrationPlan) -> Result<Self, SubmitError> {
         if !(1..=crate::diagnose::MAX_ROUNDS).contains(&calibration.rounds) {
             return Err(SubmitError::Field(crate::experiment::FieldError {
                 field: "rounds".into(),
@@ -39,34 +46,24 @@ impl Service {
                 ),
             }));
         }
-        let request = calibration.experiment(&self.limits, self.sensor_px)?;
-        let plan = request.plan(&self.limits)?;
-        if !self.limits.has_stage() {
+        let request = calibration.experiment(&service.limits, service.sensor_px)?;
+        let plan = request.plan(&service.limits)?;
+        if !service.limits.has_stage() {
             return Err(SubmitError::NoStage);
         }
-        self.store
-            .check_runs_room(plan.frame_count() as u64 * self.frame_bytes)?;
-        let model = self.requested_model(&calibration.model)?;
-        let options = calibration_options(calibration, self.sensor_px)?;
-        let work = calibration_work(
-            self.clone(),
-            Calibration {
-                plan,
-                request,
-                calibration: calibration.clone(),
-                model,
-                options,
-            },
-        );
-        let body = serde_json::to_value(calibration).expect("a plan serialises");
-        Ok(self.jobs.submit(
-            RunKind::Calibration,
-            Lane::Bench,
-            body,
-            idempotency_key,
-            None,
-            work,
-        )?)
+        service
+            .store
+            .check_runs_room(plan.frame_count() as u64 * service.frame_bytes)?;
+        let model = service.requested_model(&calibration.model)?;
+        let options = calibration_options(&calibration, service.sensor_px)?;
+        Ok(Self {
+            service: service.clone(),
+            plan,
+            request,
+            calibration,
+            model,
+            options,
+        })
     }
 }
 
@@ -81,15 +78,6 @@ pub fn calibration_options(
         schemes: check_schemes(&[SchemeSpec::Preset("native".into())])?,
         seed: plan.seed,
     })
-}
-
-/// What a calibration job runs, checked.
-struct Calibration {
-    plan: ExperimentPlan,
-    request: ExperimentRequest,
-    calibration: CalibrationPlan,
-    model: ModelConfig,
-    options: CompareOptions,
 }
 
 /// The card model's name prefix: `card-` and the plan's name in model-name characters.
@@ -108,14 +96,28 @@ pub fn card_prefix(name: &str) -> String {
     format!("card-{}", clean.trim_start_matches(['-', '.']))
 }
 
-fn calibration_work(service: Service, job: Calibration) -> Work {
-    Box::new(move |ctx: &JobContext| {
+impl Job for CalibrationJob {
+    const KIND: RunKind = RunKind::Calibration;
+    const LANE: Lane = Lane::Bench;
+
+    type Request = CalibrationPlan;
+
+    fn request(&self) -> &CalibrationPlan {
+        &self.calibration
+    }
+
+    fn dataset(&self) -> Option<&DatasetId> {
+        None
+    }
+
+    fn run(self, ctx: &JobContext) -> Result<JobOutput, JobError> {
+        let service = &self.service;
         let capture = ScaledSink {
             inner: ctx,
             from: 0.0,
             span: CAPTURE_SHARE,
         };
-        let (_, dataset) = capture_dataset(&service, &job.plan, ctx, &capture)?;
+        let (_, dataset) = capture_dataset(service, &self.plan, ctx, &capture)?;
         let diagnosis = ScaledSink {
             inner: ctx,
             from: CAPTURE_SHARE,
@@ -125,10 +127,10 @@ fn calibration_work(service: Service, job: Calibration) -> Work {
         let dir = service.store.dataset_dir(&dataset.id);
         let (rounds, card) = calibrate(
             &dir,
-            &job.model,
-            &job.options,
-            job.calibration.rounds,
-            &card_prefix(&job.calibration.name),
+            &self.model,
+            &self.options,
+            self.calibration.rounds,
+            &card_prefix(&self.calibration.name),
             &report,
         )
         .map_err(diagnose_failure)?;
@@ -142,8 +144,8 @@ fn calibration_work(service: Service, job: Calibration) -> Work {
             "model": card.model.name,
             "dataset_id": dataset.id,
             "rounds": rounds.to_json(),
-            "plan": job.calibration,
-            "experiment": job.request,
+            "plan": self.calibration,
+            "experiment": self.request,
         });
         let write = |rel: &str, bytes: &[u8]| ctx.write(rel, bytes).map_err(JobError::failed);
         write(
@@ -175,7 +177,7 @@ fn calibration_work(service: Service, job: Calibration) -> Work {
                 dataset: dataset.id,
             },
         })
-    })
+    }
 }
 
 #[cfg(test)]

@@ -4,11 +4,13 @@
 //! outputs go: `results/map.csv`, `results/map.json`, `results/recommendations.txt` and
 //! `plots/*.svg`.
 
-use super::jobs::{JobContext, JobError, JobOutput, JobResult, Work};
-use super::{Service, SweepLimits};
+use super::Job;
 use crate::experiment::{FieldError, RunSink};
 use crate::model::ModelConfig;
 use crate::run_event::EventKind;
+use crate::service::jobs::{JobContext, JobError, JobOutput, JobResult, Lane};
+use crate::service::{Service, SubmitError, SweepLimits};
+use crate::store::{DatasetId, RunKind};
 use crate::sweep::{
     map_files, merge, plan, read_results, run_shards, write_plan, Plan, SweepError, SweepSpec,
 };
@@ -55,8 +57,41 @@ pub fn plan_sweep(
     })
 }
 
-pub fn sweep(plan: Plan) -> Work {
-    Box::new(move |ctx: &JobContext| {
+/// A design map, checked against the sweep's rules and this daemon's `[sweeps]` limits, and
+/// planned.
+pub struct SweepJob {
+    spec: SweepSpec,
+    plan: Plan,
+}
+
+impl SweepJob {
+    pub fn plan(service: &Service, spec: SweepSpec) -> Result<Self, SubmitError> {
+        let model = spec
+            .model
+            .as_deref()
+            .map(|name| service.requested_model(name))
+            .transpose()?;
+        let plan = plan_sweep(&spec, model.as_ref(), &service.config.sweeps)?;
+        Ok(Self { spec, plan })
+    }
+}
+
+impl Job for SweepJob {
+    const KIND: RunKind = RunKind::Sweep;
+    const LANE: Lane = Lane::Compute;
+
+    type Request = SweepSpec;
+
+    fn request(&self) -> &SweepSpec {
+        &self.spec
+    }
+
+    fn dataset(&self) -> Option<&DatasetId> {
+        None
+    }
+
+    fn run(self, ctx: &JobContext) -> Result<JobOutput, JobError> {
+        let plan = self.plan;
         let dir = ctx.store().run_dir(&ctx.run_id).join("sweep");
         write_plan(&dir, &plan).map_err(JobError::failed)?;
         let (tasks, shards) = (plan.task_count(), plan.shards.len());
@@ -107,31 +142,5 @@ pub fn sweep(plan: Plan) -> Work {
             ),
             result: JobResult::Files,
         })
-    })
-}
-
-impl Service {
-    /// Queues a design map on the compute lane (checked and planned first: a bad spec queues
-    /// nothing).
-    pub fn submit_sweep(
-        &self,
-        spec: &SweepSpec,
-        idempotency_key: Option<&str>,
-    ) -> Result<(crate::store::RunRecord, bool), super::SubmitError> {
-        let model = spec
-            .model
-            .as_deref()
-            .map(|name| self.requested_model(name))
-            .transpose()?;
-        let plan = plan_sweep(spec, model.as_ref(), &self.config.sweeps)?;
-        let body = serde_json::to_value(spec).expect("a sweep spec serialises");
-        Ok(self.jobs.submit(
-            crate::store::RunKind::Sweep,
-            super::Lane::Compute,
-            body,
-            idempotency_key,
-            None,
-            sweep(plan),
-        )?)
     }
 }

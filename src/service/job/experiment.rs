@@ -1,0 +1,132 @@
+//! `POST /experiments` and `ffdic reproduce`: a study captured on the bench (moves, frames,
+//! reductions, DIC), its frames registered as a dataset of their own.
+
+use super::Job;
+use crate::experiment::{
+    run_experiment, BenchGeometry, ExperimentOutcome, ExperimentPlan, ExperimentRequest, RunSink,
+    RunnerError,
+};
+use crate::run_event::EventKind;
+use crate::service::jobs::{JobContext, JobError, JobOutput, JobResult, Lane};
+use crate::service::{Service, SubmitError};
+use crate::store::{DatasetId, DatasetRecord, DatasetSource, RunKind};
+use serde_json::json;
+
+/// An experiment, checked against the bench's limits and the runs' quota.
+pub struct ExperimentJob {
+    service: Service,
+    request: ExperimentRequest,
+    plan: ExperimentPlan,
+}
+
+impl ExperimentJob {
+    /// Checks `request` against what the bench can do, and that its frames (every one at full
+    /// resolution: an upper bound) fit the runs' quota: refused before the bench moves.
+    pub fn plan(service: &Service, request: ExperimentRequest) -> Result<Self, SubmitError> {
+        let plan = request.plan(&service.limits)?;
+        if !service.limits.has_stage() {
+            return Err(SubmitError::NoStage);
+        }
+        service
+            .store
+            .check_runs_room(plan.frame_count() as u64 * service.frame_bytes)?;
+        Ok(Self {
+            service: service.clone(),
+            request,
+            plan,
+        })
+    }
+}
+
+impl Job for ExperimentJob {
+    const KIND: RunKind = RunKind::Experiment;
+    const LANE: Lane = Lane::Bench;
+
+    type Request = ExperimentRequest;
+
+    fn request(&self) -> &ExperimentRequest {
+        &self.request
+    }
+
+    fn dataset(&self) -> Option<&DatasetId> {
+        None
+    }
+
+    fn run(self, ctx: &JobContext) -> Result<JobOutput, JobError> {
+        let (outcome, dataset) = capture_dataset(&self.service, &self.plan, ctx, ctx)?;
+        let hardware_runs = outcome
+            .manifest
+            .runs
+            .iter()
+            .filter(|r| r.capture.is_some())
+            .count();
+        let full_resolution_runs = outcome.manifest.runs.len() - hardware_runs;
+        let hardware = if hardware_runs > 0 {
+            format!(" and {hardware_runs} runs in the camera's own schemes")
+        } else {
+            String::new()
+        };
+        Ok(JobOutput {
+            message: format!(
+                "{full_resolution_runs} runs x {} schemes{hardware} analysed; frames are dataset {}",
+                self.plan.schemes.len(),
+                dataset.id
+            ),
+            result: JobResult::Study {
+                rows: outcome.rows,
+                captures: outcome.captures,
+            },
+        })
+    }
+}
+
+/// Captures `plan` on the bench (events through `sink`) and registers its frames as a dataset
+/// of their own, so compare and diagnose read captured and imported measurements alike.
+pub(super) fn capture_dataset(
+    service: &Service,
+    plan: &ExperimentPlan,
+    ctx: &JobContext,
+    sink: &dyn RunSink,
+) -> Result<(ExperimentOutcome, DatasetRecord), JobError> {
+    let lease = service
+        .bench
+        .hold(ctx.run_id.as_str())
+        .map_err(JobError::failed)?;
+    let outcome = run_experiment(
+        plan,
+        &service.bench,
+        &lease,
+        BenchGeometry {
+            scale_px_per_mm: service.config.bench.scale_px_per_mm,
+            working_distance_mm: service.config.bench.working_distance_mm,
+        },
+        service.timeouts(),
+        sink,
+    )
+    .map_err(|e| match e {
+        RunnerError::Cancelled => JobError::Cancelled,
+        other => JobError::failed(other),
+    })?;
+    drop(lease);
+    service
+        .check_datasets_room(&outcome.frames_dir)
+        .map_err(JobError::failed)?;
+    let dataset = ctx
+        .store()
+        .import_dataset_dir(
+            &outcome.frames_dir,
+            &plan.name,
+            DatasetSource::Experiment(ctx.run_id.clone()),
+        )
+        .map_err(JobError::failed)?;
+    ctx.store()
+        .set_dataset(&ctx.run_id, &dataset.id)
+        .map_err(JobError::failed)?;
+    sink.event(
+        EventKind::DatasetRegistered,
+        1.0,
+        &format!("frames registered as dataset {}", dataset.id),
+        json!({ "dataset_id": dataset.id }),
+    );
+    Ok((outcome, dataset))
+}
