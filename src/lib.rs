@@ -7,6 +7,7 @@
 
 pub mod api;
 pub mod atomic_write;
+pub mod bench;
 pub mod dashboard;
 pub mod dataset;
 pub mod diagnose;
@@ -21,6 +22,7 @@ pub mod run_event;
 pub mod service;
 pub mod stats;
 pub mod store;
+pub mod study;
 pub mod sweep;
 pub mod text_enum;
 

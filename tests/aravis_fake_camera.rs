@@ -10,10 +10,11 @@
 
 use crate::common::folder_sink;
 
+use ffdic::bench::{BenchHandle, BenchHardware, BenchLimits, ModelScene};
 use ffdic::dic::{analyze, DicSettings};
 use ffdic::experiment::{
-    run_experiment, BenchGeometry, BenchHandle, BenchHardware, BenchLimits, BenchTimeouts,
-    ExperimentRequest, ModelScene, MoveSpec, PatternSpec, SchemeSpec,
+    run_experiment, BenchGeometry, BenchTimeouts, ExperimentRequest, MoveSpec, PatternSpec,
+    SchemeSpec,
 };
 use ffdic::image::{Image, Roi};
 use ffdic::model::{Camera as ModelCamera, ModelConfig, SpecklePattern};

@@ -10,10 +10,10 @@ use crate::common::independent;
 
 use folder_sink::FolderSink;
 
+use ffdic::bench::{BenchHandle, BenchLimits};
 use ffdic::dic::DicSettings;
 use ffdic::experiment::{
-    run_experiment, BenchGeometry, BenchHandle, BenchLimits, BenchTimeouts, ExperimentRequest,
-    MoveSpec, PatternSpec,
+    run_experiment, BenchGeometry, BenchTimeouts, ExperimentRequest, MoveSpec, PatternSpec,
 };
 use ffdic::service::job::CalibrationJob;
 use ffdic::service::{open_bench, DaemonConfig};
@@ -202,7 +202,7 @@ fn a_failing_command_fails_the_capture_and_the_bench_goes_on() {
         open_bench(&config(root.path(), &command)).unwrap(),
         Duration::from_secs(30),
     );
-    let owner = ffdic::experiment::Owner::Direct;
+    let owner = ffdic::bench::Owner::Direct;
     let err = bench
         .capture(owner.clone(), 1, Duration::from_secs(10))
         .unwrap_err()

@@ -8,8 +8,9 @@
 //! splices, truncation) over valid seeds, plus purely random inputs. `FFDIC_FUZZ_CASES` sets the
 //! cases per parser (default 5000); the seed is fixed, so a failure reproduces.
 
+use ffdic::bench::BenchLimits;
 use ffdic::dataset::Manifest;
-use ffdic::experiment::{BenchLimits, ExperimentRequest, ExperimentSpec, PAPER_TOML};
+use ffdic::experiment::{ExperimentRequest, ExperimentSpec, PAPER_TOML};
 use ffdic::image::{read_tiff, tiff_u16_bytes};
 use ffdic::model::ModelConfig;
 use rand::rngs::StdRng;

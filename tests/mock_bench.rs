@@ -1,8 +1,8 @@
 //! The mock bench end to end: the stage moves the target, the camera renders through the model
 //! what the sensor sees there, DIC recovers the commanded move.
 
+use ffdic::bench::ModelScene;
 use ffdic::dic::{analyze, DicSettings};
-use ffdic::experiment::ModelScene;
 use ffdic::image::{Image, Roi};
 use ffdic::model::{Camera as ModelCamera, ModelConfig, SpecklePattern};
 use ffdic_hw::{Camera, Stage, StagePosition};

@@ -4,9 +4,10 @@
 //! reports the numbers instead of a loosened assertion here.
 
 use ffdic::dataset::Manifest;
-use ffdic::experiment::{analyze_dataset, simulate_dataset, ExperimentSpec, StudyRow};
+use ffdic::experiment::{simulate_dataset, ExperimentSpec};
 use ffdic::model::ModelConfig;
 use ffdic::reduce::Scheme;
+use ffdic::study::{analyze_dataset, StudyRow};
 use std::path::Path;
 
 fn study(bench: &str) -> Vec<StudyRow> {

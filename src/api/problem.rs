@@ -2,7 +2,9 @@
 //! Internal details go to the log with the request id; the client gets a status, a title and a
 //! detail that names what it can fix — never a path, a backtrace or a driver message it cannot act on.
 
-use crate::experiment::{BenchError, FieldError};
+use crate::bench::BenchError;
+
+use crate::experiment::FieldError;
 use crate::store::StoreError;
 use axum::http::{header, StatusCode};
 use axum::response::{IntoResponse, Response};

@@ -9,7 +9,8 @@ use super::ProgressBar;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use ffdic::diagnose::Diagnosis;
-use ffdic::experiment::{findings_text, paper_findings, ExperimentRequest, SchemeSpec, StudyRow};
+use ffdic::experiment::{ExperimentRequest, SchemeSpec};
+use ffdic::report::findings_text;
 use ffdic::report::{figures_text, paper_figures_text, study_json};
 use ffdic::service::job::{CompareRequest, ComparisonJob, DiagnosisJob, ExperimentJob};
 use ffdic::service::{
@@ -17,6 +18,7 @@ use ffdic::service::{
     Service, PAPER_BENCH_DISTORTION_TOML,
 };
 use ffdic::store::{RunId, RunRecord, RunStatus};
+use ffdic::study::{paper_findings, StudyRow};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::Duration;

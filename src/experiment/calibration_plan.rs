@@ -6,9 +6,9 @@
 //! lens blur (their bias against the sub-pixel phase differs), the repeats give the noise floor.
 //! Plans are TOML files like experiments; unknown keys are refused with the key named.
 
-use super::limits::BenchLimits;
 use super::request::{ExperimentRequest, FieldError, SchemeSpec};
 use super::spec::{MoveSpec, PatternSpec, StepSeries};
+use crate::bench::BenchLimits;
 use crate::dic::DicSettings;
 use serde::{Deserialize, Serialize};
 

@@ -2,8 +2,8 @@
 //! defaults to the paper's study, so `{}` runs it. Validation names the offending field, so the
 //! API can answer 422 with it.
 
-use super::limits::BenchLimits;
 use super::spec::{ExperimentSpec, MoveSpec, PatternSpec, StepSeries};
+use crate::bench::BenchLimits;
 use crate::dic::DicSettings;
 use crate::model::SpecklePattern;
 use crate::reduce::Scheme;

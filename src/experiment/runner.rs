@@ -6,15 +6,15 @@
 //! The runner knows nothing of HTTP or SQLite: it reports through a [`RunSink`], which the
 //! service implements over the run store and the event stream, and `ffdic reproduce` over the same.
 
-use super::bench::{BenchError, BenchHandle, BenchLease, BenchStatus, Owner};
 use super::captures::{capture_plan, layout_seed, TargetCapture};
 use super::request::ExperimentPlan;
-use super::study::{analyze_dataset_with, StudyError, StudyRow};
-use super::study_files::study_files;
+use crate::bench::{BenchError, BenchHandle, BenchLease, BenchStatus, Owner};
 use crate::dataset::{CameraInfo, Manifest, Run};
 use crate::image::{tiff_u16_bytes, ImageError};
 use crate::report::field_map_svgs;
+use crate::report::study_files;
 use crate::run_event::EventKind;
+use crate::study::{analyze_dataset_with, StudyError, StudyRow};
 use ffdic_hw::{CameraSettings, Frame, HardwareScheme, StagePosition};
 use serde_json::{json, Value};
 use std::path::PathBuf;

@@ -7,12 +7,13 @@ mod camera_card;
 mod comparison_figures;
 mod dic_summary;
 mod field_maps;
+mod findings_text;
 mod heatmap;
 mod history_chart;
 mod paper_figures;
 mod png;
 mod study_figures;
-mod study_rows;
+mod study_files;
 mod svg;
 mod table;
 mod xy_plot;
@@ -22,12 +23,13 @@ pub use camera_card::camera_card_text;
 pub use comparison_figures::comparison_svgs;
 pub use dic_summary::{dic_settings_json, dic_summary_json};
 pub use field_maps::{field_map_svgs, map_file_name};
+pub use findings_text::findings_text;
 pub use heatmap::{Heatmap, HeatmapMarker};
 pub use history_chart::history_chart;
 pub use paper_figures::paper_figures_text;
 pub use png::png_quicklook;
 pub use study_figures::{figure_svgs, figures_text, rows_json, study_csv, study_json};
-pub use study_rows::{Increase, IncreaseInterval, StudyRow};
+pub use study_files::study_files;
 pub use table::{
     csv, length_pm, parameters_text, plus_minus, rounded_to_error, significant, text_table,
     value_pm,

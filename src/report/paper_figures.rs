@@ -6,8 +6,8 @@
 //! its text; the text gives the translation, its y component and pattern (b)'s increase, and
 //! those are all that can be set beside a run without reading values off a picture.
 
-use super::study_rows::{Increase, StudyRow};
 use super::text_table;
+use crate::study::{Increase, StudyRow};
 
 /// The translation in the paper's reduced images: "about 64 pixels", px.
 const PAPER_U_PX: f64 = 64.0;

@@ -2,9 +2,9 @@
 //! Shared by `ffdic reproduce`, the experiment runner and the API (through
 //! `experiment::study_files`), so all show the same numbers.
 
-use super::study_rows::{Increase, IncreaseInterval, StudyRow};
 use super::{csv, text_table, BarChart, Series};
 use crate::dic::{BLOCK_PER_CORRELATION_LENGTH, MIN_BLOCKS};
+use crate::study::{Increase, IncreaseInterval, StudyRow};
 use serde_json::json;
 
 /// `{"rows":[{"pattern","scheme","u":{"mean","std"},...}]}` as the issue specifies.

@@ -5,7 +5,7 @@
 use super::config::{
     load_bench_model, CameraConfig, ConfigError, DaemonConfig, MockReduction, StageConfig,
 };
-use crate::experiment::{BenchHardware, ModelScene, TargetMount};
+use crate::bench::{BenchHardware, ModelScene, TargetMount};
 use crate::model::{Camera as ModelCamera, ModelConfig, SpecklePattern};
 use ffdic_hw::{Camera, HardwareScheme, HwError, Stage, StagePosition};
 use ffdic_mocks::{new_bench, MockCamera, MockStage, Scene, SharedBench};

@@ -4,9 +4,10 @@
 //! live subscribers (SSE). Cancellation is cooperative: the work checks its token between steps.
 
 use crate::diagnose::{CameraCard, Comparison, Rounds};
-use crate::experiment::{RunSink, StudyRow};
+use crate::experiment::RunSink;
 use crate::run_event::EventKind;
 use crate::store::{DatasetId, Event, RunId, RunKind, RunRecord, RunStatus, RunStore, StoreError};
+use crate::study::StudyRow;
 use serde_json::Value;
 use std::collections::HashMap;
 use std::path::PathBuf;

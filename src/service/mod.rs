@@ -21,7 +21,9 @@ pub use models::{
     ModelStoreError, ModelSummary, NewModel, EMBEDDED_MODELS, PAPER_BENCH_DISTORTION_TOML,
 };
 
-use crate::experiment::{BenchHandle, BenchHardware, BenchLimits, BenchTimeouts, EXPOSURE_US};
+use crate::bench::{BenchHandle, BenchHardware, BenchLimits, EXPOSURE_US};
+
+use crate::experiment::BenchTimeouts;
 use crate::store::{RecoveryReport, Retention, RunStore, StoreError};
 use std::sync::Arc;
 use std::time::Duration;
@@ -165,7 +167,7 @@ impl Service {
     /// the server told to drain (live streams end with their run's terminal event).
     pub fn begin_stop(&self) {
         self.jobs.cancel_all();
-        let _ = self.bench.stop_stage(crate::experiment::Owner::Direct);
+        let _ = self.bench.stop_stage(crate::bench::Owner::Direct);
         self.shutdown.cancel();
     }
 
@@ -174,7 +176,7 @@ impl Service {
     pub fn stop(&self, grace: Duration) {
         self.begin_stop();
         self.jobs.join_workers(grace);
-        let _ = self.bench.stop_stage(crate::experiment::Owner::Direct);
+        let _ = self.bench.stop_stage(crate::bench::Owner::Direct);
     }
 }
 

@@ -62,7 +62,7 @@ pub fn small_request(moves: usize) -> Value {
 }
 
 /// The mock bench `config` describes (its camera on the paper's bench model).
-pub fn small_bench(config: &DaemonConfig) -> ffdic::experiment::BenchHardware {
+pub fn small_bench(config: &DaemonConfig) -> ffdic::bench::BenchHardware {
     let geometry = config.mock_geometry().unwrap();
     let truth = ffdic::service::load_bench_model("paper-bench").unwrap();
     mock_bench(
@@ -89,10 +89,7 @@ impl TestServer {
     }
 
     /// Starts the service on `hardware` (the small mock bench, altered by the test).
-    pub async fn start_on(
-        config: DaemonConfig,
-        hardware: ffdic::experiment::BenchHardware,
-    ) -> Self {
+    pub async fn start_on(config: DaemonConfig, hardware: ffdic::bench::BenchHardware) -> Self {
         let (service, _) = Service::start(config, hardware).unwrap();
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let base = format!("http://{}", listener.local_addr().unwrap());

@@ -5,7 +5,7 @@
 use super::blocking;
 use crate::api::json::ApiJson;
 use crate::api::problem::{ApiError, ApiResult, Problem};
-use crate::experiment::Owner;
+use crate::bench::Owner;
 use crate::service::Service;
 use axum::extract::{Query, State};
 use axum::http::header;

@@ -3,7 +3,7 @@
 use super::blocking;
 use crate::api::json::ApiJson;
 use crate::api::problem::{ApiError, ApiResult, Problem};
-use crate::experiment::{Owner, StageAxis};
+use crate::bench::{Owner, StageAxis};
 use crate::service::Service;
 use axum::extract::State;
 use axum::Json;

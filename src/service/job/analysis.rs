@@ -5,14 +5,15 @@ use super::Job;
 use crate::dataset::Manifest;
 use crate::dic::DicSettings;
 use crate::experiment::{
-    analyze_dataset, check_dic, check_schemes, study_files, ExperimentRequest, FieldError, RunSink,
-    SchemeSpec, StudyError,
+    check_dic, check_schemes, ExperimentRequest, FieldError, RunSink, SchemeSpec,
 };
 use crate::reduce::Scheme;
+use crate::report::study_files;
 use crate::run_event::EventKind;
 use crate::service::jobs::{JobContext, JobError, JobOutput, JobResult, Lane};
 use crate::service::{Service, SubmitError};
 use crate::store::{DatasetId, RunKind};
+use crate::study::{analyze_dataset, StudyError};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 

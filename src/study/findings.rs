@@ -5,7 +5,7 @@
 //! patterns compare independent captures (Welch's t, Satterthwaite's degrees of freedom, rounded
 //! down: conservative).
 
-use super::study::{Increase, StudyRow};
+use super::rows::{Increase, StudyRow};
 use crate::stats::{mean_and_variance_of_mean, mean_interval, t_975};
 use serde::Serialize;
 
@@ -216,40 +216,6 @@ fn within([lo, hi]: [f64; 2], tolerance: f64) -> Verdict {
     } else {
         Verdict::NotResolved
     }
-}
-
-/// The findings as a terminal table.
-pub fn findings_text(findings: &[Finding]) -> String {
-    if findings.is_empty() {
-        return String::new();
-    }
-    let headers = [
-        "paper's finding",
-        "tested",
-        "mean [95 % interval]",
-        "verdict",
-    ];
-    let body: Vec<Vec<String>> = findings
-        .iter()
-        .map(|f| {
-            vec![
-                f.claim.clone(),
-                f.measure.clone(),
-                format!("{:+.1} [{:+.1}, {:+.1}]", f.mean, f.ci95[0], f.ci95[1]),
-                match f.verdict {
-                    Verdict::Holds => "holds",
-                    Verdict::Contradicted => "contradicted",
-                    Verdict::NotResolved => "not resolved",
-                }
-                .to_string(),
-            ]
-        })
-        .collect();
-    format!(
-        "\nThe paper's findings on this bench ({} captures per row; 95 % t intervals; between patterns Welch's t):\n{}",
-        findings[0].captures,
-        crate::report::text_table(&headers, &body)
-    )
 }
 
 #[cfg(test)]

@@ -3,11 +3,11 @@
 //! report the statistics with the increase of each standard deviation over the 100 % scheme —
 //! the paper's Figures 5 (x: u, exx) and 6 (y: v, eyy).
 
+use super::rows::{Increase, IncreaseInterval, StudyRow};
 use crate::dataset::{DatasetError, Manifest, Run};
 use crate::dic::{CorrelationLengths, DicResult, DicSettings, Stats, Summary};
 use crate::pairs::{correlate_pairs, PairError, PairVisitor, RunPair};
 use crate::reduce::Scheme;
-pub use crate::report::{Increase, IncreaseInterval, StudyRow};
 use std::path::Path;
 
 #[derive(Debug, thiserror::Error)]

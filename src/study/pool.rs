@@ -8,7 +8,7 @@
 //! that mean (a paired t analysis, e.g. Montgomery & Runger, *Applied Statistics and Probability
 //! for Engineers*, § 10-4).
 
-use super::study::{Increase, IncreaseInterval, StudyRow};
+use super::rows::{Increase, IncreaseInterval, StudyRow};
 use crate::dataset::Manifest;
 use crate::dic::{Stats, Summary};
 use crate::stats::mean_interval;
