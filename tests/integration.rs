@@ -30,6 +30,7 @@ mod cli_calibrate;
 mod cli_image_formats;
 mod compare_foreign;
 mod dashboard_browser;
+mod dashboard_formatting;
 mod dataset_init;
 mod dic_deformation;
 mod dic_sample3;

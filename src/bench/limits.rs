@@ -121,15 +121,15 @@ impl BenchLimits {
         Ok(())
     }
 
-    /// `mm` rounded to the stage's step (unchanged without a stage or a stated step).
+    /// `mm` rounded to the stage's step (unchanged without a stage or a stated step), as the
+    /// stage itself rounds it (`ffdic_hw::on_grid`), and then in the step's decimals.
     pub fn on_stage_grid(&self, mm: f64) -> f64 {
         match self.stage_resolution_mm {
             Some(step) if step > 0.0 && mm.is_finite() => {
                 // Rounded in the step's decimals too, so 0.7692 is not printed 0.7692000000000001.
                 let decimals = (-step.log10()).ceil().clamp(0.0, 15.0) as i32 + 1;
-                let on_grid = (mm / step).round() * step;
                 let scale = 10f64.powi(decimals);
-                (on_grid * scale).round() / scale
+                (ffdic_hw::on_grid(mm, step) * scale).round() / scale
             }
             _ => mm,
         }

@@ -92,13 +92,14 @@ fn fixed(value: f64, d: usize) -> String {
     }
 }
 
-/// `value` signed to `d` decimals, a value that rounds to zero as "+0.000" (not "-0.000").
+/// `value` (finite) signed to `d` decimals, a value that rounds to zero as "+0.000" (not
+/// "-0.000"): [`fixed`] with its sign written out.
 fn signed(value: f64, d: usize) -> String {
-    let text = format!("{value:+.d$}");
-    if text[1..].bytes().all(|b| b == b'0' || b == b'.') {
-        format!("+{}", &text[1..])
-    } else {
+    let text = fixed(value, d);
+    if text.starts_with('-') {
         text
+    } else {
+        format!("+{text}")
     }
 }
 

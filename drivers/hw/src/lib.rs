@@ -17,6 +17,6 @@ pub use schemes::{
     schemes_for, AxisReduction, BinningDomain, BinningMode, HardwareScheme, ReductionCaps,
     HARDWARE_SCHEME_PREFIX,
 };
-pub use stage::{Stage, StageInfo, StagePosition};
+pub use stage::{on_grid, Stage, StageInfo, StagePosition};
 
 pub type HwResult<T> = Result<T, HwError>;

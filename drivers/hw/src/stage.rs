@@ -28,11 +28,18 @@ pub struct StageInfo {
 impl StageInfo {
     /// `mm` on the stage's grid of commanded positions (unchanged without a resolution).
     pub fn on_grid(&self, mm: f64) -> f64 {
-        if self.resolution_mm > 0.0 && mm.is_finite() {
-            (mm / self.resolution_mm).round() * self.resolution_mm
-        } else {
-            mm
-        }
+        on_grid(mm, self.resolution_mm)
+    }
+}
+
+/// `mm` on a grid of `resolution_mm` steps: the nearest whole number of steps (unchanged
+/// without a positive step, or for a value that is not finite). The one rounding of a move to
+/// what a stage can be commanded: the stages' own and the bench's check of a request.
+pub fn on_grid(mm: f64, resolution_mm: f64) -> f64 {
+    if resolution_mm > 0.0 && mm.is_finite() {
+        (mm / resolution_mm).round() * resolution_mm
+    } else {
+        mm
     }
 }
 

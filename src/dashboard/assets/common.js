@@ -148,7 +148,8 @@ export function lengthPm(value, se) {
 export function valuePm(value, se) {
   const [v, e] = [Number(value), Number(se)];
   if (value === null || value === undefined || !Number.isFinite(v)) return "—";
-  if (se === null || se === undefined || !(Number.isFinite(e) && e > 0)) return num(v, 5);
+  // Without an error: five significant digits, as the server writes them ("1.0420e-4").
+  if (se === null || se === undefined || !(Number.isFinite(e) && e > 0)) return v.toExponential(4).replace("e+", "e");
   const exponent = Math.floor(Math.log10(Math.max(Math.abs(v), e)));
   if (exponent >= -3 && exponent < 4) {
     const d = decimalsFor(e);
