@@ -20,6 +20,35 @@ async fn experiment(server: &TestServer) -> Value {
     run
 }
 
+/// Models: an embedded one is part of the binary (409); a stored one goes (204, then 404), and
+/// its name stays its text's: another text under it is a conflict, the same text comes back.
+async fn check_only_stored_models_are_deleted(server: &TestServer) {
+    assert_eq!(delete(&server.url("/models/baseline")).await.status(), 409);
+    let toml = "name = \"mine\"\ndescription = \"a model to delete\"\n";
+    assert_eq!(
+        post(&server.url("/models"), &json!({ "toml": toml }))
+            .await
+            .status(),
+        201
+    );
+    assert_eq!(delete(&server.url("/models/mine")).await.status(), 204);
+    assert_eq!(get(&server.url("/models/mine")).await.status(), 404);
+    assert_eq!(delete(&server.url("/models/mine")).await.status(), 404);
+    let other = format!("{toml}# changed\n");
+    assert_eq!(
+        post(&server.url("/models"), &json!({ "toml": other }))
+            .await
+            .status(),
+        409
+    );
+    assert_eq!(
+        post(&server.url("/models"), &json!({ "toml": toml }))
+            .await
+            .status(),
+        201
+    );
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn runs_datasets_and_models_are_deleted_only_when_nothing_uses_them() {
     let tmp = tempfile::tempdir().unwrap();
@@ -104,32 +133,7 @@ async fn runs_datasets_and_models_are_deleted_only_when_nothing_uses_them() {
         "the run folders are gone"
     );
 
-    // Models: an embedded one is part of the binary; a stored one goes, and its name stays
-    // its text's.
-    assert_eq!(delete(&server.url("/models/baseline")).await.status(), 409);
-    let toml = "name = \"mine\"\ndescription = \"a model to delete\"\n";
-    assert_eq!(
-        post(&server.url("/models"), &json!({ "toml": toml }))
-            .await
-            .status(),
-        201
-    );
-    assert_eq!(delete(&server.url("/models/mine")).await.status(), 204);
-    assert_eq!(get(&server.url("/models/mine")).await.status(), 404);
-    assert_eq!(delete(&server.url("/models/mine")).await.status(), 404);
-    let other = format!("{toml}# changed\n");
-    assert_eq!(
-        post(&server.url("/models"), &json!({ "toml": other }))
-            .await
-            .status(),
-        409
-    );
-    assert_eq!(
-        post(&server.url("/models"), &json!({ "toml": toml }))
-            .await
-            .status(),
-        201
-    );
+    check_only_stored_models_are_deleted(&server).await;
     server.stop().await;
 }
 

@@ -10,28 +10,22 @@ use daemon::{
 };
 use serde_json::{json, Value};
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_whole_experiment_over_http() {
-    let tmp = tempfile::tempdir().unwrap();
-    let server = TestServer::start(small_config(tmp.path())).await;
-    let c = client();
-
-    assert_eq!(
-        c.get(server.url("/health")).send().await.unwrap().status(),
-        200
-    );
-    let r = c
-        .post(server.url("/experiments"))
-        .json(&small_request(2))
-        .send()
-        .await
-        .unwrap();
+/// The daemon is healthy and takes a two-move experiment with 202 and its Location; returns the
+/// run's id.
+async fn start_a_two_move_experiment(server: &TestServer) -> String {
+    assert_eq!(get(&server.url("/health")).await.status(), 200);
+    let r = post(&server.url("/experiments"), &small_request(2)).await;
     assert_eq!(r.status(), 202);
     let location = r.headers()["location"].to_str().unwrap().to_string();
     let run: Value = r.json().await.unwrap();
     let id = run["id"].as_str().unwrap().to_string();
     assert_eq!(location, format!("/api/v1/experiments/{id}"));
+    id
+}
 
+/// Run `id`'s events: in order, ending with the terminal one, progress never falling, one per
+/// frame and pair; resuming after an id replays exactly what came after it. Returns them.
+async fn check_the_events_and_their_resumption(server: &TestServer, id: &str) -> Vec<daemon::Sse> {
     // Events arrive in order, end with the terminal one, progress never falls.
     let events = read_events(
         &server.url(&format!("/experiments/{id}/events")),
@@ -71,34 +65,14 @@ async fn a_whole_experiment_over_http() {
     .await;
     assert_eq!(resumed.len(), events.len() - 3);
     assert_eq!(resumed[0].id, events[3].id);
+    events
+}
 
-    let record = wait_terminal(&server.url(&format!("/experiments/{id}"))).await;
-    assert_eq!(record["status"], "succeeded");
-    assert_eq!(record["progress"], 1.0);
-    // The frames are a dataset of their own, linked from the run.
-    let dataset = record["dataset_id"]
-        .as_str()
-        .expect("the run names its dataset");
-    let ds: Value = c
-        .get(server.url(&format!("/datasets/{dataset}")))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
-    assert_eq!(ds["source"], format!("experiment:{id}"));
-
-    // Results: a row per run and scheme, the commanded move recovered (0.5 mm at 6.5 px/mm
-    // reduced = 3.25 px per step, turned by the bench's 6.15 mrad stage misalignment).
-    let results: Value = c
-        .get(server.url(&format!("/experiments/{id}/results")))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+/// Run `id`'s downloads: the results (a row per run and scheme, the commanded move recovered:
+/// 0.5 mm at 6.5 px/mm reduced = 3.25 px per step, turned by the bench's 6.15 mrad stage
+/// misalignment), their CSV, a frame as a 16-bit TIFF (saved in `tmp` to be read) and a plot.
+async fn check_the_downloads(server: &TestServer, id: &str, tmp: &std::path::Path) {
+    let results: Value = get_json(&server.url(&format!("/experiments/{id}/results"))).await;
     let rows = results["rows"].as_array().unwrap();
     assert_eq!(rows.len(), 2 * 3);
     for r in rows {
@@ -106,35 +80,24 @@ async fn a_whole_experiment_over_http() {
         let u = r["u"]["mean"].as_f64().unwrap();
         assert!((u - 3.25 * k * 0.00615f64.cos()).abs() < 0.02, "{r}");
     }
-    let csv = c
-        .get(server.url(&format!("/experiments/{id}/results.csv")))
-        .send()
-        .await
-        .unwrap();
+    let csv = get(&server.url(&format!("/experiments/{id}/results.csv"))).await;
     assert!(csv.headers()["content-type"]
         .to_str()
         .unwrap()
         .starts_with("text/csv"));
     assert_eq!(csv.text().await.unwrap().lines().count(), 1 + 6);
-    let tiff = c
-        .get(server.url(&format!("/experiments/{id}/frames/a_ref.tif")))
-        .send()
-        .await
-        .unwrap();
+    let tiff = get(&server.url(&format!("/experiments/{id}/frames/a_ref.tif"))).await;
     assert_eq!(tiff.headers()["content-type"], "image/tiff");
     let bytes = tiff.bytes().await.unwrap();
-    let path = tmp.path().join("downloaded.tif");
+    let path = tmp.join("downloaded.tif");
     std::fs::write(&path, &bytes).unwrap();
     let (img, info) = ffdic::image::read_tiff(&path).unwrap();
     assert_eq!(
         (img.width(), img.height(), info.bit_depth),
         (daemon::WIDTH_PX, daemon::HEIGHT_PX, 16)
     );
-    let svg = c
-        .get(server.url(&format!("/experiments/{id}/plots/figure5_u.svg")))
-        .send()
+    let svg = get(&server.url(&format!("/experiments/{id}/plots/figure5_u.svg")))
         .await
-        .unwrap()
         .text()
         .await
         .unwrap();
@@ -143,137 +106,88 @@ async fn a_whole_experiment_over_http() {
         "{}",
         &svg[..40]
     );
+}
 
-    // The run folder and the index agree; the frames are a dataset of their own.
-    let folder = tmp.path().join("runs").join(&id);
+/// The run folder under `data` and the index agree on run `id` (its `record`, its `events`
+/// logged, its frames); the frames are a dataset of their own.
+async fn check_the_run_folder_agrees_with_the_index(
+    server: &TestServer,
+    data: &std::path::Path,
+    id: &str,
+    record: &Value,
+    events: usize,
+) {
+    let folder = data.join("runs").join(id);
     let on_disk: Value =
         serde_json::from_slice(&std::fs::read(folder.join("run.json")).unwrap()).unwrap();
-    assert_eq!(on_disk, record);
-    let listed: Vec<Value> = c
-        .get(server.url("/experiments?status=succeeded"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    assert_eq!(&on_disk, record);
+    let listed: Vec<Value> = get_json(&server.url("/experiments?status=succeeded")).await;
     assert_eq!(listed, vec![record.clone()]);
     let log = std::fs::read_to_string(folder.join("events.jsonl")).unwrap();
-    assert_eq!(log.lines().count(), events.len());
+    assert_eq!(log.lines().count(), events);
     let manifest = ffdic::dataset::Manifest::read(&folder.join("frames")).unwrap();
     assert_eq!(manifest.runs.len(), 2);
-    let datasets: Vec<Value> = c
-        .get(server.url("/datasets"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let datasets: Vec<Value> = get_json(&server.url("/datasets")).await;
     assert_eq!(datasets.len(), 1);
     assert_eq!(datasets[0]["source"], format!("experiment:{id}"));
-    server.stop().await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn cancel_queue_idempotency_and_a_held_bench() {
+async fn a_whole_experiment_over_http() {
     let tmp = tempfile::tempdir().unwrap();
     let server = TestServer::start(small_config(tmp.path())).await;
-    let c = client();
+    let id = start_a_two_move_experiment(&server).await;
+    let events = check_the_events_and_their_resumption(&server, &id).await;
 
-    // Two at once: the second queues behind the first; both finish.
-    let post = |body: Value, key: Option<&str>| {
-        let mut r = c.post(server.url("/experiments")).json(&body);
-        if let Some(k) = key {
-            r = r.header("Idempotency-Key", k);
-        }
-        r.send()
-    };
-    let first: Value = post(small_request(6), Some("k-1"))
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
-    let second: Value = post(small_request(1), None)
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
-    let first_url = server.url(&format!("/experiments/{}", first["id"].as_str().unwrap()));
-    let second_url = server.url(&format!("/experiments/{}", second["id"].as_str().unwrap()));
-    wait_until(&first_url, |r| r["status"] == "running").await;
-    let s: Value = c
-        .get(&second_url)
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
-    assert_eq!(s["status"], "queued", "one experiment at a time");
+    let record = wait_terminal(&server.url(&format!("/experiments/{id}"))).await;
+    assert_eq!(record["status"], "succeeded");
+    assert_eq!(record["progress"], 1.0);
+    // The frames are a dataset of their own, linked from the run.
+    let dataset = record["dataset_id"]
+        .as_str()
+        .expect("the run names its dataset");
+    let ds: Value = get_json(&server.url(&format!("/datasets/{dataset}"))).await;
+    assert_eq!(ds["source"], format!("experiment:{id}"));
 
-    // The same Idempotency-Key gives the same experiment, and queues nothing new.
-    let again = post(small_request(6), Some("k-1")).await.unwrap();
-    assert_eq!(again.status(), 200);
-    let again: Value = again.json().await.unwrap();
-    assert_eq!(again["id"], first["id"]);
+    check_the_downloads(&server, &id, tmp.path()).await;
+    check_the_run_folder_agrees_with_the_index(&server, tmp.path(), &id, &record, events.len())
+        .await;
+    server.stop().await;
+}
 
-    // Direct control while the experiment holds the bench: 409. A run is `running` a moment
-    // before its work takes the bench; once it reports progress it holds it.
-    wait_until(&first_url, |r| r["progress"].as_f64().unwrap_or(0.0) > 0.0).await;
-    let patch = c
+/// Posts `body` as an experiment, with an `Idempotency-Key` when `key` names one.
+async fn post_experiment(server: &TestServer, body: Value, key: Option<&str>) -> reqwest::Response {
+    let mut r = client().post(server.url("/experiments")).json(&body);
+    if let Some(k) = key {
+        r = r.header("Idempotency-Key", k);
+    }
+    r.send().await.unwrap()
+}
+
+/// Asks the camera for a 5000 µs exposure directly (`PATCH /camera`), whatever the answer.
+async fn set_the_exposure_directly(server: &TestServer) -> reqwest::Response {
+    client()
         .patch(server.url("/camera"))
         .json(&json!({"exposure_us": 5000.0}))
         .send()
         .await
-        .unwrap();
+        .unwrap()
+}
+
+/// Direct control while an experiment holds the bench: 409, as problem+json.
+async fn check_a_held_bench_refuses_direct_control(server: &TestServer) {
+    let patch = set_the_exposure_directly(server).await;
     assert_eq!(patch.status(), 409);
     assert_eq!(patch.headers()["content-type"], "application/problem+json");
-    let mv = c
-        .post(server.url("/stage/moves"))
-        .json(&json!({"dx_mm": 1.0}))
-        .send()
-        .await
-        .unwrap();
+    let mv = post(&server.url("/stage/moves"), &json!({"dx_mm": 1.0})).await;
     assert_eq!(mv.status(), 409);
+}
 
-    // Cancel the first mid-run: it ends cancelled, the stage stands still, the second runs.
-    let cancel = c.post(format!("{first_url}/cancel")).send().await.unwrap();
-    assert_eq!(cancel.status(), 200);
-    let done = wait_terminal(&first_url).await;
-    assert_eq!(done["status"], "cancelled", "{done}");
-    let again = c.post(format!("{first_url}/cancel")).send().await.unwrap();
-    assert_eq!(again.status(), 409, "an ended run cannot be cancelled");
-    let second_done = wait_terminal(&second_url).await;
-    assert_eq!(second_done["status"], "succeeded", "{second_done}");
-    let s1: Value = c
-        .get(server.url("/stage"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
-    tokio::time::sleep(std::time::Duration::from_millis(200)).await;
-    let s2: Value = c
-        .get(server.url("/stage"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
-    assert_eq!(s1["position"], s2["position"], "the stage stands still");
-
-    // With the bench free again, direct control works and answers with what was set.
-    let patch = c
-        .patch(server.url("/camera"))
-        .json(&json!({"exposure_us": 5000.0}))
-        .send()
-        .await
-        .unwrap();
+/// With the bench free, direct control works and answers with what was set; snapshots come as
+/// PNG when asked, TIFF otherwise.
+async fn check_a_free_bench_obeys_direct_control(server: &TestServer) {
+    let c = client();
+    let patch = set_the_exposure_directly(server).await;
     assert_eq!(patch.status(), 200);
     let applied: Value = patch.json().await.unwrap();
     assert_eq!(applied["exposure_us"], 5000.0);
@@ -285,6 +199,57 @@ async fn cancel_queue_idempotency_and_a_held_bench() {
     assert_eq!(snap.headers()["content-type"], "image/png");
     let snap = c.post(server.url("/camera/snapshot")).send().await.unwrap();
     assert_eq!(snap.headers()["content-type"], "image/tiff");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn cancel_queue_idempotency_and_a_held_bench() {
+    let tmp = tempfile::tempdir().unwrap();
+    let server = TestServer::start(small_config(tmp.path())).await;
+    let c = client();
+
+    // Two at once: the second queues behind the first; both finish.
+    let first: Value = post_experiment(&server, small_request(6), Some("k-1"))
+        .await
+        .json()
+        .await
+        .unwrap();
+    let second: Value = post_experiment(&server, small_request(1), None)
+        .await
+        .json()
+        .await
+        .unwrap();
+    let first_url = server.url(&format!("/experiments/{}", first["id"].as_str().unwrap()));
+    let second_url = server.url(&format!("/experiments/{}", second["id"].as_str().unwrap()));
+    wait_until(&first_url, |r| r["status"] == "running").await;
+    let s: Value = get_json(&second_url).await;
+    assert_eq!(s["status"], "queued", "one experiment at a time");
+
+    // The same Idempotency-Key gives the same experiment, and queues nothing new.
+    let again = post_experiment(&server, small_request(6), Some("k-1")).await;
+    assert_eq!(again.status(), 200);
+    let again: Value = again.json().await.unwrap();
+    assert_eq!(again["id"], first["id"]);
+
+    // A run is `running` a moment before its work takes the bench; once it reports progress it
+    // holds it.
+    wait_until(&first_url, |r| r["progress"].as_f64().unwrap_or(0.0) > 0.0).await;
+    check_a_held_bench_refuses_direct_control(&server).await;
+
+    // Cancel the first mid-run: it ends cancelled, the stage stands still, the second runs.
+    let cancel = c.post(format!("{first_url}/cancel")).send().await.unwrap();
+    assert_eq!(cancel.status(), 200);
+    let done = wait_terminal(&first_url).await;
+    assert_eq!(done["status"], "cancelled", "{done}");
+    let again = c.post(format!("{first_url}/cancel")).send().await.unwrap();
+    assert_eq!(again.status(), 409, "an ended run cannot be cancelled");
+    let second_done = wait_terminal(&second_url).await;
+    assert_eq!(second_done["status"], "succeeded", "{second_done}");
+    let s1: Value = get_json(&server.url("/stage")).await;
+    tokio::time::sleep(std::time::Duration::from_millis(200)).await;
+    let s2: Value = get_json(&server.url("/stage")).await;
+    assert_eq!(s1["position"], s2["position"], "the stage stands still");
+
+    check_a_free_bench_obeys_direct_control(&server).await;
     server.stop().await;
 }
 
@@ -403,15 +368,9 @@ async fn repeats_pool_independent_captures_with_intervals_over_them() {
     assert!(new.abs() < 0.2, "a new layout: r = {new}");
 }
 
-/// The camera's own binning and decimation (issue 17): `GET /camera` lists the schemes the mock
-/// sensor offers; an experiment naming two of them captures every position in each mode beside
-/// the full-resolution frame, records the mode per run in the dataset, puts each scheme in the
-/// table beside the synthesised ones with its increase over the twin run's ff100, and leaves the
-/// camera at full resolution.
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn hardware_schemes_are_captured_beside_their_synthesised_twins() {
-    let tmp = tempfile::tempdir().unwrap();
-    let server = TestServer::start(small_config(tmp.path())).await;
+/// `GET /camera` lists the schemes the mock sensor offers, each with the preset it stands for,
+/// binning in the digital domain.
+async fn check_the_offered_hardware_schemes(server: &TestServer) {
     let camera: Value = daemon::get_json(&server.url("/camera")).await;
     let offered: Vec<(&str, &str)> = camera["info"]["hardware_schemes"]
         .as_array()
@@ -436,6 +395,18 @@ async fn hardware_schemes_are_captured_beside_their_synthesised_twins() {
         camera["info"]["hardware_schemes"][0]["binning_domain"],
         "digital"
     );
+}
+
+/// The camera's own binning and decimation (issue 17): `GET /camera` lists the schemes the mock
+/// sensor offers; an experiment naming two of them captures every position in each mode beside
+/// the full-resolution frame, records the mode per run in the dataset, puts each scheme in the
+/// table beside the synthesised ones with its increase over the twin run's ff100, and leaves the
+/// camera at full resolution.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn hardware_schemes_are_captured_beside_their_synthesised_twins() {
+    let tmp = tempfile::tempdir().unwrap();
+    let server = TestServer::start(small_config(tmp.path())).await;
+    check_the_offered_hardware_schemes(&server).await;
 
     let mut request = small_request(2);
     request["schemes"] = json!(["ff100", "ff25", "hw:bin2x2-average", "HW:DEC2X2"]);

@@ -4,7 +4,7 @@
 
 use crate::common::daemon;
 
-use daemon::{client, small_config, wait_terminal, TestServer};
+use daemon::{client, get, get_json, post, small_config, wait_terminal, TestServer};
 use ffdic::dic::DicSettings;
 use ffdic::experiment::{simulate_dataset, ExperimentSpec, MoveSpec, PatternSpec};
 use ffdic::model::effects::{LensDistortion, SensorNoise, StageMisalignment};
@@ -123,48 +123,37 @@ async fn job_file(server: &TestServer, job: &Value, rel: &str) -> reqwest::Respo
     resp
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn compare_diagnose_add_the_winner_and_the_history_falls() {
-    let data = tempfile::tempdir().unwrap();
-    let frames = tempfile::tempdir().unwrap();
-    simulate(frames.path());
-    let server = TestServer::start(small_config(data.path())).await;
-    let dataset = upload(&server, frames.path()).await;
-    let id = dataset["id"].as_str().unwrap();
+/// Adds `toml` as a model (`POST /models`), whatever the answer.
+async fn add_model(server: &TestServer, toml: &str) -> reqwest::Response {
+    post(&server.url("/models"), &json!({ "toml": toml })).await
+}
 
-    // The models a comparison can name: the embedded ones, baseline first.
-    let models: Value = client()
-        .get(server.url("/models"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
-    assert_eq!(models[0]["name"], "baseline");
-    assert_eq!(models[0]["source"], "embedded");
-
-    let before = run_job(
-        &server,
+/// Compares dataset `id` with `model`: the job's record and its `results/comparison.json`.
+async fn compare(server: &TestServer, id: &str, model: &str) -> (Value, Value) {
+    let record = run_job(
+        server,
         &format!("/datasets/{id}/comparisons"),
-        &analysis("baseline"),
+        &analysis(model),
     )
     .await;
-    let cmp: Value = job_file(&server, &before, "results/comparison.json")
+    let comparison = job_file(server, &record, "results/comparison.json")
         .await
         .json()
         .await
         .unwrap();
-    let before_px = cmp["discrepancy_px"].as_f64().unwrap();
-    assert_eq!(cmp["runs"].as_array().unwrap().len(), 3);
-    let svgs: Vec<&str> = before["result_files"]
+    (record, comparison)
+}
+
+/// The comparison job `record` lists plots, and the first one served is an SVG.
+async fn check_first_plot_is_svg(server: &TestServer, record: &Value) {
+    let svgs: Vec<&str> = record["result_files"]
         .as_array()
         .unwrap()
         .iter()
         .filter_map(|f| f.as_str().filter(|f| f.starts_with("plots/")))
         .collect();
-    assert!(!svgs.is_empty(), "{before}");
-    let svg = job_file(&server, &before, svgs[0])
+    assert!(!svgs.is_empty(), "{record}");
+    let svg = job_file(server, record, svgs[0])
         .await
         .text()
         .await
@@ -173,34 +162,35 @@ async fn compare_diagnose_add_the_winner_and_the_history_falls() {
         svg.starts_with("<svg") || svg.starts_with("<?xml"),
         "{svgs:?}"
     );
+}
 
+/// Diagnoses dataset `id` against the baseline, checks the verdict names the bench's lens
+/// distortion and returns the winner's model (TOML).
+async fn diagnose_lens_distortion(server: &TestServer, id: &str) -> String {
     let diag = run_job(
-        &server,
+        server,
         &format!("/datasets/{id}/diagnoses"),
         &analysis("baseline"),
     )
     .await;
-    let d: Value = job_file(&server, &diag, "results/diagnosis.json")
+    let d: Value = job_file(server, &diag, "results/diagnosis.json")
         .await
         .json()
         .await
         .unwrap();
     assert_eq!(d["verdict"], "lens_distortion", "{d}");
-    let winner = job_file(&server, &diag, "results/winner-model.toml")
+    job_file(server, &diag, "results/winner-model.toml")
         .await
         .text()
         .await
-        .unwrap();
+        .unwrap()
+}
 
-    // One click: the winner becomes a model version; the same model twice is harmless, another
-    // model under its name is a conflict, and an embedded name is reserved.
-    let add = |toml: String| {
-        client()
-            .post(server.url("/models"))
-            .json(&json!({ "toml": toml }))
-            .send()
-    };
-    let resp = add(winner.clone()).await.unwrap();
+/// One click: the winner becomes a model version; the same model twice is harmless, another
+/// model under its name is a conflict, an embedded name is reserved, and a misspelt effect is
+/// refused by name. Returns the stored model's name.
+async fn add_the_winner(server: &TestServer, winner: &str) -> String {
+    let resp = add_model(server, winner).await;
     assert_eq!(resp.status(), 201);
     let added: Value = resp.json().await.unwrap();
     let name = added["name"].as_str().unwrap().to_string();
@@ -211,94 +201,92 @@ async fn compare_diagnose_add_the_winner_and_the_history_falls() {
             .contains(&json!("lens_distortion")),
         "{added}"
     );
-    assert_eq!(add(winner.clone()).await.unwrap().status(), 200);
+    assert_eq!(add_model(server, winner).await.status(), 200);
     assert_eq!(
-        add(format!("{winner}\n[effects.psf_blur]\nsigma_px = 0.5\n"))
-            .await
-            .unwrap()
-            .status(),
-        409
-    );
-    assert_eq!(
-        add(winner.replace(&name, "baseline"))
-            .await
-            .unwrap()
-            .status(),
-        409
-    );
-    let bad = add("name = \"x\"\n[effects.psf_blurr]\nsigma_px = 1\n".into())
+        add_model(
+            server,
+            &format!("{winner}\n[effects.psf_blur]\nsigma_px = 0.5\n")
+        )
         .await
-        .unwrap();
+        .status(),
+        409
+    );
+    assert_eq!(
+        add_model(server, &winner.replace(&name, "baseline"))
+            .await
+            .status(),
+        409
+    );
+    let bad = add_model(server, "name = \"x\"\n[effects.psf_blurr]\nsigma_px = 1\n").await;
     assert_eq!(bad.status(), 422);
     assert!(bad.text().await.unwrap().contains("psf_blurr"));
-    let detail: Value = client()
-        .get(server.url(&format!("/models/{name}")))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let detail: Value = get_json(&server.url(&format!("/models/{name}"))).await;
     assert_eq!(detail["source"], "stored");
     assert_eq!(detail["toml"], winner);
+    name
+}
 
-    let after = run_job(
-        &server,
-        &format!("/datasets/{id}/comparisons"),
-        &analysis(&name),
-    )
-    .await;
-    let cmp: Value = job_file(&server, &after, "results/comparison.json")
-        .await
-        .json()
-        .await
-        .unwrap();
-    let after_px = cmp["discrepancy_px"].as_f64().unwrap();
-    println!("discrepancy {before_px:.5} px with baseline, {after_px:.5} px with {name}");
-    assert!(after_px <= before_px / 3.0, "{before_px} → {after_px}");
-
-    let history: Value = client()
-        .get(server.url(&format!("/datasets/{id}/history")))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+/// Dataset `id`'s history: the baseline's comparison, then model `name`'s with a smaller
+/// discrepancy, both of the same manifest; and its chart is served as SVG.
+async fn check_history(server: &TestServer, id: &str, name: &str) {
+    let history: Value = get_json(&server.url(&format!("/datasets/{id}/history"))).await;
     let entries = history["entries"].as_array().unwrap();
     assert_eq!(entries.len(), 2, "{history}");
     assert_eq!(entries[0]["model"], "baseline");
-    assert_eq!(entries[1]["model"], name.as_str());
+    assert_eq!(entries[1]["model"], name);
     assert!(entries[1]["discrepancy_px"].as_f64() < entries[0]["discrepancy_px"].as_f64());
     // Both compared the same manifest: one content key, its run count.
     let manifest = entries[0]["manifest_version"].as_str().unwrap();
     assert_eq!(manifest.len(), 12, "{history}");
     assert_eq!(entries[1]["manifest_version"], manifest);
     assert_eq!(entries[0]["manifest_runs"], 3, "{history}");
-    let chart = client()
-        .get(server.url(&format!("/datasets/{id}/history.svg")))
-        .send()
-        .await
-        .unwrap();
+    let chart = get(&server.url(&format!("/datasets/{id}/history.svg"))).await;
     assert_eq!(chart.headers()["content-type"], "image/svg+xml");
+}
 
-    // A model that does not exist, and a dataset that does not: named problems, nothing queued.
-    let resp = client()
-        .post(server.url(&format!("/datasets/{id}/comparisons")))
-        .json(&json!({"model": "nope"}))
-        .send()
-        .await
-        .unwrap();
+/// A model that does not exist, and a dataset that does not: named problems, nothing queued.
+async fn check_unknown_model_and_dataset_refused(server: &TestServer, id: &str) {
+    let resp = post(
+        &server.url(&format!("/datasets/{id}/comparisons")),
+        &json!({"model": "nope"}),
+    )
+    .await;
     assert_eq!(resp.status(), 422);
     let problem: Value = resp.json().await.unwrap();
     assert_eq!(problem["field"], "model", "{problem}");
-    let resp = client()
-        .post(server.url("/datasets/ds-nope/diagnoses"))
-        .json(&json!({}))
-        .send()
-        .await
-        .unwrap();
+    let resp = post(&server.url("/datasets/ds-nope/diagnoses"), &json!({})).await;
     assert_eq!(resp.status(), 404);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn compare_diagnose_add_the_winner_and_the_history_falls() {
+    let data = tempfile::tempdir().unwrap();
+    let frames = tempfile::tempdir().unwrap();
+    simulate(frames.path());
+    let server = TestServer::start(small_config(data.path())).await;
+    let dataset = upload(&server, frames.path()).await;
+    let id = dataset["id"].as_str().unwrap();
+
+    // The models a comparison can name: the embedded ones, baseline first.
+    let models: Value = get_json(&server.url("/models")).await;
+    assert_eq!(models[0]["name"], "baseline");
+    assert_eq!(models[0]["source"], "embedded");
+
+    let (before, cmp) = compare(&server, id, "baseline").await;
+    let before_px = cmp["discrepancy_px"].as_f64().unwrap();
+    assert_eq!(cmp["runs"].as_array().unwrap().len(), 3);
+    check_first_plot_is_svg(&server, &before).await;
+
+    let winner = diagnose_lens_distortion(&server, id).await;
+    let name = add_the_winner(&server, &winner).await;
+
+    let (_, cmp) = compare(&server, id, &name).await;
+    let after_px = cmp["discrepancy_px"].as_f64().unwrap();
+    println!("discrepancy {before_px:.5} px with baseline, {after_px:.5} px with {name}");
+    assert!(after_px <= before_px / 3.0, "{before_px} → {after_px}");
+
+    check_history(&server, id, &name).await;
+    check_unknown_model_and_dataset_refused(&server, id).await;
     server.stop().await;
 }
 
@@ -309,22 +297,17 @@ async fn compare_diagnose_add_the_winner_and_the_history_falls() {
 async fn a_model_with_a_user_effect_is_added_and_a_wrong_one_refused_naming_the_variable() {
     let data = tempfile::tempdir().unwrap();
     let server = TestServer::start(small_config(data.path())).await;
-    let add = |toml: &str| {
-        client()
-            .post(server.url("/models"))
-            .json(&json!({ "toml": toml }))
-            .send()
-    };
     let bow = "name = \"bowed\"\n[effects.user.bow]\nu = \"c * (x^2 + y^2) * tx\"\nv = \"c * (x^2 + y^2) * ty\"\n[effects.user.bow.params.c]\nunit = \"1/px^2\"\nmin = -1e-7\nmax = 1e-7\n";
-    let resp = add(bow).await.unwrap();
+    let resp = add_model(&server, bow).await;
     assert_eq!(resp.status(), 201);
     let added: Value = resp.json().await.unwrap();
     assert_eq!(added["effects"], json!(["user.bow (proposed)"]), "{added}");
-    let wrong = add(&bow
-        .replace("c * (x^2 + y^2) * ty", "k * y * ty")
-        .replace("bowed", "other"))
-    .await
-    .unwrap();
+    let wrong = add_model(
+        &server,
+        &bow.replace("c * (x^2 + y^2) * ty", "k * y * ty")
+            .replace("bowed", "other"),
+    )
+    .await;
     assert_eq!(wrong.status(), 422);
     let text = wrong.text().await.unwrap();
     assert!(

@@ -4,7 +4,7 @@
 
 use crate::common::daemon;
 
-use daemon::{client, small_config, wait_terminal, TestServer};
+use daemon::{client, get_json, small_config, wait_terminal, TestServer};
 use serde_json::{json, Value};
 use std::path::Path;
 
@@ -198,43 +198,46 @@ fn part(name: &str, bytes: Vec<u8>) -> reqwest::multipart::Part {
     reqwest::multipart::Part::bytes(bytes).file_name(name.to_string())
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn bad_uploads_land_nothing_and_a_good_one_is_analysed() {
-    let f = Fixture::start().await;
-    let (server, c) = (&f.server, &f.c);
-    let before = f.written();
-    // A path-traversal file name, a corrupt TIFF, a manifest naming a missing frame.
-    let manifest = upload_manifest(0.5);
-    let good_tiff = texture_tiff(0);
-    let post_form =
-        |form: reqwest::multipart::Form| c.post(server.url("/datasets")).multipart(form).send();
+/// Posts `form` to `/datasets` with the fixture's client.
+async fn post_dataset(f: &Fixture, form: reqwest::multipart::Form) -> reqwest::Response {
+    f.c.post(f.server.url("/datasets"))
+        .multipart(form)
+        .send()
+        .await
+        .unwrap()
+}
+
+/// A path-traversal file name, a corrupt TIFF, a manifest naming a missing frame, a manifest whose
+/// move contradicts its frames and a file the manifest does not name: each refused (422), built
+/// from the good upload's `manifest` and frame `good_tiff`.
+async fn check_bad_uploads_are_refused(f: &Fixture, manifest: &str, good_tiff: &[u8]) {
     let traversal = reqwest::multipart::Form::new()
         .part(
             "dataset.json",
-            part("dataset.json", manifest.clone().into_bytes()),
+            part("dataset.json", manifest.to_owned().into_bytes()),
         )
-        .part("x", part("../../evil.tif", good_tiff.clone()));
-    let p = problem(post_form(traversal).await.unwrap(), 422).await;
+        .part("x", part("../../evil.tif", good_tiff.to_vec()));
+    let p = problem(post_dataset(f, traversal).await, 422).await;
     assert_eq!(p["field"], "file");
     let corrupt = reqwest::multipart::Form::new()
         .part(
             "dataset.json",
-            part("dataset.json", manifest.clone().into_bytes()),
+            part("dataset.json", manifest.to_owned().into_bytes()),
         )
-        .part("ref.tif", part("ref.tif", good_tiff.clone()))
+        .part("ref.tif", part("ref.tif", good_tiff.to_vec()))
         .part(
             "def.tif",
             part("def.tif", good_tiff[..good_tiff.len() / 2].to_vec()),
         );
-    let p = problem(post_form(corrupt).await.unwrap(), 422).await;
+    let p = problem(post_dataset(f, corrupt).await, 422).await;
     assert!(p["detail"].as_str().unwrap().contains("def.tif"), "{p}");
     let missing = reqwest::multipart::Form::new()
         .part(
             "dataset.json",
-            part("dataset.json", manifest.clone().into_bytes()),
+            part("dataset.json", manifest.to_owned().into_bytes()),
         )
-        .part("ref.tif", part("ref.tif", good_tiff.clone()));
-    problem(post_form(missing).await.unwrap(), 422).await;
+        .part("ref.tif", part("ref.tif", good_tiff.to_vec()));
+    problem(post_dataset(f, missing).await, 422).await;
     // Issue 12: a manifest whose move contradicts its frames (they moved 20 px = 1.5 mm, it says
     // 0.001 mm) is refused with the measured figure; so is a file the manifest does not name.
     let mislabelled = upload_manifest(0.001);
@@ -243,35 +246,33 @@ async fn bad_uploads_land_nothing_and_a_good_one_is_analysed() {
             "dataset.json",
             part("dataset.json", mislabelled.into_bytes()),
         )
-        .part("ref.tif", part("ref.tif", good_tiff.clone()))
+        .part("ref.tif", part("ref.tif", good_tiff.to_vec()))
         .part("def.tif", part("def.tif", texture_tiff(20)));
-    let p = problem(post_form(form).await.unwrap(), 422).await;
+    let p = problem(post_dataset(f, form).await, 422).await;
     assert_eq!(p["field"], "runs[r1].stage", "{p}");
     assert!(p["detail"].as_str().unwrap().contains("20.0 px"), "{p}");
     let form = reqwest::multipart::Form::new()
         .part(
             "dataset.json",
-            part("dataset.json", manifest.clone().into_bytes()),
+            part("dataset.json", manifest.to_owned().into_bytes()),
         )
-        .part("ref.tif", part("ref.tif", good_tiff.clone()))
-        .part("def.tif", part("def.tif", good_tiff.clone()))
+        .part("ref.tif", part("ref.tif", good_tiff.to_vec()))
+        .part("def.tif", part("def.tif", good_tiff.to_vec()))
         .part("notes.txt", part("notes.txt", b"hello".to_vec()));
-    let p = problem(post_form(form).await.unwrap(), 422).await;
+    let p = problem(post_dataset(f, form).await, 422).await;
     assert!(p["detail"].as_str().unwrap().contains("notes.txt"), "{p}");
-    assert!(!f.tmp.path().join("evil.tif").exists());
-    assert_eq!(f.written(), before, "nothing written");
+}
 
-    // …and the server keeps serving: a good upload lands, and its analysis runs as a job.
+/// A good upload (`manifest` and `good_tiff` as both frames) lands, and its analysis runs as a
+/// job: no motion between identical frames, its files out of reach of a traversal, and the
+/// daemon healthy.
+async fn check_a_good_upload_is_analysed(f: &Fixture, manifest: String, good_tiff: Vec<u8>) {
+    let (server, c) = (&f.server, &f.c);
     let good = reqwest::multipart::Form::new()
         .part("dataset.json", part("dataset.json", manifest.into_bytes()))
         .part("ref.tif", part("ref.tif", good_tiff.clone()))
         .part("def.tif", part("def.tif", good_tiff));
-    let r = c
-        .post(server.url("/datasets"))
-        .multipart(good)
-        .send()
-        .await
-        .unwrap();
+    let r = post_dataset(f, good).await;
     assert_eq!(r.status(), 201);
     let ds: Value = r.json().await.unwrap();
     let ds_id = ds["id"].as_str().unwrap();
@@ -312,6 +313,20 @@ async fn bad_uploads_land_nothing_and_a_good_one_is_analysed() {
         c.get(server.url("/health")).send().await.unwrap().status(),
         200
     );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_uploads_land_nothing_and_a_good_one_is_analysed() {
+    let f = Fixture::start().await;
+    let before = f.written();
+    let manifest = upload_manifest(0.5);
+    let good_tiff = texture_tiff(0);
+    check_bad_uploads_are_refused(&f, &manifest, &good_tiff).await;
+    assert!(!f.tmp.path().join("evil.tif").exists());
+    assert_eq!(f.written(), before, "nothing written");
+
+    // …and the server keeps serving: a good upload lands, and its analysis runs as a job.
+    check_a_good_upload_is_analysed(&f, manifest, good_tiff).await;
     f.server.stop().await;
 }
 
@@ -606,29 +621,20 @@ async fn requests_that_killed_the_daemon_are_refused_at_the_door() {
         405,
     )
     .await;
-    let health: Value = c
-        .get(server.url("/health"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    check_the_daemon_answers_with_nothing_queued(&server).await;
+    server.stop().await;
+}
+
+/// After the refusals the daemon answers, healthy, and no experiment was queued.
+async fn check_the_daemon_answers_with_nothing_queued(server: &TestServer) {
+    let health: Value = get_json(&server.url("/health")).await;
     assert_eq!(health["status"], "ok", "{health}");
-    let runs: Value = c
-        .get(server.url("/experiments"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let runs: Value = get_json(&server.url("/experiments")).await;
     assert_eq!(
         runs.as_array().map(Vec::len),
         Some(0),
         "nothing queued: {runs}"
     );
-    server.stop().await;
 }
 
 /// Issue 12: `datasets_quota_bytes` holds: an upload that would pass it is refused (507) with the

@@ -54,6 +54,36 @@ fn cli_map_csv(spec: &Value, dir: &Path) -> String {
     std::fs::read_to_string(sweep.join("map.csv")).unwrap()
 }
 
+/// Every figure sweep `id`'s `map` names is served as SVG; the bias plots exist (two sub-pixel
+/// positions), and the heat map marks the paper's prints.
+async fn check_every_figure_is_served(server: &TestServer, id: &str, map: &Value) {
+    let figures: Vec<&str> = map["figures"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f.as_str().unwrap())
+        .collect();
+    assert!(figures.contains(&"map_u_std_px_0.svg"), "{figures:?}");
+    assert!(
+        figures.iter().any(|f| f.starts_with("bias_u_ff25_")),
+        "{figures:?}"
+    );
+    for name in &figures {
+        let r = get(&server.url(&format!("/sweeps/{id}/plots/{name}"))).await;
+        assert_eq!(r.status(), 200, "{name}");
+        assert_eq!(r.headers()["content-type"], "image/svg+xml");
+        assert!(r.text().await.unwrap().starts_with("<svg"));
+    }
+    // The paper's b (3.1 px) lies between the smoke map's 2 and 4 px prints, a (6.5 px) between
+    // 4 and 7: both marked at the three paper schemes.
+    let heat = get(&server.url(&format!("/sweeps/{id}/plots/map_u_std_px_0.svg")))
+        .await
+        .text()
+        .await
+        .unwrap();
+    assert_eq!(heat.matches(r#"class="marker""#).count(), 6);
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_sweep_through_the_daemon_maps_as_the_cli_does() {
     let _heavy = HEAVY.lock().await;
@@ -123,32 +153,7 @@ async fn a_sweep_through_the_daemon_maps_as_the_cli_does() {
     let arrow = arrow.bytes().await.unwrap();
     assert!(arrow.starts_with(b"ARROW1") && arrow.ends_with(b"ARROW1"));
 
-    // Every figure the map names is served; the bias plots exist (two sub-pixel positions).
-    let figures: Vec<&str> = map["figures"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|f| f.as_str().unwrap())
-        .collect();
-    assert!(figures.contains(&"map_u_std_px_0.svg"), "{figures:?}");
-    assert!(
-        figures.iter().any(|f| f.starts_with("bias_u_ff25_")),
-        "{figures:?}"
-    );
-    for name in &figures {
-        let r = get(&server.url(&format!("/sweeps/{id}/plots/{name}"))).await;
-        assert_eq!(r.status(), 200, "{name}");
-        assert_eq!(r.headers()["content-type"], "image/svg+xml");
-        assert!(r.text().await.unwrap().starts_with("<svg"));
-    }
-    // The paper's b (3.1 px) lies between the smoke map's 2 and 4 px prints, a (6.5 px) between
-    // 4 and 7: both marked at the three paper schemes.
-    let heat = get(&server.url(&format!("/sweeps/{id}/plots/map_u_std_px_0.svg")))
-        .await
-        .text()
-        .await
-        .unwrap();
-    assert_eq!(heat.matches(r#"class="marker""#).count(), 6);
+    check_every_figure_is_served(&server, &id, &map).await;
 
     let listed: Vec<Value> = get_json(&server.url("/sweeps")).await;
     assert_eq!(listed.len(), 1);

@@ -13,8 +13,8 @@ use crate::common::folder_sink;
 use ffdic::bench::{BenchHandle, BenchHardware, BenchLimits, ModelScene};
 use ffdic::dic::{analyze, DicSettings};
 use ffdic::experiment::{
-    run_experiment, BenchGeometry, BenchTimeouts, ExperimentRequest, MoveSpec, PatternSpec,
-    SchemeSpec,
+    run_experiment, BenchGeometry, BenchTimeouts, ExperimentOutcome, ExperimentPlan,
+    ExperimentRequest, MoveSpec, PatternSpec, SchemeSpec,
 };
 use ffdic::image::{Image, Roi};
 use ffdic::model::{Camera as ModelCamera, ModelConfig, SpecklePattern};
@@ -434,22 +434,9 @@ fn killed_camera_is_a_disconnect_not_a_short_frame_list() {
     drop(fake);
 }
 
-/// Issue 17: a camera with SFNC decimation and an averaging binning mode (the simulator's
-/// description extended) offers the hardware schemes; an experiment naming two of them runs end
-/// to end over GigE Vision — every read-out applied and read back through the driver, frames of
-/// the binned and decimated size, rows beside their synthesised twins — and leaves the camera
-/// at full resolution.
-#[test]
-fn a_hardware_scheme_experiment_runs_through_gige_vision() {
-    if !isolated("a_hardware_scheme_experiment_runs_through_gige_vision") {
-        return;
-    }
-    let mock_bench = new_bench();
-    let mut stage = MockStage::new(mock_bench.clone(), 50.0, Duration::from_millis(5));
-    stage.home(Duration::from_secs(1)).unwrap();
-    let fake = FakeGvCamera::start_sfnc("FFDIC-HW", scene_fill(bench_scene(), mock_bench))
-        .expect("start the GigE Vision simulator with SFNC features");
-    let mut camera = AravisCamera::open(fake.address()).expect("open the camera by address");
+/// The camera offers the hardware schemes, and the driver sets decimation on it and reads it
+/// back: a frame of half the size each way, rendered. Leaves the camera at full resolution.
+fn check_decimation_is_applied_and_read_back(camera: &mut AravisCamera) {
     let info = camera.info().clone();
     assert!(info.hardware_binning && info.hardware_decimation);
     let names: Vec<String> = info
@@ -479,16 +466,11 @@ fn a_hardware_scheme_experiment_runs_through_gige_vision() {
         frame.mean()
     );
     camera.apply(&full_resolution).unwrap();
+}
 
-    let bench = BenchHandle::spawn(
-        BenchHardware {
-            camera: Box::new(camera),
-            stage: Some(Box::new(stage)),
-            targets: None,
-        },
-        Duration::from_secs(30),
-    );
-    let status = bench.status().unwrap();
+/// One move of pattern b in two full-resolution schemes and the two hardware schemes that are
+/// their twins, planned within the limits of the bench that offers `hardware_schemes`.
+fn hardware_scheme_plan(hardware_schemes: Vec<HardwareScheme>) -> ExperimentPlan {
     let limits = BenchLimits {
         scale_px_per_mm: SCALE_PX_PER_MM,
         target_field_mm: None,
@@ -496,7 +478,7 @@ fn a_hardware_scheme_experiment_runs_through_gige_vision() {
         travel_y_mm: Some((-5.0, 5.0)),
         stage_resolution_mm: None,
         exposure_us: (10.0, 1e6),
-        hardware_schemes: status.camera.info.hardware_schemes.clone(),
+        hardware_schemes,
     };
     let request = ExperimentRequest {
         name: "gige-hardware-schemes".into(),
@@ -519,40 +501,12 @@ fn a_hardware_scheme_experiment_runs_through_gige_vision() {
         },
         ..ExperimentRequest::default()
     };
-    let plan = request.plan(&limits).expect("a valid plan");
-    let dir = tempfile::tempdir().unwrap();
-    let sink = FolderSink::new(dir.path());
-    let lease = bench.hold("gige-hw").unwrap();
-    let outcome = run_experiment(
-        &plan,
-        &bench,
-        &lease,
-        BenchGeometry::scale(SCALE_PX_PER_MM),
-        BenchTimeouts::default(),
-        &sink,
-    )
-    .unwrap_or_else(|e| panic!("{e}; events {:?}", sink.events.lock().unwrap()));
-    drop(lease);
+    request.plan(&limits).expect("a valid plan")
+}
 
-    // Frames in each read-out, each run with its capture mode and twin.
-    for (stem, size) in [
-        ("b_ref", (512, 384)),
-        ("hw-bin2x2-average_b_ref", (256, 192)),
-        ("hw-dec2x2_b_m1", (256, 192)),
-    ] {
-        let path = outcome.frames_dir.join(format!("{stem}.tif"));
-        let (image, _) = ffdic::image::read_tiff(&path).unwrap();
-        assert_eq!((image.width(), image.height()), size, "{stem}");
-    }
-    let runs = &outcome.manifest.runs;
-    let hw: Vec<_> = runs.iter().filter(|r| r.capture.is_some()).collect();
-    assert_eq!(hw.len(), 2, "{runs:?}");
-    for r in &hw {
-        let twin = r.twin_of.as_deref().expect("a twin");
-        assert!(runs.iter().any(|t| t.id == twin && t.capture.is_none()));
-    }
-    // Rows: every scheme of the one move, the hardware ones recovering the commanded move in
-    // their own pixels (half the full-resolution px) as well as their synthesised twins do.
+/// Rows: every scheme of the one move, the hardware ones recovering the commanded move in
+/// their own pixels (half the full-resolution px) as well as their synthesised twins do.
+fn check_hardware_rows_match_their_twins(outcome: &ExperimentOutcome) {
     let row = |scheme: &str| {
         outcome
             .rows
@@ -597,6 +551,68 @@ fn a_hardware_scheme_experiment_runs_through_gige_vision() {
             );
         }
     }
+}
+
+/// Issue 17: a camera with SFNC decimation and an averaging binning mode (the simulator's
+/// description extended) offers the hardware schemes; an experiment naming two of them runs end
+/// to end over GigE Vision — every read-out applied and read back through the driver, frames of
+/// the binned and decimated size, rows beside their synthesised twins — and leaves the camera
+/// at full resolution.
+#[test]
+fn a_hardware_scheme_experiment_runs_through_gige_vision() {
+    if !isolated("a_hardware_scheme_experiment_runs_through_gige_vision") {
+        return;
+    }
+    let mock_bench = new_bench();
+    let mut stage = MockStage::new(mock_bench.clone(), 50.0, Duration::from_millis(5));
+    stage.home(Duration::from_secs(1)).unwrap();
+    let fake = FakeGvCamera::start_sfnc("FFDIC-HW", scene_fill(bench_scene(), mock_bench))
+        .expect("start the GigE Vision simulator with SFNC features");
+    let mut camera = AravisCamera::open(fake.address()).expect("open the camera by address");
+    check_decimation_is_applied_and_read_back(&mut camera);
+
+    let bench = BenchHandle::spawn(
+        BenchHardware {
+            camera: Box::new(camera),
+            stage: Some(Box::new(stage)),
+            targets: None,
+        },
+        Duration::from_secs(30),
+    );
+    let status = bench.status().unwrap();
+    let plan = hardware_scheme_plan(status.camera.info.hardware_schemes.clone());
+    let dir = tempfile::tempdir().unwrap();
+    let sink = FolderSink::new(dir.path());
+    let lease = bench.hold("gige-hw").unwrap();
+    let outcome = run_experiment(
+        &plan,
+        &bench,
+        &lease,
+        BenchGeometry::scale(SCALE_PX_PER_MM),
+        BenchTimeouts::default(),
+        &sink,
+    )
+    .unwrap_or_else(|e| panic!("{e}; events {:?}", sink.events.lock().unwrap()));
+    drop(lease);
+
+    // Frames in each read-out, each run with its capture mode and twin.
+    for (stem, size) in [
+        ("b_ref", (512, 384)),
+        ("hw-bin2x2-average_b_ref", (256, 192)),
+        ("hw-dec2x2_b_m1", (256, 192)),
+    ] {
+        let path = outcome.frames_dir.join(format!("{stem}.tif"));
+        let (image, _) = ffdic::image::read_tiff(&path).unwrap();
+        assert_eq!((image.width(), image.height()), size, "{stem}");
+    }
+    let runs = &outcome.manifest.runs;
+    let hw: Vec<_> = runs.iter().filter(|r| r.capture.is_some()).collect();
+    assert_eq!(hw.len(), 2, "{runs:?}");
+    for r in &hw {
+        let twin = r.twin_of.as_deref().expect("a twin");
+        assert!(runs.iter().any(|t| t.id == twin && t.capture.is_none()));
+    }
+    check_hardware_rows_match_their_twins(&outcome);
     // Restored: the camera reads out at full resolution again.
     let after = bench.status().unwrap().camera.settings;
     assert_eq!((after.binning, after.decimation), ((1, 1), (1, 1)));

@@ -289,15 +289,10 @@ async fn rebound(
     (status, content_type, r.text().await.unwrap())
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_page_on_another_origin_cannot_drive_the_bench() {
-    require_tools();
-    let work = tempfile::tempdir().unwrap();
-    let server = TestServer::start(small_config(&work.path().join("data"))).await;
-
-    // Home the stage and park it at START_MM as a local client (no Origin, JSON) would: the mock
-    // stage refuses to move before it is homed, and the attacks must find a bench that would
-    // obey them.
+/// Homes the stage and parks it at `START_MM` as a local client (no Origin, JSON) would: the mock
+/// stage refuses to move before it is homed, and the attacks must find a bench that would obey
+/// them. Returns where the stage stands.
+async fn park_the_stage(server: &TestServer) -> (f64, f64) {
     let park = client()
         .post(server.url("/stage/moves"))
         .json(&json!({"home": true, "x_mm": START_MM.0, "y_mm": START_MM.1}))
@@ -310,13 +305,18 @@ async fn a_page_on_another_origin_cannot_drive_the_bench() {
         "parking the stage: {}",
         park.text().await.unwrap()
     );
-    let start = stage_position(&server).await;
+    let start = stage_position(server).await;
     assert!(
         moved_mm(start, START_MM) < 1e-6,
         "the stage is at {start:?}"
     );
+    start
+}
 
-    // ---- the hostile page in the browser ----
+/// Serves the hostile page and has `tests/browser/cross_origin.mjs` run its attacks in the
+/// browser. Returns the script's outcome and one line per attack that got through, with what it
+/// did, for the failure messages.
+async fn run_the_attacks_in_the_browser(server: &TestServer) -> (std::process::Output, String) {
     let (attacker_url, attacker) = serve_attacker(&server.base).await;
     let script = repo().join("tests/browser/cross_origin.mjs");
     let base = server.base.clone();
@@ -352,7 +352,6 @@ async fn a_page_on_another_origin_cannot_drive_the_bench() {
         .find_map(|l| l.strip_prefix("RESULT "))
         .map(|l| serde_json::from_str(l).unwrap())
         .expect("the browser script prints a RESULT line");
-    // One line per attack that got through, with what it did, for the failure messages.
     let succeeded: String = report["results"]
         .as_array()
         .expect("the RESULT line lists the attacks")
@@ -372,6 +371,48 @@ async fn a_page_on_another_origin_cannot_drive_the_bench() {
             )
         })
         .collect();
+    (browser, succeeded)
+}
+
+/// The protection must not lock out the daemon's own clients: `Host: localhost` reads, and a
+/// same-origin JSON move (what the dashboard sends) moves the stage.
+async fn check_the_daemons_own_clients_get_in(server: &TestServer) {
+    let port = server.base.rsplit(':').next().unwrap();
+    let local = client()
+        .get(server.url("/stage"))
+        .header(HOST, format!("localhost:{port}"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(local.status(), 200, "Host: localhost must be served");
+    // What the dashboard sends: same origin, JSON.
+    let own = client()
+        .post(server.url("/stage/moves"))
+        .header(ORIGIN, &server.base)
+        .header("Sec-Fetch-Site", "same-origin")
+        .json(&json!({"x_mm": -3.0, "y_mm": 2.0}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(
+        own.status(),
+        200,
+        "a same-origin JSON move: {}",
+        own.text().await.unwrap()
+    );
+    let end = stage_position(server).await;
+    assert!(moved_mm(end, (-3.0, 2.0)) < 1e-6, "the stage is at {end:?}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_page_on_another_origin_cannot_drive_the_bench() {
+    require_tools();
+    let work = tempfile::tempdir().unwrap();
+    let server = TestServer::start(small_config(&work.path().join("data"))).await;
+    let start = park_the_stage(&server).await;
+
+    // ---- the hostile page in the browser ----
+    let (browser, succeeded) = run_the_attacks_in_the_browser(&server).await;
     let after_browser = stage_position(&server).await;
     let runs = experiments(&server).await;
 
@@ -426,30 +467,6 @@ async fn a_page_on_another_origin_cannot_drive_the_bench() {
     }
 
     // ---- and the daemon's own clients still get in ----
-    let port = server.base.rsplit(':').next().unwrap();
-    let local = client()
-        .get(server.url("/stage"))
-        .header(HOST, format!("localhost:{port}"))
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(local.status(), 200, "Host: localhost must be served");
-    // What the dashboard sends: same origin, JSON.
-    let own = client()
-        .post(server.url("/stage/moves"))
-        .header(ORIGIN, &server.base)
-        .header("Sec-Fetch-Site", "same-origin")
-        .json(&json!({"x_mm": -3.0, "y_mm": 2.0}))
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(
-        own.status(),
-        200,
-        "a same-origin JSON move: {}",
-        own.text().await.unwrap()
-    );
-    let end = stage_position(&server).await;
-    assert!(moved_mm(end, (-3.0, 2.0)) < 1e-6, "the stage is at {end:?}");
+    check_the_daemons_own_clients_get_in(&server).await;
     server.stop().await;
 }

@@ -124,18 +124,9 @@ fn simulate(dir: &Path, seed: u64) -> PathBuf {
     out
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn dashboard_in_headless_chromium() {
-    require_tools();
-    let work = tempfile::tempdir().unwrap();
-    let dataset = simulate(work.path(), 11);
-    // The same bench again, another speckle layout and noise: the diagnosis finds the same effect
-    // with other fitted parameters, so its winner is another model under the same name.
-    let second = simulate(work.path(), 12);
-    let data = work.path().join("data");
-    let server = TestServer::start(small_config(&data)).await;
-
-    // The pages and assets are served before any browser is involved.
+/// The pages and assets are served before any browser is involved: the home page as HTML with a
+/// content security policy, every page and script, and 404 for an asset that does not exist.
+async fn check_the_pages_are_served(server: &TestServer) {
     let home = client()
         .get(format!("{}/", server.base))
         .send()
@@ -167,32 +158,10 @@ async fn dashboard_in_headless_chromium() {
         .await
         .unwrap();
     assert_eq!(missing.status(), 404);
+}
 
-    let artefacts = artefact_dir();
-    let script = repo().join("tests/browser/dashboard.mjs");
-    let base = server.base.clone();
-    let t = Instant::now();
-    let status = tokio::task::spawn_blocking(move || {
-        Command::new("node")
-            .arg(&script)
-            .arg(&base)
-            .arg(&dataset)
-            .arg(&artefacts)
-            .arg("lens_distortion")
-            .arg(&second)
-            .status()
-            .unwrap()
-    })
-    .await
-    .unwrap();
-    println!("browser script: {:.1} s", t.elapsed().as_secs_f64());
-    assert!(
-        status.success(),
-        "the dashboard failed in the browser ({status}); screenshots in {}",
-        artefact_dir().display()
-    );
-
-    // What the browser saw, checked once more through the API: the history fell.
+/// What the browser saw, checked once more through the API: the uploaded dataset's history fell.
+async fn check_the_history_fell(server: &TestServer) {
     let datasets: Vec<Value> = client()
         .get(server.url("/datasets"))
         .send()
@@ -225,6 +194,45 @@ async fn dashboard_in_headless_chromium() {
         .collect();
     assert!(d.len() >= 2, "{history}");
     assert!(d[d.len() - 1] < d[0], "{history}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn dashboard_in_headless_chromium() {
+    require_tools();
+    let work = tempfile::tempdir().unwrap();
+    let dataset = simulate(work.path(), 11);
+    // The same bench again, another speckle layout and noise: the diagnosis finds the same effect
+    // with other fitted parameters, so its winner is another model under the same name.
+    let second = simulate(work.path(), 12);
+    let data = work.path().join("data");
+    let server = TestServer::start(small_config(&data)).await;
+    check_the_pages_are_served(&server).await;
+
+    let artefacts = artefact_dir();
+    let script = repo().join("tests/browser/dashboard.mjs");
+    let base = server.base.clone();
+    let t = Instant::now();
+    let status = tokio::task::spawn_blocking(move || {
+        Command::new("node")
+            .arg(&script)
+            .arg(&base)
+            .arg(&dataset)
+            .arg(&artefacts)
+            .arg("lens_distortion")
+            .arg(&second)
+            .status()
+            .unwrap()
+    })
+    .await
+    .unwrap();
+    println!("browser script: {:.1} s", t.elapsed().as_secs_f64());
+    assert!(
+        status.success(),
+        "the dashboard failed in the browser ({status}); screenshots in {}",
+        artefact_dir().display()
+    );
+
+    check_the_history_fell(&server).await;
     for shot in [
         "1-home",
         "2-experiment",

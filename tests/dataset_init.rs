@@ -16,12 +16,23 @@ fn copy_sample3(to: &Path) {
     }
 }
 
-#[test]
-fn a_sample3_step_series_is_a_dataset_in_one_command_with_the_bias_of_every_step() {
-    let root = tempfile::tempdir().unwrap();
-    let dir = root.path().join("sample3");
-    copy_sample3(&dir);
-    let d = dir.to_str().unwrap();
+/// `ffdic compare --json` of the dataset in `d` at native resolution, with no history kept.
+fn compare_native_json(d: &str) -> serde_json::Value {
+    let out = ffdic_ok(&[
+        "compare",
+        d,
+        "--schemes",
+        "native",
+        "--json",
+        "--no-history",
+    ]);
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// `ffdic dataset init` makes the step series in `d` a dataset (ten runs of 0.1 px steps, the
+/// first frame a static repeat); once is enough: a second init does not replace the manifest
+/// unless asked.
+fn init_the_step_series(d: &str) {
     let init = ffdic_ok(&[
         "dataset",
         "init",
@@ -52,18 +63,11 @@ fn a_sample3_step_series_is_a_dataset_in_one_command_with_the_bias_of_every_step
     ]);
     assert!(!again.status.success());
     assert!(String::from_utf8_lossy(&again.stderr).contains("--force"));
+}
 
-    let out = ffdic_ok(&[
-        "compare",
-        d,
-        "--schemes",
-        "native",
-        "--json",
-        "--no-history",
-    ]);
-    let cmp: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    let runs = cmp["runs"].as_array().unwrap();
-    assert_eq!(runs.len(), 10);
+/// Each run of the comparison (`compare --json`'s `runs`) has the commanded step k·0.1 px and
+/// Sample 3's small bias and std against it, on both axes.
+fn check_the_accuracy_of_every_step(runs: &[serde_json::Value]) {
     for (k, r) in runs.iter().enumerate() {
         let a = &r["accuracy"];
         let step = 0.1 * (k + 1) as f64;
@@ -91,43 +95,38 @@ fn a_sample3_step_series_is_a_dataset_in_one_command_with_the_bias_of_every_step
             assert!(std > 0.0 && std < 0.01, "{}: std {std}", r["id"]);
         }
     }
-    // The text output carries the same table, and the plot draws it against the commanded
-    // move: a bias with its ±2 SE bar and a std per run and axis (the S-curve of a step series).
-    let plots = root.path().join("plots");
-    let text = ffdic(&[
-        "compare",
-        d,
-        "--schemes",
-        "native",
-        "--no-history",
-        "--out",
-        plots.to_str().unwrap(),
-    ]);
+}
+
+/// The plots in `plots` of a comparison of `runs` runs: the accuracy against the commanded move
+/// (a bias with its ±2 SE bar and a std per run and axis: the S-curve of a step series), the
+/// summary's small multiples of the discrepancy and its three parts (a bar per run and scheme,
+/// one scheme here, in each), and the residual profiles as one plot per scheme.
+fn check_the_plots(plots: &Path, runs: usize) {
     let svg = std::fs::read_to_string(plots.join("accuracy_vs_commanded.svg")).unwrap();
-    assert_eq!(svg.matches(r#"class="error-bar""#).count(), 2 * runs.len());
-    assert_eq!(svg.matches(r#"class="point""#).count(), 4 * runs.len());
+    assert_eq!(svg.matches(r#"class="error-bar""#).count(), 2 * runs);
+    assert_eq!(svg.matches(r#"class="point""#).count(), 4 * runs);
     assert!(svg.contains("bias of u") && svg.contains("std of v"));
-    // The figure that leads: small multiples of the discrepancy and its three parts, a bar per
-    // run and scheme (one scheme here) in each, and the residual profiles as one plot per
-    // scheme.
     let summary = std::fs::read_to_string(plots.join("summary.svg")).unwrap();
     assert_eq!(summary.matches(r#"<g class="panel""#).count(), 4);
     assert_eq!(
         summary.matches(r#"class="bar""#).count(),
-        4 * runs.len(),
+        4 * runs,
         "{summary}"
     );
     assert!(plots.join("residual_vs_x_native.svg").is_file());
-    let text = String::from_utf8_lossy(&text.stdout);
-    // Each discrepancy and part carries its standard error, or is a bound where the debiasing
-    // left zero: never a bare "0.00000" that reads as perfect agreement.
+}
+
+/// The text output of a comparison of `runs` runs carries the accuracy table; each discrepancy
+/// and part carries its standard error, or is a bound where the debiasing left zero: never a bare
+/// "0.00000" that reads as perfect agreement.
+fn check_the_text_table(text: &str, runs: usize) {
     let table: Vec<&str> = text
         .lines()
         .skip_while(|l| !l.starts_with("run "))
         .skip(2)
-        .take(runs.len())
+        .take(runs)
         .collect();
-    assert_eq!(table.len(), runs.len(), "{text}");
+    assert_eq!(table.len(), runs, "{text}");
     for line in &table {
         let bare_zero = line
             .match_indices("0.00000")
@@ -144,6 +143,33 @@ fn a_sample3_step_series_is_a_dataset_in_one_command_with_the_bias_of_every_step
             && text.contains("the stage's repeatability 2.00 µm"),
         "{text}"
     );
+}
+
+#[test]
+fn a_sample3_step_series_is_a_dataset_in_one_command_with_the_bias_of_every_step() {
+    let root = tempfile::tempdir().unwrap();
+    let dir = root.path().join("sample3");
+    copy_sample3(&dir);
+    let d = dir.to_str().unwrap();
+    init_the_step_series(d);
+
+    let cmp = compare_native_json(d);
+    let runs = cmp["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 10);
+    check_the_accuracy_of_every_step(runs);
+    // The text output carries the same table, and the plots draw it.
+    let plots = root.path().join("plots");
+    let text = ffdic(&[
+        "compare",
+        d,
+        "--schemes",
+        "native",
+        "--no-history",
+        "--out",
+        plots.to_str().unwrap(),
+    ]);
+    check_the_plots(&plots, runs.len());
+    check_the_text_table(&String::from_utf8_lossy(&text.stdout), runs.len());
 }
 
 /// The same frames as 8-bit grey PNG (re-encoded by the `png` crate from the values the `tiff`
@@ -184,15 +210,7 @@ fn a_step_series_in_png_frames_gives_the_numbers_of_its_tiffs() {
             "--step-px",
             "0.1,0.1",
         ]);
-        let out = ffdic_ok(&[
-            "compare",
-            d,
-            "--schemes",
-            "native",
-            "--json",
-            "--no-history",
-        ]);
-        serde_json::from_slice(&out.stdout).unwrap()
+        compare_native_json(d)
     };
     let (t, p) = (compare(&tiffs, "tif"), compare(&pngs, "png"));
     assert_eq!(p["runs"].as_array().unwrap().len(), 3);

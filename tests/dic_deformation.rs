@@ -199,8 +199,9 @@ fn blank(mut image: Image) -> Image {
     image
 }
 
-#[test]
-fn a_step_and_a_blank_region_mark_no_wrong_point_valid() {
+/// The reference and deformed frames of the step: the blank patch in both, the material below
+/// `STEP_Y` moved by `STEP_V` in the deformed one, each with its own noise.
+fn step_and_blank_frames() -> (Image, Image) {
     let layout = speckle(23);
     let reference = noisy(blank(render(&layout)), 5);
     let above = render(&layout);
@@ -211,7 +212,25 @@ fn a_step_and_a_blank_region_mark_no_wrong_point_valid() {
             deformed.set(c, r, below.get(c, r));
         }
     }
-    let deformed = noisy(deformed, 6);
+    (reference, noisy(deformed, 6))
+}
+
+/// Prints every valid point more than 0.5 px from `truth`, for the failure's diagnosis.
+fn print_wrong_valid_points(result: &DicResult, truth: impl Fn(f64, f64) -> (f64, f64)) {
+    for p in result.points.iter().filter(|p| p.status.is_valid()) {
+        let (u, v) = truth(p.x, p.y);
+        if (p.u - u).abs().max((p.v - v).abs()) > 0.5 {
+            println!(
+                "  wrong valid point at ({}, {}): u {:.3} v {:.3} zncc {:.3} std {:.4} {:.4}",
+                p.x, p.y, p.u, p.v, p.zncc, p.u_std_px, p.v_std_px
+            );
+        }
+    }
+}
+
+#[test]
+fn a_step_and_a_blank_region_mark_no_wrong_point_valid() {
+    let (reference, deformed) = step_and_blank_frames();
     for subset_px in [41, 21] {
         let s = DicSettings {
             subset_px,
@@ -228,15 +247,7 @@ fn a_step_and_a_blank_region_mark_no_wrong_point_valid() {
             }
         };
         let e = errors(&result, truth);
-        for p in result.points.iter().filter(|p| p.status.is_valid()) {
-            let (u, v) = truth(p.x, p.y);
-            if (p.u - u).abs().max((p.v - v).abs()) > 0.5 {
-                println!(
-                    "  wrong valid point at ({}, {}): u {:.3} v {:.3} zncc {:.3} std {:.4} {:.4}",
-                    p.x, p.y, p.u, p.v, p.zncc, p.u_std_px, p.v_std_px
-                );
-            }
-        }
+        print_wrong_valid_points(&result, truth);
         // Wholly blank after the pre-filter (σ 0.7 px reaches ≈ 3σ) and the cubic B-spline
         // (two samples either side): texture leaks that far into the patch.
         let half = s.half_subset() as f64 + 4.0;

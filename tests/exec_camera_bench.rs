@@ -11,14 +11,16 @@ use crate::common::independent;
 use folder_sink::FolderSink;
 
 use ffdic::bench::{BenchHandle, BenchLimits};
+use ffdic::diagnose::CameraCard;
 use ffdic::dic::DicSettings;
 use ffdic::experiment::{
-    run_experiment, BenchGeometry, BenchTimeouts, ExperimentRequest, MoveSpec, PatternSpec,
+    run_experiment, BenchGeometry, BenchTimeouts, ExperimentOutcome, ExperimentPlan,
+    ExperimentRequest, MoveSpec, PatternSpec,
 };
 use ffdic::service::job::CalibrationJob;
 use ffdic::service::{open_bench, DaemonConfig};
-use serde_json::json;
-use std::path::Path;
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 const SCALE_PX_PER_MM: f64 = 13.0;
@@ -54,11 +56,27 @@ fn grey(path: &Path) -> Vec<f32> {
     image.data().to_vec()
 }
 
-#[test]
-fn an_experiment_through_the_exec_camera_captures_the_generators_frames_bit_for_bit() {
-    let root = tempfile::tempdir().unwrap();
-    // The generator's spec: one print 'a', the experiment's moves, one static repeat.
-    let spec = json!({
+/// The independent generator's script.
+fn generator() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/independent/generate.py")
+}
+
+/// Writes `spec` to `dir/spec.json` and returns the exec camera's command on it: the generator
+/// rendering one frame per call.
+fn frame_command(spec: &Value, dir: &Path) -> Vec<String> {
+    let spec_path = dir.join("spec.json");
+    std::fs::write(&spec_path, spec.to_string()).unwrap();
+    vec![
+        independent::python().display().to_string(),
+        generator().display().to_string(),
+        spec_path.display().to_string(),
+        "--frame".into(),
+    ]
+}
+
+/// The generator's spec: one print 'a', the experiment's moves, one static repeat.
+fn two_moves_spec() -> Value {
+    json!({
         "name": "exec", "seed": 3301,
         "width": 640, "height": 540, "scale_px_per_mm": SCALE_PX_PER_MM, "bit_depth": 16,
         "white_level_dn": 30000.0, "read_noise_dn": 20.0,
@@ -68,23 +86,12 @@ fn an_experiment_through_the_exec_camera_captures_the_generators_frames_bit_for_
         "repeats": 1,
         "stage": {"constant_offset_px": [0.2, -0.1], "repeatability_um": 3.0},
         "effects": {"k1_norm": -0.002}
-    });
-    let spec_path = root.path().join("spec.json");
-    std::fs::write(&spec_path, spec.to_string()).unwrap();
-    let expected = root.path().join("dataset");
-    independent::generate(&spec, &expected);
+    })
+}
 
-    let generator = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/independent/generate.py");
-    let command = vec![
-        independent::python().display().to_string(),
-        generator.display().to_string(),
-        spec_path.display().to_string(),
-        "--frame".into(),
-    ];
-    let hardware = open_bench(&config(root.path(), &command)).unwrap();
-    let bench = BenchHandle::spawn(hardware, Duration::from_secs(30));
-    let status = bench.status().unwrap();
-    assert!(status.has_target_mount, "the exec camera's target changer");
+/// The experiment of `two_moves_spec` (its print, moves and static frame), planned for the exec
+/// bench.
+fn two_moves_plan() -> ExperimentPlan {
     let limits = BenchLimits {
         scale_px_per_mm: SCALE_PX_PER_MM,
         target_field_mm: None,
@@ -118,25 +125,13 @@ fn an_experiment_through_the_exec_camera_captures_the_generators_frames_bit_for_
         },
         ..ExperimentRequest::default()
     };
-    let plan = request.plan(&limits).expect("a valid plan");
-    let out = tempfile::tempdir().unwrap();
-    let sink = FolderSink::new(out.path());
-    let lease = bench.hold("exec").unwrap();
-    let outcome = run_experiment(
-        &plan,
-        &bench,
-        &lease,
-        BenchGeometry {
-            scale_px_per_mm: SCALE_PX_PER_MM,
-            working_distance_mm: Some(300.0),
-        },
-        BenchTimeouts::default(),
-        &sink,
-    )
-    .unwrap_or_else(|e| panic!("{e}; events {:?}", sink.events.lock().unwrap()));
-    drop(lease);
+    request.plan(&limits).expect("a valid plan")
+}
 
-    let generated: serde_json::Value =
+/// Every frame the experiment captured (reference, each run's, the static repeat) equals the
+/// generator's own frame for that position in the dataset at `expected`, bit for bit.
+fn check_the_frames_are_the_generators(outcome: &ExperimentOutcome, expected: &Path) {
+    let generated: Value =
         serde_json::from_str(&std::fs::read_to_string(expected.join("dataset.json")).unwrap())
             .unwrap();
     let file_at = |dx: f64, dy: f64| -> String {
@@ -150,10 +145,7 @@ fn an_experiment_through_the_exec_camera_captures_the_generators_frames_bit_for_
             .unwrap()
             .to_string()
     };
-    // The bench's stated working distance goes into the dataset it exports.
-    assert_eq!(outcome.manifest.working_distance_mm, Some(300.0));
     let runs = &outcome.manifest.runs;
-    assert_eq!(runs.len(), 2, "{runs:?}");
     let reference = outcome.frames_dir.join(&runs[0].reference);
     assert_eq!(
         grey(&reference),
@@ -171,6 +163,43 @@ fn an_experiment_through_the_exec_camera_captures_the_generators_frames_bit_for_
         grey(&expected.join("a_ref_r1.tif")),
         "the static repeat"
     );
+}
+
+#[test]
+fn an_experiment_through_the_exec_camera_captures_the_generators_frames_bit_for_bit() {
+    let root = tempfile::tempdir().unwrap();
+    let spec = two_moves_spec();
+    let command = frame_command(&spec, root.path());
+    let expected = root.path().join("dataset");
+    independent::generate(&spec, &expected);
+
+    let hardware = open_bench(&config(root.path(), &command)).unwrap();
+    let bench = BenchHandle::spawn(hardware, Duration::from_secs(30));
+    let status = bench.status().unwrap();
+    assert!(status.has_target_mount, "the exec camera's target changer");
+    let plan = two_moves_plan();
+    let out = tempfile::tempdir().unwrap();
+    let sink = FolderSink::new(out.path());
+    let lease = bench.hold("exec").unwrap();
+    let outcome = run_experiment(
+        &plan,
+        &bench,
+        &lease,
+        BenchGeometry {
+            scale_px_per_mm: SCALE_PX_PER_MM,
+            working_distance_mm: Some(300.0),
+        },
+        BenchTimeouts::default(),
+        &sink,
+    )
+    .unwrap_or_else(|e| panic!("{e}; events {:?}", sink.events.lock().unwrap()));
+    drop(lease);
+
+    // The bench's stated working distance goes into the dataset it exports.
+    assert_eq!(outcome.manifest.working_distance_mm, Some(300.0));
+    let runs = &outcome.manifest.runs;
+    assert_eq!(runs.len(), 2, "{runs:?}");
+    check_the_frames_are_the_generators(&outcome, &expected);
     // The DIC saw the commanded moves (with the generator's stage offsets: within a pixel).
     let ff100 = outcome
         .rows
@@ -238,10 +267,9 @@ fn the_generators_print_covers_the_stated_travel_in_both_modes() {
     std::fs::write(&spec_path, spec.to_string()).unwrap();
     let dataset = root.path().join("dataset");
     independent::generate(&spec, &dataset);
-    let generator = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/independent/generate.py");
     let frame = |x: &str, y: &str, out: &Path| {
         let status = std::process::Command::new(independent::python())
-            .arg(&generator)
+            .arg(generator())
             .arg(&spec_path)
             .arg("--frame")
             .envs([
@@ -340,25 +368,8 @@ fn near(what: &str, value: f64, se: f64, truth: f64) {
     );
 }
 
-#[test]
-fn a_calibration_through_the_exec_camera_finds_what_the_bench_hides() {
-    let root = tempfile::tempdir().unwrap();
-    let spec = hidden_bench(3303, plan_moves());
-    let spec_path = root.path().join("spec.json");
-    std::fs::write(&spec_path, spec.to_string()).unwrap();
-    let generator = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/independent/generate.py");
-    let command = vec![
-        independent::python().display().to_string(),
-        generator.display().to_string(),
-        spec_path.display().to_string(),
-        "--frame".into(),
-    ];
-    let data = root.path().join("data");
-    let mut config = config(&data, &command);
-    config.bench.working_distance_mm = Some(300.0);
-    let (service, _) =
-        ffdic::service::Service::start(config.clone(), open_bench(&config).unwrap()).unwrap();
-    service.jobs.keep_results();
+/// Runs a calibration with moves of 1 and 5 mm, three rounds, on `service` and returns its card.
+fn calibrate_on(service: &ffdic::service::Service) -> Box<CameraCard> {
     let plan = ffdic::experiment::CalibrationPlan {
         name: "hidden bench".into(),
         move_sizes_mm: vec![1.0, 5.0],
@@ -368,7 +379,7 @@ fn a_calibration_through_the_exec_camera_finds_what_the_bench_hides() {
         ..Default::default()
     };
     let (record, _) = service
-        .submit(CalibrationJob::plan(&service, plan).unwrap(), None)
+        .submit(CalibrationJob::plan(service, plan).unwrap(), None)
         .unwrap();
     let record = loop {
         let r = service.store.get(&record.id).unwrap();
@@ -388,7 +399,13 @@ fn a_calibration_through_the_exec_camera_finds_what_the_bench_hides() {
     else {
         panic!("a calibration's result");
     };
-    let text = ffdic::report::camera_card_text(&card);
+    card
+}
+
+/// The card finds what `hidden_bench` hides, each significant and near its truth (the tilt, the
+/// off-centre distortion with no k2, the stage's angle and 1 % scale error), and leaves a fifth
+/// of the baseline's discrepancy or less. `text` is the card as printed, for the messages.
+fn check_the_card_finds_the_hidden_effects(card: &CameraCard, text: &str) {
     let param = |effect: &str, name: &str| -> (f64, f64) {
         let g = card
             .geometry
@@ -443,30 +460,33 @@ fn a_calibration_through_the_exec_camera_finds_what_the_bench_hides() {
         card.card_px * 5.0 < card.baseline_px,
         "the card's discrepancy on its own runs:\n{text}"
     );
-    // The card's model is stored, and holds on a fresh run it never saw: other moves (diagonal),
-    // another print, the dataset stating the nominal scale as the bench does.
-    let stored = service
-        .model_config(&card.model.name)
-        .expect("the card's model stored");
-    service.stop(Duration::from_secs(5));
-    let fresh = root.path().join("fresh");
+}
+
+/// The card's `stored` model holds on a fresh run it never saw: other moves (diagonal), another
+/// print, the dataset stating the nominal scale as the bench does. Generated into `fresh`;
+/// `text` is the card as printed.
+fn check_the_card_holds_on_a_fresh_run(
+    fresh: &Path,
+    stored: &ffdic::model::ModelConfig,
+    text: &str,
+) {
     independent::generate(
         &hidden_bench(
             3304,
             json!([{"id": "d1", "dx_mm": 3.0, "dy_mm": 2.0}, {"id": "d2", "dx_mm": -2.0, "dy_mm": 3.5}]),
         ),
-        &fresh,
+        fresh,
     );
     let manifest_path = fresh.join("dataset.json");
-    let mut manifest: serde_json::Value =
+    let mut manifest: Value =
         serde_json::from_str(&std::fs::read_to_string(&manifest_path).unwrap()).unwrap();
     manifest["scale_px_per_mm"] = json!(SCALE_PX_PER_MM);
     std::fs::write(&manifest_path, manifest.to_string()).unwrap();
     let (options, baseline) = native_and_baseline();
     let against = |model: &ffdic::model::ModelConfig| {
-        ffdic::diagnose::compare(&fresh, model, &options, &|_, _| true).unwrap()
+        ffdic::diagnose::compare(fresh, model, &options, &|_, _| true).unwrap()
     };
-    let (before, after) = (against(&baseline), against(&stored));
+    let (before, after) = (against(&baseline), against(stored));
     assert!(
         after.discrepancy_px * 5.0 < before.discrepancy_px,
         "a fresh run: baseline {} ± {} px, card {} ± {} px\n{text}",
@@ -482,6 +502,29 @@ fn a_calibration_through_the_exec_camera_finds_what_the_bench_hides() {
         after.discrepancy_px,
         after.discrepancy_se_px
     );
+}
+
+#[test]
+fn a_calibration_through_the_exec_camera_finds_what_the_bench_hides() {
+    let root = tempfile::tempdir().unwrap();
+    let spec = hidden_bench(3303, plan_moves());
+    let command = frame_command(&spec, root.path());
+    let data = root.path().join("data");
+    let mut config = config(&data, &command);
+    config.bench.working_distance_mm = Some(300.0);
+    let (service, _) =
+        ffdic::service::Service::start(config.clone(), open_bench(&config).unwrap()).unwrap();
+    service.jobs.keep_results();
+    let card = calibrate_on(&service);
+    let text = ffdic::report::camera_card_text(&card);
+    check_the_card_finds_the_hidden_effects(&card, &text);
+    // The card's model is stored, and holds on a fresh run it never saw.
+    let stored = service
+        .model_config(&card.model.name)
+        .expect("the card's model stored");
+    service.stop(Duration::from_secs(5));
+    let fresh = root.path().join("fresh");
+    check_the_card_holds_on_a_fresh_run(&fresh, &stored, &text);
     analyze_with_the_card(&fresh, &stored, root.path());
 }
 

@@ -89,6 +89,44 @@ fn simulate_is_deterministic_for_a_seed_and_writes_a_dataset() {
     assert_eq!(frames(&a), fc, "--force wrote the seed-2 dataset over it");
 }
 
+/// The run folder `out`'s `results/study.csv`: its first row (a 1 mm move in x, 6.5 px) states
+/// the commanded move and the bias against it, the stage misaligned by `angle` rad.
+fn check_the_csv_has_the_commanded_move(out: &std::path::Path, angle: f64) {
+    let csv = std::fs::read_to_string(out.join("results/study.csv")).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let first_line: Vec<&str> = csv.lines().nth(1).unwrap().split(',').collect();
+    let column = |name: &str| -> f64 {
+        let i = header.iter().position(|h| *h == name).expect(name);
+        first_line[i].parse().unwrap()
+    };
+    assert_eq!((column("u_expected"), column("v_expected")), (6.5, 0.0));
+    assert_eq!(column("u_bias"), column("u_mean") - 6.5);
+    assert!(
+        (column("v_bias") - 6.5 * angle.sin()).abs() < 0.005,
+        "{csv}"
+    );
+}
+
+/// Then the model against the measurement (`reproduce --json`'s `model`): baseline comparison,
+/// diagnosis, the winner added and compared again. The fixture's bench (paper-bench-distortion)
+/// has shot noise the baseline lacks (it assumes a signal-independent noise), and the fixture
+/// has the static repeat frames that make it identifiable; its distortion is negligible on
+/// 640 px frames. Shot noise leaves the displacement discrepancy at its noise floor (so no fall
+/// is asserted here); the noise-against-mean statistics find it.
+fn check_the_model_story(story: &serde_json::Value) {
+    let baseline_px = story["baseline_px"].as_f64().unwrap();
+    assert!(baseline_px.is_finite() && baseline_px >= 0.0, "{story}");
+    assert_eq!(story["verdict"], "sensor_noise", "{story}");
+    let gain = story["params"]["gain"].as_f64().unwrap();
+    assert!(
+        (gain - 0.46).abs() <= 0.25 * 0.46,
+        "gain {gain} e-/DN, truth 0.46"
+    );
+    assert_eq!(story["jobs"].as_array().unwrap().len(), 3, "{story}");
+    assert!(story["after_px"].as_f64().unwrap().is_finite(), "{story}");
+    println!("reproduce on the fixture: {story}");
+}
+
 #[test]
 fn reproduce_json_has_a_row_per_run_and_scheme_and_recovers_the_motion() {
     let tmp = tempfile::tempdir().unwrap();
@@ -158,37 +196,8 @@ fn reproduce_json_has_a_row_per_run_and_scheme_and_recovers_the_motion() {
     ] {
         assert!(out.join(f).is_file(), "{f}");
     }
-    let csv = std::fs::read_to_string(out.join("results/study.csv")).unwrap();
-    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
-    let first_line: Vec<&str> = csv.lines().nth(1).unwrap().split(',').collect();
-    let column = |name: &str| -> f64 {
-        let i = header.iter().position(|h| *h == name).expect(name);
-        first_line[i].parse().unwrap()
-    };
-    assert_eq!((column("u_expected"), column("v_expected")), (6.5, 0.0));
-    assert_eq!(column("u_bias"), column("u_mean") - 6.5);
-    assert!(
-        (column("v_bias") - 6.5 * angle.sin()).abs() < 0.005,
-        "{csv}"
-    );
-    // Then the model against the measurement: baseline comparison, diagnosis, the winner added
-    // and compared again. The fixture's bench (paper-bench-distortion) has shot noise the
-    // baseline lacks (it assumes a signal-independent noise), and the fixture has the static
-    // repeat frames that make it identifiable; its distortion is negligible on 640 px frames.
-    // Shot noise leaves the displacement discrepancy at its noise floor (so no fall is asserted
-    // here); the noise-against-mean statistics find it.
-    let story = &doc["model"];
-    let baseline_px = story["baseline_px"].as_f64().unwrap();
-    assert!(baseline_px.is_finite() && baseline_px >= 0.0, "{story}");
-    assert_eq!(story["verdict"], "sensor_noise", "{story}");
-    let gain = story["params"]["gain"].as_f64().unwrap();
-    assert!(
-        (gain - 0.46).abs() <= 0.25 * 0.46,
-        "gain {gain} e-/DN, truth 0.46"
-    );
-    assert_eq!(story["jobs"].as_array().unwrap().len(), 3, "{story}");
-    assert!(story["after_px"].as_f64().unwrap().is_finite(), "{story}");
-    println!("reproduce on the fixture: {story}");
+    check_the_csv_has_the_commanded_move(&out, angle);
+    check_the_model_story(&doc["model"]);
     let svg = std::fs::read_to_string(out.join("plots/figure5_u.svg")).unwrap();
     // One bar per pattern and scheme.
     assert_eq!(svg.matches(r#"class="bar""#).count(), 2 * 3);
