@@ -224,3 +224,188 @@ pub fn compare_hardware(
         runs,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::test_fields::{frame_stats, manifest, synthetic_result};
+    use crate::dic::{DicSettings, PoiStatus};
+    use ffdic_hw::{AxisReduction, BinningDomain, BinningMode};
+
+    /// The camera's 2x2 averaging binning, or its 2x2 decimation.
+    fn two_by_two(binned: bool) -> HardwareScheme {
+        let (axis, name, preset, fill) = if binned {
+            let mode = BinningMode::Average;
+            (
+                AxisReduction::Bin { factor: 2, mode },
+                "hw:bin2x2-average",
+                "ff100",
+                1.0,
+            )
+        } else {
+            (
+                AxisReduction::Decimate { factor: 2 },
+                "hw:dec2x2",
+                "ff25",
+                0.25,
+            )
+        };
+        HardwareScheme {
+            name: name.into(),
+            x: axis,
+            y: axis,
+            binning_domain: binned.then_some(BinningDomain::Charge),
+            equivalent_preset: Some(preset.into()),
+            fill_factor: fill,
+        }
+    }
+
+    fn settings() -> DicSettings {
+        DicSettings {
+            subset_px: 21,
+            step_px: 20,
+            ..DicSettings::default()
+        }
+    }
+
+    /// A 640x540 captured frame pair's analysis: every point moved by `(u, v)`, noise 0.002 px.
+    fn analysis((u, v): (f64, f64), seed: u64) -> DicResult {
+        synthetic_result((640, 540), &settings(), |_, _| (u, v), 0.002, seed)
+    }
+
+    /// The run `twin` of `manifest` read out in `capture`, its frames analysed as `dic`.
+    fn captured(
+        manifest: &Manifest,
+        twin: usize,
+        capture: HardwareScheme,
+        dic: DicResult,
+    ) -> HardwareMeasurement {
+        let mut run = manifest.runs[twin].clone();
+        run.twin_of = Some(run.id.clone());
+        run.id = format!("{}-{}", run.id, capture.name);
+        run.capture = Some(capture.clone());
+        HardwareMeasurement {
+            run,
+            capture,
+            twin,
+            dic,
+            reference_stats: frame_stats(1000.0),
+            moved_stats: frame_stats(990.0),
+        }
+    }
+
+    fn model_side(dic: DicResult) -> HardwareModelSide {
+        HardwareModelSide {
+            dic,
+            reference_stats: frame_stats(1010.0),
+            moved_stats: frame_stats(1005.0),
+        }
+    }
+
+    #[test]
+    fn a_capture_mode_run_is_compared_after_its_twins_landing_moved() {
+        // Run r0's landing moved by (0.4, −0.2) full-resolution px since the model rendered its
+        // binned twin: (0.2, −0.1) px of the 2x2 frames. The measured frames show that and
+        // (0.03, 0.04) px more: a rigid part of 0.05 px. Run r1's decimated frames show exactly
+        // its twin's change, (−0.6, 0.2)/2: nothing.
+        let m = manifest(&[(5.0, 0.0), (0.0, 5.0)], &["a", "b"], false);
+        let measured = vec![
+            captured(&m, 0, two_by_two(true), analysis((1.23, 0.44), 1)),
+            captured(&m, 1, two_by_two(false), analysis((0.4, 0.2), 2)),
+        ];
+        let model = vec![
+            model_side(analysis((1.0, 0.5), 3)),
+            model_side(analysis((0.7, 0.1), 4)),
+        ];
+        let options = CompareOptions {
+            dic: settings(),
+            ..CompareOptions::default()
+        };
+        let labels = ["a".to_string(), "b".to_string()];
+        let shift = [[0.4, -0.2], [-0.6, 0.2]];
+        let h = compare_hardware(&measured, model, &labels, &[0, 1], &shift, &options).unwrap();
+        let [r0, r1] = &h.runs[..] else {
+            panic!("two runs: {:?}", h.runs.len())
+        };
+        assert_eq!(
+            (r0.id.as_str(), r0.twin.as_str(), r0.pattern.as_str()),
+            ("r0-hw:bin2x2-average", "r0", "a")
+        );
+        assert_eq!(
+            (r1.scheme.as_str(), r1.pattern.as_str()),
+            ("hw:dec2x2", "b")
+        );
+        assert_eq!(r0.points, measured[0].dic.points.len());
+        for (k, truth) in [0.03, 0.04].into_iter().enumerate() {
+            let (got, se) = (r0.mean_diff_px[k], r0.se.mean_diff_se_px[k]);
+            assert!(
+                (got - truth).abs() < 3.0 * se,
+                "{got} ± {se} against {truth}"
+            );
+        }
+        let (d, se) = (r0.parts.rigid_px, r0.se.rigid_se_px);
+        assert!((d - 0.05).abs() < 3.0 * se, "{d} ± {se}");
+        assert!(r0.parts.field_px < 3.0 * r0.se.field_se_px);
+        assert!(r1.discrepancy_px < 3.0 * r1.se.discrepancy_se_px, "{r1:?}");
+        // Both sides' noise is 0.002 px per component.
+        for side in [r0.measured_random_px, r0.model_random_px] {
+            assert!(
+                side.iter().all(|s| (s / 0.002 - 1.0).abs() < 0.1),
+                "{side:?}"
+            );
+        }
+        // Statistics of each frame, measured first.
+        assert_eq!(
+            (r0.reference[0].mean_dn, r0.reference[1].mean_dn),
+            (1000.0, 1010.0)
+        );
+        assert_eq!((r0.moved[0].mean_dn, r0.moved[1].mean_dn), (990.0, 1005.0));
+        // The total is the RMS over the runs: √(0.05²/2).
+        let total = (0.05f64.powi(2) / 2.0).sqrt();
+        let se = r0.se.discrepancy_se_px + r1.se.discrepancy_se_px;
+        assert!(
+            (h.discrepancy_px - total).abs() < 3.0 * se,
+            "{} ± {se}",
+            h.discrepancy_px
+        );
+    }
+
+    #[test]
+    fn an_unmeasurable_run_is_reported_and_left_out_of_the_total() {
+        // The model's analysis of the second run has no valid point: its discrepancy is NaN and
+        // the total is the first run's alone.
+        let m = manifest(&[(5.0, 0.0), (0.0, 5.0)], &["a"], false);
+        let mut lost = analysis((0.0, 0.0), 8);
+        lost.points
+            .iter_mut()
+            .for_each(|p| p.status = PoiStatus::LowCorrelation);
+        let measured = vec![
+            captured(&m, 0, two_by_two(true), analysis((0.13, 0.0), 5)),
+            captured(&m, 1, two_by_two(true), analysis((0.0, 0.0), 6)),
+        ];
+        let model = vec![model_side(analysis((0.0, 0.0), 7)), model_side(lost)];
+        let options = CompareOptions {
+            dic: settings(),
+            ..CompareOptions::default()
+        };
+        let labels = ["a".to_string()];
+        let h = compare_hardware(&measured, model, &labels, &[0, 0], &[], &options).unwrap();
+        assert!(h.runs[1].discrepancy_px.is_nan());
+        assert_eq!(h.runs[1].points, 0);
+        // No landing change known (no shifts given): the first run's 0.13 px is all rigid.
+        let (d, se) = (h.runs[0].discrepancy_px, h.runs[0].se.discrepancy_se_px);
+        assert!((d - 0.13).abs() < 3.0 * se, "{d} ± {se}");
+        assert!((h.discrepancy_px - d).abs() < 1e-15);
+    }
+
+    #[test]
+    fn without_capture_mode_runs_or_their_model_side_there_is_no_comparison() {
+        let m = manifest(&[(5.0, 0.0)], &["a"], false);
+        let options = CompareOptions::default();
+        let labels = ["a".to_string()];
+        assert!(compare_hardware(&[], Vec::new(), &labels, &[0], &[], &options).is_none());
+        // A comparison predicted without rendering has no model side.
+        let measured = [captured(&m, 0, two_by_two(false), analysis((0.0, 0.0), 9))];
+        assert!(compare_hardware(&measured, Vec::new(), &labels, &[0], &[], &options).is_none());
+    }
+}

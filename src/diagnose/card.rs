@@ -383,3 +383,233 @@ fn judge_card(
     let left = unexplained(&first, &meas.options.schemes, w0, se, infl);
     Ok((first, se, left))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::test_fields::{
+        candidate, comparison, diagnosis, field_runs, finding, lens_field, run_samples,
+    };
+    use crate::diagnose::verdict::Confounded;
+    use crate::reduce::Scheme;
+    use GeometricParam as P;
+
+    /// The moved frame turned by θ and magnified by 1 + s (p + t lands at R(θ)(1 + s)(p + t)),
+    /// seen through a lens of radial distortion k1 about the image centre: the field the baseline
+    /// lacks at p for the move t.
+    fn camera(theta: f64, s: f64, k1: f64) -> impl Fn((f64, f64), (f64, f64)) -> (f64, f64) + Copy {
+        move |p, t| {
+            let (x, y) = ((1.0 + s) * (p.0 + t.0), (1.0 + s) * (p.1 + t.1));
+            let (sin, cos) = theta.sin_cos();
+            let lens = lens_field(p, t, (0.0, 0.0), (k1, 0.0));
+            (
+                cos * x - sin * y - p.0 - t.0 + lens.0,
+                sin * x + cos * y - p.1 - t.1 + lens.1,
+            )
+        }
+    }
+
+    #[test]
+    fn the_joint_fit_finds_each_term_of_the_camera_beside_the_others() {
+        // Rotation −3e-5, scale 2e-5 and k1 2e-3 at once; moves of two sizes along x and y
+        // identify every term, and the ones the camera lacks (tilt, decentring) stay within
+        // three errors of zero.
+        let (theta, s, k1) = (-3e-5, 2e-5, 2e-3);
+        let moves = [(130.0, 0.0), (0.0, 130.0), (65.0, 0.0), (0.0, -65.0)];
+        let points = field_runs(&moves, camera(theta, s, k1), 0.01, 20);
+        let native = Scheme::parse("native").unwrap();
+        let samples = run_samples(&native, &moves, &points, 1e-4);
+        let observations = 2 * points.iter().map(Vec::len).sum::<usize>();
+        let (fit, left_out) = joint_fit(&samples, observations);
+        let fit = fit.unwrap();
+        assert!(left_out.is_empty(), "{left_out:?}");
+        assert_eq!(&fit.params[..JOINT_ORDER.len()], &JOINT_ORDER[..]);
+        for &p in &fit.params {
+            let truth = match p {
+                P::Rotation => theta,
+                P::Scale => s,
+                P::DistortionK1 => k1,
+                _ => 0.0,
+            };
+            within_3_errors(&fit, p, truth);
+        }
+    }
+
+    /// The fit's value of `p` lies within three of its standard errors of `truth`.
+    fn within_3_errors(fit: &GeometricFit, p: GeometricParam, truth: f64) {
+        let i = fit.params.iter().position(|q| *q == p).unwrap();
+        let (v, se) = (fit.values[i], fit.stderr[i]);
+        assert!(
+            (v - truth).abs() < 3.0 * se,
+            "{p:?} = {v} ± {se} against {truth}"
+        );
+    }
+
+    #[test]
+    fn one_move_along_x_cannot_tell_decentring_from_rotation_tilt_and_scale() {
+        // For t = (tx, 0) the decentring fields are affine: p1 gives (2y, 2x)·tx/r0, a shear,
+        // which rotation (−y, x) and the tilt's (−y·tx, 0) make up; p2 gives (6x, 2y)·tx/r0,
+        // which scale (x, y) and the tilt's (−2x·tx, −y·tx) make up. Both are named, not fitted.
+        let (theta, s) = (-3e-5, 2e-5);
+        let moves = [(130.0, 0.0), (130.0, 0.0)];
+        let points = field_runs(&moves, camera(theta, s, 0.0), 0.01, 20);
+        let native = Scheme::parse("native").unwrap();
+        let samples = run_samples(&native, &moves, &points, 1e-4);
+        let (fit, left_out) = joint_fit(&samples, 2 * 2 * points[0].len());
+        let named = |term: &str| {
+            format!("lens_distortion.{term}: not identifiable apart from the other terms with these runs")
+        };
+        assert_eq!(left_out, vec![named("p1"), named("p2")]);
+        let fit = fit.unwrap();
+        assert!(!fit.params.contains(&P::DistortionP1) && !fit.params.contains(&P::DistortionP2));
+        within_3_errors(&fit, P::Rotation, theta);
+        within_3_errors(&fit, P::Scale, s);
+    }
+
+    #[test]
+    fn a_centred_distortion_is_significant_when_k1_or_k2_passes_z_errors() {
+        let centred = |k1: (f64, f64), k2: Option<(f64, f64)>| CentredDistortion {
+            k1,
+            k2,
+            centre_px: [(60.0, 2.0), (-45.0, 2.0)],
+        };
+        // z = 3: k1 at 5 errors is significant, at 2 is not, unless k2 is (at 4).
+        let clear = centred_entry(&centred((1e-3, 2e-4), None), 3.0);
+        assert!(clear.significant);
+        assert_eq!(clear.effect, EffectId::LensDistortion);
+        assert_eq!(
+            clear.params,
+            BTreeMap::from([
+                ("k1".to_string(), 1e-3),
+                ("centre_dx_px".to_string(), 60.0),
+                ("centre_dy_px".to_string(), -45.0)
+            ])
+        );
+        assert_eq!(clear.stderr["centre_dy_px"], 2.0);
+        assert!(!centred_entry(&centred((1e-3, 5e-4), None), 3.0).significant);
+        let with_k2 = centred_entry(&centred((1e-3, 5e-4), Some((-4e-4, 1e-4))), 3.0);
+        assert!(with_k2.significant);
+        assert_eq!((with_k2.params["k2"], with_k2.stderr["k2"]), (-4e-4, 1e-4));
+    }
+
+    #[test]
+    fn the_imaging_entries_are_the_last_rounds_with_what_confounds_them() {
+        let before = comparison(Vec::new());
+        let first = diagnosis(
+            &before,
+            vec![candidate(
+                EffectId::PsfBlur,
+                &[("sigma_px", 1.5, 0.1)],
+                -30.0,
+                0.001,
+            )],
+            Some(EffectId::PsfBlur.into()),
+        );
+        let mut last = diagnosis(
+            &before,
+            vec![
+                candidate(
+                    EffectId::Rotation,
+                    &[("angle_rad", 1e-4, 1e-6)],
+                    -50.0,
+                    0.01,
+                ),
+                candidate(EffectId::PsfBlur, &[("sigma_px", 0.8, 0.05)], -20.0, 0.001),
+                candidate(EffectId::SensorNoise, &[("gain", 2.0, 0.1)], -12.0, 0.0),
+            ],
+            None,
+        );
+        last.confounded.push(Confounded {
+            effects: ["psf_blur".into(), "print".into()],
+            separate_with: "a characterised print".into(),
+            evidence: "design".into(),
+        });
+        let rounds = Rounds {
+            rounds: Vec::new(),
+            verdicts: vec![EffectId::PsfBlur.into()],
+            final_discrepancy_px: 0.0,
+            final_unexplained: finding(0.0, None),
+            final_model: ModelConfig::default(),
+            diagnoses: vec![first, last],
+        };
+        let entries = imaging_entries(&rounds);
+        let summary: Vec<(EffectId, f64, bool, Option<&str>)> = entries
+            .iter()
+            .map(|e| {
+                let value = e.params.values().next().copied().unwrap_or(f64::NAN);
+                (e.effect, value, e.identifiable, e.separate_with.as_deref())
+            })
+            .collect();
+        assert_eq!(
+            summary,
+            vec![
+                (EffectId::PsfBlur, 0.8, false, Some("a characterised print")),
+                (EffectId::SensorNoise, 2.0, true, None),
+            ]
+        );
+        assert_eq!(entries[0].stderr["sigma_px"], 0.05);
+        let none = Rounds {
+            diagnoses: Vec::new(),
+            ..rounds
+        };
+        assert!(imaging_entries(&none).is_empty());
+    }
+
+    #[test]
+    fn the_card_finds_its_significant_geometry_then_the_stages_numbers() {
+        let effect = |effect: EffectId, significant: bool| CardEffect {
+            effect,
+            params: BTreeMap::new(),
+            stderr: BTreeMap::new(),
+            derived: BTreeMap::new(),
+            notes: Vec::new(),
+            significant,
+        };
+        let stage = StageMap {
+            nominal_scale_px_per_mm: 26.0,
+            scale_x_px_per_mm: 26.5,
+            scale_x_se_px_per_mm: 0.01,
+            scale_y_px_per_mm: 26.0,
+            scale_y_se_px_per_mm: 0.01,
+            angle_rad: 5e-3,
+            angle_se_rad: 1e-4,
+            skew_rad: 0.0,
+            skew_se_rad: 1e-4,
+            residual_px: 0.05,
+            runs: 6,
+            significant: vec!["scale_x".into(), "angle".into()],
+        };
+        let card = CameraCard {
+            z_significant: 3.0,
+            false_alarm_rate: CARD_FALSE_ALARM_RATE,
+            geometry: vec![
+                effect(EffectId::Rotation, false),
+                effect(EffectId::Scale, true),
+                effect(EffectId::LensDistortion, true),
+            ],
+            not_identifiable: Vec::new(),
+            stage: Some(stage),
+            imaging: Vec::new(),
+            baseline_model: "baseline".into(),
+            baseline_px: 0.01,
+            baseline_se_px: 0.001,
+            card_px: 0.001,
+            card_se_px: 0.001,
+            unexplained: finding(0.001, None),
+            model: ModelConfig::default(),
+        };
+        assert_eq!(
+            card.found(),
+            vec!["scale", "lens_distortion", "stage scale_x", "stage angle"]
+        );
+        // Taking one geometric effect over changes that one alone.
+        let mut to = Effects::default();
+        let from = Effects {
+            rotation: Some(crate::model::effects::Rotation { angle_rad: 1e-4 }),
+            scale: Some(crate::model::effects::Scale { ds: 2e-4 }),
+            ..Effects::default()
+        };
+        take_geometric(&mut to, &from, Geometric::Scale);
+        assert_eq!((to.scale, to.rotation), (from.scale, None));
+    }
+}

@@ -194,3 +194,147 @@ pub fn card_geometry(
         r0,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::fit_geometric::fit_geometric;
+    use crate::diagnose::test_fields::{field_runs, half_diagonal, lens_field, run_samples};
+    use crate::reduce::Scheme;
+    use GeometricParam as P;
+
+    #[test]
+    fn the_field_is_taken_at_the_ideal_position_of_each_image_point() {
+        // k1 = −0.01 about (40, −30) px moves the frame's corners by some 16 px. Two fixed-point
+        // steps leave an error of order (3k1)²·16 px ≈ 0.015 px in the ideal position, which the
+        // field's gradient (≈ 6·k1·r·t/r0² ≈ 0.005) makes 1e-4 px; the field taken at the image
+        // position instead is off by 16 px times that gradient, some 0.08 px.
+        let (c, k, r0) = ((40.0, -30.0), (-0.01, 0.0), half_diagonal());
+        let mut worst_naive = 0.0f64;
+        for p in [
+            (1250.0, 1050.0),
+            (-1250.0, 1050.0),
+            (-900.0, -1000.0),
+            (300.0, -200.0),
+        ] {
+            for t in [(130.0, 0.0), (0.0, 130.0), (-65.0, 40.0)] {
+                let truth = lens_field(p, t, c, k);
+                let got = radial_difference(p, t, c, k, r0);
+                let err = (got.0 - truth.0).hypot(got.1 - truth.1);
+                assert!(err < 2e-4, "at {p:?} for {t:?}: {got:?} against {truth:?}");
+                let (a, b) = (
+                    radial((p.0 + t.0, p.1 + t.1), c, k, r0),
+                    radial(p, c, k, r0),
+                );
+                worst_naive = worst_naive.max((a.0 - b.0 - truth.0).hypot(a.1 - b.1 - truth.1));
+            }
+        }
+        assert!(worst_naive > 0.02, "{worst_naive}");
+    }
+
+    #[test]
+    fn a_distortion_centre_off_the_image_centre_is_found_by_its_own_fit() {
+        // k1 = 4e-3 about (60, −45) px, no k2; moves of two sizes along x and y, noise 0.01 px.
+        // The linear fit reads the centre as p1, p2; the card fits it.
+        let (c, k1) = ((60.0, -45.0), 4e-3);
+        let native = Scheme::parse("native").unwrap();
+        let moves = [(130.0, 0.0), (0.0, 130.0), (65.0, 0.0), (0.0, 65.0)];
+        let points = field_runs(&moves, |p, t| lens_field(p, t, c, (k1, 0.0)), 0.01, 0);
+        let samples = run_samples(&native, &moves, &points, 1e-4);
+        let linear = fit_geometric(
+            &samples,
+            &[P::DistortionK1, P::DistortionP1, P::DistortionP2],
+        )
+        .unwrap();
+        let observations = 2 * points.iter().map(Vec::len).sum::<usize>();
+        let g = card_geometry(&samples, linear, half_diagonal(), observations);
+        let centred = g.centred.as_ref().expect("k1 is far beyond its error");
+        assert!(g.linear.params.is_empty(), "no other term was fitted");
+        for (name, (v, se), truth) in [
+            ("k1", centred.k1, k1),
+            ("cx", centred.centre_px[0], c.0),
+            ("cy", centred.centre_px[1], c.1),
+        ] {
+            assert!(
+                (v - truth).abs() < 3.0 * se,
+                "{name} = {v} ± {se} against {truth}"
+            );
+            assert!(se < 0.02 * truth.abs(), "{name}: ± {se}");
+        }
+        assert_eq!(centred.k2, None, "no k2 in the lens, none paid its price");
+        // The card's field is the lens's, wherever the frame reaches.
+        for p in [(1200.0, 1000.0), (-1200.0, -1000.0), (0.0, 0.0)] {
+            let (got, truth) = (
+                g.displacement(p, (130.0, 0.0)),
+                lens_field(p, (130.0, 0.0), c, (k1, 0.0)),
+            );
+            assert!(
+                (got.0 - truth.0).hypot(got.1 - truth.1) < 2e-3,
+                "{got:?} against {truth:?}"
+            );
+        }
+    }
+
+    fn linear(params: Vec<GeometricParam>, values: Vec<f64>, stderr: Vec<f64>) -> GeometricFit {
+        GeometricFit {
+            params,
+            values,
+            stderr,
+            chi2_drop: 0.0,
+        }
+    }
+
+    #[test]
+    fn without_k1_beyond_two_errors_and_both_decentring_terms_the_linear_fit_stands() {
+        let r0 = half_diagonal();
+        // k1 alone (no p1, p2): no centre to fit.
+        let k1_only = linear(vec![P::DistortionK1], vec![4e-3], vec![1e-5]);
+        let g = card_geometry(&[], k1_only.clone(), r0, 1000);
+        assert_eq!((g.linear, g.centred), (k1_only, None));
+        // k1 at 1.9 standard errors: nothing to refit.
+        let weak = linear(
+            vec![
+                P::Rotation,
+                P::DistortionK1,
+                P::DistortionP1,
+                P::DistortionP2,
+            ],
+            vec![1e-4, 1.9e-5, 1e-6, -1e-6],
+            vec![1e-6, 1e-5, 1e-5, 1e-5],
+        );
+        let g = card_geometry(&[], weak.clone(), r0, 1000);
+        assert_eq!((g.linear, g.centred), (weak, None));
+        // A clear k1 with no field difference to fit it on: the linear fit, as it is.
+        let clear = linear(
+            vec![P::DistortionK1, P::DistortionP1, P::DistortionP2],
+            vec![4e-3, 1e-4, -1e-4],
+            vec![1e-5; 3],
+        );
+        assert_eq!(card_geometry(&[], clear, r0, 1000).centred, None);
+    }
+
+    #[test]
+    fn the_linear_terms_give_the_first_order_field_of_their_physics() {
+        // The moved frame turned by θ and magnified by 1 + s: p + t lands at R(θ)(1 + s)(p + t),
+        // so the field is that less p + t; first order in θ and s, the error of order θ·s·|p|.
+        let (theta, s): (f64, f64) = (1e-4, 2e-4);
+        let g = CardGeometry {
+            linear: linear(vec![P::Rotation, P::Scale], vec![theta, s], vec![1e-6; 2]),
+            centred: None,
+            r0: half_diagonal(),
+        };
+        for (p, t) in [
+            ((1200.0, -1000.0), (130.0, 0.0)),
+            ((-500.0, 800.0), (0.0, -65.0)),
+        ] {
+            let (x, y) = ((1.0 + s) * (p.0 + t.0), (1.0 + s) * (p.1 + t.1));
+            let (sin, cos) = theta.sin_cos();
+            let truth = (cos * x - sin * y - p.0 - t.0, sin * x + cos * y - p.1 - t.1);
+            let got = g.displacement(p, t);
+            assert!(
+                (got.0 - truth.0).hypot(got.1 - truth.1) < 1e-4,
+                "{got:?} against {truth:?}"
+            );
+        }
+    }
+}

@@ -358,3 +358,142 @@ fn confounded_pairs(
 
 /// What separates lens blur and pixel aperture from the print's own profile.
 pub const PRINT_SEPARATION: &str = "a characterised print (the dataset.json pattern's dot_spacing_mm and contrast, with profile \"gaussian\" and its dot_diameter_mm or a measured mtf, or profile \"disk\" and its dot_diameter_mm and edge_softness_mm), a second magnification, a through-focus pair, or a slanted-edge frame measured as in ISO 12233: the print's calibration to the frames absorbs whatever blur one magnification cannot attribute";
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::identifiability::{SEVERAL_SIZES, STEP_SERIES};
+    use crate::diagnose::test_fields::{candidate, finding, manifest};
+
+    #[test]
+    fn the_share_explained_is_of_the_field_beyond_the_noise() {
+        // F = 5 before, 2 after: of the excess 5 − 1, 5 − 2 is gone, 0.75.
+        let share = |b, a| explained(&finding(0.01, b), &finding(0.01, a));
+        assert!((share(Some(5.0), Some(2.0)).unwrap() - 0.75).abs() < 1e-12);
+        // Down to the noise or below: all of it; worse: none.
+        assert_eq!(share(Some(5.0), Some(0.5)), Some(1.0));
+        assert_eq!(share(Some(5.0), Some(7.0)), Some(0.0));
+        // Nothing beyond the noise before, or a side without the field test: no share.
+        assert_eq!(share(Some(0.9), Some(0.5)), None);
+        assert_eq!(share(None, Some(0.5)), None);
+        assert_eq!(share(Some(5.0), None), None);
+    }
+
+    proptest::proptest! {
+        /// The share lies in [0, 1] and falls as more is left after.
+        #[test]
+        fn the_share_falls_with_what_is_left(
+            before in 1.01f64..100.0,
+            a in 0.0f64..120.0,
+            b in 0.0f64..120.0,
+        ) {
+            let share = |after: f64| {
+                explained(&finding(0.01, Some(before)), &finding(0.01, Some(after))).unwrap()
+            };
+            let (less, more) = (a.min(b), a.max(b));
+            proptest::prop_assert!((0.0..=1.0).contains(&share(less)));
+            proptest::prop_assert!(share(less) >= share(more));
+        }
+    }
+
+    /// The pairs' names.
+    fn names(pairs: &[Confounded]) -> Vec<[&str; 2]> {
+        pairs
+            .iter()
+            .map(|c| [c.effects[0].as_str(), c.effects[1].as_str()])
+            .collect()
+    }
+
+    #[test]
+    fn small_moves_and_a_calibrated_print_confound_by_design() {
+        // One 1 mm move: 26 px of a 2560 px frame, 1 % of the field (vignetting needs 5 %);
+        // no step series (blur against aperture); the print calibrated (blur and aperture
+        // against it).
+        let design = design_of(&manifest(&[(1.0, 0.0)], &["a"], true), 2560);
+        let candidates = vec![
+            candidate(EffectId::Vignetting, &[("strength", 0.3, 0.02)], -20.0, 0.0),
+            candidate(EffectId::PsfBlur, &[("sigma_px", 0.8, 0.05)], -15.0, 0.0),
+            candidate(EffectId::FillFactor, &[("fx", 0.5, 0.05)], -12.0, 0.0),
+        ];
+        let pairs = confounded_pairs(&design, &candidates, None, true);
+        assert_eq!(
+            names(&pairs),
+            vec![
+                ["fill_factor", "psf_blur"],
+                ["vignetting", "illumination"],
+                ["psf_blur", "print"],
+                ["fill_factor", "print"],
+            ]
+        );
+        let separations: Vec<&str> = pairs.iter().map(|p| p.separate_with.as_str()).collect();
+        assert_eq!(
+            separations,
+            vec![
+                STEP_SERIES,
+                ILLUMINATION_SEPARATION,
+                PRINT_SEPARATION,
+                PRINT_SEPARATION
+            ]
+        );
+        assert!(pairs.iter().all(|p| p.evidence == "design"));
+        // A 130 px move (5.1 %) and a characterised print leave the design's blur and aperture.
+        let wide = design_of(&manifest(&[(5.0, 0.0)], &["a"], true), 2560);
+        let pairs = confounded_pairs(&wide, &candidates, None, false);
+        assert_eq!(names(&pairs), vec![["fill_factor", "psf_blur"]]);
+    }
+
+    #[test]
+    fn a_significant_candidate_dropping_four_fifths_of_the_winners_is_named_beside_it() {
+        // Moves of two sizes along x and y: nothing confounded by design. The winner, rotation,
+        // dropped 0.010 px; scale (significant) 0.009 ≥ 0.8·0.010: named, with the runs that
+        // separate them; tilt (significant) 0.007: not; distortion 0.0095 but not significant
+        // (ΔBIC +3): not.
+        let moves = [(5.0, 0.0), (2.5, 0.0), (0.0, 5.0), (0.0, 2.5)];
+        let design = design_of(&manifest(&moves, &["a"], true), 2560);
+        let candidates = vec![
+            candidate(
+                EffectId::Rotation,
+                &[("angle_rad", 1e-4, 1e-6)],
+                -80.0,
+                0.010,
+            ),
+            candidate(EffectId::Scale, &[("ds", 1e-4, 1e-6)], -60.0, 0.009),
+            candidate(
+                EffectId::TargetTilt,
+                &[("angle_about_y_rad", 0.01, 1e-3)],
+                -40.0,
+                0.007,
+            ),
+            candidate(EffectId::LensDistortion, &[("k1", 1e-4, 1e-4)], 3.0, 0.0095),
+        ];
+        let winner = Some(EffectId::Rotation.into());
+        let pairs = confounded_pairs(&design, &candidates, winner, false);
+        assert_eq!(names(&pairs), vec![["rotation", "scale"]]);
+        assert_eq!(pairs[0].evidence, "data");
+        assert_eq!(pairs[0].separate_with, "translations along x and along y");
+        // Without a verdict, the data name no pair.
+        assert!(confounded_pairs(&design, &candidates, None, false).is_empty());
+    }
+
+    #[test]
+    fn a_pair_the_design_confounds_is_not_named_again_from_the_data() {
+        // One move size: distortion and scale confounded by design; the data say so too.
+        let design = design_of(&manifest(&[(5.0, 0.0)], &["a"], true), 2560);
+        let candidates = vec![
+            candidate(
+                EffectId::LensDistortion,
+                &[("k1", 2e-3, 1e-5)],
+                -90.0,
+                0.010,
+            ),
+            candidate(EffectId::Scale, &[("ds", 1e-4, 1e-6)], -85.0, 0.0099),
+        ];
+        let winner = Some(EffectId::LensDistortion.into());
+        let pairs = confounded_pairs(&design, &candidates, winner, false);
+        assert_eq!(names(&pairs), vec![["lens_distortion", "scale"]]);
+        assert_eq!(
+            (pairs[0].evidence.as_str(), pairs[0].separate_with.as_str()),
+            ("design", SEVERAL_SIZES)
+        );
+    }
+}

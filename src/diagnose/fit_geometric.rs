@@ -261,27 +261,7 @@ fn variance_factor(sums: &[Sums], values: &[f64], j: usize, k: usize, inflation:
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diagnose::test_fields::field_points;
-
-    /// A run's field difference as the fit reads it, at full resolution.
-    fn sample<'a>(
-        scheme: &'a Scheme,
-        points: &'a [CommonPoint],
-        t: (f64, f64),
-        run: usize,
-    ) -> FieldSample<'a> {
-        FieldSample {
-            scheme,
-            move_px: t,
-            centre: (1280.0, 1080.0),
-            r0: 1280f64.hypot(1080.0),
-            points,
-            var: (1e-4, 1e-4),
-            inflation: 1.0,
-            pattern: run,
-            run,
-        }
-    }
+    use crate::diagnose::test_fields::{field_points, field_runs, field_sample, run_samples};
 
     #[test]
     fn a_scale_and_a_rotation_are_recovered_from_their_physics() {
@@ -296,17 +276,8 @@ mod tests {
         };
         let native = Scheme::parse("native").unwrap();
         let moves = [(130.0, 0.0), (0.0, 65.0), (-130.0, 13.0)];
-        let points: Vec<Vec<CommonPoint>> = moves
-            .iter()
-            .enumerate()
-            .map(|(k, &t)| field_points(t, physics, 0.01, k as u64))
-            .collect();
-        let samples: Vec<FieldSample> = moves
-            .iter()
-            .zip(&points)
-            .enumerate()
-            .map(|(k, (&t, p))| sample(&native, p, t, k))
-            .collect();
+        let points = field_runs(&moves, physics, 0.01, 0);
+        let samples = run_samples(&native, &moves, &points, 1e-4);
         let params = [GeometricParam::Scale, GeometricParam::Rotation];
         let fit = fit_geometric(&samples, &params).unwrap();
         for (i, truth) in [s, theta].into_iter().enumerate() {
@@ -320,17 +291,8 @@ mod tests {
         }
         assert!(fit.chi2_drop > 100.0, "{}", fit.chi2_drop);
         // Noise alone: nothing beyond the null.
-        let quiet: Vec<Vec<CommonPoint>> = moves
-            .iter()
-            .enumerate()
-            .map(|(k, &t)| field_points(t, |_, _| (0.0, 0.0), 0.01, 10 + k as u64))
-            .collect();
-        let samples: Vec<FieldSample> = moves
-            .iter()
-            .zip(&quiet)
-            .enumerate()
-            .map(|(k, (&t, p))| sample(&native, p, t, k))
-            .collect();
+        let quiet = field_runs(&moves, |_, _| (0.0, 0.0), 0.01, 10);
+        let samples = run_samples(&native, &moves, &quiet, 1e-4);
         let fit = fit_geometric(&samples, &params).unwrap();
         assert!(fit
             .values
@@ -344,7 +306,7 @@ mod tests {
         // Without a move the travel scale has no field at all: a singular normal matrix.
         let native = Scheme::parse("native").unwrap();
         let points = field_points((0.0, 0.0), |_, _| (0.0, 0.0), 0.01, 1);
-        let samples = [sample(&native, &points, (0.0, 0.0), 0)];
+        let samples = [field_sample(&native, &points, (0.0, 0.0), 1e-4, 0)];
         assert!(fit_geometric(&samples, &[GeometricParam::TravelScale]).is_none());
     }
 }

@@ -487,7 +487,7 @@ fn write_fit(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diagnose::test_fields::field_points;
+    use crate::diagnose::test_fields::{field_runs, run_samples};
     use crate::reduce::Scheme;
 
     #[test]
@@ -507,27 +507,8 @@ mod tests {
         };
         let native = Scheme::parse("native").unwrap();
         let moves = [(130.0, 0.0), (0.0, 130.0), (65.0, 0.0)];
-        let points: Vec<_> = moves
-            .iter()
-            .enumerate()
-            .map(|(k, &t)| field_points(t, lens, 0.01, k as u64))
-            .collect();
-        let samples: Vec<FieldSample> = moves
-            .iter()
-            .zip(&points)
-            .enumerate()
-            .map(|(k, (&t, p))| FieldSample {
-                scheme: &native,
-                move_px: t,
-                centre: (1280.0, 1080.0),
-                r0,
-                points: p,
-                var: (1e-4, 1e-4),
-                inflation: 1.0,
-                pattern: k,
-                run: k,
-            })
-            .collect();
+        let points = field_runs(&moves, lens, 0.01, 0);
+        let samples = run_samples(&native, &moves, &points, 1e-4);
         let setting = GeometricSetting {
             scale_px_per_mm: 26.0,
             working_distance_mm: None,

@@ -284,3 +284,104 @@ pub fn fit_motion_blur(
         beyond_null: l > 2.0 * se,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::image_stats::PtcPoint;
+    use crate::diagnose::test_fields::{comparison, frame_stats, manifest, measurement};
+    use crate::image::Image;
+
+    fn bin(f: f64, value: f64, se: f64) -> PsdBin {
+        PsdBin { f, value, se }
+    }
+
+    #[test]
+    fn the_moved_frames_spectrum_is_compared_relative_to_its_reference() {
+        // One bin: measured moved 2 ± 0.2 over reference 1 ± 0.1, the model's 1 ± 0.1 over
+        // 1 ± 0.1. r = ln 2, its variance the four relative variances, 4·0.1²: χ² = ln²2/0.04.
+        // A second bin with no power on one side is skipped.
+        let m_moved = [bin(0.1, 2.0, 0.2), bin(0.2, 0.0, 0.1)];
+        let m_ref = [bin(0.1, 1.0, 0.1), bin(0.2, 1.0, 0.1)];
+        let o = [bin(0.1, 1.0, 0.1), bin(0.2, 1.0, 0.1)];
+        let chi2 = ratio_chi2(&m_moved, &m_ref, &o, &o);
+        let truth = 2f64.ln().powi(2) / 0.04;
+        assert!((chi2 - truth).abs() < 1e-12, "{chi2} against {truth}");
+    }
+
+    proptest::proptest! {
+        /// A blur common to both measured frames (lens, print: the same factor on the moved
+        /// frame's spectrum and its reference's, bin by bin) cannot pass for motion: χ² is
+        /// unchanged; and a measured ratio equal to the model's gives zero.
+        #[test]
+        fn a_blur_common_to_both_frames_cancels(
+            factors in proptest::collection::vec(0.05f64..1.0, 6),
+            values in proptest::collection::vec(0.1f64..10.0, 18),
+        ) {
+            let spectrum = |offset: usize| -> Vec<PsdBin> {
+                (0..6).map(|k| bin(0.05 * (k + 1) as f64, values[offset + k], 0.1 * values[offset + k])).collect()
+            };
+            let (moved, reference, model) = (spectrum(0), spectrum(6), spectrum(12));
+            let blurred = |s: &[PsdBin]| -> Vec<PsdBin> {
+                s.iter().zip(&factors).map(|(b, f)| bin(b.f, b.value * f, b.se * f)).collect()
+            };
+            let plain = ratio_chi2(&moved, &reference, &model, &model);
+            let common = ratio_chi2(&blurred(&moved), &blurred(&reference), &model, &model);
+            proptest::prop_assert!((plain - common).abs() <= 1e-9 * plain.max(1.0));
+            proptest::prop_assert!(ratio_chi2(&moved, &reference, &moved, &reference).abs() < 1e-12);
+        }
+    }
+
+    /// A 64x64 speckle-like texture at mean `level`.
+    fn texture(level: f32) -> Image {
+        Image::from_fn(64, 64, |x, y| {
+            let (x, y) = (x as f32, y as f32);
+            let hash = ((x * 12.9898 + y * 78.233).sin() * 43758.547).fract();
+            level * (1.0 + 0.2 * (x / 2.3).sin() * (y / 1.7).cos() + 0.1 * hash)
+        })
+    }
+
+    #[test]
+    fn the_spectra_fits_compare_the_spectra_alone() {
+        // The measured reference at twice the exposure, with another contrast, a noise curve and
+        // a mean map the model's crop knows nothing of: spectra relative to the mean squared are
+        // the same, so χ² is zero. The same crop blurred along x (a 1-2-1 filter) is not.
+        let bright = texture(2000.0);
+        let measured = FrameStats {
+            psd_x: psd(&bright, true),
+            psd_y: psd(&bright, false),
+            contrast: 0.9,
+            ptc: vec![PtcPoint {
+                mean_dn: 2000.0,
+                variance_dn2: 400.0,
+                se: 1.0,
+            }],
+            ..frame_stats(2000.0)
+        };
+        assert!(!measured.psd_x.is_empty());
+        let crop = texture(1000.0);
+        let same = spectra_chi2(&[&measured], std::slice::from_ref(&crop));
+        assert!(same < 1e-9, "{same}");
+        let blurred = Image::from_fn(64, 64, |x, y| {
+            let at = |x: usize| crop.data()[y * 64 + x.clamp(0, 63)];
+            0.25 * at(x.saturating_sub(1)) + 0.5 * at(x) + 0.25 * at(x + 1)
+        });
+        let blur = spectra_chi2(&[&measured], &[blurred]);
+        assert!(blur > 100.0, "{blur}");
+    }
+
+    #[test]
+    fn a_dataset_without_a_move_has_no_motion_blur_to_fit() {
+        let meas = measurement(
+            manifest(&[(0.0, 0.0), (0.0, 0.0)], &["a"], false),
+            &["ff100"],
+        );
+        let before = comparison(Vec::new());
+        let fit = fit_motion_blur(&meas, &before, &Effects::default(), &|| false);
+        assert_eq!(fit, None);
+        assert_eq!(
+            map(&[("fx", 0.5), ("fy", 0.25)]),
+            BTreeMap::from([("fx".to_string(), 0.5), ("fy".to_string(), 0.25)])
+        );
+    }
+}

@@ -98,7 +98,7 @@ pub fn gauss_newton(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diagnose::test_fields::field_points;
+    use crate::diagnose::test_fields::{field_points, field_sample};
     use crate::reduce::Scheme;
 
     #[test]
@@ -109,17 +109,7 @@ mod tests {
         let field = |p: (f64, f64), _: (f64, f64), v: &[f64]| (v[0] * (p.0 / v[1]).sin(), 0.0);
         let points = field_points((130.0, 0.0), |p, t| field(p, t, &[a, w]), 0.005, 3);
         let native = Scheme::parse("native").unwrap();
-        let samples = [FieldSample {
-            scheme: &native,
-            move_px: (130.0, 0.0),
-            centre: (1280.0, 1080.0),
-            r0: 1280f64.hypot(1080.0),
-            points: &points,
-            var: (2.5e-5, 2.5e-5),
-            inflation: 1.0,
-            pattern: 0,
-            run: 0,
-        }];
+        let samples = [field_sample(&native, &points, (130.0, 0.0), 2.5e-5, 0)];
         let (values, fit) = gauss_newton(
             &samples,
             &field,

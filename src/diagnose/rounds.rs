@@ -165,3 +165,70 @@ pub fn diagnose_rounds_prepared(
         diagnoses,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::test_fields::{candidate, comparison, diagnosis, finding};
+
+    /// A round with `verdict` on a model at `discrepancy_px`, `after_px` with it.
+    fn round(verdict: Option<EffectId>, discrepancy_px: f64, after_px: Option<f64>) -> Round {
+        Round {
+            verdict: verdict.map(CandidateId::from),
+            params: BTreeMap::new(),
+            stderr: BTreeMap::new(),
+            derived: BTreeMap::new(),
+            notes: Vec::new(),
+            model: "baseline".into(),
+            discrepancy_px,
+            discrepancy_se_px: 0.0002,
+            after_px,
+            unexplained: true,
+            partial: false,
+            withheld: None,
+        }
+    }
+
+    #[test]
+    fn the_json_is_the_first_rounds_diagnosis_with_the_rounds_beside_it() {
+        // Round 1 names rotation (0.02 → 0.005 px), round 2 nothing.
+        let mut before = comparison(Vec::new());
+        before.discrepancy_px = 0.02;
+        let rotation = candidate(
+            EffectId::Rotation,
+            &[("angle_rad", 1e-4, 1e-6)],
+            -80.0,
+            0.015,
+        );
+        let first = diagnosis(&before, vec![rotation], Some(EffectId::Rotation.into()));
+        before.discrepancy_px = 0.005;
+        let second = diagnosis(&before, Vec::new(), None);
+        let rounds = Rounds {
+            rounds: vec![
+                round(Some(EffectId::Rotation), 0.02, Some(0.005)),
+                round(None, 0.005, None),
+            ],
+            verdicts: vec![EffectId::Rotation.into()],
+            final_discrepancy_px: 0.005,
+            final_unexplained: finding(0.005, Some(1.2)),
+            final_model: ModelConfig::default(),
+            diagnoses: vec![first, second],
+        };
+        let j = rounds.to_json();
+        // The first round's diagnosis…
+        assert_eq!(j["verdict"], "rotation");
+        assert_eq!(j["discrepancy_px"], 0.02);
+        assert_eq!(j["candidates"][0]["effect"], "rotation");
+        // …and the rounds.
+        assert_eq!(j["verdicts"], serde_json::json!(["rotation"]));
+        assert_eq!(j["final_discrepancy_px"], 0.005);
+        assert_eq!(j["final_unexplained"]["field_f"], 1.2);
+        assert_eq!(j["rounds"].as_array().map(Vec::len), Some(2));
+        assert_eq!(j["rounds"][0]["after_px"], 0.005);
+        assert_eq!(j["rounds"][1]["verdict"], "none");
+        assert!(j["rounds"][1].get("after_px").is_none());
+        // A round reads back as it was written, `none` as no verdict.
+        let back: Round = serde_json::from_value(j["rounds"][1].clone()).unwrap();
+        assert_eq!(back, rounds.rounds[1]);
+    }
+}

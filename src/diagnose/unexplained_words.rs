@@ -236,21 +236,10 @@ fn capitalise(s: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::diagnose::test_fields::run_shape;
 
     fn run(exx: f64, eyy: f64, move_px: [f64; 2]) -> RunShape {
-        RunShape {
-            run: "x5mm".into(),
-            pattern: "a".into(),
-            move_px,
-            exx,
-            eyy,
-            shear: 0.0,
-            rotation: 0.0,
-            se: [1e-6; 4],
-            quadratic_px: 0.0,
-            affine_px: 0.0,
-            rigid_px: 0.0,
-        }
+        run_shape(move_px, exx, eyy, 0.0)
     }
 
     #[test]
