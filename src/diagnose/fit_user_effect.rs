@@ -9,11 +9,11 @@
 
 use super::basis::geometric_basis;
 use super::fit_geometric::{FieldSample, GeometricFit};
-use super::fit_geometric_effect::{
-    held_again, re_estimated_note, with_increments, GeometricSetting,
-};
+use super::fit_geometric_effect::held_again;
 use super::gauss_newton::gauss_newton;
+use super::geometric::GeometricSetting;
 use super::results::{GeometricTerms, ImageFit};
+use super::write_geometric::{re_estimated_note, with_increments};
 use crate::model::{CandidateId, EffectId, Effects};
 use std::collections::BTreeMap;
 

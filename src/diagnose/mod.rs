@@ -86,6 +86,7 @@ mod candidates;
 mod capture_mode;
 mod card;
 mod card_distortion;
+mod card_joint_fit;
 mod card_stage;
 mod compare;
 // The brief names the file after its job; the module is the entry point of the folder's job.
@@ -99,6 +100,7 @@ mod fit_image_stats;
 mod fit_user_effect;
 mod floor_read_out;
 mod gauss_newton;
+mod geometric;
 mod history;
 mod identifiability;
 mod image_stats;
@@ -118,6 +120,7 @@ mod test_fields;
 mod unexplained;
 mod unexplained_words;
 mod verdict;
+mod write_geometric;
 
 // The public surface: what `service`, `report`, `cli`, the Python bindings and the tests call,
 // then the types of the documents those calls return (ARCHITECTURE.md lists both).

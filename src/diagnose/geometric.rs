@@ -1,0 +1,137 @@
+//! The geometric candidates (rotation, scale, lens distortion, target tilt): which basis fields
+//! each frees ([`super::basis`]) and how they are fitted (together, or nested: a term joins only
+//! when the runs identify it and it pays its price). The fit is
+//! [`super::fit_geometric_effect`]; the fitted effect as the model writes it is
+//! [`super::write_geometric`].
+
+use super::basis::GeometricParam;
+use super::fit_geometric::GeometricFit;
+use crate::model::{EffectId, Effects};
+
+/// What the geometric fits need beyond the field samples.
+pub struct GeometricSetting {
+    pub scale_px_per_mm: f64,
+    pub working_distance_mm: Option<f64>,
+    /// Half diagonal, full-resolution px (distortion's normalising radius).
+    pub r0: f64,
+    /// Points compared: the BIC's n.
+    pub observations: usize,
+}
+
+/// How an effect's basis fields are fitted.
+pub enum Terms {
+    /// All together.
+    Joint(&'static [GeometricParam]),
+    /// The first group, then each further group when the runs identify it and its Wald χ² pays
+    /// the BIC's price.
+    Nested(&'static [&'static [GeometricParam]]),
+}
+
+/// The geometric effects: those whose signature is a displacement field of known form.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Geometric {
+    Rotation,
+    Scale,
+    LensDistortion,
+    TargetTilt,
+}
+
+impl Geometric {
+    /// Every geometric effect, in vocabulary order.
+    pub const ALL: [Geometric; 4] = [
+        Geometric::Rotation,
+        Geometric::Scale,
+        Geometric::LensDistortion,
+        Geometric::TargetTilt,
+    ];
+
+    /// The catalogue effect it is.
+    pub fn effect(self) -> EffectId {
+        match self {
+            Geometric::Rotation => EffectId::Rotation,
+            Geometric::Scale => EffectId::Scale,
+            Geometric::LensDistortion => EffectId::LensDistortion,
+            Geometric::TargetTilt => EffectId::TargetTilt,
+        }
+    }
+
+    /// The effect as a geometric one; None for an effect that changes the images rather than
+    /// where things are, or that the nominal experiment always fits.
+    pub fn of(effect: EffectId) -> Option<Geometric> {
+        match effect {
+            EffectId::Rotation => Some(Geometric::Rotation),
+            EffectId::Scale => Some(Geometric::Scale),
+            EffectId::LensDistortion => Some(Geometric::LensDistortion),
+            EffectId::TargetTilt => Some(Geometric::TargetTilt),
+            EffectId::StageMisalignment
+            | EffectId::StageError
+            | EffectId::PsfBlur
+            | EffectId::FillFactor
+            | EffectId::SensorNoise
+            | EffectId::FixedPattern
+            | EffectId::Quantization
+            | EffectId::Vignetting
+            | EffectId::IlluminationChange
+            | EffectId::MotionBlur => None,
+        }
+    }
+
+    /// The basis fields of the effect `model` holds, as a re-estimation frees them: every term
+    /// it has a value for (distortion's k1 always). None for a distortion normalised at another
+    /// radius than `r0`, whose terms are not the basis's.
+    pub fn held_terms(self, model: &Effects, r0: f64) -> Vec<GeometricParam> {
+        use GeometricParam as P;
+        match self {
+            Geometric::Rotation => model.rotation.map(|_| vec![P::Rotation]),
+            Geometric::Scale => model.scale.map(|_| vec![P::Scale]),
+            Geometric::LensDistortion => model.lens_distortion.and_then(|d| {
+                let own_radius = d.norm_radius_px <= 0.0 || (d.norm_radius_px - r0).abs() < 1e-6;
+                let centred = d.centre_dx_px == 0.0 && d.centre_dy_px == 0.0;
+                (own_radius && centred).then(|| {
+                    let mut terms = vec![P::DistortionK1];
+                    if d.p1 != 0.0 || d.p2 != 0.0 {
+                        terms.extend([P::DistortionP1, P::DistortionP2]);
+                    }
+                    if d.k2 != 0.0 {
+                        terms.push(P::DistortionK2);
+                    }
+                    terms
+                })
+            }),
+            Geometric::TargetTilt => model
+                .target_tilt
+                .map(|_| vec![P::TiltSlopeY, P::TiltSlopeX]),
+        }
+        .unwrap_or_default()
+    }
+
+    /// The basis fields it frees, and how they are fitted.
+    pub fn terms(self) -> Terms {
+        use GeometricParam as P;
+        match self {
+            Geometric::Rotation => Terms::Joint(&[P::Rotation]),
+            Geometric::Scale => Terms::Joint(&[P::Scale]),
+            Geometric::LensDistortion => Terms::Nested(&[
+                &[P::DistortionK1],
+                &[P::DistortionP1, P::DistortionP2],
+                &[P::DistortionK2],
+            ]),
+            Geometric::TargetTilt => Terms::Joint(&[P::TiltSlopeY, P::TiltSlopeX]),
+        }
+    }
+}
+
+impl GeometricFit {
+    /// The terms of the effects `keep` selects, with their values and standard errors.
+    pub fn part(&self, keep: impl Fn(Geometric) -> bool) -> GeometricFit {
+        let own: Vec<usize> = (0..self.params.len())
+            .filter(|&i| Geometric::of(self.params[i].effect_and_name().0).is_some_and(&keep))
+            .collect();
+        GeometricFit {
+            params: own.iter().map(|&i| self.params[i]).collect(),
+            values: own.iter().map(|&i| self.values[i]).collect(),
+            stderr: own.iter().map(|&i| self.stderr[i]).collect(),
+            chi2_drop: f64::NAN,
+        }
+    }
+}
