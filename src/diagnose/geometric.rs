@@ -135,3 +135,99 @@ impl GeometricFit {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::effects::{LensDistortion, Rotation, TargetTilt};
+    use GeometricParam as P;
+
+    #[test]
+    fn the_four_geometric_effects_and_no_other() {
+        for effect in EffectId::ALL {
+            match Geometric::of(effect) {
+                Some(g) => assert_eq!(g.effect(), effect),
+                None => assert!(!Geometric::ALL.iter().any(|g| g.effect() == effect)),
+            }
+        }
+        assert_eq!(
+            EffectId::ALL
+                .iter()
+                .filter(|e| Geometric::of(**e).is_some())
+                .count(),
+            4
+        );
+    }
+
+    #[test]
+    fn a_model_frees_the_terms_it_holds_and_only_in_the_basis_own_units() {
+        let r0 = 1000.0;
+        let with = |d: LensDistortion| Effects {
+            lens_distortion: Some(d),
+            ..Effects::default()
+        };
+        let lens = Geometric::LensDistortion;
+        assert!(lens.held_terms(&Effects::default(), r0).is_empty());
+        assert_eq!(
+            lens.held_terms(&with(LensDistortion::radial(1e-3)), r0),
+            [P::DistortionK1]
+        );
+        let decentred = LensDistortion {
+            p2: 1e-5,
+            k2: 2e-4,
+            ..LensDistortion::radial(1e-3)
+        };
+        assert_eq!(
+            lens.held_terms(&with(decentred), r0),
+            [
+                P::DistortionK1,
+                P::DistortionP1,
+                P::DistortionP2,
+                P::DistortionK2
+            ]
+        );
+        // About a centre of its own, or normalised at another radius, its terms are not the
+        // basis's: nothing is re-estimated.
+        let off_centre = LensDistortion {
+            centre_dx_px: 30.0,
+            ..LensDistortion::radial(1e-3)
+        };
+        assert!(lens.held_terms(&with(off_centre), r0).is_empty());
+        let other_radius = LensDistortion {
+            norm_radius_px: 800.0,
+            ..LensDistortion::radial(1e-3)
+        };
+        assert!(lens.held_terms(&with(other_radius), r0).is_empty());
+        let tilted = Effects {
+            target_tilt: Some(TargetTilt {
+                angle_about_y_rad: 0.01,
+                angle_about_x_rad: 0.0,
+                working_distance_mm: 500.0,
+            }),
+            rotation: Some(Rotation { angle_rad: 1e-4 }),
+            ..Effects::default()
+        };
+        assert_eq!(
+            Geometric::TargetTilt.held_terms(&tilted, r0),
+            [P::TiltSlopeY, P::TiltSlopeX]
+        );
+        assert_eq!(Geometric::Rotation.held_terms(&tilted, r0), [P::Rotation]);
+        assert!(Geometric::Scale.held_terms(&tilted, r0).is_empty());
+    }
+
+    #[test]
+    fn a_part_keeps_the_chosen_effects_terms_with_their_values_and_errors() {
+        let fit = GeometricFit {
+            params: vec![P::Rotation, P::DistortionK1, P::Scale, P::DistortionP1],
+            values: vec![1.0, 2.0, 3.0, 4.0],
+            stderr: vec![0.1, 0.2, 0.3, 0.4],
+            chi2_drop: 9.0,
+        };
+        let lens = fit.part(|g| g == Geometric::LensDistortion);
+        assert_eq!(lens.params, [P::DistortionK1, P::DistortionP1]);
+        assert_eq!((lens.values, lens.stderr), (vec![2.0, 4.0], vec![0.2, 0.4]));
+        let rest = fit.part(|g| g != Geometric::LensDistortion);
+        assert_eq!(rest.params, [P::Rotation, P::Scale]);
+        assert_eq!(rest.values, [1.0, 3.0]);
+    }
+}

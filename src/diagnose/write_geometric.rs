@@ -268,3 +268,151 @@ pub fn write_fit(
         },
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use GeometricParam as P;
+
+    fn setting(working_distance_mm: Option<f64>) -> GeometricSetting {
+        GeometricSetting {
+            scale_px_per_mm: 26.0,
+            working_distance_mm,
+            r0: 1000.0,
+            observations: 10_000,
+        }
+    }
+
+    fn fit(params: &[P], values: &[f64], stderr: &[f64]) -> GeometricFit {
+        GeometricFit {
+            params: params.to_vec(),
+            values: values.to_vec(),
+            stderr: stderr.to_vec(),
+            chi2_drop: f64::NAN,
+        }
+    }
+
+    #[test]
+    fn a_tilt_is_written_as_angles_at_the_stated_distance() {
+        // Slopes a = 2e-7, b = −1e-7 per px at 26 px/mm and 500 mm: tan θ = slope × 13,000 px,
+        // and d atan(u)/du = 1/(1 + u²) carries the slopes' errors to the angles.
+        let f = fit(
+            &[P::TiltSlopeY, P::TiltSlopeX],
+            &[2e-7, -1e-7],
+            &[1e-8, 2e-8],
+        );
+        let written = write_fit(
+            &f,
+            &setting(Some(500.0)),
+            &Effects::default(),
+            (EffectId::TargetTilt, Geometric::TargetTilt),
+            &[],
+        );
+        let tilt = written.effects.target_tilt.unwrap();
+        assert!((tilt.angle_about_y_rad - 2.6e-3f64.atan()).abs() < 1e-15);
+        assert!((tilt.angle_about_x_rad - (-1.3e-3f64).atan()).abs() < 1e-15);
+        let se_y = written.stderr["angle_about_y_rad"];
+        assert!((se_y - 1e-8 * 13_000.0 / (1.0 + 2.6e-3f64.powi(2))).abs() < 1e-18);
+        let derived = &written.geometric.derived;
+        assert!((derived["tan_about_y_per_m"] - 2e-7 * 26.0 * 1e3).abs() < 1e-15);
+        assert_eq!(derived["working_distance_mm"], 500.0);
+        assert!(written.beyond_null, "20 and 5 errors from zero");
+        assert!(written.geometric.notes.is_empty());
+    }
+
+    #[test]
+    fn without_a_stated_distance_a_large_tilt_is_written_nearer_and_said_so() {
+        // Slope 1e-4 per px would be atan(2.6) = 1.2 rad at the assumed 1,000 mm; the distance
+        // is brought in to where the angle is the largest written, 0.3 rad: tan 0.3 / 2.6e-3 mm.
+        let f = fit(&[P::TiltSlopeY, P::TiltSlopeX], &[1e-4, 0.0], &[1e-6, 1e-6]);
+        let written = write_fit(
+            &f,
+            &setting(None),
+            &Effects::default(),
+            (EffectId::TargetTilt, Geometric::TargetTilt),
+            &[],
+        );
+        let tilt = written.effects.target_tilt.unwrap();
+        assert!((tilt.angle_about_y_rad - 0.3).abs() < 1e-12);
+        assert!((tilt.working_distance_mm - 0.3f64.tan() / 2.6e-3).abs() < 1e-9);
+        assert!(written.geometric.notes[0].contains("no working_distance_mm"));
+        let small = fit(&[P::TiltSlopeY, P::TiltSlopeX], &[1e-8, 0.0], &[1e-9, 1e-9]);
+        let at_assumed = write_fit(
+            &small,
+            &setting(None),
+            &Effects::default(),
+            (EffectId::TargetTilt, Geometric::TargetTilt),
+            &[],
+        );
+        assert_eq!(
+            at_assumed.effects.target_tilt.unwrap().working_distance_mm,
+            ASSUMED_WORKING_DISTANCE_MM
+        );
+    }
+
+    #[test]
+    fn decentring_terms_are_also_written_as_the_centre_they_stand_for() {
+        // Radial k1 about a centre (cx, cy) = (60, −45) px shows, to first order, as
+        // p2 = −k1·cx/r0 and p1 = −k1·cy/r0 (Brown's model expanded about the image centre).
+        let (k1, r0, cx, cy) = (1e-3, 1000.0, 60.0, -45.0);
+        let params = [P::DistortionK1, P::DistortionP1, P::DistortionP2];
+        let f = fit(
+            &params,
+            &[k1, -k1 * cy / r0, -k1 * cx / r0],
+            &[1e-5, 1e-7, 1e-7],
+        );
+        let written = write_fit(
+            &f,
+            &setting(None),
+            &Effects::default(),
+            (EffectId::LensDistortion, Geometric::LensDistortion),
+            &[],
+        );
+        let derived = &written.geometric.derived;
+        assert!((derived["centre_dx_px"] - cx).abs() < 1e-9);
+        assert!((derived["centre_dy_px"] - cy).abs() < 1e-9);
+        let d = written.effects.lens_distortion.unwrap();
+        assert_eq!(
+            (d.k1, d.p1, d.p2, d.k2),
+            (k1, -k1 * cy / r0, -k1 * cx / r0, 0.0)
+        );
+        // A k1 within two errors of zero stands for no centre.
+        let faint = fit(&params, &[1e-5, 1e-7, 1e-7], &[1e-5, 1e-7, 1e-7]);
+        let written = write_fit(
+            &faint,
+            &setting(None),
+            &Effects::default(),
+            (EffectId::LensDistortion, Geometric::LensDistortion),
+            &[],
+        );
+        assert!(!written.geometric.derived.contains_key("centre_dx_px"));
+    }
+
+    #[test]
+    fn increments_add_to_the_effects_the_model_holds_and_to_no_other() {
+        let model = Effects {
+            rotation: Some(Rotation { angle_rad: 1e-4 }),
+            target_tilt: Some(TargetTilt {
+                angle_about_y_rad: 0.01,
+                angle_about_x_rad: 0.0,
+                working_distance_mm: 500.0,
+            }),
+            ..Effects::default()
+        };
+        let f = fit(
+            &[P::Rotation, P::Scale, P::TiltSlopeY],
+            &[2e-5, 3e-5, 1e-7],
+            &[1e-6; 3],
+        );
+        let out = with_increments(&model, &f, 26.0);
+        assert!((out.rotation.unwrap().angle_rad - 1.2e-4).abs() < 1e-18);
+        assert!(out.scale.is_none(), "a scale the model lacks is not added");
+        // The tilt's slope is tan θ / (Z · scale): tan 0.01 / 13,000 + 1e-7 per px.
+        let tilt = out.target_tilt.unwrap();
+        let expected = (0.01f64.tan() + 1e-7 * 13_000.0).atan();
+        assert!((tilt.angle_about_y_rad - expected).abs() < 1e-15);
+        assert_eq!(tilt.working_distance_mm, 500.0);
+        assert!(re_estimated_note(&f)
+            .starts_with("re-estimated beside it: rotation.angle_rad +2.000e-5"));
+    }
+}
