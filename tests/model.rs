@@ -16,6 +16,19 @@ fn sinc(x: f64) -> f64 {
     }
 }
 
+/// A camera of the tests' bench: 13 px/mm, the white at half the full scale, the principal
+/// point at the centre.
+fn camera_13_px_per_mm(width: usize, height: usize) -> Camera {
+    Camera {
+        width,
+        height,
+        scale_px_per_mm: 13.0,
+        exposure_level: 0.5,
+        principal_dx_px: 0.0,
+        principal_dy_px: 0.0,
+    }
+}
+
 #[test]
 fn uniform_scene_renders_uniform_for_any_aperture() {
     for (fx, fy) in [(1.0, 1.0), (0.5, 1.0), (0.25, 0.5), (0.1, 0.1)] {
@@ -153,14 +166,7 @@ fn dic_settings() -> DicSettings {
 
 #[test]
 fn every_effect_off_dic_recovers_the_commanded_translation() {
-    let camera = Camera {
-        width: 640,
-        height: 480,
-        scale_px_per_mm: 13.0,
-        exposure_level: 0.5,
-        principal_dx_px: 0.0,
-        principal_dy_px: 0.0,
-    };
+    let camera = camera_13_px_per_mm(640, 480);
     let pattern = SpecklePattern::preset("b").unwrap();
     let dots = pattern.dots(camera.field_mm(8.0), 7).unwrap();
     let effects = Effects::default();
@@ -205,14 +211,7 @@ fn every_effect_off_dic_recovers_the_commanded_translation() {
 
 #[test]
 fn fill_factor_lowers_contrast_but_not_the_mean() {
-    let camera = Camera {
-        width: 300,
-        height: 200,
-        scale_px_per_mm: 13.0,
-        exposure_level: 0.5,
-        principal_dx_px: 0.0,
-        principal_dy_px: 0.0,
-    };
+    let camera = camera_13_px_per_mm(300, 200);
     let dots = SpecklePattern::preset("b")
         .unwrap()
         .dots(camera.field_mm(2.0), 3)
@@ -311,4 +310,75 @@ fn a_lens_blur_follows_the_gaussian_transfer_function_and_keeps_the_mean() {
             );
         }
     }
+}
+
+/// The effects that act between the reference and a moved frame (`EffectId::leaves_the_reference`)
+/// leave the reference frame as the model without them renders it, pixel for pixel: a diagnosis
+/// keeps the print calibrated against the reference for a candidate among them instead of
+/// refitting it. Rendered, not assumed: every such effect is set, on a print whose frames move.
+#[test]
+fn effects_between_frames_leave_the_reference_frame_unchanged() {
+    use ffdic::model::effects::{
+        IlluminationChange, MotionBlur, PsfBlur, Rotation, Scale, StageError, StageMisalignment,
+        Vignetting,
+    };
+    use ffdic::model::EffectId;
+    let camera = camera_13_px_per_mm(160, 120);
+    let dots = SpecklePattern::preset("b")
+        .unwrap()
+        .dots(camera.field_mm(8.0), 11)
+        .unwrap();
+    let render = |effects: &Effects, moved: bool| {
+        let frame = FrameSpec {
+            stage_dx_mm: if moved { 2.0 } else { 0.0 },
+            stage_dy_mm: 0.0,
+            moved,
+            seed: 5,
+        };
+        render_frame(&camera, effects, &dots, &frame)
+            .data()
+            .to_vec()
+    };
+    let between = Effects {
+        stage_misalignment: Some(StageMisalignment { angle_rad: 0.01 }),
+        stage_error: Some(StageError {
+            repeatability_um: 20.0,
+        }),
+        rotation: Some(Rotation { angle_rad: 0.01 }),
+        scale: Some(Scale { ds: 0.01 }),
+        illumination_change: Some(IlluminationChange {
+            gain: 1.2,
+            offset: 300.0,
+        }),
+        motion_blur: Some(MotionBlur {
+            length_px: 3.0,
+            angle_rad: 0.3,
+        }),
+        ..Effects::default()
+    };
+    let set: Vec<EffectId> = between.enabled();
+    assert!(set.iter().all(|e| e.leaves_the_reference()), "{set:?}");
+    assert_eq!(
+        EffectId::ALL
+            .iter()
+            .filter(|e| e.leaves_the_reference())
+            .count(),
+        set.len(),
+        "every effect that leaves the reference is set here"
+    );
+    assert_eq!(between.reference_part(), Effects::default());
+    assert_eq!(render(&between, false), render(&Effects::default(), false));
+    // The same effects do change a moved frame, and effects on the reference are kept: the
+    // comparison can fail.
+    assert_ne!(render(&between, true), render(&Effects::default(), true));
+    let optics = Effects {
+        psf_blur: Some(PsfBlur { sigma_px: 0.8 }),
+        vignetting: Some(Vignetting { v: 0.1 }),
+        ..between.clone()
+    };
+    assert_eq!(
+        optics.reference_part().enabled(),
+        [EffectId::PsfBlur, EffectId::Vignetting]
+    );
+    assert_ne!(render(&optics, false), render(&Effects::default(), false));
 }

@@ -6,6 +6,7 @@
 use super::image_stats::STATS_CROP_PX;
 use super::measurement::Measurement;
 use super::nominal::Nominal;
+use super::nominal::PatternEstimate;
 use super::optimise::golden;
 use super::print::{
     placement_band_edge, spectral_shape_bins, spectral_shape_chi2, spectral_shape_chi2_below,
@@ -16,6 +17,11 @@ use super::stage::{fit_stage, StageObservation};
 use super::DiagnoseError;
 use crate::image::Image;
 use crate::model::{DotProfile, ModelConfig, Placement, SpecklePattern};
+use rayon::prelude::*;
+
+/// Asked before each step whether to go on (a cancelled job says no); shared by the patterns'
+/// and the placements' calibrations running side by side.
+type GoOn<'a> = &'a (dyn Fn() -> bool + Sync);
 
 /// The nominal experiment of `model` for this measurement: the stage fitted, the white levels
 /// matched (one centred crop render per pattern), the model's speckle and noise drawn from
@@ -27,7 +33,7 @@ pub(super) fn calibrate_seeded(
     model: &ModelConfig,
     seed: u64,
     scene_from: SceneFrom<'_>,
-    go_on: &dyn Fn() -> bool,
+    go_on: GoOn<'_>,
 ) -> Result<Nominal, DiagnoseError> {
     let mut nominal = meas.nominal.clone();
     let obs: Vec<StageObservation> = meas
@@ -56,49 +62,72 @@ pub(super) fn calibrate_seeded(
         meas.manifest.stage_repeatability_um,
         super::bic::inflation(&meas.options.dic),
     );
+    // The patterns side by side: a pattern's calibration reads and writes its own estimate
+    // only (its white level and print; its renders take its dots alone), so each on its own
+    // copy of the scene gives what it gave when they ran in turn.
+    let calibrated: Vec<PatternEstimate> = (0..nominal.patterns.len())
+        .into_par_iter()
+        .map(|pi| {
+            let mut own = nominal.clone();
+            calibrate_pattern(meas, &mut own, model, (pi, seed), scene_from, go_on)?;
+            Ok(own.patterns.swap_remove(pi))
+        })
+        .collect::<Result<_, DiagnoseError>>()?;
+    nominal.patterns = calibrated;
+    Ok(nominal)
+}
+
+/// Pattern `pi`'s white level and print in `nominal`, calibrated as `scene_from` says
+/// ([`calibrate_seeded`]).
+fn calibrate_pattern(
+    meas: &Measurement,
+    nominal: &mut Nominal,
+    model: &ModelConfig,
+    (pi, seed): (usize, u64),
+    scene_from: SceneFrom<'_>,
+    go_on: GoOn<'_>,
+) -> Result<(), DiagnoseError> {
     // Each step renders crops (the print's calibration some thirty): asked before each.
     let check = || go_on().then_some(()).ok_or(DiagnoseError::Cancelled);
-    for pi in 0..nominal.patterns.len() {
-        let stated = nominal.patterns[pi].pattern.clone();
-        // Whether an earlier calibration decided the placement and the dots' profile.
-        let decided = match scene_from {
-            SceneFrom::Reuse(other) => {
-                nominal.patterns[pi].clone_from(&other.patterns[pi]);
-                continue;
-            }
-            SceneFrom::Refit(other) => {
-                let decided = &other.patterns[pi];
-                let p = &mut nominal.patterns[pi];
-                p.pattern.placement = decided.pattern.placement;
-                p.pattern.profile = decided.pattern.profile;
-                p.placement_chi2 = decided.placement_chi2;
-                p.profile_chi2 = decided.profile_chi2;
-                true
-            }
-            SceneFrom::Calibrate => false,
-        };
+    let stated = nominal.patterns[pi].pattern.clone();
+    // Whether an earlier calibration decided the placement and the dots' profile.
+    let decided = match scene_from {
+        SceneFrom::Reuse(other) => {
+            nominal.patterns[pi].clone_from(&other.patterns[pi]);
+            return Ok(());
+        }
+        SceneFrom::Refit(other) => {
+            let decided = &other.patterns[pi];
+            let p = &mut nominal.patterns[pi];
+            p.pattern.placement = decided.pattern.placement;
+            p.pattern.profile = decided.pattern.profile;
+            p.placement_chi2 = decided.placement_chi2;
+            p.profile_chi2 = decided.profile_chi2;
+            true
+        }
+        SceneFrom::Calibrate => false,
+    };
+    check()?;
+    match_white(meas, nominal, model, pi, seed)?;
+    if !decided && !nominal.patterns[pi].placement_stated {
         check()?;
-        match_white(meas, &mut nominal, model, pi, seed)?;
-        if !decided && !nominal.patterns[pi].placement_stated {
-            check()?;
-            choose_placement(meas, &mut nominal, model, pi, seed)?;
-        }
-        let profile = if nominal.patterns[pi].profile_stated {
-            ProfileKnown::Stated
-        } else if decided {
-            ProfileKnown::Decided
-        } else {
-            ProfileKnown::No
-        };
-        if nominal.patterns[pi].print == PrintKnowledge::Calibrated {
-            check()?;
-            calibrate_print(meas, &mut nominal, model, pi, seed, profile, go_on)?;
-            record_calibration(meas, &mut nominal, model, pi, seed, &stated)?;
-            check()?;
-            match_white(meas, &mut nominal, model, pi, seed)?;
-        }
+        choose_placement(meas, nominal, model, pi, seed)?;
     }
-    Ok(nominal)
+    let profile = if nominal.patterns[pi].profile_stated {
+        ProfileKnown::Stated
+    } else if decided {
+        ProfileKnown::Decided
+    } else {
+        ProfileKnown::No
+    };
+    if nominal.patterns[pi].print == PrintKnowledge::Calibrated {
+        check()?;
+        calibrate_print(meas, nominal, model, pi, seed, profile, go_on)?;
+        record_calibration(meas, nominal, model, pi, seed, &stated)?;
+        check()?;
+        match_white(meas, nominal, model, pi, seed)?;
+    }
+    Ok(())
 }
 
 /// Where a comparison's white levels and prints come from.
@@ -116,7 +145,8 @@ pub enum SceneFrom<'a> {
     /// took 90 % of the discrepancy). Cuts a disk print's calibration from some 180 renderings
     /// of its crop to some 90.
     Refit(&'a Nominal),
-    /// Taken as they are: a model with the same image chain.
+    /// Taken as they are: a model with the same image chain, or one that renders the same
+    /// reference frame ([`crate::model::Effects::reference_part`]).
     Reuse(&'a Nominal),
 }
 
@@ -206,7 +236,7 @@ fn calibrate_print(
     pi: usize,
     seed: u64,
     profile: ProfileKnown,
-    go_on: &dyn Fn() -> bool,
+    go_on: GoOn<'_>,
 ) -> Result<(), DiagnoseError> {
     match (profile, nominal.patterns[pi].pattern.profile) {
         (ProfileKnown::Stated, _) | (ProfileKnown::Decided, DotProfile::Gaussian) => {
@@ -240,17 +270,20 @@ fn calibrate_print(
         } else {
             PLACEMENTS.to_vec()
         };
-        // One round under each placement, two more for the best.
-        let mut screened: Option<(f64, Nominal)> = None;
-        for placement in placements {
-            let mut disk = nominal.clone();
-            disk.patterns[pi].pattern.profile = DotProfile::Disk;
-            disk.patterns[pi].pattern.placement = placement;
-            let chi2_disk = fit_print(meas, &mut disk, model, pi, seed, 1, go_on)?;
-            if screened.as_ref().is_none_or(|(c, _)| chi2_disk < *c) {
-                screened = Some((chi2_disk, disk));
-            }
-        }
+        // One round under each placement (side by side: independent fits), two more for the
+        // best; of equal χ², the first in the list.
+        let screened = placements
+            .into_par_iter()
+            .map(|placement| {
+                let mut disk = nominal.clone();
+                disk.patterns[pi].pattern.profile = DotProfile::Disk;
+                disk.patterns[pi].pattern.placement = placement;
+                let chi2_disk = fit_print(meas, &mut disk, model, pi, seed, 1, go_on)?;
+                Ok((chi2_disk, disk))
+            })
+            .collect::<Result<Vec<_>, DiagnoseError>>()?
+            .into_iter()
+            .reduce(|best, next| if next.0 < best.0 { next } else { best });
         if let Some((_, mut disk)) = screened {
             let chi2_disk = fit_print(meas, &mut disk, model, pi, seed, 2, go_on)?;
             chi2[1] = Some(chi2_disk);
@@ -306,7 +339,7 @@ fn fit_print(
     pi: usize,
     seed: u64,
     rounds: usize,
-    go_on: &dyn Fn() -> bool,
+    go_on: GoOn<'_>,
 ) -> Result<f64, DiagnoseError> {
     let measured = &meas.reference_stats[pi];
     let chi2_of = |n: &Nominal| -> f64 {

@@ -289,7 +289,15 @@ pub(super) fn fit_one_candidate(
     } else if let Some(predicted) = predict(meas, before, &with, &fit) {
         Some((predicted, Method::Predicted))
     } else {
-        let scene = SceneFrom::Refit(&before.model.nominal);
+        // A candidate that leaves the reference frame as it was (a motion blur, an illumination
+        // change) keeps the print calibrated against it: refitted, the print would differ only
+        // by the refit's own path, and it cost most of such a candidate's time (a disk print:
+        // some 90 renderings of its crop).
+        let scene = if with.effects.reference_part() == model.effects.reference_part() {
+            SceneFrom::Reuse(&before.model.nominal)
+        } else {
+            SceneFrom::Refit(&before.model.nominal)
+        };
         let rendered = compare_with_scene(meas, &with, meas.options.seed, scene, ask)?;
         Some((rendered, Method::Rendered))
     };

@@ -75,6 +75,21 @@ impl EffectId {
         }
     }
 
+    /// Whether the effect acts only between the reference and a moved frame — the stage's
+    /// move and landing, the print turning or magnified with the move, the light changing, the
+    /// exposure smeared by a stage still moving — and so leaves the reference frame as the model
+    /// without it renders it ([`super::Effects::reference_part`]).
+    pub fn leaves_the_reference(self) -> bool {
+        use EffectId::*;
+        match self {
+            StageMisalignment | StageError | Rotation | Scale | IlluminationChange | MotionBlur => {
+                true
+            }
+            LensDistortion | TargetTilt | PsfBlur | FillFactor | SensorNoise | FixedPattern
+            | Quantization | Vignetting => false,
+        }
+    }
+
     /// The chain position.
     pub fn stage(self) -> Stage {
         use EffectId::*;

@@ -128,4 +128,48 @@ impl Effects {
             .filter(|id| self.has(*id))
             .collect()
     }
+
+    /// The effects that act on the reference frame: those acting between the reference and a
+    /// moved frame ([`EffectId::leaves_the_reference`]) left out. Two models with the same
+    /// reference part render the same reference frame, pixel for pixel, so a print calibrated
+    /// against the measured reference under one holds for the other. User effects are kept:
+    /// their fields are the user's to write.
+    pub fn reference_part(&self) -> Effects {
+        // Every field named: a new effect's field is a compile error here until it is sorted.
+        let Effects {
+            stage_misalignment,
+            stage_error,
+            rotation,
+            scale,
+            lens_distortion,
+            target_tilt,
+            psf_blur,
+            fill_factor,
+            sensor_noise,
+            fixed_pattern,
+            quantization,
+            vignetting,
+            illumination_change,
+            motion_blur,
+            user,
+        } = self.clone();
+        let keep = |id: EffectId| !id.leaves_the_reference();
+        Effects {
+            stage_misalignment: stage_misalignment.filter(|_| keep(EffectId::StageMisalignment)),
+            stage_error: stage_error.filter(|_| keep(EffectId::StageError)),
+            rotation: rotation.filter(|_| keep(EffectId::Rotation)),
+            scale: scale.filter(|_| keep(EffectId::Scale)),
+            lens_distortion: lens_distortion.filter(|_| keep(EffectId::LensDistortion)),
+            target_tilt: target_tilt.filter(|_| keep(EffectId::TargetTilt)),
+            psf_blur: psf_blur.filter(|_| keep(EffectId::PsfBlur)),
+            fill_factor: fill_factor.filter(|_| keep(EffectId::FillFactor)),
+            sensor_noise: sensor_noise.filter(|_| keep(EffectId::SensorNoise)),
+            fixed_pattern: fixed_pattern.filter(|_| keep(EffectId::FixedPattern)),
+            quantization: quantization.filter(|_| keep(EffectId::Quantization)),
+            vignetting: vignetting.filter(|_| keep(EffectId::Vignetting)),
+            illumination_change: illumination_change.filter(|_| keep(EffectId::IlluminationChange)),
+            motion_blur: motion_blur.filter(|_| keep(EffectId::MotionBlur)),
+            user,
+        }
+    }
 }
