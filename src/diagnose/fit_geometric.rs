@@ -162,14 +162,31 @@ fn invert(n: &[f64], k: usize) -> Option<Vec<f64>> {
 /// same in every run, a speckle realisation's systematic error is not. None when the basis
 /// fields cannot be told apart by these runs (a singular normal matrix).
 pub fn fit_geometric(samples: &[FieldSample], params: &[GeometricParam]) -> Option<GeometricFit> {
+    fit_geometric_testing(samples, params, &[]).map(|(fit, _)| fit)
+}
+
+/// [`fit_geometric`], with the Wald statistic of the parameters at the indices `tested` alone
+/// (βₜᵀ Cₜₜ⁻¹ βₜ, their marginal covariance; 0 when none): whether terms added to a fit are
+/// asked for by the data. The difference of two fits' `chi2_drop` is not that statistic when the
+/// per-run scatter inflates each fit's covariance by its own factors (three or more runs): a
+/// centred lens then admitted decentring terms within one standard error of zero.
+pub fn fit_geometric_testing(
+    samples: &[FieldSample],
+    params: &[GeometricParam],
+    tested: &[usize],
+) -> Option<(GeometricFit, f64)> {
     let r0 = samples.first().map_or(1.0, |s| s.r0);
     let fit = fit_fields(samples, &Catalogue { params, r0 })?;
-    Some(GeometricFit {
-        params: params.to_vec(),
-        values: fit.values,
-        stderr: fit.stderr,
-        chi2_drop: fit.chi2_drop,
-    })
+    let wald = fit.wald_of(tested)?;
+    Some((
+        GeometricFit {
+            params: params.to_vec(),
+            values: fit.values,
+            stderr: fit.stderr,
+            chi2_drop: fit.chi2_drop,
+        },
+        wald,
+    ))
 }
 
 /// A fit of any [`Basis`]: the values, their standard errors and the Wald χ² (as
@@ -178,6 +195,31 @@ pub struct FieldFit {
     pub values: Vec<f64>,
     pub stderr: Vec<f64>,
     pub chi2_drop: f64,
+    /// The values' covariance C, k×k by rows (`stderr` is the root of its diagonal;
+    /// `chi2_drop` = βᵀ C⁻¹ β).
+    pub covariance: Vec<f64>,
+}
+
+impl FieldFit {
+    /// The Wald statistic of the values at the indices `which` alone: βᵀ C⁻¹ β over their
+    /// marginal covariance (the block of C, the others free). 0 for none; None when the block
+    /// is singular.
+    pub fn wald_of(&self, which: &[usize]) -> Option<f64> {
+        let k = self.values.len();
+        let m = which.len();
+        if m == 0 {
+            return Some(0.0);
+        }
+        let block: Vec<f64> = (0..m * m)
+            .map(|x| self.covariance[which[x / m] * k + which[x % m]])
+            .collect();
+        let inv = invert(&block, m)?;
+        Some(
+            (0..m * m)
+                .map(|x| self.values[which[x / m]] * inv[x] * self.values[which[x % m]])
+                .sum(),
+        )
+    }
 }
 
 /// [`fit_geometric`] on any basis.
@@ -218,10 +260,17 @@ pub fn fit_fields(samples: &[FieldSample], basis: &dyn Basis) -> Option<FieldFit
         })
         .sum::<f64>()
         / inflation;
+    let covariance = (0..k * k)
+        .map(|x| {
+            let (i, j) = (x / k, x % k);
+            inflation * inv[x] * (factors[i] * factors[j]).sqrt()
+        })
+        .collect();
     Some(FieldFit {
         values,
         stderr: var.iter().map(|v| v.sqrt()).collect(),
         chi2_drop,
+        covariance,
     })
 }
 
@@ -299,6 +348,36 @@ mod tests {
             .iter()
             .zip(&fit.stderr)
             .all(|(v, se)| v.abs() < 4.0 * se));
+    }
+
+    /// The tested terms' Wald statistic is over their marginal covariance: all of them give
+    /// `chi2_drop`, one alone (βⱼ/σⱼ)², none 0; with three runs a term the field does not hold
+    /// stays near its one degree of freedom although adding it raises `chi2_drop` by far more.
+    #[test]
+    fn a_terms_own_wald_statistic_is_over_its_marginal_covariance() {
+        let s = 2e-5;
+        let physics = |p: (f64, f64), t: (f64, f64)| (s * (p.0 + t.0), s * (p.1 + t.1));
+        let native = Scheme::parse("native").unwrap();
+        let moves = [(130.0, 0.0), (0.0, 65.0), (-130.0, 13.0)];
+        let points = field_runs(&moves, physics, 0.01, 3);
+        let samples = run_samples(&native, &moves, &points, 1e-4);
+        let params = [GeometricParam::Scale, GeometricParam::Rotation];
+        let (fit, both) = fit_geometric_testing(&samples, &params, &[0, 1]).unwrap();
+        assert!(
+            (both - fit.chi2_drop).abs() < 1e-9 * fit.chi2_drop,
+            "{both} {fit:?}"
+        );
+        let (_, none) = fit_geometric_testing(&samples, &params, &[]).unwrap();
+        assert_eq!(none, 0.0);
+        let (_, rotation) = fit_geometric_testing(&samples, &params, &[1]).unwrap();
+        let z = fit.values[1] / fit.stderr[1];
+        assert!(
+            (rotation - z * z).abs() < 1e-9 * rotation.max(1.0),
+            "{rotation} {z}"
+        );
+        assert!(rotation < 16.0, "no rotation in the field: {rotation}");
+        let alone = fit_geometric(&samples, &params[..1]).unwrap();
+        assert!(alone.chi2_drop > 100.0, "{}", alone.chi2_drop);
     }
 
     #[test]
