@@ -7,56 +7,13 @@ use crate::api::problem::{ApiError, ApiResult, Problem};
 use crate::api::sse::{self, SseResponse};
 use crate::experiment::ExperimentRequest;
 use crate::service::job::ExperimentJob;
-use crate::service::{Service, SubmitError};
-use crate::store::{RunKind, RunRecord, RunStatus, MAX_IDEMPOTENCY_KEY_LEN};
+use crate::service::Service;
+use crate::store::{RunKind, RunRecord, RunStatus};
 use axum::extract::{Path, Query, State};
-use axum::http::{header, HeaderMap, StatusCode};
-use axum::response::{IntoResponse, Response};
+use axum::http::HeaderMap;
+use axum::response::Response;
 use axum::Json;
 use serde::Deserialize;
-
-pub fn idempotency_key(headers: &HeaderMap) -> ApiResult<Option<String>> {
-    match headers.get("idempotency-key") {
-        None => Ok(None),
-        Some(v) => {
-            let key = v
-                .to_str()
-                .ok()
-                .filter(|k| !k.is_empty() && k.len() <= MAX_IDEMPOTENCY_KEY_LEN)
-                .ok_or_else(|| {
-                    ApiError::invalid(
-                        "Idempotency-Key",
-                        format!("1 to {MAX_IDEMPOTENCY_KEY_LEN} visible ASCII characters"),
-                    )
-                })?;
-            Ok(Some(key.to_string()))
-        }
-    }
-}
-
-/// What a 429 asks a client to wait before submitting again: about one queued job's time.
-const RETRY_AFTER_S: u64 = 30;
-
-impl From<SubmitError> for ApiError {
-    fn from(e: SubmitError) -> Self {
-        match e {
-            SubmitError::Field(f) => f.into(),
-            SubmitError::NoStage => ApiError::unavailable(e.to_string()),
-            SubmitError::Store(s) => s.into(),
-            SubmitError::QueueFull { .. } => ApiError::too_many(e.to_string(), RETRY_AFTER_S),
-        }
-    }
-}
-
-/// 202 with `Location` for a new run; 200 with the same run for a repeated Idempotency-Key.
-pub fn accepted(record: RunRecord, created: bool, location: String) -> Response {
-    let status = if created {
-        StatusCode::ACCEPTED
-    } else {
-        StatusCode::OK
-    };
-    (status, [(header::LOCATION, location)], Json(record)).into_response()
-}
 
 #[utoipa::path(post, path = "/experiments", tag = "experiments", request_body = ExperimentRequest,
     params(("Idempotency-Key" = Option<String>, Header, description = "Repeat-safe submission")),
