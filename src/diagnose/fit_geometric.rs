@@ -351,8 +351,9 @@ mod tests {
     }
 
     /// The tested terms' Wald statistic is over their marginal covariance: all of them give
-    /// `chi2_drop`, one alone (βⱼ/σⱼ)², none 0; with three runs a term the field does not hold
-    /// stays near its one degree of freedom although adding it raises `chi2_drop` by far more.
+    /// `chi2_drop`, one alone (βⱼ/σⱼ)², none 0; a term the field does not hold stays near its
+    /// one degree of freedom beside one it holds. (Where the two differ, a centred lens's
+    /// decentring terms: `fit_geometric_effect`'s test.)
     #[test]
     fn a_terms_own_wald_statistic_is_over_its_marginal_covariance() {
         let s = 2e-5;
