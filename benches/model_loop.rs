@@ -12,6 +12,8 @@
 #[path = "../tests/common/independent.rs"]
 mod independent;
 
+use independent::{repo, target_dir};
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
@@ -20,26 +22,19 @@ fn main() {
     divan::main();
 }
 
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
 /// The paper-size dataset, generated on first use into a folder named by the content of its
 /// spec and of the generator (another spec or generator is another dataset, not a stale one).
 fn paper_dataset() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     DIR.get_or_init(|| {
         use std::hash::{Hash, Hasher};
-        let target = std::env::var_os("CARGO_TARGET_DIR")
-            .map(PathBuf::from)
-            .unwrap_or_else(|| repo().join("target"));
         let spec_bytes = std::fs::read(repo().join("tests/independent/examples/paper3.json"))
             .expect("paper3.json");
         let generator =
             std::fs::read(repo().join("tests/independent/generate.py")).expect("generate.py");
         let mut hasher = std::collections::hash_map::DefaultHasher::new();
         (&spec_bytes, &generator).hash(&mut hasher);
-        let dir = target.join(format!("bench-data/indep-paper3-{:016x}", hasher.finish()));
+        let dir = target_dir().join(format!("bench-data/indep-paper3-{:016x}", hasher.finish()));
         if !dir.join("dataset.json").is_file() {
             let spec = serde_json::from_slice(&spec_bytes).expect("paper3.json is JSON");
             let _ = std::fs::remove_dir_all(&dir);

@@ -6,8 +6,8 @@
 //! Lens distortion starts from k1 and adds the decentring terms p1, p2, then k2, each only when
 //! the runs identify it and its own Wald χ² in the wider fit (over its marginal covariance) pays
 //! the BIC's price (ln n per parameter): a term the data do not ask for would only spend the
-//! candidate's evidence. A distortion centre off the
-//! image centre shows as p1, p2 (see `basis`): both are reported, the centre as derived.
+//! candidate's evidence. A distortion centre off the image centre shows as p1, p2 (see
+//! `basis`): both are reported, the centre as derived.
 
 use super::basis::GeometricParam;
 use super::fit_geometric::{fit_geometric, fit_geometric_testing, FieldSample, GeometricFit};

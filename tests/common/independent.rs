@@ -18,8 +18,15 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
 
-fn repo() -> PathBuf {
+pub fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Cargo's target folder: `CARGO_TARGET_DIR`, else the repository's `target/`.
+pub fn target_dir() -> PathBuf {
+    std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| repo().join("target"))
 }
 
 /// The venv's python, made (once per run of the tests) when missing.
@@ -27,10 +34,7 @@ pub fn python() -> PathBuf {
     static PYTHON: OnceLock<PathBuf> = OnceLock::new();
     PYTHON
         .get_or_init(|| {
-            let target = std::env::var_os("CARGO_TARGET_DIR")
-                .map(PathBuf::from)
-                .unwrap_or_else(|| repo().join("target"));
-            let venv = target.join("independent-venv");
+            let venv = target_dir().join("independent-venv");
             let py = venv.join("bin/python");
             let marker = venv.join(".requirements-installed");
             let requirements = repo().join("tests/independent/requirements.txt");
