@@ -15,6 +15,12 @@
 
 use super::normal::{integrated_cdf, NORMAL_RANGE};
 use super::speckle::{Dot, Footprint, Weights};
+use std::cell::RefCell;
+use std::rc::Rc;
+
+/// A disk's strips ([`DiskDot::strips`]): their boundaries as fractions of the radius in y, and
+/// each strip's half-width, px.
+type Strips = (Vec<f64>, Vec<f64>);
 
 /// One disk in image coordinates (px): an axis-aligned ellipse of radii (`radius_x_px`,
 /// `radius_y_px`) — a circle mapped by a stretch stays one — blurred by a Gaussian of σ
@@ -39,8 +45,25 @@ const MAX_STRIPS: usize = 256;
 
 impl DiskDot {
     /// The strips' boundaries as fractions of the radius in y, from −1 to 1, and each strip's
-    /// half-width in px.
-    fn strips(&self) -> (Vec<f64>, Vec<f64>) {
+    /// half-width in px. They depend on the disk's size and blur alone, which every dot of a
+    /// print shares in a frame: each thread keeps the last ones (their arcsines were 2 % of a
+    /// diagnosis round's profile).
+    fn strips(&self) -> Rc<Strips> {
+        thread_local! {
+            static LAST: RefCell<Option<([u64; 3], Rc<Strips>)>> = const { RefCell::new(None) };
+        }
+        let key = [self.radius_x_px, self.radius_y_px, self.blur_y_px].map(f64::to_bits);
+        LAST.with_borrow_mut(|last| match last {
+            Some((k, strips)) if *k == key => strips.clone(),
+            _ => {
+                let strips = Rc::new(self.strips_computed());
+                *last = Some((key, strips.clone()));
+                strips
+            }
+        })
+    }
+
+    fn strips_computed(&self) -> Strips {
         let height = FINEST_STRIP_PX.max(self.blur_y_px);
         let n = ((2.0 * self.radius_y_px / height).ceil() as usize).clamp(1, MAX_STRIPS);
         let t: Vec<f64> = (0..=n).map(|k| -1.0 + 2.0 * k as f64 / n as f64).collect();
@@ -118,7 +141,8 @@ impl DiskDot {
         (fx, fy): (f64, f64),
     ) -> Vec<f64> {
         let (nc, nr) = (c_hi - c_lo + 1, r_hi - r_lo + 1);
-        let (t, half_widths) = self.strips();
+        let strips = self.strips();
+        let (t, half_widths) = (&strips.0, &strips.1);
         let mut values = vec![0.0; nc * nr];
         let (mut wx, mut wy) = (Vec::with_capacity(nc), Vec::with_capacity(nr));
         for (k, w) in half_widths.iter().enumerate() {

@@ -59,18 +59,67 @@ pub(super) fn hard_core_centres_remembered(
     centres
 }
 
-/// The 3x3 cells about a draw's, as (column, row) offsets: nearest first.
-const NEIGHBOURS: [(isize, isize); 9] = [
-    (0, 0),
-    (-1, 0),
-    (1, 0),
-    (0, -1),
-    (0, 1),
-    (-1, -1),
-    (1, -1),
-    (-1, 1),
-    (1, 1),
-];
+/// The centres kept so far, by cell of side d: a centre's neighbours within d lie in the 3x3
+/// cells about its own. Each cell holds its centres' coordinates in place (up to
+/// [`CELL_SLOTS`]; only a centre placed regardless can crowd one beyond, into `crowded`), and
+/// the grid has a border of empty cells, so a check reads nine runs of memory with no bounds
+/// test: the check of a draw was a tenth of a paper-size diagnosis round when each cell held
+/// indices into the list of centres.
+struct Cells {
+    /// Cells per row, the border included: cell (c, r) of the grid is at (r + 1)·stride + c + 1.
+    stride: usize,
+    counts: Vec<u8>,
+    slots: Vec<[(f64, f64); CELL_SLOTS]>,
+    /// The centres beyond a cell's slots, by cell.
+    crowded: Vec<(usize, (f64, f64))>,
+}
+
+/// Centres at least d apart fit at most four in a square of side d (its corners).
+const CELL_SLOTS: usize = 4;
+
+impl Cells {
+    fn new(cols: usize, rows: usize) -> Self {
+        let n = (cols + 2) * (rows + 2);
+        Cells {
+            stride: cols + 2,
+            counts: vec![0; n],
+            slots: vec![[(0.0, 0.0); CELL_SLOTS]; n],
+            crowded: Vec::new(),
+        }
+    }
+
+    fn push(&mut self, cell: usize, at: (f64, f64)) {
+        let k = usize::from(self.counts[cell]);
+        if k < CELL_SLOTS {
+            self.slots[cell][k] = at;
+        } else {
+            self.crowded.push((cell, at));
+        }
+        self.counts[cell] = self.counts[cell].saturating_add(1);
+    }
+
+    /// Whether no centre within the 3x3 cells about `cell` lies closer to `at` than √`d2`. The
+    /// draw's own cell first, then its sides, then its corners: near the jamming limit most
+    /// draws are refused, and a refusal is most likely found nearest.
+    fn free(&self, cell: usize, at: (f64, f64), d2: f64) -> bool {
+        let s = self.stride as isize;
+        [0, -1, 1, -s, s, -s - 1, -s + 1, s - 1, s + 1]
+            .iter()
+            .all(|&offset| {
+                let k = cell.wrapping_add_signed(offset);
+                let n = usize::from(self.counts[k]);
+                // Squared: hypot's care for overflow cost a tenth of a render.
+                let clear = |&(x, y): &(f64, f64)| (x - at.0).powi(2) + (y - at.1).powi(2) >= d2;
+                self.slots[k][..n.min(CELL_SLOTS)].iter().all(clear)
+                    && (n <= CELL_SLOTS
+                        || self
+                            .crowded
+                            .iter()
+                            .filter(|(c, _)| *c == k)
+                            .all(|(_, p)| clear(p)))
+            })
+    }
+}
 
 /// `n` centres in the rectangle [x0, x1] x [y0, y1] (mm), none closer than `min_distance_mm`
 /// to an earlier one where room was found.
@@ -82,14 +131,13 @@ fn hard_core_centres(
 ) -> Vec<(f64, f64)> {
     let d = min_distance_mm.max(1e-9);
     let d2 = d * d;
-    // A grid of cells of side d: a centre's neighbours within d lie in the 3x3 cells about it.
     let cols = (((x1 - x0) / d).ceil() as usize).max(1);
     let rows = (((y1 - y0) / d).ceil() as usize).max(1);
-    let mut cells: Vec<Vec<u32>> = vec![Vec::new(); cols * rows];
+    let mut cells = Cells::new(cols, rows);
     let cell_of = |x: f64, y: f64| {
         let c = (((x - x0) / d) as usize).min(cols - 1);
         let r = (((y - y0) / d) as usize).min(rows - 1);
-        (c, r)
+        (r + 1) * (cols + 2) + c + 1
     };
     let mut centres: Vec<(f64, f64)> = Vec::with_capacity(n);
     for _ in 0..n {
@@ -99,29 +147,12 @@ fn hard_core_centres(
                 x0 + rng.gen::<f64>() * (x1 - x0),
                 y0 + rng.gen::<f64>() * (y1 - y0),
             );
-            let (c, r) = cell_of(at.0, at.1);
-            // The draw's own cell first, then its sides, then its corners: near the jamming
-            // limit most draws are refused, and a refusal is most likely found nearest.
-            let free = NEIGHBOURS.iter().all(|&(dc, dr)| {
-                let (Some(cc), Some(rr)) = (c.checked_add_signed(dc), r.checked_add_signed(dr))
-                else {
-                    return true;
-                };
-                if cc >= cols || rr >= rows {
-                    return true;
-                }
-                cells[rr * cols + cc].iter().all(|&k| {
-                    let (x, y) = centres[k as usize];
-                    // Squared: hypot's care for overflow cost a tenth of a render.
-                    (x - at.0).powi(2) + (y - at.1).powi(2) >= d2
-                })
-            });
-            if free {
+            if cells.free(cell_of(at.0, at.1), at, d2) {
                 break;
             }
         }
-        let (c, r) = cell_of(at.0, at.1);
-        cells[r * cols + c].push(centres.len() as u32);
+        let cell = cell_of(at.0, at.1);
+        cells.push(cell, at);
         centres.push(at);
     }
     centres
