@@ -185,7 +185,51 @@ fn user_bound_of(effects: &Effects, name: &str, param: &str, value: f64) -> Opti
     Some((nearer, p.max - p.min))
 }
 
+/// The values a parameter of a fitted effect can take in a camera, where a fit is not bounded
+/// by the catalogue's range and the data can ask for what no camera has. The sensor's noise is
+/// fitted in closed form from the photon transfer curve: a curve that is flat within its errors
+/// gives any gain, and on a control with nothing hidden a slope of zero by chance was named
+/// `sensor_noise` with a full well of 8.4e7 e and a read noise of 25,500 e. The largest full
+/// wells of scientific sensors (large-pixel CCDs, binned) are some 1e6 e, the worst read noise
+/// some hundreds of e (EMVA 1288 data sheets): twice and ten times those bound what a fit may
+/// name.
+fn physical_range(effect: EffectId, param: &str) -> Option<(f64, f64)> {
+    use EffectId::*;
+    match effect {
+        SensorNoise => match param {
+            "full_well_e" => Some((0.0, 2e6)),
+            "read_noise_e" => Some((0.0, 1e3)),
+            _ => None,
+        },
+        PsfBlur | FillFactor | MotionBlur | StageMisalignment | StageError | Rotation | Scale
+        | LensDistortion | TargetTilt | FixedPattern | Quantization | Vignetting
+        | IlluminationChange => None,
+    }
+}
+
+/// The parameters of `fit` beyond what a camera has ([`physical_range`]).
+fn beyond_physics(fit: &ImageFit) -> Vec<String> {
+    let Some(effect) = fit.effect.catalogue() else {
+        return Vec::new();
+    };
+    fit.params
+        .iter()
+        .filter_map(|(k, &v)| {
+            let (lo, hi) = physical_range(effect, k)?;
+            (!(lo..=hi).contains(&v))
+                .then(|| format!("{k} = {v:.3e} (a camera's: {lo:e} to {hi:e})"))
+        })
+        .collect()
+}
+
 pub(super) fn outside_range(fit: &ImageFit) -> Option<String> {
+    let beyond = beyond_physics(fit);
+    if !beyond.is_empty() {
+        return Some(format!(
+            "the fit asks for what no camera has: {}; the data do not describe this effect",
+            beyond.join(", ")
+        ));
+    }
     let at: Vec<String> = fit
         .params
         .iter()
@@ -356,6 +400,35 @@ mod tests {
         assert!(text.contains("fy") && !text.contains("fx"), "{text}");
         // An unbounded parameter is never at a bound.
         assert!(outside_range(&fit(EffectId::Scale, &[("ds", 1e9)])).is_none());
+    }
+
+    #[test]
+    fn a_sensor_no_camera_has_is_outside_the_range() {
+        // Control 23 of the 30: gain 1,281 e/DN at 16 bits, read noise 25,500 e.
+        let control = [
+            ("gain", 1281.0),
+            ("read_noise_e", 25_500.0),
+            ("full_well_e", 8.4e7),
+        ];
+        let text = outside_range(&fit(EffectId::SensorNoise, &control)).unwrap();
+        assert!(
+            text.contains("full_well_e") && text.contains("read_noise_e"),
+            "{text}"
+        );
+        assert!(!text.contains("gain ="), "{text}");
+        // An sCMOS camera (gain 0.46 e/DN, 16 bits, read noise 1.5 e) and a large-pixel CCD.
+        let scmos = [
+            ("gain", 0.46),
+            ("read_noise_e", 1.5),
+            ("full_well_e", 30_000.0),
+        ];
+        assert!(outside_range(&fit(EffectId::SensorNoise, &scmos)).is_none());
+        let ccd = [
+            ("gain", 15.0),
+            ("read_noise_e", 12.0),
+            ("full_well_e", 9.8e5),
+        ];
+        assert!(outside_range(&fit(EffectId::SensorNoise, &ccd)).is_none());
     }
 
     #[test]
