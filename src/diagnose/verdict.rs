@@ -185,20 +185,20 @@ fn user_bound_of(effects: &Effects, name: &str, param: &str, value: f64) -> Opti
     Some((nearer, p.max - p.min))
 }
 
-/// The values a parameter of a fitted effect can take in a camera, where a fit is not bounded
-/// by the catalogue's range and the data can ask for what no camera has. The sensor's noise is
-/// fitted in closed form from the photon transfer curve: a curve that is flat within its errors
-/// gives any gain, and on a control with nothing hidden a slope of zero by chance was named
+/// The most a parameter of a fitted effect can be in a camera, where a fit is not bounded by the
+/// catalogue's range and the data can ask for what no camera has. The sensor's noise is fitted
+/// in closed form from the photon transfer curve: a curve that is flat within its errors gives
+/// any gain, and on a control with nothing hidden a slope of zero by chance was named
 /// `sensor_noise` with a full well of 8.4e7 e and a read noise of 25,500 e. The largest full
 /// wells of scientific sensors (large-pixel CCDs, binned) are some 1e6 e, the worst read noise
 /// some hundreds of e (EMVA 1288 data sheets): twice and ten times those bound what a fit may
 /// name.
-fn physical_range(effect: EffectId, param: &str) -> Option<(f64, f64)> {
+fn physical_max(effect: EffectId, param: &str) -> Option<f64> {
     use EffectId::*;
     match effect {
         SensorNoise => match param {
-            "full_well_e" => Some((0.0, 2e6)),
-            "read_noise_e" => Some((0.0, 1e3)),
+            "full_well_e" => Some(2e6),
+            "read_noise_e" => Some(1e3),
             _ => None,
         },
         PsfBlur | FillFactor | MotionBlur | StageMisalignment | StageError | Rotation | Scale
@@ -207,7 +207,7 @@ fn physical_range(effect: EffectId, param: &str) -> Option<(f64, f64)> {
     }
 }
 
-/// The parameters of `fit` beyond what a camera has ([`physical_range`]).
+/// The parameters of `fit` beyond what a camera has ([`physical_max`]).
 fn beyond_physics(fit: &ImageFit) -> Vec<String> {
     let Some(effect) = fit.effect.catalogue() else {
         return Vec::new();
@@ -215,9 +215,8 @@ fn beyond_physics(fit: &ImageFit) -> Vec<String> {
     fit.params
         .iter()
         .filter_map(|(k, &v)| {
-            let (lo, hi) = physical_range(effect, k)?;
-            (!(lo..=hi).contains(&v))
-                .then(|| format!("{k} = {v:.3e} (a camera's: {lo:e} to {hi:e})"))
+            let max = physical_max(effect, k)?;
+            (!(v <= max)).then(|| format!("{k} = {v:.3e} (a camera's at most {max:e})"))
         })
         .collect()
 }
