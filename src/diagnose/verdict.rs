@@ -190,8 +190,8 @@ fn user_bound_of(effects: &Effects, name: &str, param: &str, value: f64) -> Opti
 /// in closed form from the photon transfer curve: a curve that is flat within its errors gives
 /// any gain, and on a control with nothing hidden a slope of zero by chance was named
 /// `sensor_noise` with a full well of 8.4e7 e and a read noise of 25,500 e. The largest full
-/// wells of scientific sensors (large-pixel CCDs, binned) are some 1e6 e, the worst read noise
-/// some hundreds of e (EMVA 1288 data sheets): twice and ten times those bound what a fit may
+/// wells of scientific sensors (large-pixel CCDs, binned) are some 1e6 e, the worst read noises
+/// some 100 e (EMVA 1288 data sheets): twice and ten times those bound what a fit may
 /// name.
 fn physical_max(effect: EffectId, param: &str) -> Option<f64> {
     use EffectId::*;
