@@ -6,8 +6,8 @@
 //!   overlapping subsets ((subset/step)², at least 1), σ² the noise variance of the difference;
 //! - std: per run and scheme, Δσu and Δσv over SE = √(σm² + σo²)/√(2 n_eff);
 //! - image: per frame, ln of the power-spectrum bins along x and y, the noise variance of each
-//!   photon-transfer bin (the model's curve interpolated at the measured means), the
-//!   mean-intensity map, the contrast.
+//!   photon-transfer bin (the model's curve interpolated at the measured means; frames with a
+//!   static repeat only, see [`image_chi2_parts`]), the mean-intensity map, the contrast.
 //!
 //! The field and std χ² are scaled by N_eff/N for the frames the analyses share (see [`chi2`]).
 //!
@@ -89,9 +89,17 @@ pub fn image_chi2_parts(m: &FrameStats, o: &FrameStats) -> [(f64, usize); IMAGE_
         }
     }
     kind += 1;
-    for p in &m.ptc {
-        if let Some((v, se)) = ptc_at(&o.ptc, p.mean_dn) {
-            add(kind, p.variance_dn2 - v, (p.se * p.se + se * se).sqrt());
+    // Noise only where both sides measured it against a static repeat. A single frame's
+    // estimate (the 3x3 second difference at every pixel) is the speckle's curvature as much as
+    // its noise: on a 640x540 control's moved frame 1.5e5–1.6e7 DN² per bin against a noise of
+    // some 400 DN², and 26 of 30 controls with nothing hidden disagreed with their model on it
+    // by χ²/n 3–90 — the print's fine structure, which the spectra already compare, counted
+    // again under the name of noise.
+    if m.ptc_from_repeat && o.ptc_from_repeat {
+        for p in &m.ptc {
+            if let Some((v, se)) = ptc_at(&o.ptc, p.mean_dn) {
+                add(kind, p.variance_dn2 - v, (p.se * p.se + se * se).sqrt());
+            }
         }
     }
     kind += 1;
@@ -275,6 +283,39 @@ mod tests {
         let before = chi2(0.0, 0.0, [(600.0, 100), (20.0, 20), (0.0, 0), (1.0, 1)]);
         let after = chi2(0.0, 0.0, [(400.0, 100), (20.0, 20), (0.0, 0), (1.0, 1)]);
         assert!((image_change(&before, &after) + 50.0).abs() < 1e-12);
+    }
+
+    /// The noise's χ² counts frames whose noise both sides measured against a static repeat;
+    /// a single frame's curve (speckle curvature as much as noise) adds nothing.
+    #[test]
+    fn noise_is_compared_only_between_repeats() {
+        let curve = |variance_dn2: f64| {
+            [1000.0, 2000.0, 3000.0]
+                .map(|mean_dn| PtcPoint {
+                    mean_dn,
+                    variance_dn2,
+                    se: 1.0,
+                })
+                .to_vec()
+        };
+        let stats = |variance_dn2: f64, from_repeat: bool| FrameStats {
+            ptc: curve(variance_dn2),
+            ptc_from_repeat: from_repeat,
+            ..crate::diagnose::test_fields::frame_stats(2000.0)
+        };
+        const NOISE: usize = 1;
+        // 10 DN² apart at SE √2 per point: χ² = 3 · 100/2.
+        let both = image_chi2_parts(&stats(410.0, true), &stats(400.0, true));
+        assert_eq!(both[NOISE].1, 3);
+        assert!((both[NOISE].0 - 150.0).abs() < 1e-9, "{:?}", both[NOISE]);
+        for (m, o) in [(false, true), (true, false), (false, false)] {
+            let one = image_chi2_parts(&stats(4.1e5, m), &stats(400.0, o));
+            assert_eq!(
+                one[NOISE],
+                (0.0, 0),
+                "repeat on the model {m}, measured {o}"
+            );
+        }
     }
 
     #[test]
