@@ -93,7 +93,7 @@ pub fn image_chi2_parts(m: &FrameStats, o: &FrameStats) -> [(f64, usize); IMAGE_
     // estimate (the 3x3 second difference at every pixel) is the speckle's curvature as much as
     // its noise: on a 640x540 control's moved frame 1.5e5–1.6e7 DN² per bin against a noise of
     // some 400 DN², and 26 of 30 controls with nothing hidden disagreed with their model on it
-    // by χ²/n 3–90 — the print's fine structure, which the spectra already compare, counted
+    // by χ²/n 3.3–175 — the print's fine structure, which the spectra already compare, counted
     // again under the name of noise.
     if m.ptc_from_repeat && o.ptc_from_repeat {
         for p in &m.ptc {
