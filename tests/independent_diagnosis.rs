@@ -179,6 +179,60 @@ fn hidden_vignetting() {
     assert!(map_after * 3.0 <= map_before);
 }
 
+#[test]
+fn hidden_shot_noise_with_a_repeat_of_one_print_only() {
+    // Two prints, a photon-transfer (shot) noise the baseline lacks, and a static repeat of print
+    // a only (print b's is struck from the manifest, as a lab that took one repeat would have
+    // it). The photon transfer curve is fitted from the repeat's noise alone: print b's curve
+    // from its single frame is the speckle's curvature: fitted beside it, on a dataset like this
+    // one (2 e/DN, 40 e of read noise, two moves), the read noise came out 38 ± 41 e, against
+    // 42.4 ± 3.0 e from the repeat alone (2026-11-29).
+    let mut draw = Draw::new(7);
+    let mut spec = bench("shot", &mut draw, false);
+    let gain_e_per_dn = draw.range(1.5, 3.0);
+    let read_noise_dn = spec["read_noise_dn"].as_f64().unwrap();
+    spec["gain_e_per_dn"] = json!(gain_e_per_dn);
+    spec["patterns"] = json!([
+        independent::print(&mut draw, "a", false),
+        independent::print(&mut draw, "b", false)
+    ]);
+    spec["moves"] = json!([{"id": "x5mm", "dx_mm": 5.0, "dy_mm": 0.0}]);
+    spec["step_series"] = json!([]);
+    // The spec, to generate the dataset again outside the test.
+    println!("spec: {spec}");
+    let root = tempfile::tempdir().unwrap();
+    let dir = root.path().join("dataset");
+    generate(&spec, &dir);
+    let manifest_path = dir.join("dataset.json");
+    let mut manifest: Value =
+        serde_json::from_slice(&std::fs::read(&manifest_path).unwrap()).unwrap();
+    for run in manifest["runs"].as_array_mut().unwrap() {
+        if run["reference"].as_str().unwrap().starts_with("b_") {
+            run.as_object_mut().unwrap().remove("repeat");
+        }
+    }
+    std::fs::write(&manifest_path, serde_json::to_vec(&manifest).unwrap()).unwrap();
+    let meas = load_measurement(&dir, &options(), &|_, _| true).unwrap();
+    let r = diagnose_rounds_prepared(&meas, &baseline(), 1, &|_, _| true).unwrap();
+    report("shot", &r);
+    let d = &r.diagnoses[0];
+    assert_eq!(
+        ffdic::model::effects::verdict_name(&d.verdict),
+        "sensor_noise"
+    );
+    let (gain, gain_se) = param(d, "sensor_noise", "gain");
+    close("sensor_noise gain", gain, gain_se, gain_e_per_dn);
+    let (read_e, read_se) = param(d, "sensor_noise", "read_noise_e");
+    let truth_e = read_noise_dn * gain_e_per_dn;
+    println!("gain {gain} ± {gain_se} (truth {gain_e_per_dn}), read noise {read_e} ± {read_se} e (truth {truth_e})");
+    // Within 15 % or two standard errors of the truth, and known to better than 20 %.
+    assert!(
+        (read_e - truth_e).abs() <= (0.15 * truth_e).max(2.0 * read_se),
+        "read noise {read_e} ± {read_se} e, truth {truth_e}"
+    );
+    assert!(read_se < 0.2 * truth_e, "read noise {read_e} ± {read_se} e");
+}
+
 /// The psf_blur dataset of the tests: Gaussian dots, a lens blur drawn in 0.8–1.4 px.
 fn psf_spec(state_print: &str) -> (Value, f64) {
     let mut draw = Draw::new(6);

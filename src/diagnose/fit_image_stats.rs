@@ -61,14 +61,17 @@ pub fn fit_sensor_noise(
     before: &Comparison,
     model: &Effects,
 ) -> Option<ImageFit> {
-    let points: Vec<_> = meas
-        .reference_stats
+    // Only the patterns with a static repeat: a single frame's curve is the speckle's curvature,
+    // not its noise (a dataset with repeats for some patterns only would fit a slope to it).
+    let with_repeat: Vec<usize> = (0..meas.reference_stats.len())
+        .filter(|&pi| meas.reference_stats[pi].ptc_from_repeat)
+        .collect();
+    let points: Vec<_> = with_repeat
         .iter()
-        .flat_map(|s| s.ptc.iter().copied())
+        .flat_map(|&pi| meas.reference_stats[pi].ptc.iter().copied())
         .collect();
     let (a, b, cov) = ptc_line(&points)?;
-    let bits = before.model.nominal.bit_depth;
-    let full_scale = 2f64.powi(bits as i32) - 1.0;
+    let full_scale = before.model.nominal.full_scale_dn();
     let make = |a: f64, b: f64| {
         let gain = 1.0 / a.max(1e-9);
         SensorNoise {
@@ -94,7 +97,7 @@ pub fn fit_sensor_noise(
         )
         .expect(TARGET_BUILT);
         let mut model_points = Vec::new();
-        for pi in 0..meas.labels.len() {
+        for &pi in &with_repeat {
             let r0 = scene.render(pi, Shot::REFERENCE, Some(STATS_CROP_PX));
             let r1 = scene.render(pi, Shot::REPEAT, Some(STATS_CROP_PX));
             model_points.extend(ptc(&r0, Some(&r1)));

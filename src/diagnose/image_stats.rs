@@ -120,15 +120,31 @@ fn noise_samples(a: &Image, repeat: Option<&Image>) -> (Vec<(f64, f64)>, f64) {
 
 /// Pooled noise variance (DN²) of a crop: mean of the per-pixel estimates; without a repeat,
 /// over the flattest quarter of the pixels (least speckle structure leaks into the estimate).
-pub fn noise_variance(a: &Image, repeat: Option<&Image>) -> f64 {
+///
+/// With a repeat, a pixel clipped in either frame (at 0 DN or at `full_scale_dn`) is left out:
+/// a pixel clipped in both differs by nothing and would pull the floor down (control 0 of the
+/// independent controls: 2.1 % of its reference's pixels at 0 DN, 389.5 DN² over all pixels
+/// against 397.7 over the unclipped, its nine unclipped noise bins at 389–405). The model's
+/// readout clips the same way, so a floor from the unclipped pixels reproduces the clipping.
+pub fn noise_variance(a: &Image, repeat: Option<&Image>, full_scale_dn: f64) -> f64 {
     let a = centre_crop(a, STATS_CROP_PX);
     let b = repeat.map(|r| centre_crop(r, STATS_CROP_PX));
-    let (samples, _) = noise_samples(&a, b.as_ref());
+    if let Some(b) = &b {
+        let clipped = |v: f32| v <= 0.0 || f64::from(v) >= full_scale_dn;
+        let (sum, n) = a
+            .data()
+            .iter()
+            .zip(b.data())
+            .filter(|(x, y)| !clipped(**x) && !clipped(**y))
+            .fold((0.0, 0usize), |(s, n), (x, y)| {
+                let d = f64::from(*x) - f64::from(*y);
+                (s + d * d / 2.0, n + 1)
+            });
+        return if n == 0 { 0.0 } else { sum / n as f64 };
+    }
+    let (samples, _) = noise_samples(&a, None);
     if samples.is_empty() {
         return 0.0;
-    }
-    if b.is_some() {
-        return samples.iter().map(|s| s.1).sum::<f64>() / samples.len() as f64;
     }
     let mut v: Vec<f64> = samples.iter().map(|s| s.1).collect();
     let q = percentile(&mut v, 0.25);
@@ -381,6 +397,31 @@ mod tests {
         assert!(percentile(&mut [], 0.5).is_nan());
     }
 
+    /// Half of the pixels far outside the range (clipped in both frames, at 0 DN or at full
+    /// scale), half inside it with a σ of 10 DN: the floor is the unclipped half's 100 DN², not
+    /// the 50 of all pixels.
+    #[test]
+    fn clipped_pixels_do_not_pull_the_noise_floor_down() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let n = Normal::new(0.0, 10.0).unwrap();
+        for (outside, full) in [(-100.0, 65535.0), (1100.0, 1000.0)] {
+            let mut frame = || {
+                Image::from_fn(256, 256, |c, _| {
+                    let truth = if c % 2 == 0 { 500.0 } else { outside };
+                    (truth + n.sample(&mut rng) as f32).clamp(0.0, full)
+                })
+            };
+            let (a, b) = (frame(), frame());
+            let v = noise_variance(&a, Some(&b), f64::from(full));
+            assert!(
+                (v / 100.0 - 1.0).abs() < 0.03,
+                "{outside} DN clipped at {full}: {v}"
+            );
+        }
+    }
+
     #[test]
     fn white_noise_has_a_flat_spectrum_and_the_right_variance() {
         use rand::SeedableRng;
@@ -389,9 +430,9 @@ mod tests {
         let n = Normal::new(1000.0, 10.0).unwrap();
         let a = Image::from_fn(256, 256, |_, _| n.sample(&mut rng) as f32);
         let b = Image::from_fn(256, 256, |_, _| n.sample(&mut rng) as f32);
-        let v = noise_variance(&a, Some(&b));
+        let v = noise_variance(&a, Some(&b), 65535.0);
         assert!((v / 100.0 - 1.0).abs() < 0.03, "{v}");
-        let single = noise_variance(&a, None);
+        let single = noise_variance(&a, None, 65535.0);
         assert!((single / 100.0 - 1.0).abs() < 0.1, "{single}");
         let s = frame_stats(None, &a, Some(&b));
         // White noise: σ²/mean² per unit frequency over 1 cycle/px → 1e-4 everywhere.

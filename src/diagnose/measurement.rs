@@ -166,8 +166,13 @@ impl PairVisitor for MeasuredPairs<'_> {
         })?;
         same_size_as_first(run, reference, &mut self.size)?;
         self.bit_depth = pair.bit_depth;
-        self.references
-            .observe(self.pattern_of_run[pair.index], self.dir, run, reference)?;
+        self.references.observe(
+            self.pattern_of_run[pair.index],
+            self.dir,
+            run,
+            reference,
+            pair.bit_depth,
+        )?;
         let crop = centre_crop(deformed, STATS_CROP_PX);
         self.moved_stats
             .push(frame_stats(Some(deformed), &crop, None));
@@ -247,6 +252,7 @@ impl ReferenceStats {
         dir: &Path,
         run: &Run,
         reference: &Image,
+        bit_depth: u8,
     ) -> Result<(), DiagnoseError> {
         if self.stats[pi].is_some() {
             return Ok(());
@@ -266,7 +272,7 @@ impl ReferenceStats {
         self.stats[pi] = Some(frame_stats(Some(reference), &crop, repeat.as_ref()));
         self.levels[pi] = (
             white_level_guess(&crop),
-            pooled_noise_variance(&crop, repeat.as_ref()),
+            pooled_noise_variance(&crop, repeat.as_ref(), bit_depth),
         );
         self.crops[pi] = Some(crop);
         self.repeats[pi] = repeat;

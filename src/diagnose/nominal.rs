@@ -109,7 +109,7 @@ pub struct Nominal {
 
 impl Nominal {
     pub fn full_scale_dn(&self) -> f64 {
-        2f64.powi(self.bit_depth as i32) - 1.0
+        full_scale_dn(self.bit_depth)
     }
 
     /// The effects the renderer gets: the model's, with the fitted misalignment and the dataset's
@@ -372,9 +372,15 @@ pub fn white_level_guess(img: &Image) -> f64 {
     percentile(&mut smooth, 0.995).max(1.0)
 }
 
-/// Pooled noise variance of a measured reference (its static repeat when given).
-pub fn pooled_noise_variance(reference: &Image, repeat: Option<&Image>) -> f64 {
-    noise_variance(reference, repeat)
+/// Pooled noise variance of a measured reference (its static repeat when given), over the
+/// pixels clipped in neither frame of a `bit_depth`-bit range.
+pub fn pooled_noise_variance(reference: &Image, repeat: Option<&Image>, bit_depth: u8) -> f64 {
+    noise_variance(reference, repeat, full_scale_dn(bit_depth))
+}
+
+/// The largest value of a `bit_depth`-bit sample, where a sensor's readout clips.
+pub fn full_scale_dn(bit_depth: u8) -> f64 {
+    2f64.powi(i32::from(bit_depth)) - 1.0
 }
 
 /// The validated pattern index of every run (pattern labels in order of first appearance).

@@ -142,7 +142,12 @@ fn quality_json(first: &Frame, second: &Frame, subset_px: usize) -> ApiResult<St
     let figures = crate::image::speckle_quality(&crop_first, subset_px)
         .map_err(|e| ApiError::invalid("subset_px", e.to_string()))?;
     let noise_dn = if (second.width, second.height) == (width, height) {
-        crate::diagnose::noise_variance(&crop_first, Some(&crop(second))).sqrt()
+        crate::diagnose::noise_variance(
+            &crop_first,
+            Some(&crop(second)),
+            crate::diagnose::full_scale_dn(first.bit_depth),
+        )
+        .sqrt()
     } else {
         f64::NAN
     };
