@@ -24,8 +24,9 @@
 //!   finds `stage_error`.
 //! - **The sensor**: the ADC at the TIFFs' bit depth and — when the model has no `sensor_noise` —
 //!   a signal-independent noise whose σ is the pooled noise of the measured frames (from the
-//!   static repeat frames when present, over the pixels clipped in neither). A hidden photon-transfer (shot) noise therefore shows as
-//!   the wrong slope of noise against mean (EMVA 1288).
+//!   static repeat frames when present, over the pixels clipped in neither). A hidden
+//!   photon-transfer (shot) noise therefore shows as the wrong slope of noise against mean
+//!   (EMVA 1288).
 //!
 //! `quantization` is thus always known and `stage_misalignment` always fitted; neither is a
 //! diagnose candidate.
@@ -130,7 +131,7 @@ pub use diagnose::{diagnose, diagnose_prepared};
 pub use history::{append_history, history_dir_for, read_history};
 pub use image_stats::noise_variance;
 pub use measurement::{load_measurement, Measurement};
-pub use nominal::{full_scale_dn, BASELINE_TOML};
+pub use nominal::BASELINE_TOML;
 pub use rounds::{diagnose_rounds, diagnose_rounds_prepared, MAX_ROUNDS};
 
 pub use basis::GeometricParam;

@@ -109,7 +109,10 @@ pub struct Nominal {
 
 impl Nominal {
     pub fn full_scale_dn(&self) -> f64 {
-        full_scale_dn(self.bit_depth)
+        Quantization {
+            bits: self.bit_depth.into(),
+        }
+        .max_dn()
     }
 
     /// The effects the renderer gets: the model's, with the fitted misalignment and the dataset's
@@ -375,12 +378,10 @@ pub fn white_level_guess(img: &Image) -> f64 {
 /// Pooled noise variance of a measured reference (its static repeat when given), over the
 /// pixels clipped in neither frame of a `bit_depth`-bit range.
 pub fn pooled_noise_variance(reference: &Image, repeat: Option<&Image>, bit_depth: u8) -> f64 {
-    noise_variance(reference, repeat, full_scale_dn(bit_depth))
-}
-
-/// The largest value of a `bit_depth`-bit sample, where a sensor's readout clips.
-pub fn full_scale_dn(bit_depth: u8) -> f64 {
-    2f64.powi(i32::from(bit_depth)) - 1.0
+    let adc = Quantization {
+        bits: bit_depth.into(),
+    };
+    noise_variance(reference, repeat, adc.max_dn())
 }
 
 /// The validated pattern index of every run (pattern labels in order of first appearance).

@@ -211,8 +211,7 @@ impl Scene {
             };
         }
         // The dataset's own sensor: signal-independent noise, then the ADC.
-        let bits = effects.quantization.take().map_or(16, |q| q.bits);
-        let full = 2f64.powi(bits as i32) - 1.0;
+        let full = effects.quantization.take().map_or(65535.0, |q| q.max_dn());
         camera.exposure_level *= n.full_scale_dn() / 65535.0;
         let mut img = render_frame(&camera, &effects, dots, &spec);
         let sigma = n.noise_floor_dn;

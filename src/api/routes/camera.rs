@@ -145,7 +145,10 @@ fn quality_json(first: &Frame, second: &Frame, subset_px: usize) -> ApiResult<St
         crate::diagnose::noise_variance(
             &crop_first,
             Some(&crop(second)),
-            crate::diagnose::full_scale_dn(first.bit_depth),
+            crate::model::effects::Quantization {
+                bits: first.bit_depth.into(),
+            }
+            .max_dn(),
         )
         .sqrt()
     } else {
