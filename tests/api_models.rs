@@ -292,7 +292,8 @@ async fn compare_diagnose_add_the_winner_and_the_history_falls() {
 
 /// A model with an effect the user wrote down goes in through the API like any other, listed as
 /// `user.NAME (proposed)` while its parameter has no value; an expression that reads a variable
-/// it does not declare is refused with 422 naming the variable and what it may read.
+/// it does not declare is refused with 422 naming the variable and what it may read. The same
+/// for an intensity effect.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_model_with_a_user_effect_is_added_and_a_wrong_one_refused_naming_the_variable() {
     let data = tempfile::tempdir().unwrap();
@@ -314,4 +315,21 @@ async fn a_model_with_a_user_effect_is_added_and_a_wrong_one_refused_naming_the_
         text.contains("'k'") && text.contains("x, y, tx, ty"),
         "{text}"
     );
+    // An intensity effect goes in the same way; one that is both a displacement and an
+    // intensity is refused, saying to write two effects.
+    let lamp = "name = \"lamp\"\n[effects.user.lamp]\nintensity = \"ax * x\"\n[effects.user.lamp.params.ax]\nunit = \"1/px\"\nmin = -1e-3\nmax = 1e-3\n";
+    let resp = add_model(&server, lamp).await;
+    assert_eq!(resp.status(), 201);
+    let added: Value = resp.json().await.unwrap();
+    assert_eq!(added["effects"], json!(["user.lamp (proposed)"]), "{added}");
+    let both = add_model(
+        &server,
+        &lamp
+            .replace("intensity = ", "u = \"ax * tx\"\nintensity = ")
+            .replace("name = \"lamp\"", "name = \"both\""),
+    )
+    .await;
+    assert_eq!(both.status(), 422);
+    let text = both.text().await.unwrap();
+    assert!(text.contains("write two effects"), "{text}");
 }

@@ -316,6 +316,23 @@ fn a_lens_blur_follows_the_gaussian_transfer_function_and_keeps_the_mean() {
 /// leave the reference frame as the model without them renders it, pixel for pixel: a diagnosis
 /// keeps the print calibrated against the reference for a candidate among them instead of
 /// refitting it. Rendered, not assumed: every such effect is set, on a print whose frames move.
+/// Pattern b on a 160x120 camera at 13 px/mm, rendered with `effects` at the stage's origin or
+/// moved 2 mm along x.
+fn render_b(effects: &Effects, moved: bool) -> ffdic::image::Image {
+    let camera = camera_13_px_per_mm(160, 120);
+    let dots = SpecklePattern::preset("b")
+        .unwrap()
+        .dots(camera.field_mm(8.0), 11)
+        .unwrap();
+    let frame = FrameSpec {
+        stage_dx_mm: if moved { 2.0 } else { 0.0 },
+        stage_dy_mm: 0.0,
+        moved,
+        seed: 5,
+    };
+    render_frame(&camera, effects, &dots, &frame)
+}
+
 #[test]
 fn effects_between_frames_leave_the_reference_frame_unchanged() {
     use ffdic::model::effects::{
@@ -323,22 +340,7 @@ fn effects_between_frames_leave_the_reference_frame_unchanged() {
         Vignetting,
     };
     use ffdic::model::EffectId;
-    let camera = camera_13_px_per_mm(160, 120);
-    let dots = SpecklePattern::preset("b")
-        .unwrap()
-        .dots(camera.field_mm(8.0), 11)
-        .unwrap();
-    let render = |effects: &Effects, moved: bool| {
-        let frame = FrameSpec {
-            stage_dx_mm: if moved { 2.0 } else { 0.0 },
-            stage_dy_mm: 0.0,
-            moved,
-            seed: 5,
-        };
-        render_frame(&camera, effects, &dots, &frame)
-            .data()
-            .to_vec()
-    };
+    let render = |effects: &Effects, moved: bool| render_b(effects, moved).data().to_vec();
     let between = Effects {
         stage_misalignment: Some(StageMisalignment { angle_rad: 0.01 }),
         stage_error: Some(StageError {
@@ -381,4 +383,36 @@ fn effects_between_frames_leave_the_reference_frame_unchanged() {
         [EffectId::PsfBlur, EffectId::Vignetting]
     );
     assert_ne!(render(&optics, false), render(&Effects::default(), false));
+}
+
+/// A user's intensity effect multiplies the moved frame's irradiance by 1 + its expression at
+/// each pixel (px from the image centre) and leaves the reference as it was.
+#[test]
+fn a_user_intensity_effect_lights_the_moved_frame_only() {
+    let render = render_b;
+    let mut lamp = Effects::default();
+    lamp.user.insert(
+        "lamp".into(),
+        toml::from_str(
+            "intensity = \"ax * x + ay * y\"\n[params.ax]\nvalue = 1e-3\nmin = -1.0\nmax = 1.0\n[params.ay]\nvalue = -5e-4\nmin = -1.0\nmax = 1.0\n",
+        )
+        .unwrap(),
+    );
+    assert_eq!(lamp.reference_part(), Effects::default());
+    let none = Effects::default();
+    assert_eq!(
+        render(&lamp, false).data(),
+        render(&none, false).data(),
+        "the reference is lit as before"
+    );
+    let (with, without) = (render(&lamp, true), render(&none, true));
+    let (cx, cy) = (79.5, 59.5);
+    for (row, col) in [(0, 0), (10, 150), (60, 80), (119, 3), (119, 159)] {
+        let expected = 1.0 + 1e-3 * (col as f64 - cx) - 5e-4 * (row as f64 - cy);
+        let ratio = f64::from(with.get(col, row)) / f64::from(without.get(col, row));
+        assert!(
+            (ratio - expected).abs() < 1e-5,
+            "({col}, {row}): {ratio} against {expected}"
+        );
+    }
 }

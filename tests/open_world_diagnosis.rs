@@ -457,3 +457,101 @@ fn a_distortion_beside_a_user_effect_is_re_estimated_and_both_are_named() {
     within("c", fitted, 0.0, -bow / (2.0 * z_mm * 13.0 * 13.0));
     falls_3x(&r);
 }
+
+/// A lamp that drifted after the references were taken (the generator's `lamp_ramp_per_px`):
+/// every moved frame lit with a linear ramp of 2–4 % from the centre to the frame's edge per
+/// axis, drawn for `test`; and the ramp [ax, ay] (1/px).
+fn lamp_spec(test: u64) -> (Value, [f64; 2]) {
+    let mut draw = Draw::new(test);
+    let mut spec = bench("lamp", &mut draw, false);
+    let mut slope = || draw.range(0.6e-4, 1.2e-4) * draw.sign();
+    let ramp = [slope(), slope()];
+    spec["effects"] = json!({ "lamp_ramp_per_px": ramp });
+    (spec, ramp)
+}
+
+/// The light-change part of a comparison's image χ² (spectra, photon transfer, mean map,
+/// contrast, the moved frames' light change), and its observations.
+fn light_change_chi2(c: &ffdic::diagnose::Comparison) -> (f64, usize) {
+    println!("image χ² parts {:?}", c.chi2.image_parts);
+    c.chi2.image_parts[4]
+}
+
+/// An intensity effect no catalogue names: no catalogue effect is named for it (a ramp is
+/// neither a vignetting's r² nor an illumination change's uniform gain), and what it leaves is
+/// described as the moved frames' light change the model does not match.
+#[test]
+fn a_drifted_lamp_is_outside_the_catalogue_and_its_light_change_left_unexplained() {
+    let (spec, _) = lamp_spec(3207);
+    let (r, _) = diagnose(&spec, 2);
+    let d = &r.diagnoses[0];
+    assert_eq!(verdict_name(&d.verdict), "none", "{:?}", d.withheld);
+    let (chi2, n) = light_change_chi2(d.before.as_ref().expect("kept"));
+    println!("light change χ² {chi2:.0} over {n}");
+    // Significant by the light test, its shape named.
+    assert!(d.unexplained.significant, "{}", d.unexplained.summary);
+    let (f, threshold) = (
+        d.unexplained.light_f.unwrap(),
+        d.unexplained.light_f_threshold.unwrap(),
+    );
+    assert!(f > threshold, "light F {f} against {threshold}");
+    assert!(
+        d.unexplained
+            .shape
+            .image
+            .iter()
+            .any(|m| m.kind == "light_change"),
+        "{}",
+        d.unexplained.summary
+    );
+    assert!(
+        d.unexplained.summary.contains("light_change"),
+        "{}",
+        d.unexplained.summary
+    );
+}
+
+/// The same lamp written down by the user as an intensity effect of their own: `diagnose` fits
+/// it on the moved frames' mean maps, names it, its slopes match the drawn ramp, and the
+/// χ² of the moved frames' light change falls at least 3x.
+#[test]
+fn a_drifted_lamp_written_as_a_user_intensity_effect_is_fitted_and_named() {
+    let (spec, ramp) = lamp_spec(3207);
+    let mut model = independent::baseline();
+    model.effects.user.insert(
+        "lamp".into(),
+        toml::from_str(
+            r#"
+            description = "the moved frames lit by a lamp that drifted"
+            intensity = "ax * x + ay * y"
+            [params.ax]
+            unit = "1/px"
+            min = -1e-3
+            max = 1e-3
+            [params.ay]
+            unit = "1/px"
+            min = -1e-3
+            max = 1e-3
+            "#,
+        )
+        .unwrap(),
+    );
+    model.validate().unwrap();
+    let (r, _) = independent::diagnose_model(&spec, &model, 1);
+    let d = &r.diagnoses[0];
+    assert_eq!(verdict_name(&d.verdict), "user.lamp", "{:?}", d.withheld);
+    let c = candidate(d, "user.lamp");
+    within("ax", c.params["ax"], c.stderr["ax"], ramp[0]);
+    within("ay", c.params["ay"], c.stderr["ay"], ramp[1]);
+    let (before, n) = light_change_chi2(d.before.as_ref().expect("kept"));
+    let (after, _) = light_change_chi2(d.after.as_ref().expect("the verdict rendered"));
+    println!("light change χ²: {before:.0} -> {after:.0} over {n}");
+    assert!(
+        after * 3.0 <= before,
+        "light change χ² {before} -> {after}: less than a 3x fall"
+    );
+    // The displacements are not made worse, and the fitted effect is in the final model.
+    assert!(c.criteria.drop_px > -2.0 * c.criteria.drop_se_px);
+    let fitted = &r.final_model.effects.user["lamp"];
+    assert_eq!(fitted.values(), Some(vec![c.params["ax"], c.params["ay"]]));
+}

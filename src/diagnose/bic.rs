@@ -15,8 +15,8 @@
 //! comparison without the candidate held fixed. A candidate is significant when ΔBIC < −10
 //! (very strong evidence, Kass & Raftery, JASA 90 (1995)).
 
-use super::image_stats::{FrameStats, PtcPoint};
-use super::results::{Chi2, Comparison, RunComparison, IMAGE_KINDS};
+use super::image_stats::{light_change, FrameStats, PtcPoint};
+use super::results::{Chi2, Comparison, ImageComparison, RunComparison, IMAGE_KINDS};
 use crate::dic::DicSettings;
 
 /// ΔBIC below which a candidate counts as found.
@@ -63,6 +63,62 @@ pub fn image_chi2(m: &FrameStats, o: &FrameStats) -> (f64, usize) {
 
 /// The index of the mean-intensity map among [`IMAGE_KINDS`].
 const MEAN_MAP: usize = 2;
+/// The index of the moved frames' light change ([`light_change_chi2`]).
+pub const LIGHT_CHANGE: usize = 4;
+
+/// The light change of every moved frame of `images` ([`light_change_chi2`]), each weighed
+/// 1/moved frames of its pattern as the moved frames' other statistics are in [`chi2`]: χ² and
+/// observations.
+pub fn light_change_of(images: &[ImageComparison]) -> (f64, usize) {
+    let mut moved_per_pattern: std::collections::BTreeMap<&str, f64> = Default::default();
+    for im in images.iter().filter(|i| i.run.is_some()) {
+        *moved_per_pattern.entry(im.pattern.as_str()).or_default() += 1.0;
+    }
+    let (mut chi2, mut n) = (0.0, 0.0);
+    for im in images.iter().filter(|i| i.run.is_some()) {
+        let weight = 1.0 / moved_per_pattern[im.pattern.as_str()];
+        let (c, k) = light_change_chi2(im);
+        chi2 += c * weight;
+        n += k as f64 * weight;
+    }
+    (chi2, n.round() as usize)
+}
+
+/// The light change between two renderings of the model (`first`'s model side taken as the
+/// measurement, `second`'s as the model): what a right model leaves of it. None without moved
+/// frames.
+pub fn light_change_between(first: &Comparison, second: &Comparison) -> Option<f64> {
+    let images: Vec<ImageComparison> = first
+        .images
+        .iter()
+        .zip(&second.images)
+        .filter(|(a, b)| a.run.is_some() && a.run == b.run && a.pattern == b.pattern)
+        .map(|(a, b)| ImageComparison {
+            measured: a.model.clone(),
+            model: b.model.clone(),
+            ..a.clone()
+        })
+        .collect();
+    let (chi2, n) = light_change_of(&images);
+    (n > 0 && chi2 > 0.0).then_some(chi2)
+}
+
+/// χ² and observations of a moved frame's light change ([`light_change`]) about its own
+/// constant (the weighted mean of q): what the model leaves of the light that changed across
+/// the field between the frames.
+fn light_change_chi2(moved: &ImageComparison) -> (f64, usize) {
+    let blocks = light_change((&moved.measured, &moved.model));
+    if blocks.len() < 2 {
+        return (0.0, 0);
+    }
+    let (sw, swq) = blocks.iter().fold((0.0, 0.0), |(sw, swq), b| {
+        let w = 1.0 / (b.se * b.se);
+        (sw + w, swq + w * b.q)
+    });
+    let mean = swq / sw;
+    let chi2 = blocks.iter().map(|b| ((b.q - mean) / b.se).powi(2)).sum();
+    (chi2, blocks.len() - 1)
+}
 
 /// χ² and observation count of one frame's image statistics, per kind ([`IMAGE_KINDS`]).
 pub fn image_chi2_parts(m: &FrameStats, o: &FrameStats) -> [(f64, usize); IMAGE_KINDS] {
@@ -186,6 +242,8 @@ pub fn chi2(cmp: &Comparison, noise_from: Option<&Comparison>, dic: &DicSettings
     // statistics repeat the reference's disagreement with the model's print, so together they
     // count as one frame (each weighs 1/moved frames of its pattern), and the mean-intensity map
     // — a property of the illumination and lens, not of the move — is the reference's alone.
+    // What the light did between the frames is the moved frames' light change against their
+    // reference ([`light_change_of`]), weighed as their other statistics.
     let mut moved_per_pattern: std::collections::BTreeMap<&str, f64> = Default::default();
     for im in cmp.images.iter().filter(|i| i.run.is_some()) {
         *moved_per_pattern.entry(im.pattern.as_str()).or_default() += 1.0;
@@ -210,6 +268,10 @@ pub fn chi2(cmp: &Comparison, noise_from: Option<&Comparison>, dic: &DicSettings
             n_image += k;
         }
     }
+    let light = light_change_of(&cmp.images);
+    image_parts[LIGHT_CHANGE] = light;
+    image += light.0;
+    n_image += light.1;
     n += n_image;
     Chi2 {
         field,
@@ -263,11 +325,60 @@ mod tests {
         }
     }
 
+    /// A moved frame's statistics with an 8×8 light map of `value(x, y)` (x, y px over
+    /// 640×540), each block ± 0.002.
+    fn with_light(value: impl Fn(f64, f64) -> f64) -> FrameStats {
+        let xs: Vec<f64> = (0..8).map(|i| 40.0 + 80.0 * i as f64).collect();
+        let ys: Vec<f64> = (0..8).map(|j| 33.75 + 67.5 * j as f64).collect();
+        let values = ys
+            .iter()
+            .flat_map(|&y| xs.iter().map(move |&x| (x, y)))
+            .map(|(x, y)| value(x, y))
+            .collect();
+        FrameStats {
+            light_map: Some(crate::diagnose::image_stats::MeanMap {
+                nx: 8,
+                ny: 8,
+                xs,
+                ys,
+                values,
+                se: vec![0.002; 64],
+            }),
+            ..crate::diagnose::test_fields::frame_stats(2000.0)
+        }
+    }
+
+    /// The light change counts what varies across the moved frame beyond the model, not a
+    /// uniform change: 2 % more light everywhere leaves χ² at 0, a ramp (±3 %, about 6.5
+    /// errors of q RMS) is far beyond its 63 observations.
+    #[test]
+    fn the_light_change_is_what_varies_over_the_moved_frame() {
+        let moved = |measured: FrameStats| ImageComparison {
+            frame: "moved".into(),
+            pattern: "a".into(),
+            run: Some("x5mm".into()),
+            measured,
+            model: with_light(|_, _| 1.0),
+        };
+        let (chi2, n) = light_change_chi2(&moved(with_light(|_, _| 1.02)));
+        assert_eq!(n, 63);
+        assert!(chi2 < 1e-9, "{chi2}");
+        let lamp = moved(with_light(|x, _| 1.0 + 1e-4 * (x - 320.0)));
+        let (chi2, _) = light_change_chi2(&lamp);
+        assert!(chi2 > 20.0 * 63.0, "{chi2}");
+        // A reference has none.
+        let reference = ImageComparison {
+            run: None,
+            ..moved(with_light(|_, _| 1.0))
+        };
+        assert_eq!(light_change_of(&[reference]), (0.0, 0));
+    }
+
     #[test]
     fn delta_bic_of_a_known_comparison() {
         // The field χ² falls from 900 to 400, std from 50 to 48, the images are well described
         // (χ² at their count) and stay: ΔBIC = −500 − 2 + 0 + 2·ln 1000 = −488.18.
-        let parts = [(100.0, 100), (20.0, 20), (0.0, 0), (1.0, 1)];
+        let parts = [(100.0, 100), (20.0, 20), (0.0, 0), (1.0, 1), (0.0, 0)];
         let before = chi2(900.0, 50.0, parts);
         let after = chi2(400.0, 48.0, parts);
         let expected = -502.0 + 2.0 * 1000f64.ln();
@@ -280,8 +391,16 @@ mod tests {
     #[test]
     fn an_overdispersed_image_statistic_counts_only_as_far_as_its_scatter() {
         // Spectra at χ²/n = 4 with the candidate: a drop of 200 counts as 50.
-        let before = chi2(0.0, 0.0, [(600.0, 100), (20.0, 20), (0.0, 0), (1.0, 1)]);
-        let after = chi2(0.0, 0.0, [(400.0, 100), (20.0, 20), (0.0, 0), (1.0, 1)]);
+        let before = chi2(
+            0.0,
+            0.0,
+            [(600.0, 100), (20.0, 20), (0.0, 0), (1.0, 1), (0.0, 0)],
+        );
+        let after = chi2(
+            0.0,
+            0.0,
+            [(400.0, 100), (20.0, 20), (0.0, 0), (1.0, 1), (0.0, 0)],
+        );
         assert!((image_change(&before, &after) + 50.0).abs() < 1e-12);
     }
 

@@ -11,6 +11,7 @@ use super::fit_geometric_effect::fit_geometric_effect;
 use super::fit_image::{fit_fill_factor, fit_motion_blur, fit_psf_blur};
 use super::fit_image_stats::{fit_illumination_change, fit_sensor_noise, fit_vignetting};
 use super::fit_user_effect::fit_user_effect;
+use super::fit_user_intensity::fit_user_intensity;
 use super::geometric::GeometricSetting;
 use super::identifiability::DatasetDesign;
 pub use super::identifiability::NotIdentifiable;
@@ -18,6 +19,7 @@ use super::measurement::Measurement;
 use super::results::{Comparison, ImageFit};
 use super::verdict::{Candidate, Judge, Method};
 use super::{DiagnoseError, Progress};
+use crate::model::effects::UserKind;
 use crate::model::{CandidateId, EffectId, Effects, ModelConfig};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
@@ -86,8 +88,14 @@ pub(super) fn fit_candidate(
     let id = match id {
         CandidateId::Catalogue(e) => *e,
         CandidateId::User(name) => {
-            let (samples, setting) = field_samples(meas, before);
-            return fit_user_effect(&samples, &setting, model, (name, refit));
+            let kind = model.user.get(name)?.field().ok()?.kind();
+            return match kind {
+                UserKind::Displacement => {
+                    let (samples, setting) = field_samples(meas, before);
+                    fit_user_effect(&samples, &setting, model, (name, refit))
+                }
+                UserKind::Intensity => fit_user_intensity(meas, before, model, name),
+            };
         }
     };
     match id {
@@ -127,7 +135,12 @@ pub(super) fn predict(
     let user = match &fit.effect {
         CandidateId::User(name) => {
             let e = with.effects.user.get(name)?;
-            Some((e.field().ok()?, e.values()?))
+            let field = e.field().ok()?;
+            // An intensity changes the images: rendered, as the catalogue's image effects are.
+            if field.kind() == UserKind::Intensity {
+                return None;
+            }
+            Some((field, e.values()?))
         }
         CandidateId::Catalogue(_) => None,
     };

@@ -330,10 +330,10 @@ fn judge_card(
         progress,
     )?;
     let infl = super::bic::inflation(&meas.options.dic);
-    let w0 = model_scatter(&first, &second, infl);
+    let scatter = model_scatter(&first, &second, infl);
     let seed_sd = (first.discrepancy_px - second.discrepancy_px).abs() / std::f64::consts::SQRT_2;
     let se = first.discrepancy_se_px.max(seed_sd);
-    let left = unexplained(&first, &meas.options.schemes, w0, se, infl);
+    let left = unexplained(&first, &meas.options.schemes, &scatter, se, infl);
     Ok((first, se, left))
 }
 

@@ -8,7 +8,7 @@ use super::bic::chi2;
 use super::calibrate_scene::{calibrate_seeded, SceneFrom};
 use super::capture_mode::{compare_hardware, model_hardware, HardwareModelSide};
 use super::discrepancy::{run_discrepancy, RunDiscrepancy};
-use super::image_stats::{centre_crop, frame_stats, STATS_CROP_PX};
+use super::image_stats::{centre_crop, frame_stats, light_map, FrameStats, STATS_CROP_PX};
 use super::measurement::{load_measurement, Measurement};
 use super::nominal::Nominal;
 use super::residuals::residual_map;
@@ -171,12 +171,16 @@ pub fn compare_with_scene(
             let at = nominal.landed_command(ri, (run.stage.dx_mm, run.stage.dy_mm));
             let moved = scene.render(pi, Shot::of_run(ri, at), None);
             let mcrop = centre_crop(&moved, STATS_CROP_PX);
+            let [sx, sy] = nominal.actual_move_px(ri, (run.stage.dx_mm, run.stage.dy_mm));
             moved_images[ri] = Some(ImageComparison {
                 frame: "moved".into(),
                 pattern: meas.labels[pi].clone(),
                 run: Some(run.id.clone()),
                 measured: meas.moved_stats[ri].clone(),
-                model: frame_stats(Some(&moved), &mcrop, None),
+                model: FrameStats {
+                    light_map: Some(light_map(&reference, &moved, (sx, sy))),
+                    ..frame_stats(Some(&moved), &mcrop, None)
+                },
             });
             let mut per_scheme = Vec::new();
             for (s, prep) in opts.schemes.iter().zip(&prepared) {

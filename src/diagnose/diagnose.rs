@@ -28,7 +28,7 @@ use super::identifiability::{design_of, separating_run, DatasetDesign};
 use super::measurement::{load_measurement, Measurement};
 use super::print::PrintKnowledge;
 use super::results::Comparison;
-use super::unexplained::{model_scatter, unexplained, Unexplained};
+use super::unexplained::{model_scatter, unexplained, ModelScatter, Unexplained};
 use super::verdict::{
     Candidate, Diagnosis, Judge, Withheld, ILLUMINATION_SEPARATION, MIN_EXPLAINED_FRACTION,
     VIGNETTING_MOVE_FRACTION,
@@ -83,7 +83,7 @@ pub fn diagnose_prepared(
     };
     // Asks, without a step done, whether to go on: inside each comparison, before every point.
     let ask = |_: usize, _: usize| progress(done.load(Ordering::Relaxed), total);
-    let (by_seed, w0) = discrepancy_by_seed(meas, model, &before, &tick, &ask)?;
+    let (by_seed, scatter) = discrepancy_by_seed(meas, model, &before, &tick, &ask)?;
     let seed_sd = {
         let n = by_seed.len() as f64;
         let m = by_seed.iter().sum::<f64>() / n;
@@ -112,7 +112,14 @@ pub fn diagnose_prepared(
     let mut by_drop: Vec<&Candidate> = candidates.iter().collect();
     by_drop.sort_by(|a, b| b.drop_px.total_cmp(&a.drop_px));
     let ranking_by_drop = by_drop.iter().map(|c| c.effect.clone()).collect();
-    let left = settle(meas, winner, &mut models, &before, w0, (se_before, seed_sd));
+    let left = settle(
+        meas,
+        winner,
+        &mut models,
+        &before,
+        &scatter,
+        (se_before, seed_sd),
+    );
     if let Some(w) = &left.withheld {
         for c in candidates.iter_mut().filter(|c| c.effect == w.effect) {
             c.criteria.explains_its_signature = false;
@@ -163,19 +170,20 @@ fn settle(
     winner: Option<CandidateId>,
     models: &mut FittedModels,
     before: &Comparison,
-    w0: Option<f64>,
+    scatter: &ModelScatter,
     (se_before, seed_sd): (f64, f64),
 ) -> Settled {
     let infl = super::bic::inflation(&meas.options.dic);
     let schemes = &meas.options.schemes;
-    let left_before = unexplained(before, schemes, w0, se_before, infl);
+    let w0 = scatter.field_w;
+    let left_before = unexplained(before, schemes, scatter, se_before, infl);
     let (winner_model, after) = match winner.as_ref().and_then(|w| models.remove(w)) {
         Some((_, m, a)) => (Some(m), a),
         None => (None, None),
     };
     let left_after = after.as_ref().map(|a| {
         let se = a.discrepancy_se_px.max(seed_sd);
-        unexplained(a, schemes, w0, se, infl)
+        unexplained(a, schemes, scatter, se, infl)
     });
     let explained_fraction = left_after.as_ref().and_then(|a| explained(&left_before, a));
     let settled = Settled {
@@ -271,16 +279,16 @@ fn rest_has_a_name(
 
 /// The discrepancy with each of the `MODEL_SEEDS` model seeds (the first is `before`'s): its
 /// scatter is part of the discrepancy's standard error. Also the model's own scatter of the
-/// low-order field between the first two renderings ([`model_scatter`]).
+/// low-order field and light change between the first two renderings ([`model_scatter`]).
 fn discrepancy_by_seed(
     meas: &Measurement,
     model: &ModelConfig,
     before: &Comparison,
     tick: &dyn Fn() -> Result<(), DiagnoseError>,
     ask: Progress,
-) -> Result<(Vec<f64>, Option<f64>), DiagnoseError> {
+) -> Result<(Vec<f64>, ModelScatter), DiagnoseError> {
     let mut by_seed = vec![before.discrepancy_px];
-    let mut w0 = None;
+    let mut scatter = ModelScatter::default();
     let infl = super::bic::inflation(&meas.options.dic);
     for k in 1..MODEL_SEEDS {
         let c = compare_with_scene(
@@ -292,11 +300,11 @@ fn discrepancy_by_seed(
         )?;
         by_seed.push(c.discrepancy_px);
         if k == 1 {
-            w0 = model_scatter(before, &c, infl);
+            scatter = model_scatter(before, &c, infl);
         }
         tick()?;
     }
-    Ok((by_seed, w0))
+    Ok((by_seed, scatter))
 }
 
 /// Effects the fits cannot tell apart: by the dataset's design (vignetting against

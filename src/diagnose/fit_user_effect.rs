@@ -14,6 +14,7 @@ use super::gauss_newton::gauss_newton;
 use super::geometric::GeometricSetting;
 use super::results::{GeometricTerms, ImageFit};
 use super::write_geometric::{re_estimated_note, with_increments};
+use crate::model::effects::{UserEffect, UserKind};
 use crate::model::{CandidateId, EffectId, Effects};
 use std::collections::BTreeMap;
 
@@ -22,7 +23,7 @@ use std::collections::BTreeMap;
 const REFIT_STEP: f64 = 1e-3;
 
 /// Fits user effect `name` of `model` on the field differences; None when it is not a proposed
-/// user effect of the model, or when these runs cannot identify its parameters (a singular
+/// displacement effect of the model, or when these runs cannot identify its parameters (a singular
 /// fit, or a field that is not finite where the points are).
 ///
 /// `refit`: the geometric effects `model` holds from earlier rounds, whose terms are fitted again
@@ -40,20 +41,13 @@ pub fn fit_user_effect(
 ) -> Option<ImageFit> {
     let effect = model.user.get(name)?;
     let field = effect.field().ok()?;
+    if field.kind() != UserKind::Displacement {
+        return None;
+    }
     let again = held_again(model, refit, setting.r0, None);
     let n = effect.params.len();
     let mut ranges: Vec<(f64, f64)> = effect.params.values().map(|p| (p.min, p.max)).collect();
-    // From zero (no effect) where the range holds it, else its middle.
-    let mut at: Vec<f64> = ranges
-        .iter()
-        .map(|&(lo, hi)| {
-            if lo <= 0.0 && 0.0 <= hi {
-                0.0
-            } else {
-                0.5 * (lo + hi)
-            }
-        })
-        .collect();
+    let mut at = null_start(&ranges);
     let mut step: Vec<f64> = ranges.iter().map(|&(lo, hi)| 1e-6 * (hi - lo)).collect();
     ranges.extend(again.iter().map(|_| (f64::NEG_INFINITY, f64::INFINITY)));
     at.extend(again.iter().map(|_| 0.0));
@@ -74,50 +68,74 @@ pub fn fit_user_effect(
         &ranges,
         &step,
     )?;
-    let names = field.param_names();
     let (own, own_se) = (&at[..n], &fit.stderr[..n]);
-    let beyond_null = own.iter().zip(own_se).any(|(v, se)| v.abs() > 2.0 * se);
     let increments = GeometricFit {
         params: again.clone(),
         values: at[n..].to_vec(),
         stderr: fit.stderr[n..].to_vec(),
         chi2_drop: f64::NAN,
     };
-    let mut effects = with_increments(model, &increments, setting.scale_px_per_mm);
+    let effects = with_increments(model, &increments, setting.scale_px_per_mm);
+    let notes = if again.is_empty() {
+        Vec::new()
+    } else {
+        vec![re_estimated_note(&increments)]
+    };
+    let terms = GeometricTerms {
+        // The increments' field: the user's own is added from its expressions.
+        field: again.into_iter().zip(increments.values).collect(),
+        derived: BTreeMap::new(),
+        notes,
+    };
+    Some(user_fit((name, effect), (own, own_se), effects, terms))
+}
+
+/// Where a user effect's fit starts: each parameter at zero (no effect) where its range holds
+/// it, else at the range's middle.
+pub(super) fn null_start(ranges: &[(f64, f64)]) -> Vec<f64> {
+    ranges
+        .iter()
+        .map(|&(lo, hi)| {
+            if lo <= 0.0 && 0.0 <= hi {
+                0.0
+            } else {
+                0.5 * (lo + hi)
+            }
+        })
+        .collect()
+}
+
+/// The fit of user effect `name` at `values` ± `stderr` (its parameters' order): `effects`
+/// with the effect valued, the parameters' units noted before `terms`' notes, "no effect" every
+/// parameter within two standard errors of zero.
+pub(super) fn user_fit(
+    (name, effect): (&str, &UserEffect),
+    (values, stderr): (&[f64], &[f64]),
+    mut effects: Effects,
+    mut terms: GeometricTerms,
+) -> ImageFit {
     effects
         .user
-        .insert(name.to_string(), effect.with_values(own));
+        .insert(name.to_string(), effect.with_values(values));
     let units: Vec<String> = effect
         .params
         .iter()
         .filter(|(_, p)| !p.unit.is_empty())
         .map(|(n, p)| format!("{n} in {}", p.unit))
         .collect();
-    let mut notes = Vec::new();
     if !units.is_empty() {
-        notes.push(units.join(", "));
+        terms.notes.insert(0, units.join(", "));
     }
-    if !again.is_empty() {
-        notes.push(re_estimated_note(&increments));
-    }
-    Some(ImageFit {
+    let names: Vec<String> = effect.params.keys().cloned().collect();
+    ImageFit {
         effect: CandidateId::User(name.to_string()),
-        params: names.iter().cloned().zip(own.iter().copied()).collect(),
-        stderr: names
-            .iter()
-            .cloned()
-            .zip(own_se.iter().copied())
-            .collect::<BTreeMap<_, _>>(),
+        params: names.iter().cloned().zip(values.iter().copied()).collect(),
+        stderr: names.iter().cloned().zip(stderr.iter().copied()).collect(),
         effects,
         k: names.len(),
-        beyond_null,
-        geometric: GeometricTerms {
-            // The increments' field: the user's own is added from its expressions.
-            field: again.into_iter().zip(increments.values).collect(),
-            derived: BTreeMap::new(),
-            notes,
-        },
-    })
+        beyond_null: values.iter().zip(stderr).any(|(v, se)| v.abs() > 2.0 * se),
+        geometric: terms,
+    }
 }
 
 #[cfg(test)]

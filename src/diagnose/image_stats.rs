@@ -63,6 +63,10 @@ pub struct FrameStats {
     pub ptc_from_repeat: bool,
     pub psd_x: Vec<PsdBin>,
     pub psd_y: Vec<PsdBin>,
+    /// A moved frame's light against its reference's on the same part of the print
+    /// ([`light_map`]); none for a reference, or where no move was known.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub light_map: Option<MeanMap>,
 }
 
 /// Quantile q in [0, 1] (sorts `v`).
@@ -290,55 +294,157 @@ pub fn psd(img: &Image, along_x: bool) -> Vec<PsdBin> {
         .collect()
 }
 
-fn mean_map(img: &Image) -> MeanMap {
-    let (w, h) = (img.width(), img.height());
-    let (n, _) = img.mean_std();
-    let (nx, ny) = (8usize, 8usize);
-    let mut values = Vec::with_capacity(nx * ny);
-    let mut se = Vec::with_capacity(nx * ny);
-    for j in 0..ny {
-        for i in 0..nx {
-            let (c0, c1) = (i * w / nx, (i + 1) * w / nx);
-            let (r0, r1) = (j * h / ny, (j + 1) * h / ny);
-            // Four sub-blocks give the scatter of the block mean.
-            let mut subs = [0.0f64; 4];
-            let mut cnt = [0usize; 4];
-            for r in r0..r1 {
-                let row = img.row(r);
-                let sr = usize::from(r >= (r0 + r1) / 2) * 2;
-                for (c, v) in row.iter().enumerate().take(c1).skip(c0) {
-                    let s = sr + usize::from(c >= (c0 + c1) / 2);
-                    subs[s] += *v as f64;
-                    cnt[s] += 1;
-                }
+/// The centres (px) of `blocks` equal blocks over `n_px` pixels.
+fn block_centres(n_px: usize, blocks: usize) -> Vec<f64> {
+    (0..blocks)
+        .map(|i| (i as f64 + 0.5) * n_px as f64 / blocks as f64 - 0.5)
+        .collect()
+}
+
+/// The mean of `v` and its standard error (0 from fewer than two values).
+fn mean_and_se(v: &[f64]) -> (f64, f64) {
+    let k = v.len() as f64;
+    let m = v.iter().sum::<f64>() / k.max(1.0);
+    if v.len() < 2 {
+        return (m, 0.0);
+    }
+    let sd = (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (k - 1.0)).sqrt();
+    (m, sd / k.sqrt())
+}
+
+impl MeanMap {
+    /// An 8×8 map over a `w`×`h` frame: `block` gives each block's value and standard error
+    /// from its columns and rows.
+    fn over_blocks(
+        (w, h): (usize, usize),
+        block: impl Fn((usize, usize), (usize, usize)) -> (f64, f64),
+    ) -> MeanMap {
+        let (nx, ny) = (8usize, 8usize);
+        let (mut values, mut se) = (Vec::with_capacity(nx * ny), Vec::with_capacity(nx * ny));
+        for j in 0..ny {
+            for i in 0..nx {
+                let columns = (i * w / nx, (i + 1) * w / nx);
+                let rows = (j * h / ny, (j + 1) * h / ny);
+                let (v, e) = block(columns, rows);
+                values.push(v);
+                se.push(e);
             }
-            let means: Vec<f64> = (0..4)
-                .filter(|&s| cnt[s] > 0)
-                .map(|s| subs[s] / cnt[s] as f64)
-                .collect();
-            let m = means.iter().sum::<f64>() / means.len().max(1) as f64;
-            let sd = if means.len() > 1 {
-                (means.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (means.len() - 1) as f64)
-                    .sqrt()
-            } else {
-                0.0
-            };
-            values.push(m / n);
-            se.push(sd / (means.len() as f64).sqrt() / n);
+        }
+        MeanMap {
+            nx,
+            ny,
+            xs: block_centres(w, nx),
+            ys: block_centres(h, ny),
+            values,
+            se,
         }
     }
-    MeanMap {
-        nx,
-        ny,
-        xs: (0..nx)
-            .map(|i| (i as f64 + 0.5) * w as f64 / nx as f64 - 0.5)
-            .collect(),
-        ys: (0..ny)
-            .map(|j| (j as f64 + 0.5) * h as f64 / ny as f64 - 0.5)
-            .collect(),
-        values,
-        se,
+}
+
+fn mean_map(img: &Image) -> MeanMap {
+    let (n, _) = img.mean_std();
+    MeanMap::over_blocks((img.width(), img.height()), |(c0, c1), (r0, r1)| {
+        // Four sub-blocks give the scatter of the block mean.
+        let mut subs = [0.0f64; 4];
+        let mut cnt = [0usize; 4];
+        for r in r0..r1 {
+            let row = img.row(r);
+            let sr = usize::from(r >= (r0 + r1) / 2) * 2;
+            for (c, v) in row.iter().enumerate().take(c1).skip(c0) {
+                let s = sr + usize::from(c >= (c0 + c1) / 2);
+                subs[s] += *v as f64;
+                cnt[s] += 1;
+            }
+        }
+        let means: Vec<f64> = (0..4)
+            .filter(|&s| cnt[s] > 0)
+            .map(|s| subs[s] / cnt[s] as f64)
+            .collect();
+        let (m, se) = mean_and_se(&means);
+        (m / n, se / n)
+    })
+}
+
+/// The light of a moved frame against its reference's on the same part of the print: per block
+/// of an 8×8 grid over the moved frame, the moved block's mean over the mean of the reference's
+/// pixels `shift_px` (the move, rounded to whole px) back, where both frames hold them. The
+/// print's texture is the same on both sides and divides out, so what varies over the map is
+/// the light that changed between the frames (a lamp that drifted, a shadow) and the noise; a
+/// whole-pixel shift leaves at most half a pixel of texture at the blocks' edges. The scatter of
+/// the four quarter-blocks' ratios gives each block's standard error; a block the two frames
+/// do not share is NaN.
+pub fn light_map(reference: &Image, moved: &Image, shift_px: (f64, f64)) -> MeanMap {
+    let (w, h) = (moved.width(), moved.height());
+    let (sx, sy) = (shift_px.0.round() as i64, shift_px.1.round() as i64);
+    // The moved frame's pixels whose reference pixel (c − sx, r − sy) lies in the frame.
+    let inside = |c: usize, n: usize, s: i64| {
+        let c = c as i64 - s;
+        c >= 0 && c < n as i64
+    };
+    MeanMap::over_blocks((w, h), |(c0, c1), (r0, r1)| {
+        let (mut moved_sum, mut reference_sum) = ([0.0f64; 4], [0.0f64; 4]);
+        for r in (r0..r1).filter(|&r| inside(r, h, sy)) {
+            let (row, source) = (moved.row(r), reference.row((r as i64 - sy) as usize));
+            let half = usize::from(r >= (r0 + r1) / 2) * 2;
+            for c in (c0..c1).filter(|&c| inside(c, w, sx)) {
+                let q = half + usize::from(c >= (c0 + c1) / 2);
+                moved_sum[q] += f64::from(row[c]);
+                reference_sum[q] += f64::from(source[(c as i64 - sx) as usize]);
+            }
+        }
+        let ratios: Vec<f64> = (0..4)
+            .filter(|&q| reference_sum[q] > 0.0)
+            .map(|q| moved_sum[q] / reference_sum[q])
+            .collect();
+        if ratios.len() < 2 {
+            (f64::NAN, f64::NAN)
+        } else {
+            mean_and_se(&ratios)
+        }
+    })
+}
+
+/// One block of a moved frame's light change beyond the model ([`light_change`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LightBlock {
+    /// The block's centre, px (image coordinates).
+    pub x: f64,
+    pub y: f64,
+    /// The measured light map's value over the model's.
+    pub q: f64,
+    pub se: f64,
+}
+
+/// The light change of a moved frame beyond the model's: per block, the measured
+/// [`light_map`] over the model's. Where the model lights the moved frame as the measurement
+/// does, q is one constant over the frame within its errors (a uniform change between the
+/// frames is the catalogue's `illumination_change`); a lamp that drifted, a shadow, light that
+/// changed across the field make it vary. `moved` is (measured, model); empty without both
+/// maps or when they differ in size.
+pub fn light_change(moved: (&FrameStats, &FrameStats)) -> Vec<LightBlock> {
+    let (Some(m), Some(o)) = (&moved.0.light_map, &moved.1.light_map) else {
+        return Vec::new();
+    };
+    if m.nx != o.nx || m.ny != o.ny || m.values.len() != o.values.len() {
+        return Vec::new();
     }
+    let mut out = Vec::with_capacity(m.values.len());
+    for j in 0..m.ny {
+        for i in 0..m.nx {
+            let k = j * m.nx + i;
+            let q = m.values[k] / o.values[k];
+            let se = q * (m.se[k] / m.values[k]).hypot(o.se[k] / o.values[k]);
+            if q.is_finite() && se > 0.0 {
+                out.push(LightBlock {
+                    x: m.xs[i],
+                    y: m.ys[j],
+                    q,
+                    se,
+                });
+            }
+        }
+    }
+    out
 }
 
 /// Statistics of one frame: the mean map over `full` (when given, else over the crop), the rest
@@ -355,6 +461,7 @@ pub fn frame_stats(full: Option<&Image>, crop: &Image, repeat_crop: Option<&Imag
         ptc_from_repeat: repeat_crop.is_some(),
         psd_x: psd(crop, true),
         psd_y: psd(crop, false),
+        light_map: None,
     }
 }
 
@@ -375,6 +482,57 @@ pub fn centred_crop(width: usize, height: usize, side: usize) -> (usize, usize, 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The moved frame is the reference's texture shifted by (13, −7) px and lit by a ramp of
+    /// ±5 % across the frame: the light map gives the ramp at every block's centre, the texture
+    /// (contrast 50 %) divided out; without the ramp every block is 1 within 1e-6.
+    #[test]
+    fn a_light_map_divides_out_the_print_and_keeps_the_light() {
+        let (w, h) = (320usize, 240usize);
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let texture: Vec<f32> = (0..w * h)
+            .map(|_| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                1000.0 * (1.0 + 0.5 * ((state >> 40) as f32 / (1u64 << 24) as f32 - 0.5))
+            })
+            .collect();
+        let reference = Image::from_vec(w, h, texture.clone()).unwrap();
+        let (sx, sy) = (13i64, -7i64);
+        let ramp = |c: usize| 1.0 + 0.1 * (c as f64 / (w - 1) as f64 - 0.5);
+        let shifted = |lit: bool| {
+            let data = (0..w * h)
+                .map(|k| {
+                    let (c, r) = ((k % w) as i64, (k / w) as i64);
+                    let (rc, rr) = ((c - sx).rem_euclid(w as i64), (r - sy).rem_euclid(h as i64));
+                    let v = texture[rr as usize * w + rc as usize];
+                    if lit {
+                        (f64::from(v) * ramp(c as usize)) as f32
+                    } else {
+                        v
+                    }
+                })
+                .collect();
+            Image::from_vec(w, h, data).unwrap()
+        };
+        let flat = light_map(&reference, &shifted(false), (13.2, -6.8));
+        assert!(
+            flat.values.iter().all(|v| (v - 1.0).abs() < 1e-6),
+            "{:?}",
+            flat.values
+        );
+        let lit = light_map(&reference, &shifted(true), (13.2, -6.8));
+        for (k, v) in lit.values.iter().enumerate() {
+            let expected = ramp(lit.xs[k % 8].round() as usize);
+            // The block's mean of a ramp lit texture: its centre's value within the texture's
+            // weight on the ramp (under 0.2 %).
+            assert!(
+                (v - expected).abs() < 2e-3,
+                "block {k}: {v} against {expected}"
+            );
+        }
+    }
 
     proptest::proptest! {
         /// A centred crop keeps the frame's centre exactly and is never larger than asked or

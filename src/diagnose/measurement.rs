@@ -3,7 +3,7 @@
 //! centred crops the print is calibrated to) from which the nominal experiment starts.
 
 use super::capture_mode::{measure_hardware, HardwareMeasurement};
-use super::image_stats::{centre_crop, frame_stats, FrameStats, STATS_CROP_PX};
+use super::image_stats::{centre_crop, frame_stats, light_map, FrameStats, STATS_CROP_PX};
 use super::nominal::{
     pattern_for, pattern_indices, pooled_noise_variance, white_level_guess, Nominal,
 };
@@ -154,16 +154,22 @@ impl PairVisitor for MeasuredPairs<'_> {
         // A move stated an order of magnitude off would send the fit chasing a travel scale of
         // hundreds: say so with the measured figure instead. (The pair loop checked the sizes.)
         // The scale of the run's own frames, as the upload's check takes it.
-        check_stated_move(
+        let px_per_mm = run.frame_px_per_mm(self.scale_px_per_mm);
+        let measured = check_stated_move(
             reference,
             deformed,
             (run.stage.dx_mm, run.stage.dy_mm),
-            run.frame_px_per_mm(self.scale_px_per_mm),
+            px_per_mm,
         )
         .map_err(|e| DiagnoseError::Frames {
             run: run.id.clone(),
             message: e.to_string(),
         })?;
+        // The light map's whole-pixel shift: the frames' own move where it was measured.
+        let shift_px = measured.map_or(
+            (run.stage.dx_mm * px_per_mm, run.stage.dy_mm * px_per_mm),
+            |m| m.measured_px,
+        );
         same_size_as_first(run, reference, &mut self.size)?;
         self.bit_depth = pair.bit_depth;
         self.references.observe(
@@ -174,8 +180,10 @@ impl PairVisitor for MeasuredPairs<'_> {
             pair.bit_depth,
         )?;
         let crop = centre_crop(deformed, STATS_CROP_PX);
-        self.moved_stats
-            .push(frame_stats(Some(deformed), &crop, None));
+        self.moved_stats.push(FrameStats {
+            light_map: Some(light_map(reference, deformed, shift_px)),
+            ..frame_stats(Some(deformed), &crop, None)
+        });
         self.moved_crops.push(crop);
         self.dic.push(Vec::new());
         Ok(())

@@ -99,6 +99,7 @@ mod fit_geometric_effect;
 mod fit_image;
 mod fit_image_stats;
 mod fit_user_effect;
+mod fit_user_intensity;
 mod floor_read_out;
 mod gauss_newton;
 mod geometric;

@@ -51,7 +51,8 @@ pub struct ImageMismatch {
     pub chi2_per_observation: f64,
 }
 
-const IMAGE_KIND_NAMES: [&str; IMAGE_KINDS] = ["spectrum", "noise", "mean_map", "contrast"];
+const IMAGE_KIND_NAMES: [&str; IMAGE_KINDS] =
+    ["spectrum", "noise", "mean_map", "contrast", "light_change"];
 
 /// The full quadratic surface of `values` at `xy` (`discrepancy::quadratic_fit`), and the drop
 /// of the residual sum of squares from the mean to it; None with fewer than 12 points or a
@@ -461,7 +462,7 @@ mod tests {
         // spectrum 31/10 = 3.1 (named), noise 30/10 = 3.0 (not: the bound is strict), no mean map
         // observed, contrast 100/10 = 10 (named).
         let mut cmp = comparison(Vec::new());
-        cmp.chi2.image_parts = [(31.0, 10), (30.0, 10), (0.0, 0), (100.0, 10)];
+        cmp.chi2.image_parts = [(31.0, 10), (30.0, 10), (0.0, 0), (100.0, 10), (0.0, 0)];
         let shape = shape_of(&cmp, &[], 1.0);
         let named: Vec<(&str, f64)> = shape
             .image

@@ -142,7 +142,7 @@ fn is_zero(n: &usize) -> bool {
 }
 
 /// The image statistics' kinds: spectra, photon transfer, mean map, contrast.
-pub const IMAGE_KINDS: usize = 4;
+pub const IMAGE_KINDS: usize = 5;
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Chi2 {
@@ -155,7 +155,8 @@ pub struct Chi2 {
     /// Of which image statistics.
     #[serde(default)]
     pub image_observations: usize,
-    /// The image χ² and observations per kind (spectra, photon transfer, mean map, contrast).
+    /// The image χ² and observations per kind (spectra, photon transfer, mean map, contrast,
+    /// the moved frames' light change).
     #[serde(default)]
     pub image_parts: [(f64, usize); IMAGE_KINDS],
 }

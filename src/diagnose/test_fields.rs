@@ -365,6 +365,7 @@ pub(super) fn frame_stats(mean_dn: f64) -> FrameStats {
         ptc_from_repeat: false,
         psd_x: Vec::new(),
         psd_y: Vec::new(),
+        light_map: None,
     }
 }
 
@@ -381,6 +382,8 @@ pub(super) fn finding(discrepancy_px: f64, field_f: Option<f64>) -> Unexplained 
         random_error_ratio: None,
         field_f,
         field_f_threshold: field_f.map(|_| 1.5),
+        light_f: None,
+        light_f_threshold: None,
         shape: Shape::default(),
         implausible_stage: Vec::new(),
         summary: String::new(),
@@ -410,7 +413,7 @@ pub(super) fn candidate(
         criteria: Criteria {
             delta_bic_ok: delta_bic < -10.0,
             beyond_null: significant,
-            evidence: Evidence::of_candidate(&effect),
+            evidence: Evidence::of_candidate(&effect, &Effects::default()),
             drop_px,
             drop_se_px: 0.0,
             image_chi2_drop: 0.0,

@@ -127,6 +127,9 @@ pub struct Finding<'a> {
     /// The field test's F and threshold, when two renderings were made, and whether it fired.
     pub field: Option<(f64, f64)>,
     pub field_fired: bool,
+    /// The light test's F and threshold, and whether it fired.
+    pub light: Option<(f64, f64)>,
+    pub light_fired: bool,
     /// The rigid part (RMS over runs), whether it fired, and what a right model stays below, px.
     pub rigid_px: f64,
     pub rigid_fired: bool,
@@ -162,6 +165,11 @@ pub fn summary(f: &Finding) -> String {
     };
     if f.field_fired {
         text += &field_words(f.shape);
+    }
+    if let Some((v, t)) = f.light.filter(|_| f.light_fired) {
+        text += &format!(
+            " The light changed across the field between the references and their moved frames beyond the model: the change is {v:.1} times that between two renderings of the model (threshold {t:.2}) — a lamp that drifted, a shadow, a reflection; the model's catalogue holds only a uniform change (illumination_change): write it as a user intensity effect."
+        );
     }
     if f.rigid_fired {
         if let Some(r) = f

@@ -6,6 +6,7 @@ use super::bic::{chi2, delta_bic, image_change, SIGNIFICANT_DELTA_BIC};
 pub use super::identifiability::{Confounded, NotIdentifiable};
 use super::results::{Comparison, ImageFit, ModelInfo};
 use super::unexplained::Unexplained;
+use crate::model::effects::UserKind;
 use crate::model::{CandidateId, EffectId, Effects, ModelConfig};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -49,11 +50,19 @@ pub enum Evidence {
 }
 
 impl Evidence {
-    /// A user effect is a displacement field.
-    pub fn of_candidate(candidate: &CandidateId) -> Self {
+    /// A user effect shows where it acts ([`UserKind`]): a displacement field in the
+    /// displacements, an intensity field in the image statistics. `effects` holds it (one
+    /// that does not, or does not bind, is read as a displacement: it has no fit either way).
+    pub fn of_candidate(candidate: &CandidateId, effects: &Effects) -> Self {
         match candidate {
             CandidateId::Catalogue(e) => Self::of(*e),
-            CandidateId::User(_) => Evidence::Displacement,
+            CandidateId::User(name) => {
+                let field = effects.user.get(name).and_then(|e| e.field().ok());
+                match field.map(|f| f.kind()) {
+                    Some(UserKind::Intensity) => Evidence::Image,
+                    Some(UserKind::Displacement) | None => Evidence::Displacement,
+                }
+            }
         }
     }
 
@@ -312,7 +321,7 @@ impl Judge<'_> {
             a.discrepancy_se_px.max(self.seed_sd)
         });
         let drop_se_px = self.se_before.hypot(se_after);
-        let evidence = Evidence::of_candidate(&fit.effect);
+        let evidence = Evidence::of_candidate(&fit.effect, &fit.effects);
         let displacement_ok = drop_px > 2.0 * drop_se_px;
         // The image drop is scaled for overdispersion; with no effect a k-parameter drop is
         // χ²_k, whose standard deviation is √(2k).
@@ -434,14 +443,29 @@ mod tests {
     fn every_effect_shows_in_displacements_images_or_either() {
         for e in EffectId::ALL {
             let evidence = Evidence::of(e);
-            assert_eq!(Evidence::of_candidate(&e.into()), evidence);
+            assert_eq!(
+                Evidence::of_candidate(&e.into(), &Effects::default()),
+                evidence
+            );
         }
         assert_eq!(Evidence::of(EffectId::Vignetting), Evidence::Image);
         assert_eq!(Evidence::of(EffectId::PsfBlur), Evidence::Either);
         assert_eq!(Evidence::of(EffectId::TargetTilt), Evidence::Displacement);
-        assert_eq!(
-            Evidence::of_candidate(&CandidateId::User("wobble".into())),
-            Evidence::Displacement
+        let mut effects = Effects::default();
+        let mut user = |name: &str, text: &str| {
+            let effect = toml::from_str(text).expect("a user effect");
+            effects.user.insert(name.into(), effect);
+        };
+        user(
+            "wobble",
+            "u = \"a * x\"\n[params.a]\nmin = -1.0\nmax = 1.0\n",
         );
+        user(
+            "lamp",
+            "intensity = \"g * x\"\n[params.g]\nmin = -1.0\nmax = 1.0\n",
+        );
+        let of = |name: &str| Evidence::of_candidate(&CandidateId::User(name.into()), &effects);
+        assert_eq!(of("wobble"), Evidence::Displacement);
+        assert_eq!(of("lamp"), Evidence::Image);
     }
 }

@@ -4,12 +4,13 @@
 //! and scale; the target's tilt through a pinhole; lens distortion) and its size (scale px/mm,
 //! magnification, depth, PSF added in quadrature);
 //! the sensor integrates each dot exactly over its pixels' apertures; radiometry and the sensor
-//! chain (vignetting, illumination change, PRNU/DSNU, shot and read noise, ADC) act per pixel.
+//! chain (vignetting, a user's intensity effects, illumination change, PRNU/DSNU, shot and read
+//! noise, ADC) act per pixel.
 //! Distortion moves dot centres and leaves their shape to the local similarity transform: the
 //! shape change it would add is of order k1·(dot size), far below anything DIC resolves.
 
 use super::disk::DiskDot;
-use super::effects::user::{rendered_fields, UserField};
+use super::effects::user::{rendered_fields, UserField, UserKind};
 use super::effects::Effects;
 use super::pattern::{DotShape, TargetDot};
 use super::readout::{SensorChain, SensorReadout};
@@ -348,15 +349,34 @@ struct Radiometry<'a> {
     centre: (f64, f64),
     r0: f64,
     illumination: Option<super::effects::IlluminationChange>,
+    /// The model's user intensity effects on a moved frame, bound and valued, and the move they
+    /// read (px, as the camera sees it).
+    user_intensity: Vec<(UserField, Vec<f64>)>,
+    move_px: (f64, f64),
 }
 
 impl<'a> Radiometry<'a> {
     fn new(camera: &Camera, effects: &'a Effects, frame: &FrameSpec) -> Self {
+        let user_intensity = if frame.moved {
+            rendered_fields(&effects.user)
+                .into_iter()
+                .filter(|(f, _)| f.kind() == UserKind::Intensity)
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let (mx, my) = match effects.stage_misalignment {
+            Some(m) => m.actual_move(frame.stage_dx_mm, frame.stage_dy_mm),
+            None => (frame.stage_dx_mm, frame.stage_dy_mm),
+        };
+        let k = camera.scale_px_per_mm;
         Self {
             effects,
             centre: camera.centre(),
             r0: camera.half_diagonal_px(),
             illumination: effects.illumination_change.filter(|_| frame.moved),
+            user_intensity,
+            move_px: (k * mx, k * my),
         }
     }
 
@@ -374,6 +394,15 @@ impl<'a> Radiometry<'a> {
             let (cx, cy) = self.centre;
             let r2 = ((col as f64 - cx).powi(2) + (row as f64 - cy).powi(2)) / (self.r0 * self.r0);
             v *= 1.0 - vg.v * r2;
+        }
+        if !self.user_intensity.is_empty() {
+            let p = (col as f64 - self.centre.0, row as f64 - self.centre.1);
+            let change: f64 = self
+                .user_intensity
+                .iter()
+                .map(|(f, values)| f.relative_intensity(p, self.move_px, values))
+                .sum();
+            v *= 1.0 + change;
         }
         if let Some(ic) = self.illumination {
             v = ic.gain * v + ic.offset;

@@ -230,10 +230,12 @@ pub fn report(name: &str, r: &Rounds) {
     for (k, d) in r.diagnoses.iter().enumerate() {
         let u = &d.unexplained;
         println!(
-            "   round {k}: unexplained {} F {:?} (threshold {:?}) ratio {:.2}; after: {:?} F {:?}; explained {:?} partial {} withheld {:?}",
+            "   round {k}: unexplained {} F {:?} (threshold {:?}) light F {:?} (threshold {:?}) ratio {:.2}; after: {:?} F {:?}; explained {:?} partial {} withheld {:?}",
             u.significant,
             u.field_f,
             u.field_f_threshold,
+            u.light_f,
+            u.light_f_threshold,
             u.ratio,
             d.unexplained_after.as_ref().map(|a| a.significant),
             d.unexplained_after.as_ref().and_then(|a| a.field_f),

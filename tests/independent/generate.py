@@ -114,6 +114,7 @@ OPTIONAL_EFFECTS = {
     "p2_norm": 0.0,
     "distortion_centre_px": [0.0, 0.0],  # distortion centre relative to the optical axis (px)
     "target_bow_per_mm": 0.0,         # κ: depth offset κ|P|²/2 (mm) of a bowed target
+    "lamp_ramp_per_px": [0.0, 0.0],   # moved frames lit by a drifted lamp: × (1 + ax·x + ay·y)
 }
 
 
@@ -267,6 +268,12 @@ def _validate(spec: dict) -> None:
     if (not isinstance(c, (list, tuple)) or len(c) != 2
             or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in c)):
         raise SpecError("effects.distortion_centre_px must be [dx, dy] (px, relative to the optical axis)")
+    ramp = opt_effect(spec, "lamp_ramp_per_px")
+    if (not isinstance(ramp, (list, tuple)) or len(ramp) != 2
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in ramp)):
+        raise SpecError("effects.lamp_ramp_per_px must be [ax, ay] (1/px)")
+    if abs(ramp[0]) * int(spec["width"]) / 2 + abs(ramp[1]) * int(spec["height"]) / 2 >= 0.5:
+        raise SpecError("effects.lamp_ramp_per_px changes the irradiance by half or more inside the frame")
     st = spec["stage"]
     if len(st["constant_offset_px"]) != 2:
         raise SpecError("stage.constant_offset_px must be [dx, dy]")
@@ -427,6 +434,7 @@ class Camera:
         self.theta_x = float(opt_effect(spec, "tilt_about_x_rad"))
         self.theta_y = float(opt_effect(spec, "tilt_about_y_rad"))
         self.bow = float(opt_effect(spec, "target_bow_per_mm"))
+        self.ramp = np.array([float(v) for v in opt_effect(spec, "lamp_ramp_per_px")])
         self.R3 = tilt_matrix(self.theta_x, self.theta_y)
         self.perspective_on = bool(self.theta_x != 0 or self.theta_y != 0 or self.bow != 0)
         # the distortion must be monotonic over the frame (no fold-over): for k1 < 0, r(1 + k1 r²)
@@ -1091,6 +1099,11 @@ def render_irradiance(cam: Camera, pr: Print, fr: Frame, render: dict):
         refl *= V
     if fr.gain != 1.0:
         refl *= fr.gain
+    if fr.kind == "deformed" and np.any(cam.ramp != 0):
+        # a lamp that drifted after the reference: the moved frames lit with a linear ramp
+        x = np.arange(cam.W) - cam.axis[0]
+        y = np.arange(cam.H) - cam.axis[1]
+        refl *= 1.0 + cam.ramp[0] * x[None, :] + cam.ramp[1] * y[:, None]
     diag = {"render_method": method, "dots_rendered": int(cx.size),
             "pixels_clipped_below_0": n_neg, "min_reflectance_before_clip": min_refl,
             "render_seconds": round(time.perf_counter() - t0, 3)}
@@ -1615,6 +1628,9 @@ def generate(spec: dict, out_dir, overwrite: bool | None = None, quiet: bool = T
             "bow_model": "depth offset z(P) = target_bow_per_mm |P|^2/2 (mm) along the camera's z, P the print "
                          "coordinate (moves with the print; apex at print (0, 0)); W = Ry Rx (q, 0) + (0, 0, Z + z(P)). "
                          "Not in ffdic's catalogue on purpose",
+            "lamp_ramp_per_px": [float(v) for v in cam.ramp],
+            "lamp_model": "moved (deformed) frames only: irradiance x (1 + ax x + ay y), x, y px from the axis "
+                          "(pixel centres); not in ffdic's catalogue on purpose",
             "dot_shape_under_tilt_and_distortion": "each dot rendered isotropic with the local areal magnification "
                                                    "sqrt(det J) of the tilt/bow and of the distortion (approximation)",
         },

@@ -427,7 +427,7 @@ function userEffectToml(form) {
   const name = form.effect.value.trim();
   if (!/^[A-Za-z][A-Za-z0-9_]*$/.test(name)) throw new Error(`effect name '${name}': letters, digits and _, starting with a letter`);
   const lines = [`[effects.user.${name}]`];
-  for (const key of ["u", "v"]) {
+  for (const key of ["u", "v", "intensity"]) {
     const text = form[key].value.trim();
     if (text) lines.push(`${key} = ${JSON.stringify(text)}`);
   }

@@ -32,7 +32,7 @@ pub use sensor_noise::SensorNoise;
 pub use stage_error::StageError;
 pub use stage_misalignment::StageMisalignment;
 pub use target_tilt::{TargetTilt, MAX_TILT_RAD};
-pub use user::{UserEffect, UserParam};
+pub use user::{UserEffect, UserKind, UserParam};
 pub use vignetting::Vignetting;
 
 pub use id::{join as join_effects, verdict_name, verdict_serde, CandidateId, EffectId, Stage};
@@ -132,8 +132,8 @@ impl Effects {
     /// The effects that act on the reference frame: those acting between the reference and a
     /// moved frame ([`EffectId::leaves_the_reference`]) left out. Two models with the same
     /// reference part render the same reference frame, pixel for pixel, so a print calibrated
-    /// against the measured reference under one holds for the other. User effects are kept:
-    /// their fields are the user's to write.
+    /// against the measured reference under one holds for the other. User effects are left out
+    /// too: the renderer applies both kinds (a displacement, an intensity) to moved frames only.
     pub fn reference_part(&self) -> Effects {
         // Every field named: a new effect's field is a compile error here until it is sorted.
         let Effects {
@@ -151,7 +151,7 @@ impl Effects {
             vignetting,
             illumination_change,
             motion_blur,
-            user,
+            user: _,
         } = self.clone();
         let keep = |id: EffectId| !id.leaves_the_reference();
         Effects {
@@ -169,7 +169,7 @@ impl Effects {
             vignetting: vignetting.filter(|_| keep(EffectId::Vignetting)),
             illumination_change: illumination_change.filter(|_| keep(EffectId::IlluminationChange)),
             motion_blur: motion_blur.filter(|_| keep(EffectId::MotionBlur)),
-            user,
+            user: BTreeMap::new(),
         }
     }
 }

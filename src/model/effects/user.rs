@@ -3,11 +3,12 @@ use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use std::collections::BTreeMap;
 
 /// An effect the catalogue lacks, written down by a user in a model file (`[effects.user.NAME]`):
-/// the extra displacement of a moved frame against its reference, as expressions `u` and `v`
-/// (full-resolution px) of
+/// either the extra displacement of a moved frame against its reference, as expressions `u` and
+/// `v` (full-resolution px), or a change of the moved frame's irradiance, as an expression
+/// `intensity` (relative: the moved frame's pixel is multiplied by 1 + `intensity`), of
 ///
-/// - `x`, `y`: the point's position in the reference frame, px from the optical axis (the image
-///   centre), x to the right and y down;
+/// - `x`, `y`: for `u`, `v` the point's position in the reference frame, for `intensity` the
+///   pixel's, px from the optical axis (the image centre), x to the right and y down;
 /// - `tx`, `ty`: the run's actual move, px (the stage's move as the camera sees it);
 /// - the effect's named parameters (`[effects.user.NAME.params.P]`, each with a unit, a range and,
 ///   once known, a value).
@@ -25,6 +26,26 @@ use std::collections::BTreeMap;
 /// max = 1e-7
 /// ```
 ///
+/// A lamp that drifted between the reference and the moved frames, lighting the field with a
+/// ramp, is an intensity effect:
+///
+/// ```toml
+/// [effects.user.lamp]
+/// intensity = "gx * x + gy * y"
+/// [effects.user.lamp.params.gx]
+/// unit = "1/px"
+/// min = -1e-4
+/// max = 1e-4
+/// [effects.user.lamp.params.gy]
+/// unit = "1/px"
+/// min = -1e-4
+/// max = 1e-4
+/// ```
+///
+/// One effect is one of the two kinds ([`UserKind`]): the diagnosis fits a displacement on the
+/// measured fields and an intensity on the image statistics, so an effect with both would be
+/// judged on half of its evidence; a user writes two effects instead.
+///
 /// An effect whose parameters all have a value is part of the model: the renderer adds its field
 /// to every moved frame. One with a parameter still without a value is proposed: the model renders
 /// without it and `diagnose` fits it as a candidate beside the catalogue's, within the ranges.
@@ -39,6 +60,9 @@ pub struct UserEffect {
     /// Extra displacement along y, px; absent means none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub v: Option<Expression>,
+    /// Relative change of the moved frame's irradiance at a pixel (0 is none); absent means none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub intensity: Option<Expression>,
     #[serde(default)]
     pub params: BTreeMap<String, UserParam>,
 }
@@ -56,6 +80,15 @@ pub struct UserParam {
     /// The range a fit may take it to.
     pub min: f64,
     pub max: f64,
+}
+
+/// What a user effect changes, which is also the evidence its fit reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum UserKind {
+    /// `u`, `v`: the moved frame's displacement, fitted on the measured fields.
+    Displacement,
+    /// `intensity`: the moved frame's irradiance, fitted on the image statistics.
+    Intensity,
 }
 
 /// The variables every expression may use beside the parameters, in the order of
@@ -157,6 +190,7 @@ impl Bound {
 pub struct UserField {
     u: Option<Bound>,
     v: Option<Bound>,
+    intensity: Option<Bound>,
     names: Vec<String>,
 }
 
@@ -166,12 +200,36 @@ impl UserField {
         &self.names
     }
 
-    /// The extra displacement (px) at `p` (px from the axis, reference frame) for the move `t`
-    /// (px) with parameter values `values` (in [`UserField::param_names`] order).
-    pub fn displacement(&self, p: (f64, f64), t: (f64, f64), values: &[f64]) -> (f64, f64) {
+    pub fn kind(&self) -> UserKind {
+        if self.intensity.is_some() {
+            UserKind::Intensity
+        } else {
+            UserKind::Displacement
+        }
+    }
+
+    fn all_values(
+        p: (f64, f64),
+        t: (f64, f64),
+        values: &[f64],
+    ) -> [f64; COORDINATES.len() + MAX_USER_PARAMS] {
         let mut all = [0.0; COORDINATES.len() + MAX_USER_PARAMS];
         all[..4].copy_from_slice(&[p.0, p.1, t.0, t.1]);
         all[4..4 + values.len()].copy_from_slice(values);
+        all
+    }
+
+    /// The relative change of the moved frame's irradiance at pixel `p` (px from the axis) for
+    /// the move `t` (px); 0 for a displacement effect.
+    pub fn relative_intensity(&self, p: (f64, f64), t: (f64, f64), values: &[f64]) -> f64 {
+        let all = Self::all_values(p, t, values);
+        self.intensity.as_ref().map_or(0.0, |b| b.eval(&all))
+    }
+
+    /// The extra displacement (px) at `p` (px from the axis, reference frame) for the move `t`
+    /// (px) with parameter values `values` (in [`UserField::param_names`] order).
+    pub fn displacement(&self, p: (f64, f64), t: (f64, f64), values: &[f64]) -> (f64, f64) {
+        let all = Self::all_values(p, t, values);
         let at = |b: &Option<Bound>| b.as_ref().map_or(0.0, |b| b.eval(&all));
         (at(&self.u), at(&self.v))
     }
@@ -182,8 +240,14 @@ impl UserEffect {
     /// (a variable that is neither, a range that is empty, a value outside it, too many
     /// parameters, nothing to compute).
     pub fn field(&self) -> Result<UserField, String> {
-        if self.u.is_none() && self.v.is_none() {
-            return Err("needs u or v (or both): the displacement it adds, px".into());
+        let displaces = self.u.is_some() || self.v.is_some();
+        if !displaces && self.intensity.is_none() {
+            return Err(
+                "needs u or v (or both): the displacement it adds, px; or intensity: the relative change of the moved frame's irradiance".into(),
+            );
+        }
+        if displaces && self.intensity.is_some() {
+            return Err("has both a displacement (u, v) and an intensity: the diagnosis fits the one on the fields and the other on the image statistics, so write two effects".into());
         }
         if self.params.len() > MAX_USER_PARAMS {
             return Err(format!(
@@ -216,6 +280,7 @@ impl UserEffect {
         Ok(UserField {
             u: bind(&self.u)?,
             v: bind(&self.v)?,
+            intensity: bind(&self.intensity)?,
             names: self.params.keys().cloned().collect(),
         })
     }
@@ -298,8 +363,34 @@ mod tests {
         e.u = None;
         e.v = None;
         assert!(e.field().unwrap_err().contains("needs u or v"));
+        let mut e = bow();
+        e.intensity = Some(Expression::parse("d * x").unwrap());
+        assert!(e.field().unwrap_err().contains("write two effects"));
         assert!(Expression::parse("c * (x +").is_err());
         assert!(!is_identifier("1a") && is_identifier("bow_2"));
+    }
+
+    #[test]
+    fn an_intensity_effect_changes_the_moved_frame_at_a_pixel() {
+        let e: UserEffect = toml::from_str(
+            "intensity = \"g * x + h * ty\"\n[params.g]\nmin = -1.0\nmax = 1.0\n[params.h]\nmin = -1.0\nmax = 1.0\n",
+        )
+        .unwrap();
+        let f = e.field().unwrap();
+        assert_eq!(f.kind(), UserKind::Intensity);
+        let i = f.relative_intensity((100.0, 7.0), (3.0, 2.0), &[1e-4, 0.01]);
+        assert!((i - (1e-2 + 0.02)).abs() < 1e-12, "{i}");
+        // It displaces nothing; a displacement effect changes no intensity.
+        assert_eq!(
+            f.displacement((100.0, 7.0), (3.0, 2.0), &[1e-4, 0.01]),
+            (0.0, 0.0)
+        );
+        let bow = bow().field().unwrap();
+        assert_eq!(bow.kind(), UserKind::Displacement);
+        assert_eq!(
+            bow.relative_intensity((1.0, 1.0), (1.0, 1.0), &[0.1, 0.2]),
+            0.0
+        );
     }
 
     #[test]
