@@ -66,17 +66,31 @@ const MEAN_MAP: usize = 2;
 /// The index of the moved frames' light change ([`light_change_chi2`]).
 pub const LIGHT_CHANGE: usize = 4;
 
-/// The light change of every moved frame of `images` ([`light_change_chi2`]), each weighed
-/// 1/moved frames of its pattern as the moved frames' other statistics are in [`chi2`]: χ² and
-/// observations.
-pub fn light_change_of(images: &[ImageComparison]) -> (f64, usize) {
+/// The weight of each image of `images` in the image χ²: 1 for a reference, 1/moved frames of
+/// its pattern for a moved frame (see [`chi2`]).
+fn image_weights(images: &[ImageComparison]) -> Vec<f64> {
     let mut moved_per_pattern: std::collections::BTreeMap<&str, f64> = Default::default();
     for im in images.iter().filter(|i| i.run.is_some()) {
         *moved_per_pattern.entry(im.pattern.as_str()).or_default() += 1.0;
     }
+    images
+        .iter()
+        .map(|im| match im.run {
+            Some(_) => 1.0 / moved_per_pattern[im.pattern.as_str()],
+            None => 1.0,
+        })
+        .collect()
+}
+
+/// The light change of every moved frame of `images` ([`light_change_chi2`]), each weighed
+/// as the moved frames' other statistics are in [`chi2`] ([`image_weights`]): χ² and
+/// observations.
+fn light_change_of(images: &[ImageComparison]) -> (f64, usize) {
     let (mut chi2, mut n) = (0.0, 0.0);
-    for im in images.iter().filter(|i| i.run.is_some()) {
-        let weight = 1.0 / moved_per_pattern[im.pattern.as_str()];
+    for (im, weight) in images.iter().zip(image_weights(images)) {
+        if im.run.is_none() {
+            continue;
+        }
         let (c, k) = light_change_chi2(im);
         chi2 += c * weight;
         n += k as f64 * weight;
@@ -244,15 +258,7 @@ pub fn chi2(cmp: &Comparison, noise_from: Option<&Comparison>, dic: &DicSettings
     // — a property of the illumination and lens, not of the move — is the reference's alone.
     // What the light did between the frames is the moved frames' light change against their
     // reference ([`light_change_of`]), weighed as their other statistics.
-    let mut moved_per_pattern: std::collections::BTreeMap<&str, f64> = Default::default();
-    for im in cmp.images.iter().filter(|i| i.run.is_some()) {
-        *moved_per_pattern.entry(im.pattern.as_str()).or_default() += 1.0;
-    }
-    for im in &cmp.images {
-        let weight = match im.run {
-            Some(_) => 1.0 / moved_per_pattern[im.pattern.as_str()],
-            None => 1.0,
-        };
+    for (im, weight) in cmp.images.iter().zip(image_weights(&cmp.images)) {
         for (kind, (acc, (c, k))) in image_parts
             .iter_mut()
             .zip(image_chi2_parts(&im.measured, &im.model))

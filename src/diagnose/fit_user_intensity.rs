@@ -8,9 +8,9 @@
 //! changed by beyond the model: q_k = c·(1 + f(p_k, t; θ)), f the user's expression at the
 //! block's centre p_k (px from the axis) for the run's move t, c one constant per moved frame (a
 //! uniform change is the catalogue's `illumination_change`: an expression's constant term is not
-//! identifiable beside c). The print's texture divides out. Gauss–Newton on central differences, each parameter held
-//! within its range; standard errors from the normal matrix, scaled by the reduced χ² when the
-//! blocks scatter more than their errors.
+//! identifiable beside c). The print's texture divides out. Gauss–Newton on central
+//! differences, each parameter held within its range; standard errors from the normal matrix,
+//! scaled by the reduced χ² when the blocks scatter more than their errors.
 
 use super::fit_user_effect::{null_start, user_fit};
 use super::image_stats::light_change;
@@ -24,7 +24,7 @@ use nalgebra::{DMatrix, DVector};
 /// The most Gauss–Newton steps; an expression linear in its parameters needs one or two.
 const MAX_STEPS: usize = 12;
 
-/// One block of a moved frame's mean map: where it is, the run's move, and the ratio q.
+/// One block of a moved frame's light change: where it is, the run's move, and the ratio q.
 #[derive(Clone, Copy, Debug)]
 struct Block {
     /// Index of its moved frame (its constant c).
@@ -38,10 +38,7 @@ struct Block {
 /// The blocks of every moved frame with light maps on both sides ([`light_change`]), and the
 /// number of those frames.
 fn blocks(meas: &Measurement, before: &Comparison) -> (Vec<Block>, usize) {
-    let (cx, cy) = (
-        (meas.width as f64 - 1.0) / 2.0,
-        (meas.height as f64 - 1.0) / 2.0,
-    );
+    let (cx, cy) = before.model.nominal.camera(0).centre();
     let mut out = Vec::new();
     let mut frames = 0;
     for im in before.images.iter().filter(|i| i.run.is_some()) {
@@ -158,7 +155,7 @@ fn gauss_newton(
     Some((theta, se))
 }
 
-/// Fits user effect `name` of `model` on the moved frames' mean maps; None when it is not a
+/// Fits user effect `name` of `model` on the moved frames' light change; None when it is not a
 /// proposed intensity effect of the model, or when these frames cannot identify its parameters.
 pub fn fit_user_intensity(
     meas: &Measurement,
@@ -190,7 +187,7 @@ mod tests {
 
     /// An intensity ramp on two moved frames' blocks, each frame with its own constant and the
     /// blocks' scatter at their errors: the ramp's slopes come back within three errors, and
-    /// a constant term (what the normalised maps cannot see) leaves the fit singular.
+    /// a constant term (what the frames' constants already hold) leaves the fit singular.
     #[test]
     fn a_ramp_on_the_moved_frames_is_found_beside_each_frame_s_constant() {
         let lamp: UserEffect = toml::from_str(

@@ -28,9 +28,10 @@
 //! of the moved frame, its light against the reference's on the same part of the print
 //! (`image_stats::light_map`), measured over the model's (`image_stats::light_change`), its χ²
 //! about the frame's own constant, against the same between two renderings of the model, F
-//! against F(K, K) at the same rate, K reduced for the blocks' estimated errors (`light_test`). A lamp that drifted, a shadow, light that changed across
-//! the field leave it, and so does a vignetting the model lacks (the print moved across it: a
-//! ramp along the move); the print's texture divides out, and it sees no displacement.
+//! against F(K, K) at the same rate, K reduced for the blocks' estimated errors (`light_test`).
+//! A lamp that drifted, a shadow, light that changed across the field leave it, and so does a
+//! vignetting the model lacks (the print moved across it: a ramp along the move); the print's
+//! texture divides out, and it sees no displacement.
 //!
 //! **The shape** ([`super::residual_shape`]): what the residual looks like, per run.
 
