@@ -67,6 +67,9 @@ fn main() {
             std::process::exit(2);
         }
     };
+    if !matches!(cli.command, Command::Serve(_)) {
+        cli::logging::init_if_asked();
+    }
     let outcome = match &cli.command {
         Command::Analyze(args) => cli::analyze::run(args),
         Command::Simulate(args) => cli::simulate::run(args),

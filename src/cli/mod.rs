@@ -9,7 +9,7 @@ mod dataset_arg;
 pub mod diagnose;
 mod error_line;
 pub mod history;
-mod logging;
+pub mod logging;
 mod number_pair;
 mod progress;
 pub mod reduce;

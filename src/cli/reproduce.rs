@@ -12,7 +12,7 @@ use ffdic::diagnose::Diagnosis;
 use ffdic::experiment::{ExperimentRequest, SchemeSpec};
 use ffdic::report::findings_text;
 use ffdic::report::{figures_text, paper_figures_text, study_json};
-use ffdic::service::job::{CompareRequest, ComparisonJob, DiagnosisJob, ExperimentJob};
+use ffdic::service::job::{CompareRequest, DiagnosisJob, ExperimentJob};
 use ffdic::service::{
     mock_bench, CameraConfig, DaemonConfig, JobResult, MockBinning, MockReduction, NewModel,
     Service, PAPER_BENCH_DISTORTION_TOML,
@@ -233,8 +233,10 @@ pub(super) fn wait(
     Ok(record)
 }
 
-/// The model against the measurement, as a user would do it on the dashboard: compare the
-/// captured frames with the baseline, diagnose, add the winner as a model, compare again.
+/// The model against the measurement, as a user would do it on the dashboard: diagnose the
+/// captured frames against the baseline model (the diagnosis compares the baseline with them and
+/// renders the model with the winner added: its run holds the baseline's residual maps), then
+/// store the model with the winner so the next comparison can take it.
 #[derive(Debug, serde::Serialize)]
 struct ModelStory {
     dataset: String,
@@ -254,7 +256,7 @@ struct ModelStory {
     model: Option<String>,
     after_px: Option<f64>,
     after_se_px: Option<f64>,
-    /// Jobs: comparison, diagnosis, comparison with the winner.
+    /// Jobs: the diagnosis (its baseline comparison and the winner's are part of it).
     jobs: Vec<String>,
 }
 
@@ -310,24 +312,7 @@ fn model_story(
         dic: spec.dic.clone(),
         ..CompareRequest::default()
     };
-    let mut jobs = Vec::new();
-    let mut comparison = |request: &CompareRequest, what: &'static str| -> Result<(f64, f64)> {
-        let (job, _) = service.submit(
-            ComparisonJob::plan(service, &dataset.id, request.clone())?,
-            None,
-        )?;
-        wait(service, &job.id, what, show)?;
-        jobs.push(job.id.to_string());
-        let Some(JobResult::Comparison(cmp)) = service.jobs.take_result(&job.id) else {
-            bail!("comparison {} succeeded without a comparison", job.id)
-        };
-        Ok((cmp.discrepancy_px, cmp.discrepancy_se_px))
-    };
-    let (baseline_px, baseline_se_px) = comparison(&request, "comparing with the baseline model")?;
-    let (job, _) = service.submit(
-        DiagnosisJob::plan(service, &dataset.id, request.clone())?,
-        None,
-    )?;
+    let (job, _) = service.submit(DiagnosisJob::plan(service, &dataset.id, request)?, None)?;
     wait(service, &job.id, "diagnosing", show)?;
     let Some(JobResult::Diagnosis(rounds)) = service.jobs.take_result(&job.id) else {
         bail!("diagnosis {} succeeded without a diagnosis", job.id);
@@ -337,30 +322,30 @@ fn model_story(
         .first()
         .cloned()
         .with_context(|| format!("diagnosis {} ran no round", job.id))?;
-    let diagnosis_job = job.id.to_string();
+    let baseline = diagnosis
+        .before
+        .as_ref()
+        .with_context(|| format!("diagnosis {} kept no baseline comparison", job.id))?;
+    let (baseline_px, baseline_se_px) = (baseline.discrepancy_px, baseline.discrepancy_se_px);
     let winner = diagnosis
         .candidates
         .iter()
         .find(|c| Some(&c.effect) == diagnosis.verdict.as_ref())
         .cloned();
-    let (model, after) = match &winner {
-        None => (None, None),
-        Some(_) => {
-            // The model with every verdict added (one round: the winner).
+    // The winner's comparison is the diagnosis's own rendering of the model with it added (the
+    // baseline's print, the same seed); the model is stored for the dashboard's next comparison.
+    let (model, after) = match (&winner, &diagnosis.after) {
+        (Some(_), Some(after)) => {
             let toml = rounds.final_model.to_toml();
             let (added, _) = service.add_model(&NewModel { toml })?;
-            let name = added.summary.name;
-            let after = comparison(
-                &CompareRequest {
-                    model: name.clone(),
-                    ..request.clone()
-                },
-                "comparing with the winner added",
-            )?;
-            (Some(name), Some(after))
+            (
+                Some(added.summary.name),
+                Some((after.discrepancy_px, after.discrepancy_se_px)),
+            )
         }
+        (None, _) | (Some(_), None) => (None, None),
     };
-    jobs.insert(1, diagnosis_job);
+    let jobs = vec![job.id.to_string()];
     Ok(ModelStory {
         dataset: dataset.id.to_string(),
         baseline_px,

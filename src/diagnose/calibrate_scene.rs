@@ -150,6 +150,17 @@ pub enum SceneFrom<'a> {
     Reuse(&'a Nominal),
 }
 
+impl SceneFrom<'_> {
+    /// The variant's name, for the logs.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            SceneFrom::Calibrate => "calibrate",
+            SceneFrom::Refit(_) => "refit",
+            SceneFrom::Reuse(_) => "reuse",
+        }
+    }
+}
+
 /// The model's centred reference crop of pattern `pi`.
 fn reference_crop(
     meas: &Measurement,

@@ -277,9 +277,13 @@ pub(super) fn fit_one_candidate(
     ask: Progress,
 ) -> Result<Option<(Candidate, FittedModel)>, DiagnoseError> {
     let before = judge.before;
+    let _span = tracing::debug_span!("candidate", %id).entered();
     // A cancelled job's fit ends early; the tick after it reports the cancel.
     let stop = || !ask(0, 0);
-    let Some(fit) = fit_candidate(meas, before, &model.effects, (id, refit), &stop) else {
+    let fitting = tracing::debug_span!("fit");
+    let fitted =
+        fitting.in_scope(|| fit_candidate(meas, before, &model.effects, (id, refit), &stop));
+    let Some(fit) = fitted else {
         return Ok(None);
     };
     let with = ModelConfig {
@@ -330,6 +334,7 @@ pub(super) fn render_winner(
 ) -> Result<Option<CandidateId>, DiagnoseError> {
     while let Some(pos) = candidates.iter().position(|c| c.significant) {
         let effect = candidates[pos].effect.clone();
+        let _span = tracing::debug_span!("winner", %effect).entered();
         if candidates[pos].method == Method::Rendered {
             return Ok(Some(effect));
         }

@@ -132,7 +132,11 @@ pub fn compare_with_scene(
     let total = runs.len() * opts.schemes.len();
     let done = AtomicUsize::new(0);
     let go_on = || progress(done.load(Ordering::Relaxed), total);
-    let nominal = calibrate_seeded(meas, model, seed, scene_from, &go_on)?;
+    let _span =
+        tracing::debug_span!("comparison", model = %model.name, seed, scene = scene_from.kind())
+            .entered();
+    let nominal = tracing::debug_span!("calibrate")
+        .in_scope(|| calibrate_seeded(meas, model, seed, scene_from, &go_on))?;
     let scene = Scene::new(&nominal, &model.effects, &meas.manifest, seed)?;
     let cancelled = || !go_on();
     let mut model_dic: Vec<Option<Vec<DicResult>>> = vec![None; runs.len()];
@@ -142,11 +146,14 @@ pub fn compare_with_scene(
         if !go_on() {
             return Err(DiagnoseError::Cancelled);
         }
-        let reference = scene.render(pi, Shot::REFERENCE, None);
+        let rendering = tracing::debug_span!("render");
+        let reference = rendering.in_scope(|| scene.render(pi, Shot::REFERENCE, None));
         let crop = centre_crop(&reference, STATS_CROP_PX);
-        let repeat = meas.repeat_crops[pi]
-            .as_ref()
-            .map(|_| scene.render(pi, Shot::REPEAT, Some(STATS_CROP_PX)));
+        let repeat = rendering.in_scope(|| {
+            meas.repeat_crops[pi]
+                .as_ref()
+                .map(|_| scene.render(pi, Shot::REPEAT, Some(STATS_CROP_PX)))
+        });
         images.push(ImageComparison {
             frame: "reference".into(),
             pattern: meas.labels[pi].clone(),
@@ -155,11 +162,13 @@ pub fn compare_with_scene(
             model: frame_stats(Some(&reference), &crop, repeat.as_ref()),
         });
         let mut prepared = Vec::new();
+        let preparing = tracing::debug_span!("prepare").entered();
         for s in &opts.schemes {
             let r = reduce(&reference, s)?;
             prepared
                 .push(PreparedReference::new(&r, &opts.dic).map_err(|e| dic_error("model", s, e))?);
         }
+        drop(preparing);
         for (ri, run) in runs
             .iter()
             .enumerate()
@@ -169,7 +178,7 @@ pub fn compare_with_scene(
                 return Err(DiagnoseError::Cancelled);
             }
             let at = nominal.landed_command(ri, (run.stage.dx_mm, run.stage.dy_mm));
-            let moved = scene.render(pi, Shot::of_run(ri, at), None);
+            let moved = rendering.in_scope(|| scene.render(pi, Shot::of_run(ri, at), None));
             let mcrop = centre_crop(&moved, STATS_CROP_PX);
             let [sx, sy] = nominal.actual_move_px(ri, (run.stage.dx_mm, run.stage.dy_mm));
             moved_images[ri] = Some(ImageComparison {
@@ -183,6 +192,7 @@ pub fn compare_with_scene(
                 },
             });
             let mut per_scheme = Vec::new();
+            let _correlating = tracing::debug_span!("dic").entered();
             for (s, prep) in opts.schemes.iter().zip(&prepared) {
                 let d = reduce(&moved, s)?;
                 let watch = Watch {

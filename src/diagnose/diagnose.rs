@@ -65,6 +65,7 @@ pub fn diagnose_prepared(
     refit: &[EffectId],
     progress: Progress,
 ) -> Result<Diagnosis, DiagnoseError> {
+    let _span = tracing::debug_span!("round", model = %model.name).entered();
     let before = match before {
         Some(b) => b,
         None => compare_prepared(meas, model, &|_, _| progress(0, 1))?,
@@ -112,6 +113,7 @@ pub fn diagnose_prepared(
     let mut by_drop: Vec<&Candidate> = candidates.iter().collect();
     by_drop.sort_by(|a, b| b.drop_px.total_cmp(&a.drop_px));
     let ranking_by_drop = by_drop.iter().map(|c| c.effect.clone()).collect();
+    let settling = tracing::debug_span!("settle").entered();
     let left = settle(
         meas,
         winner,
@@ -126,6 +128,7 @@ pub fn diagnose_prepared(
             c.significant = false;
         }
     }
+    drop(settling);
     let confounded = confounded_pairs(&design, &candidates, left.winner.clone(), print_calibrated);
     Ok(Diagnosis {
         model: before.model.clone(),

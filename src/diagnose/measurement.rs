@@ -50,6 +50,7 @@ pub fn load_measurement(
 ) -> Result<Measurement, DiagnoseError> {
     // Frames the sensor binned or decimated itself are compared beside the fit, in their mode
     // (`capture_mode`); the fit holds the full-resolution runs.
+    let _span = tracing::debug_span!("measured_side").entered();
     let (manifest, hardware_runs) = Manifest::read(dir)?.full_resolution();
     if manifest.runs.is_empty() {
         return Err(DiagnoseError::Frames {
