@@ -369,6 +369,27 @@ fn near(what: &str, value: f64, se: f64, truth: f64) {
 }
 
 /// Runs a calibration with moves of 1 and 5 mm, three rounds, on `service` and returns its card.
+/// Waits for job `id` to end; it must have succeeded.
+fn succeeded(
+    service: &ffdic::service::Service,
+    id: &ffdic::store::RunId,
+) -> ffdic::store::RunRecord {
+    let record = loop {
+        let r = service.store.get(id).unwrap();
+        if r.status.is_terminal() {
+            break r;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    assert_eq!(
+        record.status,
+        ffdic::store::RunStatus::Succeeded,
+        "{}",
+        record.message
+    );
+    record
+}
+
 fn calibrate_on(service: &ffdic::service::Service) -> Box<CameraCard> {
     let plan = ffdic::experiment::CalibrationPlan {
         name: "hidden bench".into(),
@@ -381,19 +402,7 @@ fn calibrate_on(service: &ffdic::service::Service) -> Box<CameraCard> {
     let (record, _) = service
         .submit(CalibrationJob::plan(service, plan).unwrap(), None)
         .unwrap();
-    let record = loop {
-        let r = service.store.get(&record.id).unwrap();
-        if r.status.is_terminal() {
-            break r;
-        }
-        std::thread::sleep(Duration::from_millis(100));
-    };
-    assert_eq!(
-        record.status,
-        ffdic::store::RunStatus::Succeeded,
-        "{}",
-        record.message
-    );
+    let record = succeeded(service, &record.id);
     let Some(ffdic::service::JobResult::Calibration { card, .. }) =
         service.jobs.take_result(&record.id)
     else {
@@ -522,10 +531,88 @@ fn a_calibration_through_the_exec_camera_finds_what_the_bench_hides() {
     let stored = service
         .model_config(&card.model.name)
         .expect("the card's model stored");
-    service.stop(Duration::from_secs(5));
     let fresh = root.path().join("fresh");
     check_the_card_holds_on_a_fresh_run(&fresh, &stored, &text);
     analyze_with_the_card(&fresh, &stored, root.path());
+    analyses_with_the_card_through_the_service(&service, &fresh, root.path(), &stored.name);
+    service.stop(Duration::from_secs(5));
+}
+
+/// The API's analyses given the card (`POST /datasets/{id}/analyses` with `card`), on the
+/// fresh pair and, without a card, on the same move with nothing hidden (`flat`, written by
+/// [`analyze_with_the_card`]): in every reduction the card's correction is made where each
+/// reduced point's block sees, so the corrected field departs from a rigid move about as much
+/// as the flat bench's does, as `analyze --card` holds at full resolution.
+fn analyses_with_the_card_through_the_service(
+    service: &ffdic::service::Service,
+    fresh: &Path,
+    root: &Path,
+    card: &str,
+) {
+    use ffdic::experiment::SchemeSpec;
+    use ffdic::service::job::{AnalysisJob, AnalysisRequest};
+    use ffdic::store::DatasetSource;
+    let import = |dir: &Path, name: &str| {
+        service
+            .store
+            .import_dataset_dir(dir, name, DatasetSource::Upload)
+            .unwrap()
+            .id
+    };
+    let (fresh_id, flat_id) = (import(fresh, "fresh"), import(&root.join("flat"), "flat"));
+    let request = |card: Option<&str>| AnalysisRequest {
+        schemes: ["ff100", "ff50", "ff25"]
+            .map(|s| SchemeSpec::Preset(s.into()))
+            .to_vec(),
+        card: card.map(str::to_string),
+        ..AnalysisRequest::default()
+    };
+    let unknown = AnalysisJob::plan(service, &fresh_id, request(Some("no-such-card")));
+    match unknown {
+        Err(ffdic::service::SubmitError::Field(e)) => assert_eq!(e.field, "card", "{e:?}"),
+        other => panic!("an unknown card: {:?}", other.err()),
+    }
+    let rows = |dataset, card: Option<&str>| -> Vec<ffdic::study::StudyRow> {
+        let job = AnalysisJob::plan(service, &dataset, request(card)).unwrap();
+        let (record, _) = service.submit(job, None).unwrap();
+        let record = succeeded(service, &record.id);
+        match service.jobs.take_result(&record.id) {
+            Some(ffdic::service::JobResult::Study { rows, .. }) => rows,
+            _ => panic!("an analysis's rows"),
+        }
+    };
+    let (with_card, flat) = (rows(fresh_id, Some(card)), rows(flat_id, None));
+    let excess = |s: f64, floor: f64| (s * s - floor * floor).max(0.0).sqrt();
+    for scheme in ["ff100", "ff50", "ff25"] {
+        let find = |rows: &[ffdic::study::StudyRow]| {
+            rows.iter()
+                .find(|r| r.run.ends_with("d1") && r.scheme == scheme)
+                .cloned()
+                .unwrap()
+        };
+        let (row, floor) = (find(&with_card), find(&flat));
+        let corrected = row.card.as_ref().expect("a row given the card has it");
+        assert_eq!(corrected.model, card);
+        assert!(floor.card.is_none());
+        for (axis, raw, fixed, floor) in [
+            ("u", row.summary.u.std, corrected.u.std, floor.summary.u.std),
+            ("v", row.summary.v.std, corrected.v.std, floor.summary.v.std),
+        ] {
+            eprintln!(
+                "analysis with the card, {scheme} {axis}: std {raw:.5} -> {fixed:.5} px, nothing hidden {floor:.5} px; bias {:?} -> {:?} px",
+                row.bias_px(),
+                row.card_bias_px()
+            );
+            assert!(
+                raw > 5.0 * floor,
+                "{scheme} {axis}: the raw field is not rigid"
+            );
+            assert!(
+                excess(fixed, floor) < 0.05 * excess(raw, floor),
+                "{scheme} {axis}: with the card std {fixed} px, raw {raw} px, floor {floor} px"
+            );
+        }
+    }
 }
 
 /// `ffdic analyze --card` on a fresh pair from the hidden bench: with the card's distortion and

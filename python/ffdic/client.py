@@ -797,8 +797,9 @@ class Client:
         self, dataset_id: str, *, idempotency_key: Optional[str] = None, **request: Any
     ) -> str:
         """``POST /datasets/{id}/analyses``: queues the study's reductions and DIC on a stored
-        dataset (``schemes``, ``dic``; defaults: the paper's) and returns the job id. Follow it
-        with ``follow(job, kind="job")``; its study is ``results(job, kind="job")``."""
+        dataset (``schemes``, ``dic``; defaults: the paper's; ``card``: a camera card's model
+        name, whose distortion and tilt each row's ``card`` takes off) and returns the job id.
+        Follow it with ``follow(job, kind="job")``; its study is ``results(job, kind="job")``."""
         return self._submit(f"/datasets/{_quote(dataset_id)}/analyses", request, idempotency_key)
 
     def compare(

@@ -2,7 +2,7 @@
 //! images, or one folder of them) analysed incrementally; summary on stdout, points and
 //! settings on disk.
 
-use super::analyze_card::CardCorrection;
+use super::analyze_card::{card_json, card_text, load_card};
 use super::ProgressBar;
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -213,7 +213,7 @@ fn run_pair(
     pool: &rayon::ThreadPool,
 ) -> Result<()> {
     let card = match &args.card {
-        Some(given) => Some(CardCorrection::load(
+        Some(given) => Some(load_card(
             given,
             &args.data,
             (reference.width(), reference.height()),
@@ -232,7 +232,7 @@ fn run_pair(
 
     if let Some(dir) = &args.out {
         create_dir(dir)?;
-        let corrected = card.as_ref().map(|c| c.corrected(&result));
+        let corrected = card.as_ref().map(|c| c.corrected(None, &result.points));
         write_atomic(
             &dir.join("points.csv"),
             points_csv(&result, args.scale, corrected.as_deref()).as_bytes(),
@@ -251,7 +251,7 @@ fn run_pair(
         doc["bias"] = json!({ "u": u, "v": v });
     }
     if let Some(card) = &card {
-        doc["card"] = card.json(&result);
+        doc["card"] = card_json(card, &result);
     }
     let mut out = std::io::stdout().lock();
     if args.json {
@@ -272,7 +272,7 @@ fn run_pair(
             write_bias(&mut out, bias)?;
         }
         if let Some(card) = &card {
-            write!(out, "{}", card.text(&result))?;
+            write!(out, "{}", card_text(card, &result))?;
         }
     }
     if result.summary.valid == 0 && result.summary.points > 0 {

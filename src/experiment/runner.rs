@@ -583,8 +583,7 @@ fn analyse(
     let captures = analyze_dataset_with(
         &captured.frames_dir,
         manifest,
-        &plan.schemes,
-        &plan.dic,
+        (&plan.schemes, &plan.dic, None),
         &|done, total| {
             sink.event(
                 EventKind::PairAnalyzed,

@@ -109,6 +109,7 @@ mod tests {
             increase_ci95: None,
             repeats: 1,
             expected_px: None,
+            card: None,
         }
     }
 

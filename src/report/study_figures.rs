@@ -11,7 +11,7 @@ use serde_json::json;
 pub fn rows_json(rows: &[StudyRow]) -> serde_json::Value {
     let ms = |s: &crate::dic::Stats| json!({"mean": s.mean, "std": s.std, "ci95": s.std_ci95});
     json!({
-        "rows": rows.iter().map(|r| json!({
+        "rows": rows.iter().map(|r| (r, json!({
             "run": r.run,
             "pattern": r.pattern,
             "scheme": r.scheme,
@@ -25,7 +25,15 @@ pub fn rows_json(rows: &[StudyRow]) -> serde_json::Value {
             "repeats": r.repeats,
             "expected_px": r.expected_px,
             "bias_px": r.bias_px(),
-        })).collect::<Vec<_>>()
+        }))).map(|(r, mut row)| {
+            // Only a study given a camera card has the corrected displacement.
+            if let Some(c) = &r.card {
+                row["card"] = json!({
+                    "model": c.model, "u": ms(&c.u), "v": ms(&c.v), "bias_px": r.card_bias_px(),
+                });
+            }
+            row
+        }).collect::<Vec<_>>()
     })
 }
 
@@ -216,6 +224,7 @@ pub fn study_csv(rows: &[StudyRow]) -> String {
         "u_bias",
         "v_bias",
     ];
+    let with_card = rows.iter().any(|r| r.card.is_some());
     let body: Vec<Vec<String>> = rows
         .iter()
         .map(|r| {
@@ -247,10 +256,45 @@ pub fn study_csv(rows: &[StudyRow]) -> String {
             )
             .chain([r.repeats.to_string()])
             .chain(expected_and_bias(r))
+            .chain(with_card.then(|| card_columns(r)).into_iter().flatten())
             .collect()
         })
         .collect();
+    let headers: Vec<&str> = headers
+        .into_iter()
+        .chain(with_card.then_some(CARD_HEADERS).into_iter().flatten())
+        .collect();
     csv(&headers, &body)
+}
+
+/// The columns of a study analysed with a camera card: the corrected u and v, and their bias
+/// against the commanded move.
+const CARD_HEADERS: [&str; 7] = [
+    "card",
+    "u_card_mean",
+    "u_card_std",
+    "v_card_mean",
+    "v_card_std",
+    "u_card_bias",
+    "v_card_bias",
+];
+
+fn card_columns(r: &StudyRow) -> [String; 7] {
+    let Some(c) = &r.card else {
+        return Default::default();
+    };
+    let [bu, bv] = r
+        .card_bias_px()
+        .map_or([String::new(), String::new()], |b| b.map(|x| x.to_string()));
+    [
+        c.model.clone(),
+        c.u.mean.to_string(),
+        c.u.std.to_string(),
+        c.v.mean.to_string(),
+        c.v.std.to_string(),
+        bu,
+        bv,
+    ]
 }
 
 /// `u_expected`, `v_expected`, `u_bias`, `v_bias` of a row (px of its scheme); empty where the

@@ -154,10 +154,20 @@ impl Service {
     /// The model a request names (embedded or stored); an unknown or broken one blames the
     /// request's `model` field.
     fn requested_model(&self, name: &str) -> Result<crate::model::ModelConfig, SubmitError> {
+        self.model_named_by(name, "model")
+    }
+
+    /// The model a request's `field` names (embedded or stored); an unknown or broken one
+    /// blames that field.
+    fn model_named_by(
+        &self,
+        name: &str,
+        field: &str,
+    ) -> Result<crate::model::ModelConfig, SubmitError> {
         self.model_config(name).map_err(|e| match e {
             ModelStoreError::Store(s) => SubmitError::Store(s),
             other => SubmitError::Field(crate::experiment::FieldError {
-                field: "model".into(),
+                field: field.into(),
                 reason: other.to_string(),
             }),
         })

@@ -3,6 +3,7 @@
 //! report the statistics with the increase of each standard deviation over the 100 % scheme —
 //! the paper's Figures 5 (x: u, exx) and 6 (y: v, eyy).
 
+use super::card::CardCorrection;
 use super::rows::{Increase, IncreaseInterval, StudyRow};
 use crate::dataset::{DatasetError, Manifest, Run};
 use crate::dic::{CorrelationLengths, DicResult, DicSettings, Stats, Summary};
@@ -45,8 +46,7 @@ pub fn analyze_dataset(
     analyze_dataset_with(
         dir,
         manifest,
-        schemes,
-        dic,
+        (schemes, dic, None),
         progress,
         cancelled,
         &|_, _, _| {},
@@ -57,7 +57,8 @@ pub fn analyze_dataset(
 /// before it keeps only the summary: the experiment runner draws its u, v and strain maps from it.
 pub type ResultHook<'a> = dyn Fn(&Run, &Scheme, &DicResult) + Sync + 'a;
 
-/// [`analyze_dataset`], handing every pair's full result to `on_result`.
+/// [`analyze_dataset`], handing every pair's full result to `on_result`; with a camera `card`,
+/// each row also holds its displacement with the card's geometry taken off.
 ///
 /// A run the camera read out in its own binning or decimation (`capture`) is correlated as it is,
 /// under the hardware scheme's name, and compared with the first scheme of its full-resolution
@@ -66,8 +67,7 @@ pub type ResultHook<'a> = dyn Fn(&Run, &Scheme, &DicResult) + Sync + 'a;
 pub fn analyze_dataset_with(
     dir: &Path,
     manifest: &Manifest,
-    schemes: &[Scheme],
-    dic: &DicSettings,
+    (schemes, dic, card): (&[Scheme], &DicSettings, Option<&CardCorrection>),
     progress: &(dyn Fn(usize, usize) -> bool + Sync),
     cancelled: &(dyn Fn() -> bool + Sync),
     on_result: &ResultHook<'_>,
@@ -99,6 +99,7 @@ pub fn analyze_dataset_with(
         progress,
         cancelled,
         on_result,
+        card,
         pending,
         twins: Vec::new(),
         baseline: None,
@@ -116,6 +117,7 @@ struct Study<'a> {
     progress: &'a (dyn Fn(usize, usize) -> bool + Sync),
     cancelled: &'a (dyn Fn() -> bool + Sync),
     on_result: &'a ResultHook<'a>,
+    card: Option<&'a CardCorrection>,
     /// Twin ids with the number of hardware runs still to use them.
     pending: Vec<(String, usize)>,
     /// (twin id, its baseline row, its baseline result)
@@ -191,6 +193,7 @@ impl PairVisitor for Study<'_> {
             increase_ci95,
             repeats: 1,
             expected_px: Some(expected_px(run, scheme, self.scale_px_per_mm)),
+            card: self.card.map(|c| c.stats(Some(scheme), &result.points)),
         });
         let first_scheme =
             run.capture.is_none() && self.baseline.as_ref().map(|b| b.0) != Some(pair.index);

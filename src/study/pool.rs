@@ -8,6 +8,7 @@
 //! that mean (a paired t analysis, e.g. Montgomery & Runger, *Applied Statistics and Probability
 //! for Engineers*, § 10-4).
 
+use super::card::CardStats;
 use super::rows::{Increase, IncreaseInterval, StudyRow};
 use crate::dataset::Manifest;
 use crate::dic::{Stats, Summary};
@@ -50,17 +51,18 @@ pub fn pool_captures(manifest: &Manifest, rows: &[StudyRow]) -> Vec<StudyRow> {
 fn pool(id: &str, members: &[&StudyRow]) -> StudyRow {
     let first = members[0];
     let stats = |f: fn(&Summary) -> &Stats| {
-        let all: Vec<&Stats> = members.iter().map(|r| f(&r.summary)).collect();
-        let (std, std_ci95) = mean_interval(&all.iter().map(|s| s.std).collect::<Vec<_>>());
-        Stats {
-            mean: mean_interval(&all.iter().map(|s| s.mean).collect::<Vec<_>>()).0,
-            std,
-            std_ci95,
-            min: all.iter().map(|s| s.min).fold(f64::INFINITY, f64::min),
-            max: all.iter().map(|s| s.max).fold(f64::NEG_INFINITY, f64::max),
-            count: all.iter().map(|s| s.count).sum(),
-        }
+        pooled_stats(&members.iter().map(|r| f(&r.summary)).collect::<Vec<_>>())
     };
+    // A card's corrected field, pooled as the raw one is (every capture was given the card).
+    let card = members
+        .iter()
+        .map(|r| r.card.as_ref())
+        .collect::<Option<Vec<_>>>()
+        .map(|cards| CardStats {
+            model: cards[0].model.clone(),
+            u: pooled_stats(&cards.iter().map(|c| &c.u).collect::<Vec<_>>()),
+            v: pooled_stats(&cards.iter().map(|c| &c.v).collect::<Vec<_>>()),
+        });
     let increases: Option<Vec<Increase>> = members.iter().map(|r| r.increase_pct).collect();
     let (increase_pct, increase_ci95) = match increases {
         None => (None, None),
@@ -110,5 +112,20 @@ fn pool(id: &str, members: &[&StudyRow]) -> StudyRow {
         increase_ci95,
         expected_px: first.expected_px,
         repeats: members.len(),
+        card,
+    }
+}
+
+/// The statistics of captures pooled: the mean of the means, and of the stds with their t
+/// interval.
+fn pooled_stats(all: &[&Stats]) -> Stats {
+    let (std, std_ci95) = mean_interval(&all.iter().map(|s| s.std).collect::<Vec<_>>());
+    Stats {
+        mean: mean_interval(&all.iter().map(|s| s.mean).collect::<Vec<_>>()).0,
+        std,
+        std_ci95,
+        min: all.iter().map(|s| s.min).fold(f64::INFINITY, f64::min),
+        max: all.iter().map(|s| s.max).fold(f64::NEG_INFINITY, f64::max),
+        count: all.iter().map(|s| s.count).sum(),
     }
 }

@@ -58,6 +58,9 @@ pub struct StudyRow {
     /// `summary.u.mean − expected_px[0]`. Absent in rows written before it was recorded.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub expected_px: Option<[f64; 2]>,
+    /// The displacement with a camera card's geometry taken off (an analysis given a card).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub card: Option<super::CardStats>,
 }
 
 impl StudyRow {
@@ -66,6 +69,12 @@ impl StudyRow {
     pub fn bias_px(&self) -> Option<[f64; 2]> {
         self.expected_px
             .map(|[u, v]| [self.summary.u.mean - u, self.summary.v.mean - v])
+    }
+
+    /// The card-corrected mean minus the commanded move (u, v), px of the row's scheme.
+    pub fn card_bias_px(&self) -> Option<[f64; 2]> {
+        let (card, [u, v]) = (self.card.as_ref()?, self.expected_px?);
+        Some([card.u.mean - u, card.v.mean - v])
     }
 }
 

@@ -1,5 +1,6 @@
 //! `POST /datasets/{id}/analyses`: the fill-factor study of a stored dataset (its pairs
-//! reduced by every scheme and correlated), on the compute lane.
+//! reduced by every scheme and correlated), on the compute lane; given a camera card, each row
+//! also with the card's geometry taken off.
 
 use super::Job;
 use crate::dataset::Manifest;
@@ -7,13 +8,14 @@ use crate::dic::DicSettings;
 use crate::experiment::{
     check_dic, check_schemes, ExperimentRequest, FieldError, RunSink, SchemeSpec,
 };
+use crate::model::GeometryCorrection;
 use crate::reduce::Scheme;
 use crate::report::study_files;
 use crate::run_event::EventKind;
 use crate::service::jobs::{JobContext, JobError, JobOutput, JobResult, Lane};
 use crate::service::{Service, SubmitError};
 use crate::store::{DatasetId, RunKind};
-use crate::study::{analyze_dataset, StudyError};
+use crate::study::{analyze_dataset_with, CardCorrection, StudyError};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
@@ -26,6 +28,11 @@ pub struct AnalysisRequest {
     pub schemes: Vec<SchemeSpec>,
     #[schema(value_type = Object)]
     pub dic: DicSettings,
+    /// A camera card (`POST /calibrations`; a stored or embedded model's name): each row also
+    /// holds its displacement with the card's lens distortion and target tilt taken off
+    /// (`card`: the corrected u and v and their bias against the commanded move).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub card: Option<String>,
 }
 
 impl Default for AnalysisRequest {
@@ -34,6 +41,7 @@ impl Default for AnalysisRequest {
         Self {
             schemes: r.schemes,
             dic: r.dic,
+            card: None,
         }
     }
 }
@@ -100,6 +108,7 @@ pub struct AnalysisJob {
     dataset: DatasetId,
     request: AnalysisRequest,
     plan: AnalysisPlan,
+    card: Option<CardCorrection>,
 }
 
 impl AnalysisJob {
@@ -115,11 +124,35 @@ impl AnalysisJob {
             record.runs,
             service.config.jobs.max_analysis_subset_pixels,
         )?;
+        let card = match &request.card {
+            None => None,
+            Some(name) => {
+                let model = service.model_named_by(name, "card")?;
+                // The manifest's scale places a tilt's plane (a card fitted on this bench).
+                let manifest =
+                    Manifest::read(&service.store.dataset_dir(dataset)).map_err(|e| {
+                        SubmitError::Field(FieldError {
+                            field: "card".into(),
+                            reason: format!("the dataset's manifest: {e}"),
+                        })
+                    })?;
+                Some(CardCorrection {
+                    model: model.name.clone(),
+                    correction: GeometryCorrection::of(
+                        &model.effects,
+                        record.width,
+                        record.height,
+                        manifest.scale_px_per_mm,
+                    ),
+                })
+            }
+        };
         Ok(Self {
             service: service.clone(),
             dataset: dataset.clone(),
             request,
             plan,
+            card,
         })
     }
 }
@@ -142,11 +175,10 @@ impl Job for AnalysisJob {
         let (service, dataset, plan) = (self.service, self.dataset, self.plan);
         let dir = service.store.dataset_dir(&dataset);
         let manifest = Manifest::read(&dir).map_err(JobError::failed)?;
-        let rows = analyze_dataset(
+        let rows = analyze_dataset_with(
             &dir,
             &manifest,
-            &plan.schemes,
-            &plan.dic,
+            (&plan.schemes, &plan.dic, self.card.as_ref()),
             &|done, total| {
                 ctx.event(
                     EventKind::PairAnalyzed,
@@ -157,6 +189,7 @@ impl Job for AnalysisJob {
                 !ctx.cancelled()
             },
             &|| ctx.cancelled(),
+            &|_, _, _| {},
         )
         .map_err(|e| match e {
             StudyError::Cancelled => JobError::Cancelled,
