@@ -97,6 +97,34 @@ fn calibrate_on_the_bench_prints_the_card_and_stores_its_model() {
         again["card"]["stage"]["runs"], 8,
         "the same runs, the same map"
     );
+
+    // The card's model as the bench of a study (`reproduce --bench-model NAME`): the mock bench
+    // renders that camera, whose stage angle the study's v shows.
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/small.toml");
+    let study = ffdic_ok(&[
+        "reproduce",
+        "--experiment",
+        fixture.to_str().unwrap(),
+        "--bench-model",
+        model,
+        "--data",
+        data.to_str().unwrap(),
+        "--no-model",
+        "--json",
+    ]);
+    let study: Value = serde_json::from_slice(&study.stdout).unwrap();
+    let angle = card["stage"]["angle_rad"].as_f64().unwrap();
+    let row = &study["rows"][0];
+    let (u, v) = (
+        row["u"]["mean"].as_f64().unwrap(),
+        row["v"]["mean"].as_f64().unwrap(),
+    );
+    println!("the card's bench: u {u:.4} v {v:.4} px, card angle {angle:.5} rad");
+    assert!(
+        (v.atan2(u) - angle).abs() < 0.001,
+        "the study's move at {:.5} rad, the card's stage angle {angle:.5} rad",
+        v.atan2(u)
+    );
 }
 
 #[test]

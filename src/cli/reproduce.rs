@@ -14,8 +14,8 @@ use ffdic::report::findings_text;
 use ffdic::report::{figures_text, paper_figures_text, study_json};
 use ffdic::service::job::{CompareRequest, DiagnosisJob, ExperimentJob};
 use ffdic::service::{
-    mock_bench, CameraConfig, DaemonConfig, JobResult, MockBinning, MockReduction, NewModel,
-    Service, PAPER_BENCH_DISTORTION_TOML,
+    find_analysis_model, mock_bench, CameraConfig, DaemonConfig, JobResult, MockBinning,
+    MockReduction, NewModel, Service, PAPER_BENCH_DISTORTION_TOML,
 };
 use ffdic::store::{RunId, RunRecord, RunStatus};
 use ffdic::study::{paper_findings, StudyRow};
@@ -28,10 +28,12 @@ pub struct ReproduceArgs {
     /// Experiment file (default: the embedded paper study, config/experiments/paper.toml).
     #[arg(long)]
     pub experiment: Option<PathBuf>,
-    /// Model of the mock bench's truth (default: config/models/paper-bench-distortion.toml, the
-    /// paper's bench with a mild lens distortion the baseline analysis model lacks).
-    #[arg(long)]
-    pub bench_model: Option<PathBuf>,
+    /// Model of the mock bench's truth: a TOML file, or a model name — embedded or stored in
+    /// DATA/models, e.g. a camera card's (`ffdic calibrate`) — (default: the embedded
+    /// paper-bench-distortion, the paper's bench with a mild lens distortion the baseline
+    /// analysis model lacks).
+    #[arg(long, value_name = "FILE|NAME")]
+    pub bench_model: Option<String>,
     /// Data folder the run is stored in (as `ffdic serve` would).
     #[arg(long, default_value = "data")]
     pub data: PathBuf,
@@ -78,11 +80,14 @@ impl From<SensorBinning> for MockBinning {
 
 pub fn run(args: &ReproduceArgs) -> Result<()> {
     let spec = load_experiment(&args.experiment)?;
-    let truth = load_model(
-        &args.bench_model,
-        PAPER_BENCH_DISTORTION_TOML,
-        "config/models/paper-bench-distortion.toml",
-    )?;
+    let truth = match &args.bench_model {
+        Some(given) => find_analysis_model(Some(given), &args.data)?,
+        None => load_model(
+            &None,
+            PAPER_BENCH_DISTORTION_TOML,
+            "config/models/paper-bench-distortion.toml",
+        )?,
+    };
     let truth_effects = bench_effects(&truth);
     let mut config = DaemonConfig::embedded();
     config.data_dir = args.data.clone();

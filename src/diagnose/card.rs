@@ -34,7 +34,7 @@ use super::rounds::Rounds;
 use super::unexplained::{model_scatter, unexplained, Unexplained};
 use super::write_geometric::write_joint;
 use super::{DiagnoseError, Progress};
-use crate::model::effects::LensDistortion;
+use crate::model::effects::{LensDistortion, StageMisalignment};
 use crate::model::{EffectId, Effects, ModelConfig};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -92,7 +92,8 @@ pub struct CameraCard {
     pub baseline_model: String,
     pub baseline_px: f64,
     pub baseline_se_px: f64,
-    /// The card's model (the rounds' non-geometric verdicts and the significant geometry).
+    /// The card's model (the rounds' non-geometric verdicts, the significant geometry and the
+    /// stage's angle when significant).
     pub card_px: f64,
     pub card_se_px: f64,
     /// What the card's model leaves unexplained.
@@ -203,6 +204,17 @@ pub fn camera_card(
     let stage = geometry_fit
         .as_ref()
         .and_then(|g| stage_map(meas, &samples, g, setting.scale_px_per_mm, z));
+    // The stage's angle, when significant, as the model states it: a comparison fits its own
+    // stage (`Nominal::render_effects`), but a bench rendered from the card's model (the mock
+    // bench of `reproduce --bench-model`, a sweep) moves its target as this stage did.
+    if let Some(map) = stage
+        .as_ref()
+        .filter(|m| m.significant.iter().any(|k| k == "angle"))
+    {
+        effects.stage_misalignment = Some(StageMisalignment {
+            angle_rad: map.angle_rad,
+        });
+    }
     let imaging = imaging_entries(rounds);
     let mut model = ModelConfig {
         name: String::new(),
