@@ -5,6 +5,7 @@
 //! right, y down. Pixel (col, row) therefore covers the square [col-0.5, col+0.5] x [row-0.5, row+0.5].
 
 mod error;
+pub mod focus_map;
 mod formats;
 mod gray;
 mod roi;
@@ -14,6 +15,7 @@ mod tiff_layout;
 mod view;
 
 pub use error::ImageError;
+pub use focus_map::{focus_map, FocusMap};
 pub use formats::{
     decode_image, decode_image_within, frame_files, read_image, read_image_header, FRAME_EXTENSIONS,
 };

@@ -165,6 +165,13 @@ async function main() {
       const mig = Number(await page.locator("#snapshot-quality [data-figure=mean_gradient]").getAttribute("data-value"));
       expect(mig > 0, `mean intensity gradient ${mig} DN/px`);
     }
+    // The focus by region: 4x3 cells of the whole frame, each a % of the sharpest (the mock
+    // bench's flat target is in focus everywhere).
+    if (expect(await appears(page, "#focus-map td[data-focus-pct]", 10 * SECOND), "the snapshot has a focus map")) {
+      const pcts = (await page.locator("#focus-map td").evaluateAll((tds) => tds.map((t) => Number(t.dataset.focusPct))));
+      expect(pcts.length === 12 && pcts.every((p) => p > 50 && p <= 100) && pcts.some((p) => p === 100),
+        `focus map: 12 regions within a factor two of the sharpest: ${pcts.join(", ")}`);
+    }
     await page.waitForSelector("#camera-state dd");
     const cameraText = await page.locator("#camera-state").innerText();
     if (!/exposure/.test(cameraText) || !/µs/.test(cameraText)) fail(`camera state: ${cameraText}`);
@@ -310,6 +317,16 @@ async function main() {
     await page.goto(`${base}/`);
     await page.waitForSelector("#calibration-list tr[data-id]", { timeout: 10 * SECOND });
     expect(await page.locator("#calibration-list tr[data-id]").count() === 1, "the home page lists the calibration");
+
+    // ---- the perpendicularity check on the bench page (issue 33's setup aid) ----
+    await page.locator("#perp-btn").click();
+    if (expect(await appears(page, "#perp-result[data-loaded=true]", 120 * SECOND), "the perpendicularity check reports")) {
+      const stage = await page.locator("#perp-result [data-perp=stage_angle_rad]").innerText();
+      expect(/±/.test(stage), `the stage's angle with its standard error: ${stage}`);
+      const tilts = await page.locator("#perp-result [data-perp^=angle_about]").allInnerTexts();
+      expect(tilts.length === 2 && tilts.every((t) => /±/.test(t)), `two tilt angles with their standard errors: ${tilts.join("; ")}`);
+      log(`perpendicularity: stage ${stage}; tilt ${tilts.join(", ")}`);
+    }
 
     // ---- upload the hidden-effect dataset through the form ----
     await page.goto(`${base}/`);

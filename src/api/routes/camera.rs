@@ -113,7 +113,8 @@ pub struct SnapshotQuery {
     pub format: Option<String>,
     /// With `true`, the `X-Speckle-Quality` header carries the frame's speckle-quality figures
     /// (JSON: mean intensity gradient, speckle size, SSSIG over `subset_px` subsets, and the
-    /// temporal noise from a second frame taken for it, with the displacement error it predicts).
+    /// temporal noise from a second frame taken for it, with the displacement error it predicts;
+    /// and the whole frame's focus region by region, its gradient energy on a 4x3 grid).
     pub quality: Option<bool>,
     /// Subset side for the SSSIG, px (default: the DIC default subset); at most the frame's
     /// smaller side less 2 (422 otherwise: the frame size is the camera's).
@@ -154,11 +155,14 @@ fn quality_json(first: &Frame, second: &Frame, subset_px: usize) -> ApiResult<St
     } else {
         f64::NAN
     };
+    let whole =
+        crate::image::Image::from_fn(width, height, |c, r| first.data[r * width + c] as f32);
     let q = SnapshotQuality {
         std_u_px: figures.std_u_px_per_noise_dn * noise_dn,
         std_v_px: figures.std_v_px_per_noise_dn * noise_dn,
         figures,
         noise_dn,
+        focus: crate::image::focus_map(&whole, FOCUS_COLUMNS, FOCUS_ROWS),
     };
     Ok(serde_json::to_string(&q).expect("speckle quality serialises"))
 }
@@ -174,11 +178,17 @@ struct SnapshotQuality {
     /// σ_u and σ_v a median subset would show at that noise: √2·σ/√SSSIG (Pan et al. 2008), px.
     std_u_px: f64,
     std_v_px: f64,
+    /// The gradient energy of each region of the whole frame (its focus, region by region).
+    focus: crate::image::FocusMap,
 }
+
+/// The focus map's grid over the whole frame: columns and rows of regions.
+const FOCUS_COLUMNS: usize = 4;
+const FOCUS_ROWS: usize = 3;
 
 #[utoipa::path(post, path = "/camera/snapshot", tag = "bench", params(SnapshotQuery),
     responses((status = 200, description = "One frame: 16-bit TIFF, or with format=png an 8-bit PNG", content(("image/tiff"), ("image/png")),
-               headers(("X-Speckle-Quality" = String, description = "With quality=true: the frame's speckle-quality figures as JSON (mean_gradient_dn_per_px, speckle_size_x_px, speckle_size_y_px, speckle_size_px, subset_px, subsets, sssig_x_median_dn2, sssig_y_median_dn2, sssig_x_min_dn2, sssig_y_min_dn2, std_u_px_per_noise_dn, std_v_px_per_noise_dn, noise_dn: the temporal noise σ in DN from a second frame taken for it, std_u_px, std_v_px: the displacement error that noise predicts)"))),
+               headers(("X-Speckle-Quality" = String, description = "With quality=true: the frame's speckle-quality figures as JSON (mean_gradient_dn_per_px, speckle_size_x_px, speckle_size_y_px, speckle_size_px, subset_px, subsets, sssig_x_median_dn2, sssig_y_median_dn2, sssig_x_min_dn2, sssig_y_min_dn2, std_u_px_per_noise_dn, std_v_px_per_noise_dn, noise_dn: the temporal noise σ in DN from a second frame taken for it, std_u_px, std_v_px: the displacement error that noise predicts, focus: {columns, rows, energy_dn2_per_px2}: the whole frame's gradient energy per region, row-major)"))),
               (status = 422, description = "Unknown format, or a subset larger than the frame", body = Problem),
               (status = 409, body = Problem), (status = 503, body = Problem), (status = 504, body = Problem)))]
 pub async fn snapshot(

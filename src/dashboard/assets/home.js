@@ -1,5 +1,5 @@
 // Home: the bench (state, snapshot with histogram, exposure and gain), experiments, datasets.
-import { api, el, $, clear, num, mm, when, showError, setupToken, loadRunList } from "./common.js";
+import { api, el, $, clear, num, mm, when, showError, setupToken, loadRunList, follow, valuePm } from "./common.js";
 import { histogramSvg } from "./charts.js";
 
 setupToken();
@@ -160,6 +160,37 @@ function showQuality(q, bits) {
       q.std_u_px_per_noise_dn)));
 }
 
+/** The whole frame's gradient energy region by region, as % of the sharpest region: a target
+ * in focus everywhere reads near 100 % in every cell; one side well below the other is a
+ * defocus there (the target or the sensor tilted, or the lens's field curvature). */
+function showFocus(focus) {
+  const box = $("#snapshot-focus");
+  if (!focus || !Array.isArray(focus.energy_dn2_per_px2)) {
+    clear(box, el("p", { class: "muted" }, "no focus figures for this frame"));
+    return;
+  }
+  const e = focus.energy_dn2_per_px2;
+  const max = Math.max(...e);
+  const rows = [];
+  for (let r = 0; r < focus.rows; r++) {
+    const cells = [];
+    for (let c = 0; c < focus.columns; c++) {
+      const v = e[r * focus.columns + c];
+      const pct = max > 0 ? (100 * v) / max : NaN;
+      const cell = el("td", { class: "num", "data-focus-pct": Number.isFinite(pct) ? pct.toFixed(1) : "",
+        title: `${num(v, 4)} DN²/px²` }, Number.isFinite(pct) ? `${num(pct, 3)} %` : "—");
+      // Through the CSSOM: the page's CSP refuses inline style attributes.
+      cell.style.background = `rgba(46, 125, 50, ${Number.isFinite(pct) ? (0.6 * pct / 100).toFixed(2) : 0})`;
+      cells.push(cell);
+    }
+    rows.push(el("tr", {}, ...cells));
+  }
+  const weakest = max > 0 ? (100 * Math.min(...e)) / max : NaN;
+  clear(box,
+    el("table", { class: "focus-map", id: "focus-map" }, el("tbody", {}, ...rows)),
+    el("p", { class: "why" }, `Mean squared intensity gradient per region of the whole frame (Krotkov 1987), as % of the sharpest; the weakest region holds ${num(weakest, 3)} %. On one print this falls where the lens defocuses: adjust the focus or the target's tilt until the regions agree.`));
+}
+
 async function snapshot() {
   const btn = $("#snapshot-btn");
   btn.disabled = true;
@@ -185,13 +216,17 @@ async function snapshot() {
       if (v === 0) dark++;
       if (v > max) max = v;
       const g = Math.max(0, Math.min(255, Math.round((255 * (v - lo)) / (hi - lo))));
-      rgba.data.set([g, g, g, 255], 4 * i);
+      // Clipped pixels marked: saturated red, black-clipped blue (DIC loses both).
+      if (v >= full) rgba.data.set([230, 30, 30, 255], 4 * i);
+      else if (v === 0) rgba.data.set([30, 80, 230, 255], 4 * i);
+      else rgba.data.set([g, g, g, 255], 4 * i);
     }
     ctx.putImageData(rgba, 0, 0);
     drawZoom(img, lo, hi);
     let quality = null;
     try { quality = qualityHeader ? JSON.parse(qualityHeader) : null; } catch (_) { /* shown as none */ }
     showQuality(quality, img.bits);
+    showFocus(quality && quality.focus);
     // Histogram over the 16-bit range the frame uses (bins of a power of two).
     const top = Math.max(256, 2 ** Math.ceil(Math.log2(max + 1)));
     const bins = 128;
@@ -219,6 +254,52 @@ async function snapshot() {
 }
 
 $("#snapshot-btn").addEventListener("click", snapshot);
+
+/** The perpendicularity check's plan: the calibration's default moves (±x, ±y at two sizes),
+ * nothing else, one round — the card's tilt and stage angle, soonest. */
+const PERPENDICULARITY_PLAN = { name: "perpendicularity", phase_scan_count: 0, static_frames: 0, rounds: 1 };
+
+/** A small move back and forth on the bench (a calibration of the preset plan), then the
+ * card's target tilt and stage angle with their standard errors. */
+async function checkPerpendicularity() {
+  const btn = $("#perp-btn");
+  const status = $("#perp-status");
+  btn.disabled = true;
+  showError($("#perp-error"), null);
+  try {
+    const run = await api("/calibrations", { method: "POST", body: { ...PERPENDICULARITY_PLAN, pattern: $("#perp-pattern").value } });
+    const id = encodeURIComponent(run.id);
+    const record = await follow(`/calibrations/${id}`, `/jobs/${id}/events`, null,
+      (r) => { status.textContent = `${r.status}, ${Math.round(100 * (r.progress || 0))} %`; });
+    if (record.status !== "succeeded") throw new Error(`the check ${record.status}: ${record.message || ""}`);
+    const doc = await api(`/calibrations/${id}/card`);
+    const card = doc.card;
+    const tilt = card.geometry.find((g) => g.effect === "target_tilt");
+    const rows = [];
+    if (tilt) {
+      for (const [name, v] of Object.entries(tilt.params)) rows.push([name.replaceAll("_", " "), valuePm(v, tilt.stderr[name]), name]);
+      const wd = (tilt.derived || {}).working_distance_mm;
+      // Without a stated distance the angles are the first-order field's at an assumed one.
+      if (Number.isFinite(wd)) rows.push(["at a working distance of [mm]", `${num(wd, 4)}${(tilt.notes || []).length ? ` (${tilt.notes.join("; ")})` : ""}`, "working_distance_mm"]);
+    }
+    const s = card.stage;
+    if (s) rows.push(["stage angle to the rows [rad]", valuePm(s.angle_rad, s.angle_se_rad), "stage_angle_rad"]);
+    clear($("#perp-result"), rows.length
+      ? rows.flatMap(([name, value, key]) => [el("dt", {}, name), el("dd", { "data-perp": key }, value)])
+      : [el("dt", {}, "result"), el("dd", {}, "the moves did not separate a tilt: see the card")],
+    el("dt", {}, "card"), el("dd", {}, el("a", { href: `/calibrations/${run.id}` }, run.id),
+      tilt && tilt.significant ? " — the tilt is significant: adjust the mount" : " — no significant tilt"));
+    status.textContent = `checked ${new Date().toLocaleTimeString()}`;
+    $("#perp-result").dataset.loaded = "true";
+  } catch (e) {
+    showError($("#perp-error"), e);
+    status.textContent = "";
+  } finally {
+    btn.disabled = false;
+  }
+}
+
+$("#perp-btn").addEventListener("click", checkPerpendicularity);
 
 $("#camera-form").addEventListener("submit", async (ev) => {
   ev.preventDefault();
