@@ -81,6 +81,27 @@ async fn a_dataset_lists_its_comparisons_and_details() {
     server.stop().await;
 }
 
+/// The focus of the whole frame region by region (4x3) in a snapshot's quality figures `q`: the
+/// mock bench's target is flat and in focus, so every region is about as sharp as the sharpest
+/// (the print's density varies from region to region by a few %).
+fn check_the_focus_map(q: &Value) {
+    let focus = &q["focus"];
+    assert_eq!(
+        (focus["columns"].as_u64(), focus["rows"].as_u64()),
+        (Some(4), Some(3)),
+        "{q}"
+    );
+    let energy: Vec<f64> = focus["energy_dn2_per_px2"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e.as_f64().unwrap())
+        .collect();
+    assert_eq!(energy.len(), 12);
+    let max = energy.iter().copied().fold(0.0, f64::max);
+    assert!(energy.iter().all(|&e| e > 0.5 * max), "{energy:?}");
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_snapshot_carries_its_speckle_quality_only_on_request() {
     let dir = tempfile::tempdir().unwrap();
@@ -118,24 +139,7 @@ async fn a_snapshot_carries_its_speckle_quality_only_on_request() {
         "{q}"
     );
     assert!(q["sssig_x_min_dn2"].as_f64().unwrap() <= sx);
-    // The focus of the whole frame region by region (4x3): the mock bench's target is flat and
-    // in focus, so every region is about as sharp as the sharpest (the print's density varies
-    // from region to region by a few %).
-    let focus = &q["focus"];
-    assert_eq!(
-        (focus["columns"].as_u64(), focus["rows"].as_u64()),
-        (Some(4), Some(3)),
-        "{q}"
-    );
-    let energy: Vec<f64> = focus["energy_dn2_per_px2"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|e| e.as_f64().unwrap())
-        .collect();
-    assert_eq!(energy.len(), 12);
-    let max = energy.iter().copied().fold(0.0, f64::max);
-    assert!(energy.iter().all(|&e| e > 0.5 * max), "{energy:?}");
+    check_the_focus_map(&q);
     // The frame's own noise estimate against the temporal noise of two snapshots of the same
     // scene (an independent measurement: σ of their difference / √2).
     let noise_dn = q["noise_dn"].as_f64().unwrap();

@@ -5,6 +5,7 @@
 //! And a command that fails leaves a clear error while the bench goes on.
 
 use crate::common;
+use crate::common::daemon;
 use crate::common::folder_sink;
 use crate::common::independent;
 
@@ -369,27 +370,6 @@ fn near(what: &str, value: f64, se: f64, truth: f64) {
 }
 
 /// Runs a calibration with moves of 1 and 5 mm, three rounds, on `service` and returns its card.
-/// Waits for job `id` to end; it must have succeeded.
-fn succeeded(
-    service: &ffdic::service::Service,
-    id: &ffdic::store::RunId,
-) -> ffdic::store::RunRecord {
-    let record = loop {
-        let r = service.store.get(id).unwrap();
-        if r.status.is_terminal() {
-            break r;
-        }
-        std::thread::sleep(Duration::from_millis(100));
-    };
-    assert_eq!(
-        record.status,
-        ffdic::store::RunStatus::Succeeded,
-        "{}",
-        record.message
-    );
-    record
-}
-
 fn calibrate_on(service: &ffdic::service::Service) -> Box<CameraCard> {
     let plan = ffdic::experiment::CalibrationPlan {
         name: "hidden bench".into(),
@@ -402,7 +382,7 @@ fn calibrate_on(service: &ffdic::service::Service) -> Box<CameraCard> {
     let (record, _) = service
         .submit(CalibrationJob::plan(service, plan).unwrap(), None)
         .unwrap();
-    let record = succeeded(service, &record.id);
+    let record = daemon::succeeded(service, &record.id);
     let Some(ffdic::service::JobResult::Calibration { card, .. }) =
         service.jobs.take_result(&record.id)
     else {
@@ -575,7 +555,7 @@ fn analyses_with_the_card_through_the_service(
     let rows = |dataset, card: Option<&str>| -> Vec<ffdic::study::StudyRow> {
         let job = AnalysisJob::plan(service, &dataset, request(card)).unwrap();
         let (record, _) = service.submit(job, None).unwrap();
-        let record = succeeded(service, &record.id);
+        let record = daemon::succeeded(service, &record.id);
         match service.jobs.take_result(&record.id) {
             Some(ffdic::service::JobResult::Study { rows, .. }) => rows,
             _ => panic!("an analysis's rows"),

@@ -27,6 +27,7 @@ mod browser_cross_origin;
 mod build_sharing;
 mod cli_analyze;
 mod cli_calibrate;
+mod cli_diagnose_on_bench;
 mod cli_image_formats;
 mod compare_foreign;
 mod dashboard_browser;

@@ -3,6 +3,7 @@
 //! reveal; `--write-model` writes the model with the winner added.
 
 use super::compare::{load_analysis_model, AnalysisArgs};
+use super::diagnose_on_bench::{on_bench, OnBench};
 use super::ProgressBar;
 use anyhow::{Context, Result};
 use clap::Args;
@@ -29,6 +30,17 @@ pub struct DiagnoseArgs {
     /// Add the winner and diagnose again, up to this many rounds (stops at `none`).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=MAX_ROUNDS as u64))]
     pub rounds: u64,
+    /// Then resolve on the bench what the diagnosis left open: capture the runs that separate
+    /// the pairs the dataset's design confounds and reveal the effects it cannot (moves of
+    /// several sizes along x and y, a sub-pixel step series, static frames, on the dataset's
+    /// target), append them to the dataset as new runs (a new dataset in DATA/datasets) and
+    /// diagnose again.
+    #[arg(long)]
+    pub on_bench: bool,
+    /// With --on-bench: the daemon config naming the bench (default: the embedded config, the
+    /// mock bench); its data folder is replaced by --data.
+    #[arg(long, requires = "on_bench")]
+    pub config: Option<PathBuf>,
     #[command(flatten)]
     pub analysis: AnalysisArgs,
 }
@@ -205,25 +217,78 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
                 .with_context(|| format!("cannot write {}", path.display()))?;
         }
     }
+    let bench = match args.on_bench {
+        true => {
+            let mut config = match &args.config {
+                Some(p) => ffdic::service::DaemonConfig::load(p)?,
+                None => ffdic::service::DaemonConfig::embedded(),
+            };
+            config.data_dir = args.analysis.data.clone();
+            let setting = (&model, &options, args.rounds as usize);
+            Some(on_bench(&args.dataset, &r, setting, config, !args.json)?)
+        }
+        false => None,
+    };
     if args.json {
-        println!("{}", r.to_json());
-    } else {
-        for (k, d) in r.diagnoses.iter().enumerate() {
-            if r.diagnoses.len() > 1 {
-                println!("== round {}", k + 1);
-            }
-            print!("{}", diagnosis_text(d));
+        let mut doc = r.to_json();
+        if let Some(b) = &bench {
+            doc = serde_json::json!({
+                "before": doc,
+                "on_bench": b,
+                "after": b.after.to_json(),
+            });
         }
-        if args.rounds > 1 {
-            print!("{}", rounds_text(&r));
-        }
-        if let (Some(path), false) = (&args.write_model, r.verdicts.is_empty()) {
-            println!(
-                "model with {} written to {}",
-                join_effects(&r.verdicts, ", "),
-                path.display()
-            );
-        }
+        println!("{doc}");
+        return Ok(());
+    }
+    print_rounds(&r, args);
+    if let (Some(path), false) = (&args.write_model, r.verdicts.is_empty()) {
+        println!(
+            "model with {} written to {}",
+            join_effects(&r.verdicts, ", "),
+            path.display()
+        );
+    }
+    if let Some(b) = &bench {
+        print!("{}", on_bench_text(b));
+        print_rounds(&b.after, args);
     }
     Ok(())
+}
+
+/// What the bench captured, and where the merged dataset is.
+fn on_bench_text(b: &OnBench) -> String {
+    let runs: Vec<String> = b
+        .runs
+        .iter()
+        .map(|r| {
+            serde_json::to_value(r).map_or_else(
+                |_| format!("{r:?}"),
+                |v| v.as_str().unwrap_or_default().replace('_', " "),
+            )
+        })
+        .collect();
+    format!(
+        "\n== on the bench: {} (moves of {:?} mm along ±x and ±y, a phase scan of {} steps, {} static frames), experiment {}; the dataset with them: {} ({})\n",
+        runs.join(", "),
+        b.plan.move_sizes_mm,
+        b.plan.phase_scan_count,
+        b.plan.static_frames,
+        b.experiment,
+        b.dataset,
+        b.folder.display()
+    )
+}
+
+/// A diagnosis's rounds as text (with `--rounds` > 1 the fall over them too).
+fn print_rounds(r: &Rounds, args: &DiagnoseArgs) {
+    for (k, d) in r.diagnoses.iter().enumerate() {
+        if r.diagnoses.len() > 1 {
+            println!("== round {}", k + 1);
+        }
+        print!("{}", diagnosis_text(d));
+    }
+    if args.rounds > 1 {
+        print!("{}", rounds_text(r));
+    }
 }

@@ -7,6 +7,7 @@ pub mod compare;
 pub mod dataset;
 mod dataset_arg;
 pub mod diagnose;
+mod diagnose_on_bench;
 mod error_line;
 pub mod history;
 pub mod logging;

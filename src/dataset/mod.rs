@@ -8,6 +8,7 @@ mod frame_check;
 mod init;
 mod manifest;
 mod manifest_schema;
+mod merge;
 mod move_check;
 
 pub use capture::sensor_readout;
@@ -20,6 +21,7 @@ pub use manifest::{
     StageMove, FORMAT, MAX_EDGE_SOFTNESS_PX, MAX_PRINT_FEATURE_PX,
 };
 pub use manifest_schema::{schema_problems, SCHEMA_JSON};
+pub use merge::merge_datasets;
 pub use move_check::{
     check_stated_move, measure_move, MeasuredMove, MoveContradiction, MAX_RATIO, MAX_VECTOR_ERROR,
     MIN_DIFFERENCE_PX, MIN_NCC,

@@ -204,18 +204,7 @@ pub fn camera_card(
     let stage = geometry_fit
         .as_ref()
         .and_then(|g| stage_map(meas, &samples, g, setting.scale_px_per_mm, z));
-    // The stage's angle, when significant, as the model states it: a comparison fits its own
-    // stage (`Nominal::render_effects`), but a bench rendered from the card's model (the mock
-    // bench of `reproduce --bench-model`, a sweep) moves its target as this stage did.
-    if let Some(map) = stage
-        .as_ref()
-        .filter(|m| m.significant.iter().any(|k| k == "angle"))
-    {
-        effects.stage_misalignment = Some(StageMisalignment {
-            angle_rad: map.angle_rad,
-        });
-    }
-    let imaging = imaging_entries(rounds);
+    state_stage_angle(&mut effects, stage.as_ref());
     let mut model = ModelConfig {
         name: String::new(),
         description: format!(
@@ -239,7 +228,7 @@ pub fn camera_card(
         geometry,
         not_identifiable,
         stage,
-        imaging,
+        imaging: imaging_entries(rounds),
         baseline_model: before.model.name.clone(),
         baseline_px: before.discrepancy_px,
         baseline_se_px,
@@ -321,6 +310,17 @@ fn imaging_entries(rounds: &Rounds) -> Vec<ImagingEntry> {
         })
     })
     .collect()
+}
+
+/// The stage's angle, when significant, as the card's model states it: a comparison fits its own
+/// stage (`Nominal::render_effects`), but a bench rendered from the card's model (the mock bench
+/// of `reproduce --bench-model`, a sweep) moves its target as this stage did.
+fn state_stage_angle(effects: &mut Effects, stage: Option<&StageMap>) {
+    if let Some(map) = stage.filter(|m| m.significant.iter().any(|k| k == "angle")) {
+        effects.stage_misalignment = Some(StageMisalignment {
+            angle_rad: map.angle_rad,
+        });
+    }
 }
 
 /// The card's model against the measurement: its comparison (the print calibrated again from

@@ -115,6 +115,7 @@ mod residuals;
 mod results;
 mod rounds;
 mod scene;
+mod separating_runs;
 mod stage;
 mod stage_landing;
 #[cfg(test)]
@@ -151,6 +152,7 @@ pub use results::{
     ImageComparison, ModelInfo, RunComparison, Side,
 };
 pub use rounds::{Round, Rounds};
+pub use separating_runs::{runs_to_separate, SeparatingRuns};
 pub use stage_landing::{RepeatabilitySource, StageLanding};
 pub use unexplained::Unexplained;
 pub use verdict::{Candidate, Criteria, Diagnosis, Evidence, Method, Withheld};

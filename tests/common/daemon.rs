@@ -330,3 +330,24 @@ impl ServeProcess {
         }
     }
 }
+
+/// Waits for job `id` to end; it must have succeeded.
+pub fn succeeded(
+    service: &ffdic::service::Service,
+    id: &ffdic::store::RunId,
+) -> ffdic::store::RunRecord {
+    let record = loop {
+        let r = service.store.get(id).unwrap();
+        if r.status.is_terminal() {
+            break r;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    };
+    assert_eq!(
+        record.status,
+        ffdic::store::RunStatus::Succeeded,
+        "{}",
+        record.message
+    );
+    record
+}

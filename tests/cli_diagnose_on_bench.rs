@@ -1,0 +1,131 @@
+//! `ffdic diagnose --on-bench` through the binary (issue 33, "resolve confounds on the bench"):
+//! a dataset of the paper's design (one move, no static frames) captured on the small mock
+//! bench leaves distortion and scale confounded and the sensor's noise unrevealed; the bench
+//! captures moves of two sizes along x and y, a phase scan and static frames, the merged dataset
+//! is diagnosed again, and what the design left open is resolved.
+
+use crate::common::{daemon, ffdic_ok};
+use ffdic::experiment::ExperimentRequest;
+use ffdic::service::job::ExperimentJob;
+use ffdic::service::{DaemonConfig, Service};
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// One 2 mm move of target a (26 px of the 400 px frame), no static frames, on `config`'s mock
+/// bench: the dataset's folder in the store.
+fn one_move_dataset(config: &DaemonConfig) -> PathBuf {
+    let (service, _) = Service::start(config.clone(), daemon::small_bench(config)).unwrap();
+    let request: ExperimentRequest = serde_json::from_value(json!({
+        "name": "one move", "patterns": ["a"], "settle_ms": 0,
+        "moves": [{"id": "x2mm", "dx_mm": 2.0, "dy_mm": 0.0}],
+        "dic": {"subset_px": 21, "step_px": 10, "strain_window": 5}
+    }))
+    .unwrap();
+    let (record, _) = service
+        .submit(ExperimentJob::plan(&service, request).unwrap(), None)
+        .unwrap();
+    let record = daemon::succeeded(&service, &record.id);
+    let dir = service.store.dataset_dir(&record.dataset_id.unwrap());
+    service.stop(Duration::from_secs(5));
+    dir
+}
+
+fn effects_of(list: &Value, key: &str) -> Vec<String> {
+    list.as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x[key].to_string())
+        .collect()
+}
+
+#[test]
+fn what_one_move_leaves_open_is_captured_on_the_bench_and_resolved() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    let config_path = tmp.path().join("ffdic.toml");
+    std::fs::write(&config_path, daemon::small_config_toml(&data)).unwrap();
+    let config = DaemonConfig::load(&config_path).unwrap();
+    let dataset = one_move_dataset(&config);
+    let path = |p: &Path| p.to_str().unwrap().to_string();
+    let out = ffdic_ok(&[
+        "diagnose",
+        &path(&dataset),
+        "--on-bench",
+        "--config",
+        &path(&config_path),
+        "--data",
+        &path(&data),
+        "--schemes",
+        "native",
+        "--subset",
+        "21",
+        "--step",
+        "10",
+        "--json",
+    ]);
+    let doc: Value = serde_json::from_slice(&out.stdout).expect("one JSON document");
+    let (before, bench, after) = (&doc["before"], &doc["on_bench"], &doc["after"]);
+    let design_pairs = |d: &Value| -> Vec<String> {
+        d["confounded"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|c| c["evidence"] == "design")
+            .map(|c| format!("{}+{}", c["effects"][0], c["effects"][1]))
+            .collect()
+    };
+    let distortion_scale = "\"lens_distortion\"+\"scale\"".to_string();
+    assert!(
+        design_pairs(before).contains(&distortion_scale),
+        "one move size confounds distortion and scale: {:?}",
+        design_pairs(before)
+    );
+    let noise = "\"sensor_noise\"".to_string();
+    assert!(effects_of(&before["not_identifiable"], "effect").contains(&noise));
+    // The bench was asked for moves of several sizes and static frames, at the dataset's move.
+    let runs = bench["runs"].to_string();
+    assert!(
+        runs.contains("several_move_sizes") && runs.contains("static_repeats"),
+        "{runs}"
+    );
+    assert_eq!(bench["plan"]["move_sizes_mm"], json!([0.5, 2.0]));
+    assert_eq!(bench["plan"]["pattern"], "a");
+    // The merged dataset: the original run first, then the bench's, under their prefix, in the
+    // data folder; the original folder is left as it was.
+    let merged = PathBuf::from(bench["folder"].as_str().unwrap());
+    let manifest: Value =
+        serde_json::from_slice(&std::fs::read(merged.join("dataset.json")).unwrap()).unwrap();
+    let ids: Vec<&str> = manifest["runs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["id"].as_str().unwrap())
+        .collect();
+    assert_eq!(ids[0], "a-x2mm", "{ids:?}");
+    assert!(
+        ids.len() > 8 && ids[1..].iter().all(|id| id.starts_with("bench-")),
+        "{ids:?}"
+    );
+    let original: Value =
+        serde_json::from_slice(&std::fs::read(dataset.join("dataset.json")).unwrap()).unwrap();
+    assert_eq!(original["runs"].as_array().unwrap().len(), 1);
+    // Resolved: no design confound of distortion and scale, the noise revealed and fitted.
+    assert!(
+        !design_pairs(after).contains(&distortion_scale),
+        "{:?}",
+        design_pairs(after)
+    );
+    assert!(!effects_of(&after["not_identifiable"], "effect").contains(&noise));
+    assert!(
+        effects_of(&after["candidates"], "effect").contains(&noise),
+        "the noise is fitted with the bench's static frames"
+    );
+    println!(
+        "on the bench: {runs}; before {:?} confounded, after {:?}; verdicts {} -> {}",
+        design_pairs(before),
+        design_pairs(after),
+        before["verdicts"],
+        after["verdicts"]
+    );
+}
