@@ -125,6 +125,40 @@ fn calibrate_on_the_bench_prints_the_card_and_stores_its_model() {
         "the study's move at {:.5} rad, the card's stage angle {angle:.5} rad",
         v.atan2(u)
     );
+    check_a_design_map_takes_the_card(tmp.path(), &data, model, angle);
+}
+
+/// A design map on the card's camera (`model = "card-…"` in the sweep's spec): its plan starts
+/// from the card's effects, the stage's angle among them.
+fn check_a_design_map_takes_the_card(dir: &Path, data: &Path, model: &str, angle: f64) {
+    let smoke = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sweeps/smoke.toml"),
+    )
+    .unwrap();
+    let spec = write(
+        &dir.join("sweep.toml"),
+        &smoke.replacen("seeds = 3", &format!("seeds = 1\nmodel = \"{model}\""), 1),
+    );
+    let out = dir.join("sweep");
+    ffdic_ok(&[
+        "sweep",
+        "plan",
+        &spec,
+        "--out",
+        out.to_str().unwrap(),
+        "--data",
+        data.to_str().unwrap(),
+    ]);
+    let plan: Value =
+        serde_json::from_slice(&std::fs::read(out.join("plan.json")).unwrap()).unwrap();
+    let stated = plan["base_effects"]["stage_misalignment"]["angle_rad"]
+        .as_f64()
+        .expect("the card's stage angle in the map's base effects");
+    assert!(
+        (stated - angle).abs() <= 1e-12 * angle.abs(),
+        "{stated} against the card's {angle}: {}",
+        plan["base_effects"]
+    );
 }
 
 #[test]

@@ -9,6 +9,7 @@ mod correction;
 mod disk;
 pub mod effects;
 mod hard_core;
+mod lattice;
 mod normal;
 mod pattern;
 mod readout;

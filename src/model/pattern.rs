@@ -9,6 +9,7 @@
 //! speckle patterns", Opt. Express 16 (2008): σ_u ∝ σ_noise / √(Σ|∇I|²)).
 
 use super::hard_core::hard_core_centres_remembered;
+use super::lattice::lattice_remembered;
 use serde::{Deserialize, Serialize};
 
 /// FWHM = 2·sqrt(2 ln 2)·σ.
@@ -199,9 +200,8 @@ impl SpecklePattern {
         let nx = ((x1 - x0) / s).ceil() as usize;
         let ny = ((y1 - y0) / s).ceil() as usize;
         let shape = self.shape();
-        let depth_of = |rng: &mut rand_chacha::ChaCha8Rng| {
-            self.contrast * (1.0 + 0.15 * (2.0 * rng.gen::<f64>() - 1.0))
-        };
+        // A dot's depth from its uniform draw u: ±15 % about the contrast.
+        let depth = |u: f64| self.contrast * (1.0 + 0.15 * (2.0 * u - 1.0));
         if self.placement == Placement::HardCore {
             // Dots of their diameter cannot all keep it beyond the jamming limit (54.7 % of the
             // plane): the distance is held to 0.8 spacing (50 %).
@@ -213,31 +213,18 @@ impl SpecklePattern {
                     x_mm,
                     y_mm,
                     shape,
-                    depth: depth_of(&mut rng),
+                    depth: depth(rng.gen::<f64>()),
                 })
                 .collect());
         }
-        let mut dots = Vec::with_capacity(nx * ny);
-        for j in 0..ny {
-            for i in 0..nx {
-                // The jittered grid keeps the cell; Poisson draws the cell too (the same count
-                // and the same stream of draws, so the two layouts differ only in placement).
-                let (ci, cj) = match self.placement {
-                    Placement::JitteredGrid => (i as f64, j as f64),
-                    Placement::Poisson => (
-                        (rng.gen::<f64>() * nx as f64).floor(),
-                        (rng.gen::<f64>() * ny as f64).floor(),
-                    ),
-                    Placement::HardCore => unreachable!("a hard core is laid out above"),
-                };
-                dots.push(TargetDot {
-                    x_mm: x0 + (ci + rng.gen::<f64>()) * s,
-                    y_mm: y0 + (cj + rng.gen::<f64>()) * s,
-                    shape,
-                    depth: depth_of(&mut rng),
-                });
-            }
-        }
-        Ok(dots)
+        Ok(lattice_remembered(self.placement, field, s, seed)
+            .iter()
+            .map(|&(x_mm, y_mm, u)| TargetDot {
+                x_mm,
+                y_mm,
+                shape,
+                depth: depth(u),
+            })
+            .collect())
     }
 }
