@@ -326,6 +326,8 @@ async function main() {
       const tilts = await page.locator("#perp-result [data-perp^=angle_about]").allInnerTexts();
       expect(tilts.length === 2 && tilts.every((t) => /±/.test(t)), `two tilt angles with their standard errors: ${tilts.join("; ")}`);
       log(`perpendicularity: stage ${stage}; tilt ${tilts.join(", ")}`);
+      const models = await page.evaluate(async () => (await (await fetch("/api/v1/models")).json()).map((m) => m.name));
+      expect(!models.some((n) => n.startsWith("card-perpendicularity-")), `a check keeps no model: ${models.join(", ")}`);
     }
 
     // ---- upload the hidden-effect dataset through the form ----

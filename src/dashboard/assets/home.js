@@ -274,6 +274,14 @@ async function checkPerpendicularity() {
     if (record.status !== "succeeded") throw new Error(`the check ${record.status}: ${record.message || ""}`);
     const doc = await api(`/calibrations/${id}/card`);
     const card = doc.card;
+    // A readout, not a card to carry on: its model is not kept among the models (the card itself
+    // stays in the calibration's folder). A refusal (the model in use) leaves it.
+    let kept = false;
+    try {
+      await api(`/models/${encodeURIComponent(doc.model)}`, { method: "DELETE" });
+    } catch (_) {
+      kept = true;
+    }
     const tilt = card.geometry.find((g) => g.effect === "target_tilt");
     const rows = [];
     if (tilt) {
@@ -288,7 +296,8 @@ async function checkPerpendicularity() {
       ? rows.flatMap(([name, value, key]) => [el("dt", {}, name), el("dd", { "data-perp": key }, value)])
       : [el("dt", {}, "result"), el("dd", {}, "the moves did not separate a tilt: see the card")],
     el("dt", {}, "card"), el("dd", {}, el("a", { href: `/calibrations/${run.id}` }, run.id),
-      tilt && tilt.significant ? " — the tilt is significant: adjust the mount" : " — no significant tilt"));
+      tilt && tilt.significant ? " — the tilt is significant: adjust the mount" : " — no significant tilt",
+      kept ? "" : "; its model is not kept (a calibration keeps one)"));
     status.textContent = `checked ${new Date().toLocaleTimeString()}`;
     $("#perp-result").dataset.loaded = "true";
   } catch (e) {
