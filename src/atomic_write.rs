@@ -1,6 +1,6 @@
 //! Files written whole or not at all: a crash never leaves half a file under its final name. The
 //! lowest floor of the house (no crate imports but libc's syncfs): the TIFF writer, the dataset manifest, the store,
-//! sweeps and the CLI's outputs all write through it.
+//! sweeps and the CLI's outputs all write through it; a file linked or copied durably (`link_or_copy`) beside them.
 
 use std::io::Write;
 use std::path::Path;
@@ -54,6 +54,20 @@ pub fn sync_file_system(dir: &Path) -> std::io::Result<()> {
     }
     #[cfg(not(target_os = "linux"))]
     folder.sync_all()
+}
+
+/// `to` made the same file as `from`: a hard link where the file system allows (the bytes exist
+/// once on disk; every file here is written under a temporary name and renamed, never rewritten
+/// in place, so neither name can change the other), else a copy synced to disk. On failure, the
+/// path that failed with its error.
+pub fn link_or_copy(from: &Path, to: &Path) -> Result<(), (std::path::PathBuf, std::io::Error)> {
+    if std::fs::hard_link(from, to).is_ok() {
+        return Ok(());
+    }
+    std::fs::copy(from, to).map_err(|e| (from.to_owned(), e))?;
+    std::fs::File::open(to)
+        .and_then(|f| f.sync_all())
+        .map_err(|e| (to.to_owned(), e))
 }
 
 #[cfg(test)]

@@ -178,26 +178,31 @@ fn a_bowed_target_is_outside_the_catalogue_and_left_unexplained() {
     assert!(!candidate(d, &w.effect.to_string()).significant);
 }
 
-/// The baseline with the bow written as a user effect (see below).
-fn with_bow() -> ffdic::model::ModelConfig {
+/// The baseline with the user effect `name` written as the TOML `text` (validated).
+fn baseline_with_user(name: &str, text: &str) -> ffdic::model::ModelConfig {
     let mut model = independent::baseline();
-    model.effects.user.insert(
-        "bow".into(),
-        toml::from_str(
-            r#"
-            description = "a print bowed towards or away from the camera"
-            u = "c * (x^2 + y^2) * tx"
-            v = "c * (x^2 + y^2) * ty"
-            [params.c]
-            unit = "1/px^2"
-            min = -1e-7
-            max = 1e-7
-            "#,
-        )
-        .unwrap(),
-    );
+    model
+        .effects
+        .user
+        .insert(name.into(), toml::from_str(text).unwrap());
     model.validate().unwrap();
     model
+}
+
+/// The baseline with the bow written as a user effect (see below).
+fn with_bow() -> ffdic::model::ModelConfig {
+    baseline_with_user(
+        "bow",
+        r#"
+        description = "a print bowed towards or away from the camera"
+        u = "c * (x^2 + y^2) * tx"
+        v = "c * (x^2 + y^2) * ty"
+        [params.c]
+        unit = "1/px^2"
+        min = -1e-7
+        max = 1e-7
+        "#,
+    )
 }
 
 /// The same bow written down by the user as an effect of their own: through a pinhole at
@@ -517,26 +522,21 @@ fn a_drifted_lamp_is_outside_the_catalogue_and_its_light_change_left_unexplained
 #[test]
 fn a_drifted_lamp_written_as_a_user_intensity_effect_is_fitted_and_named() {
     let (spec, ramp) = lamp_spec(3207);
-    let mut model = independent::baseline();
-    model.effects.user.insert(
-        "lamp".into(),
-        toml::from_str(
-            r#"
-            description = "the moved frames lit by a lamp that drifted"
-            intensity = "ax * x + ay * y"
-            [params.ax]
-            unit = "1/px"
-            min = -1e-3
-            max = 1e-3
-            [params.ay]
-            unit = "1/px"
-            min = -1e-3
-            max = 1e-3
-            "#,
-        )
-        .unwrap(),
+    let model = baseline_with_user(
+        "lamp",
+        r#"
+        description = "the moved frames lit by a lamp that drifted"
+        intensity = "ax * x + ay * y"
+        [params.ax]
+        unit = "1/px"
+        min = -1e-3
+        max = 1e-3
+        [params.ay]
+        unit = "1/px"
+        min = -1e-3
+        max = 1e-3
+        "#,
     );
-    model.validate().unwrap();
     let (r, _) = independent::diagnose_model(&spec, &model, 1);
     let d = &r.diagnoses[0];
     assert_eq!(verdict_name(&d.verdict), "user.lamp", "{:?}", d.withheld);

@@ -258,16 +258,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
 
 /// What the bench captured, and where the merged dataset is.
 fn on_bench_text(b: &OnBench) -> String {
-    let runs: Vec<String> = b
-        .runs
-        .iter()
-        .map(|r| {
-            serde_json::to_value(r).map_or_else(
-                |_| format!("{r:?}"),
-                |v| v.as_str().unwrap_or_default().replace('_', " "),
-            )
-        })
-        .collect();
+    let runs: Vec<&str> = b.runs.iter().map(|r| r.describe()).collect();
     format!(
         "\n== on the bench: {} (moves of {:?} mm along ±x and ±y, a phase scan of {} steps, {} static frames), experiment {}; the dataset with them: {} ({})\n",
         runs.join(", "),

@@ -15,7 +15,6 @@ use ffdic::service::job::ExperimentJob;
 use ffdic::service::{open_bench, DaemonConfig, Service};
 use ffdic::store::{DatasetSource, RunId};
 use std::path::{Path, PathBuf};
-
 use std::time::Duration;
 
 /// What `--on-bench` did: the runs it asked for, the plan that captured them, the experiment,

@@ -4,7 +4,7 @@
 //! the paper's settings — then Figures 5 and 6. The run lands in the data folder like any other,
 //! so `ffdic serve` shows it.
 
-use super::simulate::{load_experiment, load_model};
+use super::simulate::load_experiment;
 use super::ProgressBar;
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -15,7 +15,7 @@ use ffdic::report::{figures_text, paper_figures_text, study_json};
 use ffdic::service::job::{CompareRequest, DiagnosisJob, ExperimentJob};
 use ffdic::service::{
     find_analysis_model, mock_bench, CameraConfig, DaemonConfig, JobResult, MockBinning,
-    MockReduction, NewModel, Service, PAPER_BENCH_DISTORTION_TOML,
+    MockReduction, NewModel, Service,
 };
 use ffdic::store::{RunId, RunRecord, RunStatus};
 use ffdic::study::{paper_findings, StudyRow};
@@ -80,14 +80,14 @@ impl From<SensorBinning> for MockBinning {
 
 pub fn run(args: &ReproduceArgs) -> Result<()> {
     let spec = load_experiment(&args.experiment)?;
-    let truth = match &args.bench_model {
-        Some(given) => find_analysis_model(Some(given), &args.data)?,
-        None => load_model(
-            &None,
-            PAPER_BENCH_DISTORTION_TOML,
-            "config/models/paper-bench-distortion.toml",
-        )?,
-    };
+    let truth = find_analysis_model(
+        Some(
+            args.bench_model
+                .as_deref()
+                .unwrap_or("paper-bench-distortion"),
+        ),
+        &args.data,
+    )?;
     let truth_effects = bench_effects(&truth);
     let mut config = DaemonConfig::embedded();
     config.data_dir = args.data.clone();

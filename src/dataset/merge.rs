@@ -89,15 +89,8 @@ fn link_or_copy(from: &Path, to: &Path) -> Result<(), DatasetError> {
             source,
         })?;
     }
-    if std::fs::hard_link(from, to).is_ok() {
-        return Ok(());
-    }
-    std::fs::copy(from, to)
-        .map(|_| ())
-        .map_err(|source| DatasetError::Read {
-            path: from.to_owned(),
-            source,
-        })
+    crate::atomic_write::link_or_copy(from, to)
+        .map_err(|(path, source)| DatasetError::Write { path, source })
 }
 
 #[cfg(test)]

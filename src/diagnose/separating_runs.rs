@@ -26,6 +26,18 @@ pub enum SeparatingRuns {
     StaticRepeats,
 }
 
+impl SeparatingRuns {
+    /// The runs in words.
+    pub fn describe(self) -> &'static str {
+        match self {
+            SeparatingRuns::SeveralMoveSizes => "moves of several sizes",
+            SeparatingRuns::BothAxes => "moves along x and along y",
+            SeparatingRuns::StepSeries => "a sub-pixel step series",
+            SeparatingRuns::StaticRepeats => "static repeat frames",
+        }
+    }
+}
+
 /// The runs that would resolve `d`'s design confounds and the effects it could not reveal,
 /// each kind once, in the enum's order.
 pub fn runs_to_separate(d: &Diagnosis) -> Vec<SeparatingRuns> {

@@ -5,23 +5,21 @@
 //! that finds no room in [`ATTEMPTS`] draws is placed at its last draw regardless (the count and
 //! so the print's density are kept; the layout only loses its hard core locally).
 
+use super::remembered::Remembered;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 /// Draws per centre before it is placed regardless.
 const ATTEMPTS: usize = 64;
 
-/// The layouts [`hard_core_centres_remembered`] keeps.
-const REMEMBERED: usize = 8;
+/// A layout's inputs: the generator's state, the field's and the distance's bits, the count.
+type LayoutKey = (ChaCha8Rng, [u64; 5], usize);
+/// A layout, and the generator's state after it.
+type Layout = (Arc<Vec<(f64, f64)>>, ChaCha8Rng);
 
-/// A layout's inputs (the generator's state, the field's and the distance's bits, the count),
-/// and the layout with the generator's state after it.
-type Layout = (
-    (ChaCha8Rng, [u64; 5], usize),
-    Arc<Vec<(f64, f64)>>,
-    ChaCha8Rng,
-);
+/// The last eight layouts.
+static LAYOUTS: Remembered<LayoutKey, Layout> = Remembered::new(8);
 
 /// [`hard_core_centres`], remembering the last few layouts: a print's calibration renders its
 /// reference crop some fifty times with the same centres (its contrast and edge are searched, not
@@ -33,29 +31,17 @@ pub(super) fn hard_core_centres_remembered(
     n: usize,
     min_distance_mm: f64,
 ) -> Arc<Vec<(f64, f64)>> {
-    static LAYOUTS: Mutex<Vec<Layout>> = Mutex::new(Vec::new());
     let (x0, y0, x1, y1) = field;
     let key = (
         rng.clone(),
         [x0, y0, x1, y1, min_distance_mm].map(f64::to_bits),
         n,
     );
-    let found = LAYOUTS
-        .lock()
-        .expect("no panic while held")
-        .iter()
-        .find(|(k, _, _)| *k == key)
-        .map(|(_, centres, after)| (centres.clone(), after.clone()));
-    if let Some((centres, after)) = found {
-        *rng = after;
-        return centres;
-    }
-    let centres = Arc::new(hard_core_centres(rng, field, n, min_distance_mm));
-    let mut layouts = LAYOUTS.lock().expect("no panic while held");
-    if layouts.len() == REMEMBERED {
-        layouts.remove(0);
-    }
-    layouts.push((key, centres.clone(), rng.clone()));
+    let (centres, after) = LAYOUTS.get_or(key, || {
+        let centres = Arc::new(hard_core_centres(rng, field, n, min_distance_mm));
+        (centres, rng.clone())
+    });
+    *rng = after;
     centres
 }
 

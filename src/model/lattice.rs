@@ -3,22 +3,21 @@
 //! remembered: a print's calibration renders its reference crop some fifty times with the same
 //! seed, field and spacing (its contrast and size are searched, not where its dots sit), and
 //! drawing the layout again for every crop was 6–8 % of a diagnosis round (`perf`, 2026-11-29).
-//! The hard core keeps its own memory (`hard_core.rs`).
+//! The hard core's layouts are remembered the same way (`remembered.rs`).
 
 use super::pattern::Placement;
+use super::remembered::Remembered;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 /// One dot: its centre (x, y), mm, and the uniform draw in [0, 1) its depth is made from.
 pub(super) type LatticeDot = (f64, f64, f64);
 
-/// The layouts [`lattice_remembered`] keeps (a diagnosis calibrates up to three prints side by
-/// side, each under up to three placements).
-const REMEMBERED: usize = 8;
-
-/// A layout's inputs: the placement, the field's and the spacing's bits, the seed.
-type Key = (Placement, [u64; 5], u64);
+/// A layout's inputs (the placement, the field's and the spacing's bits, the seed) and the
+/// layout: the last eight (a diagnosis calibrates up to three prints side by side, each under
+/// up to three placements).
+static LAYOUTS: Remembered<(Placement, [u64; 5], u64), Arc<Vec<LatticeDot>>> = Remembered::new(8);
 
 /// [`lattice`], remembering the last few layouts.
 pub(super) fn lattice_remembered(
@@ -27,29 +26,15 @@ pub(super) fn lattice_remembered(
     spacing_mm: f64,
     seed: u64,
 ) -> Arc<Vec<LatticeDot>> {
-    static LAYOUTS: Mutex<Vec<(Key, Arc<Vec<LatticeDot>>)>> = Mutex::new(Vec::new());
     let (x0, y0, x1, y1) = field;
     let key = (
         placement,
         [x0, y0, x1, y1, spacing_mm].map(f64::to_bits),
         seed,
     );
-    let found = LAYOUTS
-        .lock()
-        .expect("no panic while held")
-        .iter()
-        .find(|(k, _)| *k == key)
-        .map(|(_, dots)| dots.clone());
-    if let Some(dots) = found {
-        return dots;
-    }
-    let dots = Arc::new(lattice(placement, field, spacing_mm, seed));
-    let mut layouts = LAYOUTS.lock().expect("no panic while held");
-    if layouts.len() == REMEMBERED {
-        layouts.remove(0);
-    }
-    layouts.push((key, dots.clone()));
-    dots
+    LAYOUTS.get_or(key, || {
+        Arc::new(lattice(placement, field, spacing_mm, seed))
+    })
 }
 
 /// The lattice's dots, reproducible from `seed`: per cell in row order, a Poisson dot's cell

@@ -13,6 +13,7 @@ mod lattice;
 mod normal;
 mod pattern;
 mod readout;
+mod remembered;
 mod render;
 mod seed;
 mod shot_noise;

@@ -194,15 +194,8 @@ impl RunStore {
                 std::fs::create_dir_all(parent).map_err(io(parent))?;
             }
             // A frame the store already holds (an experiment's export in its run folder) is
-            // linked, not written again: its bytes exist once on disk, in both places. Every
-            // store file is written under a temporary name and renamed, never rewritten in
-            // place, so neither side can change the other. Across filesystems: a copy.
-            if std::fs::hard_link(&from, &to).is_err() {
-                std::fs::copy(&from, &to).map_err(io(&from))?;
-                std::fs::File::open(&to)
-                    .and_then(|f| f.sync_all())
-                    .map_err(io(&to))?;
-            }
+            // linked, not written again. Across filesystems: a copy.
+            crate::atomic_write::link_or_copy(&from, &to).map_err(|(path, e)| io(&path)(e))?;
         }
         self.commit_dataset(staging, name, source)
     }
