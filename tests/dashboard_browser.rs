@@ -8,7 +8,8 @@
 //! (another seed) and adds its winner, which must get a name of its own (issue 13); starts the
 //! smoke design map from the home page and sees its recommendations, heat maps with the paper's
 //! points, bias plots and cells (issue 15); starts a calibration from the home page and sees its
-//! camera card: the stored model, the stage's map, the discrepancy with its SEs (issue 33). Screenshots
+//! camera card: the stored model, the stage's map, the discrepancy with its SEs (issue 33); diagnoses
+//! a one-move dataset and resolves its confounds on the bench (issue 33). Screenshots
 //! land in `target/browser-artifacts/`.
 //!
 //! Needs `node`, `/usr/bin/chromium` and `npm ci --prefix tests/browser` (scripts/test-all.sh
@@ -242,6 +243,7 @@ async fn dashboard_in_headless_chromium() {
         "6-dataset-reloaded",
         "7-second-dataset-added",
         "8-sweep",
+        "9-on-bench",
     ] {
         assert!(
             artefact_dir().join(format!("{shot}.png")).is_file(),

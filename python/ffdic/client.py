@@ -51,6 +51,7 @@ FINAL_RECORD_WAIT_S = 5.0
 _JOB_DOCUMENT = {
     "comparison": "results/comparison.json",
     "diagnosis": "results/diagnosis.json",
+    "on_bench": "results/on-bench.json",
     "analysis": "results/study.json",
     "experiment": "results/study.json",
 }
@@ -839,6 +840,27 @@ class Client:
         each winner and diagnoses again, and puts every step into the dataset's history."""
         body = {"model": model, "rounds": rounds, **request}
         job_id = self._submit(f"/datasets/{_quote(dataset_id)}/diagnoses", body, idempotency_key)
+        return self._job_result(job_id, progress)
+
+    def diagnose_on_bench(
+        self,
+        dataset_id: str,
+        model: str = "baseline",
+        rounds: int = 1,
+        *,
+        idempotency_key: Optional[str] = None,
+        progress: Union[ProgressCallback, bool, None] = None,
+        **request: Any,
+    ) -> JobResult:
+        """``POST /datasets/{id}/on-bench``: diagnoses the dataset as :meth:`diagnose` does,
+        then captures on the daemon's bench the runs that separate what the diagnosis left open
+        (its ``runs_to_separate``), appends them to the dataset's runs as a new dataset and
+        diagnoses that; follows the job and returns ``results/on-bench.json``: ``before`` and
+        ``after`` (diagnoses), ``open_before`` and ``open_after`` (``confounded`` pairs and
+        ``not_identifiable`` effects), ``bench`` (``runs``, ``plan``, ``captured`` and
+        ``dataset``: the new dataset's id; all null when nothing was left for a bench)."""
+        body = {"model": model, "rounds": rounds, **request}
+        job_id = self._submit(f"/datasets/{_quote(dataset_id)}/on-bench", body, idempotency_key)
         return self._job_result(job_id, progress)
 
     def history(self, dataset_id: str) -> List[Dict[str, Any]]:

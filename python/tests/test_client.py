@@ -224,6 +224,26 @@ def test_a_cancelled_run_raises_run_failed(client: Client) -> None:
     assert again.value.status == 409
 
 
+def test_what_one_move_leaves_open_is_resolved_on_the_bench(client: Client) -> None:
+    run_id = client.start_experiment(
+        name="one move",
+        patterns=["a"],
+        moves=[{"id": "x2", "dx_mm": 2.0, "dy_mm": 0.0}],
+        settle_ms=0,
+        dic=SMALL_DIC,
+    )
+    dataset_id = client.follow(run_id)["dataset_id"]
+    doc = client.diagnose_on_bench(dataset_id, schemes=[NATIVE], dic=SMALL_DIC)
+    assert doc.job["kind"] == "on_bench" and doc.job["status"] == "succeeded"
+    assert "static_repeats" in doc["bench"]["runs"]
+    assert doc["bench"]["dataset"] not in (None, dataset_id)
+    unrevealed = lambda open_: [n["effect"] for n in open_["not_identifiable"]]  # noqa: E731
+    assert "sensor_noise" in unrevealed(doc["open_before"])
+    assert "sensor_noise" not in unrevealed(doc["open_after"]), doc.job["message"]
+    assert client.dataset(dataset_id)["runs"] == 1
+    assert client.dataset(doc["bench"]["dataset"])["runs"] > 1
+
+
 # --- datasets and models --------------------------------------------------------------------
 
 

@@ -26,7 +26,7 @@ use utoipa_axum::routes;
         (name = "experiments", description = "Translation experiments on the bench"),
         (name = "calibrations", description = "Calibration plans on the bench and the camera cards they write"),
         (name = "datasets", description = "Measurements in format ffdic-dataset/1"),
-        (name = "jobs", description = "Any run: experiments, analyses, comparisons, diagnoses, sweeps, calibrations"),
+        (name = "jobs", description = "Any run: experiments, analyses, comparisons, diagnoses, on-bench diagnoses, sweeps, calibrations"),
         (name = "models", description = "Analysis models: embedded and added by users"),
         (name = "sweeps", description = "Design maps: error against dot size, fill factor, noise, blur and sub-pixel motion"),
     )
@@ -63,6 +63,7 @@ pub fn router(max_upload_bytes: usize) -> OpenApiRouter<Service> {
         .routes(routes!(datasets::analyse))
         .routes(routes!(datasets::compare))
         .routes(routes!(datasets::diagnose))
+        .routes(routes!(datasets::on_bench))
         .routes(routes!(datasets::history))
         .routes(routes!(datasets::history_svg))
         .routes(routes!(datasets::jobs))

@@ -197,18 +197,33 @@ pub fn rounds_text(r: &Rounds) -> String {
 pub fn run(args: &DiagnoseArgs) -> Result<()> {
     let model = load_analysis_model(&args.model, &args.analysis.data)?;
     let options = args.analysis.options()?;
-    let bar = ProgressBar::new(!args.json, "fitting candidates");
-    let r = diagnose_rounds(
-        &args.dataset,
-        &model,
-        &options,
-        args.rounds as usize,
-        &|done, total| {
-            bar.update(done, total);
-            true
-        },
-    )?;
-    bar.finish();
+    let (r, bench) = match args.on_bench {
+        true => {
+            let mut config = match &args.config {
+                Some(p) => ffdic::service::DaemonConfig::load(p)?,
+                None => ffdic::service::DaemonConfig::embedded(),
+            };
+            config.data_dir = args.analysis.data.clone();
+            let setting = (&model, &options, args.rounds as usize);
+            let (before, b) = on_bench(&args.dataset, setting, config, !args.json)?;
+            (before, Some(b))
+        }
+        false => {
+            let bar = ProgressBar::new(!args.json, "fitting candidates");
+            let r = diagnose_rounds(
+                &args.dataset,
+                &model,
+                &options,
+                args.rounds as usize,
+                &|done, total| {
+                    bar.update(done, total);
+                    true
+                },
+            )?;
+            bar.finish();
+            (r, None)
+        }
+    };
     if let Some(path) = &args.write_model {
         if r.verdicts.is_empty() {
             eprintln!("verdict none: no model written to {}", path.display());
@@ -217,25 +232,15 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
                 .with_context(|| format!("cannot write {}", path.display()))?;
         }
     }
-    let bench = match args.on_bench {
-        true => {
-            let mut config = match &args.config {
-                Some(p) => ffdic::service::DaemonConfig::load(p)?,
-                None => ffdic::service::DaemonConfig::embedded(),
-            };
-            config.data_dir = args.analysis.data.clone();
-            let setting = (&model, &options, args.rounds as usize);
-            Some(on_bench(&args.dataset, &r, setting, config, !args.json)?)
-        }
-        false => None,
-    };
     if args.json {
         let mut doc = r.to_json();
         if let Some(b) = &bench {
+            let mut on_bench = serde_json::to_value(&b.bench)?;
+            on_bench["folder"] = serde_json::json!(b.folder);
             doc = serde_json::json!({
                 "before": doc,
-                "on_bench": b,
-                "after": b.after.to_json(),
+                "on_bench": on_bench,
+                "after": b.after.as_ref().map(Rounds::to_json),
             });
         }
         println!("{doc}");
@@ -251,23 +256,26 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     }
     if let Some(b) = &bench {
         print!("{}", on_bench_text(b));
-        print_rounds(&b.after, args);
+        if let Some(after) = &b.after {
+            print_rounds(after, args);
+        }
     }
     Ok(())
 }
 
 /// What the bench captured, and where the merged dataset is.
 fn on_bench_text(b: &OnBench) -> String {
-    let runs: Vec<&str> = b.runs.iter().map(|r| r.describe()).collect();
+    let (Some(plan), Some(folder)) = (&b.bench.plan, &b.folder) else {
+        return "\n== on the bench: nothing to capture (no pair confounded by the dataset's design, no effect a move, a step series or static frames would reveal)\n".into();
+    };
+    let runs: Vec<&str> = b.bench.runs.iter().map(|r| r.describe()).collect();
     format!(
-        "\n== on the bench: {} (moves of {:?} mm along ±x and ±y, a phase scan of {} steps, {} static frames), experiment {}; the dataset with them: {} ({})\n",
+        "\n== on the bench: {} (moves of {:?} mm along ±x and ±y, a phase scan of {} steps, {} static frames); the dataset with them: {}\n",
         runs.join(", "),
-        b.plan.move_sizes_mm,
-        b.plan.phase_scan_count,
-        b.plan.static_frames,
-        b.experiment,
-        b.dataset,
-        b.folder.display()
+        plan.move_sizes_mm,
+        plan.phase_scan_count,
+        plan.static_frames,
+        folder.display()
     )
 }
 

@@ -418,6 +418,7 @@ mod tests {
             verdicts: vec![EffectId::PsfBlur.into()],
             final_discrepancy_px: 0.0,
             final_unexplained: finding(0.0, None),
+            runs_to_separate: Vec::new(),
             final_model: ModelConfig::default(),
             diagnoses: vec![first, last],
         };

@@ -152,7 +152,7 @@ pub use results::{
     ImageComparison, ModelInfo, RunComparison, Side,
 };
 pub use rounds::{Round, Rounds};
-pub use separating_runs::{runs_to_separate, SeparatingRuns};
+pub use separating_runs::{open_questions, runs_to_separate, SeparatingRuns};
 pub use stage_landing::{RepeatabilitySource, StageLanding};
 pub use unexplained::Unexplained;
 pub use verdict::{Candidate, Criteria, Diagnosis, Evidence, Method, Withheld};

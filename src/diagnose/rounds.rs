@@ -9,6 +9,7 @@
 use super::compare::compare_prepared;
 use super::diagnose::diagnose_prepared;
 use super::measurement::{load_measurement, Measurement};
+use super::separating_runs::{runs_to_separate, SeparatingRuns};
 use super::unexplained::Unexplained;
 use super::verdict::Diagnosis;
 use super::{CompareOptions, DiagnoseError, Progress};
@@ -63,6 +64,12 @@ pub struct Rounds {
     /// What the final model leaves unexplained: never `none` silently over a significant
     /// residual.
     pub final_unexplained: Unexplained,
+    /// What a bench's runs would resolve of what the rounds left open (their design's
+    /// confounds, the effects the dataset cannot reveal; every round's: a verdict chosen under a
+    /// confound is itself in question): `ffdic diagnose --on-bench` and
+    /// `POST /datasets/{id}/on-bench` capture them.
+    #[serde(default)]
+    pub runs_to_separate: Vec<SeparatingRuns>,
     /// The model with every verdict added.
     #[serde(skip)]
     pub final_model: ModelConfig,
@@ -161,6 +168,7 @@ pub fn diagnose_rounds_prepared(
         verdicts,
         final_discrepancy_px,
         final_unexplained,
+        runs_to_separate: runs_to_separate(&diagnoses),
         final_model: current,
         diagnoses,
     })
@@ -211,6 +219,7 @@ mod tests {
             verdicts: vec![EffectId::Rotation.into()],
             final_discrepancy_px: 0.005,
             final_unexplained: finding(0.005, Some(1.2)),
+            runs_to_separate: Vec::new(),
             final_model: ModelConfig::default(),
             diagnoses: vec![first, second],
         };

@@ -7,10 +7,10 @@
 use super::identifiability::{Confounded, NotIdentifiable};
 use super::Diagnosis;
 use crate::model::EffectId;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// A kind of run a bench captures to separate effects.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SeparatingRuns {
     /// Translations of several sizes: distortion's field grows with the move, a scale change's
@@ -38,10 +38,32 @@ impl SeparatingRuns {
     }
 }
 
-/// The runs that would resolve `d`'s design confounds and the effects it could not reveal,
-/// each kind once, in the enum's order.
-pub fn runs_to_separate(d: &Diagnosis) -> Vec<SeparatingRuns> {
-    runs_for(&d.confounded, &d.not_identifiable)
+/// The runs that would resolve the design confounds of `rounds` (a diagnosis's rounds) and the
+/// effects they could not reveal, each kind once, in the enum's order.
+pub fn runs_to_separate(rounds: &[Diagnosis]) -> Vec<SeparatingRuns> {
+    let (confounded, not_identifiable) = open_questions(rounds);
+    runs_for(&confounded, &not_identifiable)
+}
+
+/// What `rounds` left open, each once in the order first met: the confounded pairs and the
+/// effects the dataset cannot reveal. A later round's model holds an earlier verdict, so its
+/// candidates no longer show that verdict's confounds: every round's are kept.
+pub fn open_questions(rounds: &[Diagnosis]) -> (Vec<Confounded>, Vec<NotIdentifiable>) {
+    let mut confounded: Vec<Confounded> = Vec::new();
+    let mut not_identifiable: Vec<NotIdentifiable> = Vec::new();
+    for d in rounds {
+        for c in &d.confounded {
+            if !confounded.contains(c) {
+                confounded.push(c.clone());
+            }
+        }
+        for n in &d.not_identifiable {
+            if !not_identifiable.iter().any(|m| m.effect == n.effect) {
+                not_identifiable.push(n.clone());
+            }
+        }
+    }
+    (confounded, not_identifiable)
 }
 
 /// [`runs_to_separate`] of a diagnosis's confounded pairs and not-identifiable effects.

@@ -6,6 +6,7 @@
 use crate::diagnose::{CameraCard, Comparison, Rounds};
 use crate::experiment::RunSink;
 use crate::run_event::EventKind;
+use crate::service::job::OnBenchCapture;
 use crate::store::{DatasetId, Event, RunId, RunKind, RunRecord, RunStatus, RunStore, StoreError};
 use crate::study::StudyRow;
 use serde_json::Value;
@@ -50,6 +51,14 @@ pub enum JobResult {
         rounds: Box<Rounds>,
         card: Box<CameraCard>,
         dataset: DatasetId,
+    },
+    /// A diagnosis completed on the bench: the stored dataset's rounds, what the bench
+    /// captured and the merged dataset, and the rounds on it (none when the first diagnosis
+    /// left nothing a bench's runs resolve).
+    OnBench {
+        before: Box<Rounds>,
+        bench: Box<OnBenchCapture>,
+        after: Option<Box<Rounds>>,
     },
     /// Nothing beyond the files the job wrote (a design map's merged files).
     Files,

@@ -24,16 +24,21 @@ pub enum RunKind {
     /// A calibration (`POST /calibrations`): a move plan captured on the bench, diagnosed, and a
     /// camera card written; on the bench lane.
     Calibration,
+    /// A diagnosis completed on the bench (`POST /datasets/{id}/on-bench`): the runs that
+    /// separate what the dataset left open captured, appended, diagnosed again; on the bench
+    /// lane.
+    OnBench,
 }
 
 impl RunKind {
-    pub const ALL: [RunKind; 6] = [
+    pub const ALL: [RunKind; 7] = [
         RunKind::Experiment,
         RunKind::Analysis,
         RunKind::Comparison,
         RunKind::Diagnosis,
         RunKind::Sweep,
         RunKind::Calibration,
+        RunKind::OnBench,
     ];
 
     pub fn as_str(self) -> &'static str {
@@ -44,6 +49,7 @@ impl RunKind {
             RunKind::Diagnosis => "diagnosis",
             RunKind::Sweep => "sweep",
             RunKind::Calibration => "calibration",
+            RunKind::OnBench => "on_bench",
         }
     }
 
@@ -56,6 +62,7 @@ impl RunKind {
             RunKind::Diagnosis => "dia",
             RunKind::Sweep => "swp",
             RunKind::Calibration => "cal",
+            RunKind::OnBench => "onb",
         }
     }
 }

@@ -12,7 +12,8 @@
 // bench (another seed) diagnosed and added must not claim the first dataset's model as its own;
 // the home page takes no snapshot until asked; a finished experiment replays its events; the
 // study charts carry error bars; moves and errors carry µm beside px; a calibration started from
-// the home page shows its camera card (issue 33).
+// the home page shows its camera card (issue 33); a one-move dataset diagnosed offers to resolve
+// its confounds on the bench, and the bench's runs resolve them (issue 33).
 //
 // Defects are collected (each check says what it saw) and reported together at the end, so one
 // run shows every one that is still there.
@@ -496,6 +497,53 @@ async function main() {
         expect(compared === fresh[0], `the comparison after the add uses the new model (${compared})`);
       }
       await shot(page, "7-second-dataset-added");
+    }
+
+    // ---- the bench resolves what one move leaves open (issue 33) ----
+    // One 2 mm move, no static frames, captured through the API: distortion and scale are
+    // confounded by the design, the sensor's noise cannot be revealed.
+    const oneMove = await page.evaluate(async () => {
+      const post = await fetch("/api/v1/experiments", {
+        method: "POST", headers: { "content-type": "application/json" },
+        body: JSON.stringify({ name: "one move", patterns: ["a"], settle_ms: 0, moves: [{ id: "x2mm", dx_mm: 2.0, dy_mm: 0.0 }], dic: { subset_px: 21, step_px: 10, strain_window: 5 } }),
+      });
+      const job = await post.json();
+      for (;;) {
+        const r = await (await fetch(`/api/v1/jobs/${job.id}`)).json();
+        if (r.status === "succeeded") return r.dataset_id;
+        if (["failed", "cancelled"].includes(r.status)) return null;
+        await new Promise((ok) => setTimeout(ok, 200));
+      }
+    });
+    if (expect(!!oneMove, "a one-move experiment through the API gives a dataset")) {
+      await page.goto(`${base}/datasets/${oneMove}`);
+      await page.waitForSelector("#model option[value=baseline]", { state: "attached" });
+      await page.locator("#model").selectOption("baseline");
+      await smallAnalysis();
+      await mf.locator("input[name=scheme][value=ff100]").setChecked(false);
+      await mf.locator("input[name=scheme][value=native]").setChecked(true);
+      await page.locator("#diagnose-btn").click();
+      await page.waitForSelector("#diagnosis-verdict[data-verdict]", { timeout: 400 * SECOND });
+      const benchButton = page.locator("#on-bench-btn");
+      const asked = expect(await appears(page, "#on-bench-btn", 15 * SECOND, "visible"), "a diagnosis that left confounds offers to resolve them on the bench");
+      const runs = (await benchButton.getAttribute("data-runs")) || "";
+      expect(runs.includes("several_move_sizes") && runs.includes("static_repeats"),
+        `the bench is asked for moves of several sizes and static frames (${runs}: "${await benchButton.innerText()}")`);
+      if (asked) {
+        await benchButton.click();
+        if (expect(await appears(page, "#on-bench-table", 400 * SECOND, "visible"), "the on-bench job shows what it resolved")) {
+          const rows = await page.locator("#on-bench-table tbody tr").evaluateAll((rs) => rs.map((r) => [r.dataset.open, r.lastElementChild.textContent]));
+          log(`on the bench: ${rows.map((r) => r.join(": ")).join("; ")}`);
+          const pair = rows.find((r) => /lens_distortion and scale confounded \(design\)/.test(r[0] || ""));
+          expect(pair && pair[1] === "resolved", `distortion and scale, confounded by one move, are resolved by the bench's runs (${JSON.stringify(rows)})`);
+          const noise = rows.find((r) => /sensor_noise not identifiable/.test(r[0] || ""));
+          expect(noise && noise[1] === "resolved", "the sensor's noise, unrevealed without static frames, is revealed");
+          const merged = await page.locator("#on-bench-dataset").innerText();
+          expect(merged && merged !== oneMove, `the bench's runs make a new dataset (${merged}), the original stays`);
+          expect(await appears(page, "#job-list tr[data-kind=on_bench]", 15 * SECOND), "the dataset's page lists the on-bench job");
+        }
+      }
+      await shot(page, "9-on-bench");
     }
 
     if (problems.length) fail(`the pages reported problems:\n  ${problems.join("\n  ")}`);

@@ -16,7 +16,7 @@ use crate::image::read_image_header;
 use crate::report::history_chart;
 use crate::service::job::{
     dataset_page_row, AnalysisJob, AnalysisRequest, CompareRequest, ComparisonJob, DatasetPageRow,
-    DiagnosisJob,
+    DiagnosisJob, OnBenchJob,
 };
 use crate::service::Service;
 use crate::store::{DatasetId, DatasetRecord, DatasetSource, RunKind};
@@ -395,6 +395,25 @@ pub async fn diagnose(
     let id = dataset_id(&id)?;
     super::queue(&svc, &headers, "/api/v1/jobs", move |s| {
         DiagnosisJob::plan(s, &id, request)
+    })
+    .await
+}
+
+#[utoipa::path(post, path = "/datasets/{id}/on-bench", tag = "datasets", request_body = CompareRequest,
+    params(("id" = String, Path, description = "Dataset id"),
+           ("Idempotency-Key" = Option<String>, Header, description = "Repeat-safe submission")),
+    responses((status = 202, description = "Queued as a job on the bench lane; Location names it. The dataset is diagnosed (results/diagnosis.json); the runs that separate what it left open (its rounds' runs_to_separate: moves of several sizes, along both axes, a step series, static frames) are captured on the bench, appended to the dataset's runs as a new stored dataset and diagnosed again. results/on-bench.json holds before, open_before, bench (runs, plan, captured and merged dataset ids), after and open_after", body = Object),
+              (status = 429, description = "The lane already has jobs.max_queued_per_lane jobs waiting; Retry-After says when to try again", body = Problem),
+              (status = 404, body = Problem), (status = 503, description = "No stage is configured", body = Problem), (status = 422, body = Problem)))]
+pub async fn on_bench(
+    State(svc): State<Service>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+    ApiJson(request): ApiJson<CompareRequest>,
+) -> ApiResult<Response> {
+    let id = dataset_id(&id)?;
+    super::queue(&svc, &headers, "/api/v1/jobs", move |s| {
+        OnBenchJob::plan(s, &id, request)
     })
     .await
 }

@@ -63,7 +63,7 @@ async function loadJobs() {
   try {
     const jobs = await api(`${base}/jobs`);
     const headline = (j) => {
-      if (j.kind === "diagnosis" && j.verdicts.length) {
+      if ((j.kind === "diagnosis" || j.kind === "on_bench") && j.verdicts.length) {
         return `${j.verdicts.join(", ")} — ${pxUm(j.discrepancy_px, scale)}` +
           (j.final_discrepancy_px != null ? ` → ${pxUm(j.final_discrepancy_px, scale)}` : "");
       }
@@ -107,6 +107,7 @@ async function reopen(j) {
     $("#comparison").scrollIntoView({ block: "start" });
   } else {
     await showDiagnosis(job, { ...(job.request || {}) });
+    if (j.kind === "on_bench") await showOnBench(job);
     $("#diagnosis").scrollIntoView({ block: "start" });
   }
 }
@@ -310,6 +311,12 @@ async function showDiagnosis(job, body) {
     notes.push(el("li", {}, `${n.effect} cannot be identified from this dataset: ${n.reason}; add ${n.runs_to_add}`));
   }
   clear($("#identifiability"), notes.length ? [el("h3", {}, "What this dataset cannot tell apart"), el("ul", {}, notes)] : []);
+  const runs = d.runs_to_separate || [];
+  $("#on-bench").classList.toggle("hidden", !runs.length);
+  $("#on-bench-btn").textContent = `Resolve on the bench: capture ${runs.map((r) => SEPARATING_RUNS[r] || r).join(", ")}`;
+  $("#on-bench-btn").dataset.runs = runs.join(" ");
+  clear($("#on-bench-result"), []);
+  $("#on-bench-notice").textContent = "";
   showUnexplained(d);
   const add = $("#add-winner");
   const hasWinner = d.verdict !== "none" && (job.result_files || []).includes("results/winner-model.toml");
@@ -321,8 +328,53 @@ async function showDiagnosis(job, body) {
   $("#add-notice").textContent = "";
 }
 
+/** The kinds of runs a bench captures to separate effects, in words (diagnose/separating_runs.rs). */
+const SEPARATING_RUNS = {
+  several_move_sizes: "moves of several sizes",
+  both_axes: "moves along x and along y",
+  step_series: "a sub-pixel step series",
+  static_repeats: "static repeat frames",
+};
+
+/** What a diagnosis left open, as the on-bench document holds it: one line each. */
+function openLines(open) {
+  if (!open) return [];
+  return [
+    ...(open.confounded || []).map((c) => `${c.effects.join(" and ")} confounded (${c.evidence})`),
+    ...(open.not_identifiable || []).map((n) => `${n.effect} not identifiable`),
+  ];
+}
+
+/** An on-bench job's capture and the ambiguity before and after it. */
+async function showOnBench(job) {
+  const doc = await api(`/jobs/${job.id}/files/results/on-bench.json`);
+  $("#on-bench").classList.remove("hidden");
+  const b = doc.bench || {};
+  const box = $("#on-bench-result");
+  if (!b.dataset) {
+    clear(box, el("p", { class: "muted" }, job.message || "nothing captured"));
+    return;
+  }
+  const [before, after] = [openLines(doc.open_before), openLines(doc.open_after)];
+  const verdicts = (r) => (r && r.verdicts && r.verdicts.length ? r.verdicts.join(", ") : "none");
+  const plan = b.plan || {};
+  const rows = [...new Set([...before, ...after])].map((line) => el("tr", { "data-open": line },
+    el("td", {}, line),
+    el("td", {}, before.includes(line) ? "open" : "—"),
+    el("td", { class: after.includes(line) ? "" : "resolved" }, after.includes(line) ? "open" : "resolved")));
+  clear(box, [
+    el("h3", {}, "On the bench"),
+    el("p", { class: "small" }, `Captured ${(b.runs || []).map((r) => SEPARATING_RUNS[r] || r).join(", ")}: moves of ${(plan.move_sizes_mm || []).map((s) => num(s, 3)).join(" and ") || "no"} mm along ±x and ±y, a phase scan of ${plan.phase_scan_count || 0} steps, ${plan.static_frames || 0} static frames. The dataset with them: `,
+      el("a", { href: `/datasets/${encodeURIComponent(b.dataset)}`, class: "mono", id: "on-bench-dataset" }, b.dataset), "."),
+    el("table", { id: "on-bench-table" },
+      el("thead", {}, el("tr", {}, ["what the dataset left open", "before", "with the bench's runs"].map((h) => el("th", {}, h)))),
+      el("tbody", {}, rows.length ? rows : [el("tr", {}, el("td", { colspan: 3, class: "muted" }, "nothing was open"))])),
+    el("p", { class: "small", id: "on-bench-verdicts" }, `Verdicts: ${verdicts(doc.before)} → ${verdicts(doc.after)}; discrepancy ${lengthUm(doc.before.discrepancy_px, doc.before.discrepancy_se_px)} → ${doc.after ? lengthUm(doc.after.discrepancy_px, doc.after.discrepancy_se_px) : "—"} against ${doc.before.model.name}.`),
+  ]);
+}
+
 /** The buttons that start work: one job at a time. */
-const BUTTONS = ["#compare-btn", "#diagnose-btn", "#find-all-btn", "#add-winner", "#user-effect-btn"];
+const BUTTONS = ["#compare-btn", "#diagnose-btn", "#find-all-btn", "#add-winner", "#user-effect-btn", "#on-bench-btn"];
 
 async function guard(fn) {
   if (busy) return;
@@ -349,6 +401,16 @@ $("#find-all-btn").addEventListener("click", () => guard(async () => {
   const body = { ...settings($("#model").value), rounds: 4 };
   const job = await runJob("diagnoses", body);
   await showDiagnosis(job, body);
+  await loadHistory();
+  await loadJobs();
+}));
+
+$("#on-bench-btn").addEventListener("click", () => guard(async () => {
+  const body = lastDiagnosis ? lastDiagnosis.body : settings($("#model").value);
+  $("#on-bench-notice").textContent = "diagnosing, capturing on the bench, diagnosing again…";
+  const job = await runJob("on-bench", body);
+  await showDiagnosis(job, body);
+  await showOnBench(job);
   await loadHistory();
   await loadJobs();
 }));

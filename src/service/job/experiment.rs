@@ -81,8 +81,35 @@ impl Job for ExperimentJob {
 }
 
 /// Captures `plan` on the bench (events through `sink`) and registers its frames as a dataset
-/// of their own, so compare and diagnose read captured and imported measurements alike.
+/// of their own, so compare and diagnose read captured and imported measurements alike; the
+/// run's record names it as the dataset the run made.
 pub(super) fn capture_dataset(
+    service: &Service,
+    plan: &ExperimentPlan,
+    ctx: &JobContext,
+    sink: &dyn RunSink,
+) -> Result<(ExperimentOutcome, DatasetRecord), JobError> {
+    let (outcome, dataset) = capture_frames(service, plan, ctx, sink)?;
+    ctx.store()
+        .set_dataset(&ctx.run_id, &dataset.id)
+        .map_err(JobError::failed)?;
+    registered(sink, &dataset, "frames registered as dataset");
+    Ok((outcome, dataset))
+}
+
+/// The event that says `dataset` is stored, `what` before its id.
+pub(super) fn registered(sink: &dyn RunSink, dataset: &DatasetRecord, what: &str) {
+    sink.event(
+        EventKind::DatasetRegistered,
+        1.0,
+        &format!("{what} {}", dataset.id),
+        json!({ "dataset_id": dataset.id }),
+    );
+}
+
+/// [`capture_dataset`] without naming the dataset in the run's record, nor an event: for a run
+/// whose record names the dataset it reads (an on-bench diagnosis).
+pub(super) fn capture_frames(
     service: &Service,
     plan: &ExperimentPlan,
     ctx: &JobContext,
@@ -119,14 +146,5 @@ pub(super) fn capture_dataset(
             DatasetSource::Experiment(ctx.run_id.clone()),
         )
         .map_err(JobError::failed)?;
-    ctx.store()
-        .set_dataset(&ctx.run_id, &dataset.id)
-        .map_err(JobError::failed)?;
-    sink.event(
-        EventKind::DatasetRegistered,
-        1.0,
-        &format!("frames registered as dataset {}", dataset.id),
-        json!({ "dataset_id": dataset.id }),
-    );
     Ok((outcome, dataset))
 }

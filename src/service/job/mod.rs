@@ -12,6 +12,7 @@ mod calibration;
 mod comparison;
 mod diagnosis;
 mod experiment;
+mod on_bench;
 mod sweep;
 
 pub use analysis::{AnalysisJob, AnalysisRequest};
@@ -19,6 +20,7 @@ pub use calibration::{calibration_options, card_prefix, CalibrationJob};
 pub use comparison::{CompareRequest, ComparisonJob};
 pub use diagnosis::DiagnosisJob;
 pub use experiment::ExperimentJob;
+pub use on_bench::{merge_into_store, separating_plan, OnBenchCapture, OnBenchJob, BENCH_PREFIX};
 pub use sweep::{plan_sweep, SweepJob, MAX_DAEMON_SENSOR_SIDE_PX, MAX_DAEMON_SWEEP_TASKS};
 
 use super::jobs::{JobContext, JobError, JobOutput, Lane};
@@ -86,7 +88,8 @@ pub enum DatasetPageRow {
 pub fn dataset_page_row(kind: RunKind) -> DatasetPageRow {
     match kind {
         RunKind::Comparison => DatasetPageRow::Headline("results/comparison.json"),
-        RunKind::Diagnosis => DatasetPageRow::Headline("results/diagnosis.json"),
+        // An on-bench diagnosis's `results/diagnosis.json` is the listed dataset's own.
+        RunKind::Diagnosis | RunKind::OnBench => DatasetPageRow::Headline("results/diagnosis.json"),
         RunKind::Analysis => DatasetPageRow::Listed,
         RunKind::Experiment | RunKind::Sweep | RunKind::Calibration => DatasetPageRow::NotListed,
     }

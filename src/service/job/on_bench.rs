@@ -1,0 +1,347 @@
+//! `POST /datasets/{id}/on-bench` and `ffdic diagnose --on-bench` (issue 33, "resolve confounds
+//! on the bench"): a stored dataset diagnosed; the runs that separate what the diagnosis left
+//! open ([`crate::diagnose::runs_to_separate`]: the pairs its design confounds, the effects it
+//! cannot reveal) become a calibration-style plan on the dataset's target and move size, which
+//! the bench captures; the frames are appended to the dataset's runs as a new stored dataset (the
+//! original is left as it was) and diagnosed again with the same model and options. On the bench
+//! lane: the before and the after belong to one request, and the capture between them needs the
+//! hardware.
+
+use super::comparison::ModelAgainstDataset;
+use super::experiment::{capture_frames, registered};
+use super::{diagnose_failure, progress_reporter, CompareRequest, Job};
+use crate::dataset::{merge_datasets, Manifest};
+use crate::diagnose::{diagnose_rounds, open_questions, CompareOptions, Rounds, SeparatingRuns};
+use crate::experiment::{CalibrationPlan, FieldError, PatternSpec, RunSink, SchemeSpec};
+use crate::model::ModelConfig;
+use crate::service::jobs::{JobContext, JobError, JobOutput, JobResult, Lane};
+use crate::service::scaled_sink::ScaledSink;
+use crate::service::{Service, SubmitError};
+use crate::store::{DatasetId, DatasetRecord, DatasetSource, RunKind, RunStore};
+use serde::Serialize;
+use serde_json::json;
+use std::path::Path;
+
+/// The shares of the job's progress: the first diagnosis, the capture, the second diagnosis.
+const FIRST_SHARE: f64 = 0.4;
+const CAPTURE_SHARE: f64 = 0.2;
+
+/// The prefix of the bench's run ids, frame files and pattern labels in the merged dataset.
+pub const BENCH_PREFIX: &str = "bench-";
+
+/// An on-bench diagnosis, checked: a diagnosis's request, a stage, a dataset that names the
+/// target the bench is to mount.
+pub struct OnBenchJob(ModelAgainstDataset);
+
+/// What the bench added to a dataset.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct OnBenchCapture {
+    /// The kinds of runs the first diagnosis asked for (empty: nothing a bench resolves).
+    pub runs: Vec<SeparatingRuns>,
+    /// The plan that captured them.
+    pub plan: Option<CalibrationPlan>,
+    /// The bench's frames alone, as a stored dataset.
+    pub captured: Option<DatasetId>,
+    /// The dataset's runs and the bench's (ids `bench-…`), diagnosed again.
+    pub dataset: Option<DatasetId>,
+}
+
+impl OnBenchJob {
+    /// A client's request (`POST /datasets/{id}/on-bench`): its model from the stored models.
+    pub fn plan(
+        service: &Service,
+        dataset: &DatasetId,
+        request: CompareRequest,
+    ) -> Result<Self, SubmitError> {
+        Self::checked(ModelAgainstDataset::plan(service, dataset, request)?)
+    }
+
+    /// `ffdic diagnose --on-bench`'s job: a model of the command line's (a file or a name), its
+    /// options and rounds.
+    pub fn for_model(
+        service: &Service,
+        dataset: &DatasetId,
+        model: ModelConfig,
+        options: CompareOptions,
+        rounds: usize,
+    ) -> Result<Self, SubmitError> {
+        service.store.get_dataset(dataset)?;
+        let request = CompareRequest {
+            model: model.name.clone(),
+            schemes: options
+                .schemes
+                .iter()
+                .cloned()
+                .map(SchemeSpec::Custom)
+                .collect(),
+            dic: options.dic.clone(),
+            seed: options.seed,
+            rounds,
+        };
+        Self::checked(ModelAgainstDataset {
+            service: service.clone(),
+            dataset: dataset.clone(),
+            request,
+            model,
+            options,
+        })
+    }
+
+    fn checked(job: ModelAgainstDataset) -> Result<Self, SubmitError> {
+        if !job.service.limits.has_stage() {
+            return Err(SubmitError::NoStage);
+        }
+        let manifest = Manifest::read(&job.service.store.dataset_dir(&job.dataset))
+            .map_err(|e| field("dataset", e.to_string()))?;
+        target_label(&manifest)?;
+        Ok(Self(job))
+    }
+}
+
+fn field(name: &str, reason: String) -> FieldError {
+    FieldError {
+        field: name.into(),
+        reason,
+    }
+}
+
+/// The target the bench mounts: the dataset's first named pattern (a preset name the mock
+/// bench renders, the label an exec camera is told, the target a lab mounts by hand).
+fn target_label(manifest: &Manifest) -> Result<String, FieldError> {
+    manifest
+        .runs
+        .iter()
+        .find_map(|r| r.pattern.as_ref().map(|p| p.label.clone()))
+        .ok_or_else(|| {
+            field(
+                "dataset",
+                "the dataset names no pattern: the bench must know which target to mount".into(),
+            )
+        })
+}
+
+/// The plan that captures `runs` on the dataset's target at the dataset's own move size: ±x and
+/// ±y at the largest move and a quarter of it where sizes or directions are asked for (the
+/// identifiability rule's ratio of 1.5 with room to spare), a phase scan of four steps for a
+/// step series, two static frames for repeats.
+pub fn separating_plan(
+    manifest: &Manifest,
+    runs: &[SeparatingRuns],
+    options: &CompareOptions,
+) -> Result<CalibrationPlan, FieldError> {
+    let largest_mm = manifest
+        .runs
+        .iter()
+        .map(|r| r.stage.dx_mm.hypot(r.stage.dy_mm))
+        .fold(0.0, f64::max);
+    let wants = |k: SeparatingRuns| runs.contains(&k);
+    let move_sizes_mm = match (
+        largest_mm > 0.0,
+        wants(SeparatingRuns::SeveralMoveSizes) || wants(SeparatingRuns::BothAxes),
+    ) {
+        (false, _) => Vec::new(),
+        (true, true) => vec![0.25 * largest_mm, largest_mm],
+        (true, false) => vec![largest_mm],
+    };
+    Ok(CalibrationPlan {
+        name: "on-bench".into(),
+        pattern: PatternSpec::Preset(target_label(manifest)?),
+        move_sizes_mm,
+        phase_scan_count: if wants(SeparatingRuns::StepSeries) {
+            4
+        } else {
+            0
+        },
+        static_frames: if wants(SeparatingRuns::StaticRepeats) {
+            2
+        } else {
+            0
+        },
+        rounds: 1,
+        dic: options.dic.clone(),
+        ..CalibrationPlan::default()
+    })
+}
+
+/// The dataset in `base_dir` with the runs of the stored dataset `added` appended (ids, frame
+/// files and pattern labels prefixed [`BENCH_PREFIX`]), committed to `store` as a new dataset.
+pub fn merge_into_store(
+    store: &RunStore,
+    base_dir: &Path,
+    added: &DatasetId,
+    name: &str,
+    source: DatasetSource,
+) -> Result<DatasetRecord, String> {
+    let staging = store.stage_dataset().map_err(|e| e.to_string())?;
+    merge_datasets(
+        base_dir,
+        &store.dataset_dir(added),
+        BENCH_PREFIX,
+        staging.path(),
+    )
+    .map_err(|e| e.to_string())?;
+    store
+        .commit_dataset(staging, name, source)
+        .map_err(|e| e.to_string())
+}
+
+/// What a diagnosis's rounds left open, as the on-bench document shows it before and after.
+fn open_document(r: Option<&Rounds>) -> serde_json::Value {
+    r.map_or(serde_json::Value::Null, |r| {
+        let (confounded, not_identifiable) = open_questions(&r.diagnoses);
+        json!({ "confounded": confounded, "not_identifiable": not_identifiable })
+    })
+}
+
+/// The confounded pairs the rounds' design left, as `a/b` words.
+fn design_confounds(r: &Rounds) -> Vec<String> {
+    open_questions(&r.diagnoses)
+        .0
+        .iter()
+        .filter(|c| c.evidence == "design")
+        .map(|c| c.effects.join("/"))
+        .collect()
+}
+
+/// Captures `bench.runs` on the bench (the job's progress from the first diagnosis's share on)
+/// and stores the dataset `dataset` with them appended; fills in `bench`'s plan and datasets.
+fn capture_and_merge(
+    service: &Service,
+    dataset: &DatasetId,
+    options: &CompareOptions,
+    bench: &mut OnBenchCapture,
+    ctx: &JobContext,
+) -> Result<DatasetRecord, JobError> {
+    let dir = service.store.dataset_dir(dataset);
+    let manifest = Manifest::read(&dir).map_err(JobError::failed)?;
+    let plan = separating_plan(&manifest, &bench.runs, options).map_err(JobError::failed)?;
+    let experiment = plan
+        .experiment(&service.limits, service.sensor_px)
+        .and_then(|request| request.plan(&service.limits))
+        .map_err(JobError::failed)?;
+    service
+        .store
+        .check_runs_room(experiment.frame_count() as u64 * service.frame_bytes)
+        .map_err(JobError::failed)?;
+    bench.plan = Some(plan);
+    let capture = ScaledSink {
+        inner: ctx,
+        from: FIRST_SHARE,
+        span: CAPTURE_SHARE,
+    };
+    let (_, captured) = capture_frames(service, &experiment, ctx, &capture)?;
+    bench.captured = Some(captured.id.clone());
+    let merged = merge_into_store(
+        &service.store,
+        &dir,
+        &captured.id,
+        &format!("{} on the bench", manifest.name),
+        DatasetSource::Other(format!(
+            "on-bench {}: {dataset} and {}",
+            ctx.run_id, captured.id
+        )),
+    )
+    .map_err(JobError::failed)?;
+    registered(ctx, &merged, "the dataset with the bench's runs:");
+    bench.dataset = Some(merged.id.clone());
+    Ok(merged)
+}
+
+impl Job for OnBenchJob {
+    const KIND: RunKind = RunKind::OnBench;
+    const LANE: Lane = Lane::Bench;
+    type Request = CompareRequest;
+
+    fn request(&self) -> &CompareRequest {
+        &self.0.request
+    }
+
+    fn dataset(&self) -> Option<&DatasetId> {
+        Some(&self.0.dataset)
+    }
+
+    fn run(self, ctx: &JobContext) -> Result<JobOutput, JobError> {
+        let ModelAgainstDataset {
+            service,
+            dataset,
+            request,
+            model,
+            options,
+        } = self.0;
+        let part = |from: f64, span: f64| ScaledSink {
+            inner: ctx,
+            from,
+            span,
+        };
+        let dir = service.store.dataset_dir(&dataset);
+        let first = part(0.0, FIRST_SHARE);
+        let before = diagnose_rounds(
+            &dir,
+            &model,
+            &options,
+            request.rounds,
+            &progress_reporter(&first, "diagnosis of the dataset"),
+        )
+        .map_err(diagnose_failure)?;
+        let write_json = |rel: &str, value: &serde_json::Value| {
+            let bytes = serde_json::to_vec_pretty(value).map_err(JobError::failed)?;
+            ctx.write(rel, &bytes).map_err(JobError::failed)
+        };
+        write_json("results/diagnosis.json", &before.to_json())?;
+        let mut bench = OnBenchCapture {
+            runs: before.runs_to_separate.clone(),
+            ..OnBenchCapture::default()
+        };
+        let document = |bench: &OnBenchCapture, after: Option<&Rounds>| {
+            json!({
+                "before": before.to_json(),
+                "open_before": open_document(Some(&before)),
+                "bench": bench,
+                "after": after.map(Rounds::to_json),
+                "open_after": open_document(after),
+            })
+        };
+        if bench.runs.is_empty() {
+            write_json("results/on-bench.json", &document(&bench, None))?;
+            return Ok(JobOutput {
+                message: "nothing to capture: the diagnosis left no pair confounded by the dataset's design and no effect a move, a step series or static frames would reveal".into(),
+                result: JobResult::OnBench {
+                    before: Box::new(before),
+                    bench: Box::new(bench),
+                    after: None,
+                },
+            });
+        }
+        let merged = capture_and_merge(&service, &dataset, &options, &mut bench, ctx)?;
+        let second = part(
+            FIRST_SHARE + CAPTURE_SHARE,
+            1.0 - FIRST_SHARE - CAPTURE_SHARE,
+        );
+        let after = diagnose_rounds(
+            &service.store.dataset_dir(&merged.id),
+            &model,
+            &options,
+            request.rounds,
+            &progress_reporter(&second, "diagnosis with the bench's runs"),
+        )
+        .map_err(diagnose_failure)?;
+        write_json("results/on-bench.json", &document(&bench, Some(&after)))?;
+        let words = |pairs: Vec<String>| match pairs.is_empty() {
+            true => "none".to_string(),
+            false => pairs.join(", "),
+        };
+        Ok(JobOutput {
+            message: format!(
+                "confounded by the design: {} → {} with the bench's runs (dataset {})",
+                words(design_confounds(&before)),
+                words(design_confounds(&after)),
+                merged.id
+            ),
+            result: JobResult::OnBench {
+                before: Box::new(before),
+                bench: Box::new(bench),
+                after: Some(Box::new(after)),
+            },
+        })
+    }
+}
