@@ -1,7 +1,7 @@
 //! `ffdic diagnose --on-bench` through the binary (issue 33, "resolve confounds on the bench"):
 //! a dataset of the paper's design (one move, no static frames) captured on the small mock
 //! bench leaves distortion and scale confounded and the sensor's noise unrevealed; the bench
-//! captures moves of two sizes along x and y, a phase scan and static frames, the merged dataset
+//! captures designed moves (another size), a phase scan and static frames, the merged dataset
 //! is diagnosed again, and what the design left open is resolved.
 
 use crate::common::{daemon, ffdic_ok};
@@ -37,6 +37,37 @@ fn effects_of(list: &Value, key: &str) -> Vec<String> {
         .iter()
         .map(|x| x[key].to_string())
         .collect()
+}
+
+/// The plan's target and designed moves (diagnose/move_design.rs): a second size for the rule,
+/// the fewest that make the confounded fields differ, each within the dataset's own move.
+fn check_the_designed_moves(bench: &Value) -> Vec<Value> {
+    assert_eq!(bench["plan"]["patterns"], json!(["a"]));
+    let moves = bench["plan"]["moves"].as_array().unwrap().clone();
+    assert!(!moves.is_empty() && moves.len() <= 8, "{moves:?}");
+    for m in &moves {
+        let size = m["dx_mm"]
+            .as_f64()
+            .unwrap()
+            .hypot(m["dy_mm"].as_f64().unwrap());
+        assert!(size > 0.0 && size <= 2.0 + 1e-9, "{m}");
+    }
+    assert!(
+        moves.iter().any(|m| {
+            let size = m["dx_mm"]
+                .as_f64()
+                .unwrap()
+                .hypot(m["dy_mm"].as_f64().unwrap());
+            size * 1.5 <= 2.0
+        }),
+        "a move of another size: {moves:?}"
+    );
+    let pairs = bench["design"]["pairs"].to_string();
+    assert!(
+        pairs.contains("lens_distortion") && pairs.contains("scale"),
+        "{pairs}"
+    );
+    moves
 }
 
 #[test]
@@ -89,8 +120,7 @@ fn what_one_move_leaves_open_is_captured_on_the_bench_and_resolved() {
         runs.contains("several_move_sizes") && runs.contains("static_repeats"),
         "{runs}"
     );
-    assert_eq!(bench["plan"]["move_sizes_mm"], json!([0.5, 2.0]));
-    assert_eq!(bench["plan"]["pattern"], "a");
+    let moves = check_the_designed_moves(bench);
     // The merged dataset: the original run first, then the bench's, under their prefix, in the
     // data folder; the original folder is left as it was.
     let merged = PathBuf::from(bench["folder"].as_str().unwrap());
@@ -103,8 +133,10 @@ fn what_one_move_leaves_open_is_captured_on_the_bench_and_resolved() {
         .map(|r| r["id"].as_str().unwrap())
         .collect();
     assert_eq!(ids[0], "a-x2mm", "{ids:?}");
+    // The original run, the designed moves, four phase-scan steps along each axis.
+    assert_eq!(ids.len(), 1 + moves.len() + 8, "{ids:?}");
     assert!(
-        ids.len() > 8 && ids[1..].iter().all(|id| id.starts_with("bench-")),
+        ids[1..].iter().all(|id| id.starts_with("bench-")),
         "{ids:?}"
     );
     let original: Value =

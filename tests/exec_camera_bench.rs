@@ -690,8 +690,8 @@ fn design_confounds(rounds: &ffdic::diagnose::Rounds) -> Vec<[String; 2]> {
 /// paper's design (one 5 mm move of print a, no static frames) from the independent generator,
 /// whose lens distorts (k1 = −0.01 about the image centre), leaves distortion confounded with
 /// scale by its design and the sensor's noise unrevealed. The on-bench job (the API's
-/// `POST /datasets/{id}/on-bench`) asks for moves of several sizes and static frames; the exec
-/// camera, the generator behind it, captures them; the merged dataset's diagnosis has neither
+/// `POST /datasets/{id}/on-bench`) asks for moves of several sizes and static frames, and designs
+/// the moves; the exec camera, the generator behind it, captures them; the merged dataset's diagnosis has neither
 /// open question and names the distortion near its truth.
 #[test]
 fn what_one_move_leaves_open_the_generators_bench_resolves() {
@@ -741,56 +741,86 @@ fn what_one_move_leaves_open_the_generators_bench_resolves() {
         before.verdicts,
         after.verdicts
     );
-    let pair = ["lens_distortion".to_string(), "scale".to_string()];
-    assert!(design_confounds(&before).contains(&pair));
-    let not_identifiable = |r: &ffdic::diagnose::Rounds| -> Vec<ffdic::model::EffectId> {
-        let (_, open) = ffdic::diagnose::open_questions(&r.diagnoses);
-        open.iter().map(|n| n.effect).collect()
-    };
-    assert!(not_identifiable(&before).contains(&ffdic::model::EffectId::SensorNoise));
-    use ffdic::diagnose::SeparatingRuns;
-    assert!(
-        bench.runs.contains(&SeparatingRuns::SeveralMoveSizes),
-        "{:?}",
-        bench.runs
-    );
-    assert!(
-        bench.runs.contains(&SeparatingRuns::StaticRepeats),
-        "{:?}",
-        bench.runs
-    );
-    assert_eq!(bench.plan.as_ref().unwrap().move_sizes_mm, vec![1.25, 5.0]);
-    // The merged dataset: the original run, then the bench's under their prefix (eight moves;
-    // four phase-scan steps along each axis, which the aperture against the blur asks for); the
-    // stored original keeps its one run.
+    check_what_the_bench_asked_and_captured(&bench);
+    // The merged dataset: the original run, then the bench's under their prefix (the designed
+    // moves; four phase-scan steps along each axis, which the aperture against the blur asks
+    // for); the stored original keeps its one run.
     let merged =
         ffdic::dataset::Manifest::read(&service.store.dataset_dir(bench.dataset.as_ref().unwrap()))
             .unwrap();
     let ids: Vec<&str> = merged.runs.iter().map(|r| r.id.as_str()).collect();
-    assert!(
-        bench.runs.contains(&SeparatingRuns::StepSeries),
-        "{:?}",
-        bench.runs
-    );
-    assert_eq!(ids.len(), 17, "{ids:?}");
+    let moves = bench.plan.as_ref().unwrap().moves.len();
+    assert_eq!(ids.len(), 1 + moves + 8, "{ids:?}");
     assert!(
         ids[1..].iter().all(|id| id.starts_with("bench-")),
         "{ids:?}"
     );
     let original = ffdic::dataset::Manifest::read(&service.store.dataset_dir(&dataset)).unwrap();
     assert_eq!(original.runs.len(), 1);
-    // Resolved, and the distortion named near its truth.
-    assert!(
-        !design_confounds(&after).contains(&pair),
-        "{:?}",
-        design_confounds(&after)
-    );
-    assert!(!not_identifiable(&after).contains(&ffdic::model::EffectId::SensorNoise));
-    let k1 = after
-        .rounds
-        .iter()
-        .find(|r| r.verdict.as_ref().map(|v| v.to_string()) == Some("lens_distortion".into()))
-        .unwrap_or_else(|| panic!("lens_distortion named: {:?}", after.verdicts));
-    near("k1 on the bench", k1.params["k1"], k1.stderr["k1"], -0.01);
+    check_resolved_and_named(&before, &after);
     service.stop(Duration::from_secs(5));
+}
+
+/// The effects a diagnosis's rounds could not reveal.
+fn not_identifiable(r: &ffdic::diagnose::Rounds) -> Vec<ffdic::model::EffectId> {
+    let (_, open) = ffdic::diagnose::open_questions(&r.diagnoses);
+    open.iter().map(|n| n.effect).collect()
+}
+
+/// One move asks for moves of several sizes, a step series and static frames; the designed
+/// moves are few and answer the distortion/scale pair.
+fn check_what_the_bench_asked_and_captured(bench: &ffdic::service::job::OnBenchCapture) {
+    use ffdic::diagnose::SeparatingRuns;
+    for asked in [
+        SeparatingRuns::SeveralMoveSizes,
+        SeparatingRuns::StepSeries,
+        SeparatingRuns::StaticRepeats,
+    ] {
+        assert!(bench.runs.contains(&asked), "{asked:?}: {:?}", bench.runs);
+    }
+    // The designed moves: another size for the rule, the fewest that make the confounded
+    // geometric fields differ (their correlations before and after printed).
+    let plan = bench.plan.as_ref().unwrap();
+    let design = bench.design.as_ref().unwrap();
+    eprintln!(
+        "designed moves {:?} px; pairs {:?}",
+        design.moves_px, design.pairs
+    );
+    assert!(
+        !plan.moves.is_empty() && plan.moves.len() <= 8,
+        "{:?}",
+        plan.moves
+    );
+    assert!(design.pairs.iter().any(|p| p.effects
+        == [
+            ffdic::model::EffectId::LensDistortion,
+            ffdic::model::EffectId::Scale
+        ]));
+}
+
+/// Before, distortion and scale confounded by the design and the noise unrevealed; after,
+/// neither, and the distortion named near its truth (k1 = −0.01).
+fn check_resolved_and_named(before: &ffdic::diagnose::Rounds, after: &ffdic::diagnose::Rounds) {
+    let pair = ["lens_distortion".to_string(), "scale".to_string()];
+    assert!(design_confounds(before).contains(&pair));
+    assert!(not_identifiable(before).contains(&ffdic::model::EffectId::SensorNoise));
+    assert!(
+        !design_confounds(after).contains(&pair),
+        "{:?}",
+        design_confounds(after)
+    );
+    assert!(!not_identifiable(after).contains(&ffdic::model::EffectId::SensorNoise));
+    let k1_of = |r: &ffdic::diagnose::Rounds| {
+        r.rounds
+            .iter()
+            .find(|r| r.verdict.as_ref().map(|v| v.to_string()) == Some("lens_distortion".into()))
+            .map(|r| (r.params["k1"], r.stderr["k1"]))
+    };
+    let (k1, se) =
+        k1_of(after).unwrap_or_else(|| panic!("lens_distortion named: {:?}", after.verdicts));
+    eprintln!(
+        "k1: one move {:?}, with the bench's runs {k1} ± {se} (truth -0.01)",
+        k1_of(before)
+    );
+    near("k1 on the bench", k1, se, -0.01);
 }

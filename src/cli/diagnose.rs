@@ -269,12 +269,34 @@ fn on_bench_text(b: &OnBench) -> String {
         return "\n== on the bench: nothing to capture (no pair confounded by the dataset's design, no effect a move, a step series or static frames would reveal)\n".into();
     };
     let runs: Vec<&str> = b.bench.runs.iter().map(|r| r.describe()).collect();
+    let moves: Vec<String> = plan
+        .moves
+        .iter()
+        .map(|m| format!("({:.3}, {:.3})", m.dx_mm, m.dy_mm))
+        .collect();
+    let pairs: Vec<String> = b
+        .bench
+        .design
+        .iter()
+        .flat_map(|d| &d.pairs)
+        .map(|p| {
+            format!(
+                "{}/{} {:.3} -> {:.3}",
+                p.effects[0], p.effects[1], p.correlation_before, p.correlation_after
+            )
+        })
+        .collect();
+    let steps: usize = plan.step_series.iter().map(|s| s.count).sum();
     format!(
-        "\n== on the bench: {} (moves of {:?} mm along ±x and ±y, a phase scan of {} steps, {} static frames); the dataset with them: {}\n",
+        "\n== on the bench: {} (moves {} mm, {} phase-scan steps, {} static frames){}; the dataset with them: {}\n",
         runs.join(", "),
-        plan.move_sizes_mm,
-        plan.phase_scan_count,
+        moves.join(" "),
+        steps,
         plan.static_frames,
+        match pairs.is_empty() {
+            true => String::new(),
+            false => format!("; signature correlations {}", pairs.join(", ")),
+        },
         folder.display()
     )
 }

@@ -4,6 +4,7 @@
 //! the same knowledge as a vocabulary a bench's plan is built from. What no stage move can
 //! supply (a characterised print, a stated repeatability, flat fields) maps to nothing.
 
+use super::geometric::Geometric;
 use super::identifiability::{Confounded, NotIdentifiable};
 use super::Diagnosis;
 use crate::model::EffectId;
@@ -73,13 +74,21 @@ fn runs_for(
 ) -> Vec<SeparatingRuns> {
     let mut runs: Vec<SeparatingRuns> = confounded
         .iter()
-        .filter(|c| c.evidence == "design")
+        .filter(|c| c.evidence == "design" || both_geometric(c))
         .flat_map(for_confounded)
         .chain(not_identifiable.iter().flat_map(for_not_identifiable))
         .collect();
     runs.sort();
     runs.dedup();
     runs
+}
+
+/// Whether both sides of a pair are geometric effects: two fields the data could not tell
+/// apart, which other moves make different (`move_design.rs` chooses them).
+fn both_geometric(c: &Confounded) -> bool {
+    c.effects
+        .iter()
+        .all(|e| e.parse::<EffectId>().ok().and_then(Geometric::of).is_some())
 }
 
 /// The runs that separate a confounded pair (empty when one side is not a catalogue effect a
@@ -132,8 +141,8 @@ mod tests {
 
     /// The paper's design (one 5 mm move, no repeats, no step series): the bench adds moves of
     /// several sizes for distortion against scale, a step series for the aperture against the
-    /// blur, static frames for the noise; a confound with the print adds nothing, and data
-    /// confounds are left to the diagnosis.
+    /// blur, static frames for the noise; a confound with the print adds nothing, and a data
+    /// confound is the bench's only between two geometric fields.
     #[test]
     fn each_open_question_asks_for_its_runs() {
         let design = design_of(&manifest(&[(5.0, 0.0)], &["a"], false), 2560);
@@ -144,7 +153,7 @@ mod tests {
             EffectId::PsfBlur,
         ]);
         pairs.push(confounded("psf_blur", "print", "design"));
-        pairs.push(confounded("rotation", "target_tilt", "data"));
+        pairs.push(confounded("fill_factor", "vignetting", "data"));
         let not_identifiable: Vec<NotIdentifiable> = [EffectId::SensorNoise, EffectId::StageError]
             .into_iter()
             .filter_map(|e| design.not_identifiable(e))
@@ -160,5 +169,10 @@ mod tests {
         );
         // Nothing open: nothing for the bench.
         assert!(runs_for(&[], &[]).is_empty());
+        // Two geometric fields the data could not tell apart: other moves can.
+        assert_eq!(
+            runs_for(&[confounded("rotation", "target_tilt", "data")], &[]),
+            vec![SeparatingRuns::SeveralMoveSizes, SeparatingRuns::BothAxes]
+        );
     }
 }

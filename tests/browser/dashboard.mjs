@@ -330,6 +330,16 @@ async function main() {
       const models = await page.evaluate(async () => (await (await fetch("/api/v1/models")).json()).map((m) => m.name));
       expect(!models.some((n) => n.startsWith("card-perpendicularity-")), `a check keeps no model: ${models.join(", ")}`);
     }
+    // Kept checking while the mount is adjusted: the readings follow one another until unticked.
+    await page.locator("#perp-live").setChecked(true);
+    await page.locator("#perp-btn").click();
+    if (expect(await appears(page, "#perp-history li[data-reading='3']", 120 * SECOND), "kept checking, the readings follow one another")) {
+      await page.locator("#perp-live").setChecked(false);
+      await page.waitForFunction(() => !document.querySelector("#perp-btn").disabled, null, { timeout: 120 * SECOND });
+      const readings = await page.locator("#perp-history li").count();
+      expect(readings >= 3 && readings <= 4, `unticked, the checks stop (${readings} readings)`);
+      log(`perpendicularity kept: ${(await page.locator("#perp-history li").first().innerText()).replace(/\s+/g, " ")}`);
+    }
 
     // ---- upload the hidden-effect dataset through the form ----
     await page.goto(`${base}/`);

@@ -358,14 +358,19 @@ async function showOnBench(job) {
   const [before, after] = [openLines(doc.open_before), openLines(doc.open_after)];
   const verdicts = (r) => (r && r.verdicts && r.verdicts.length ? r.verdicts.join(", ") : "none");
   const plan = b.plan || {};
+  const moves = (plan.moves || []).map((m) => `(${num(m.dx_mm, 3)}, ${num(m.dy_mm, 3)})`).join(" ") || "none";
+  const steps = (plan.step_series || []).reduce((n, st) => n + st.count, 0);
+  const pairs = ((b.design || {}).pairs || []).map((p) => el("li", { "data-pair": p.effects.join(" ") },
+    `${p.effects.join(" and ")}: their fields' correlation ${num(p.correlation_before, 3)} with the dataset's moves, ${num(p.correlation_after, 3)} with the bench's`));
   const rows = [...new Set([...before, ...after])].map((line) => el("tr", { "data-open": line },
     el("td", {}, line),
     el("td", {}, before.includes(line) ? "open" : "—"),
     el("td", { class: after.includes(line) ? "" : "resolved" }, after.includes(line) ? "open" : "resolved")));
   clear(box, [
     el("h3", {}, "On the bench"),
-    el("p", { class: "small" }, `Captured ${(b.runs || []).map((r) => SEPARATING_RUNS[r] || r).join(", ")}: moves of ${(plan.move_sizes_mm || []).map((s) => num(s, 3)).join(" and ") || "no"} mm along ±x and ±y, a phase scan of ${plan.phase_scan_count || 0} steps, ${plan.static_frames || 0} static frames. The dataset with them: `,
+    el("p", { class: "small" }, `Captured ${(b.runs || []).map((r) => SEPARATING_RUNS[r] || r).join(", ")}: moves (x, y) ${moves} mm, ${steps} phase-scan steps, ${plan.static_frames || 0} static frames. The dataset with them: `,
       el("a", { href: `/datasets/${encodeURIComponent(b.dataset)}`, class: "mono", id: "on-bench-dataset" }, b.dataset), "."),
+    pairs.length ? el("ul", { class: "small", id: "on-bench-design" }, pairs) : null,
     el("table", { id: "on-bench-table" },
       el("thead", {}, el("tr", {}, ["what the dataset left open", "before", "with the bench's runs"].map((h) => el("th", {}, h)))),
       el("tbody", {}, rows.length ? rows : [el("tr", {}, el("td", { colspan: 3, class: "muted" }, "nothing was open"))])),

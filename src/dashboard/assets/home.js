@@ -262,9 +262,7 @@ const PERPENDICULARITY_PLAN = { name: "perpendicularity", phase_scan_count: 0, s
 /** A small move back and forth on the bench (a calibration of the preset plan), then the
  * card's target tilt and stage angle with their standard errors. */
 async function checkPerpendicularity() {
-  const btn = $("#perp-btn");
   const status = $("#perp-status");
-  btn.disabled = true;
   showError($("#perp-error"), null);
   try {
     const run = await api("/calibrations", { method: "POST", body: { ...PERPENDICULARITY_PLAN, pattern: $("#perp-pattern").value } });
@@ -300,15 +298,40 @@ async function checkPerpendicularity() {
       kept ? "" : "; its model is not kept (a calibration keeps one)"));
     status.textContent = `checked ${new Date().toLocaleTimeString()}`;
     $("#perp-result").dataset.loaded = "true";
+    return { rows, significant: !!(tilt && tilt.significant) };
   } catch (e) {
     showError($("#perp-error"), e);
     status.textContent = "";
+    return null;
+  }
+}
+
+/** One reading in the history the user adjusts the mount by, newest first. */
+function addReading(reading) {
+  const list = $("#perp-history");
+  const n = list.children.length + 1;
+  const words = reading.rows.filter(([, , key]) => key !== "working_distance_mm").map(([name, value]) => `${name} ${value}`);
+  list.prepend(el("li", { "data-reading": String(n), "data-significant": String(reading.significant) },
+    `${new Date().toLocaleTimeString()} — ${words.join("; ") || "no tilt separated"}${reading.significant ? " (significant)" : ""}`));
+}
+
+/** Checks once, or again and again while "keep checking" is ticked: the readings follow the
+ * mount as the user adjusts it. */
+async function perpendicularity() {
+  const btn = $("#perp-btn");
+  btn.disabled = true;
+  try {
+    do {
+      const reading = await checkPerpendicularity();
+      if (!reading) break;
+      addReading(reading);
+    } while ($("#perp-live").checked);
   } finally {
     btn.disabled = false;
   }
 }
 
-$("#perp-btn").addEventListener("click", checkPerpendicularity);
+$("#perp-btn").addEventListener("click", perpendicularity);
 
 $("#camera-form").addEventListener("submit", async (ev) => {
   ev.preventDefault();

@@ -10,9 +10,15 @@
 use super::comparison::ModelAgainstDataset;
 use super::experiment::{capture_frames, registered};
 use super::{diagnose_failure, progress_reporter, CompareRequest, Job};
+use crate::bench::BenchLimits;
 use crate::dataset::{merge_datasets, Manifest};
-use crate::diagnose::{diagnose_rounds, open_questions, CompareOptions, Rounds, SeparatingRuns};
-use crate::experiment::{CalibrationPlan, FieldError, PatternSpec, RunSink, SchemeSpec};
+use crate::diagnose::{
+    design_for, diagnose_rounds, open_questions, CompareOptions, Confounded, MoveDesign, Rounds,
+    SeparatingRuns,
+};
+use crate::experiment::{
+    CalibrationPlan, ExperimentRequest, FieldError, MoveSpec, PatternSpec, RunSink, SchemeSpec,
+};
 use crate::model::ModelConfig;
 use crate::service::jobs::{JobContext, JobError, JobOutput, JobResult, Lane};
 use crate::service::scaled_sink::ScaledSink;
@@ -38,8 +44,10 @@ pub struct OnBenchJob(ModelAgainstDataset);
 pub struct OnBenchCapture {
     /// The kinds of runs the first diagnosis asked for (empty: nothing a bench resolves).
     pub runs: Vec<SeparatingRuns>,
-    /// The plan that captured them.
-    pub plan: Option<CalibrationPlan>,
+    /// The experiment that captured them.
+    pub plan: Option<ExperimentRequest>,
+    /// How its moves were chosen: the geometric pairs' signature correlations before and after.
+    pub design: Option<MoveDesign>,
     /// The bench's frames alone, as a stored dataset.
     pub captured: Option<DatasetId>,
     /// The dataset's runs and the bench's (ids `bench-…`), diagnosed again.
@@ -120,33 +128,33 @@ fn target_label(manifest: &Manifest) -> Result<String, FieldError> {
         })
 }
 
-/// The plan that captures `runs` on the dataset's target at the dataset's own move size: ±x and
-/// ±y at the largest move and a quarter of it where sizes or directions are asked for (the
-/// identifiability rule's ratio of 1.5 with room to spare), a phase scan of four steps for a
-/// step series, two static frames for repeats.
+/// The experiment that captures `runs` on the dataset's target (`open`: the pairs the
+/// diagnosis left confounded), with the design of its moves: chosen from ±x and ±y at a quarter,
+/// a half and all of the dataset's largest move (the calibration's default size when it has no
+/// move) to meet the identifiability rules `runs` names and make the geometric pairs' fields
+/// differ, fewest first ([`crate::diagnose::design_for`]); a phase scan of four steps for a step
+/// series, two static frames for repeats.
 pub fn separating_plan(
     manifest: &Manifest,
-    runs: &[SeparatingRuns],
-    options: &CompareOptions,
-) -> Result<CalibrationPlan, FieldError> {
+    (open, runs): (&[Confounded], &[SeparatingRuns]),
+    limits: &BenchLimits,
+    sensor_px: (u32, u32),
+) -> Result<(ExperimentRequest, MoveDesign), FieldError> {
+    let scale = manifest.scale_px_per_mm;
+    let existing_px: Vec<(f64, f64)> = manifest
+        .runs
+        .iter()
+        .map(|r| (r.stage.dx_mm * scale, r.stage.dy_mm * scale))
+        .collect();
     let largest_mm = manifest
         .runs
         .iter()
         .map(|r| r.stage.dx_mm.hypot(r.stage.dy_mm))
         .fold(0.0, f64::max);
     let wants = |k: SeparatingRuns| runs.contains(&k);
-    let move_sizes_mm = match (
-        largest_mm > 0.0,
-        wants(SeparatingRuns::SeveralMoveSizes) || wants(SeparatingRuns::BothAxes),
-    ) {
-        (false, _) => Vec::new(),
-        (true, true) => vec![0.25 * largest_mm, largest_mm],
-        (true, false) => vec![largest_mm],
-    };
-    Ok(CalibrationPlan {
+    let calibration = CalibrationPlan {
         name: "on-bench".into(),
         pattern: PatternSpec::Preset(target_label(manifest)?),
-        move_sizes_mm,
         phase_scan_count: if wants(SeparatingRuns::StepSeries) {
             4
         } else {
@@ -158,9 +166,49 @@ pub fn separating_plan(
             0
         },
         rounds: 1,
-        dic: options.dic.clone(),
         ..CalibrationPlan::default()
-    })
+    };
+    let largest_mm = match largest_mm > 0.0 {
+        true => largest_mm,
+        false => calibration
+            .sizes_mm(limits, sensor_px.0)
+            .into_iter()
+            .fold(0.0, f64::max),
+    };
+    let menu_mm: Vec<(f64, f64)> = [0.25, 0.5, 1.0]
+        .iter()
+        .flat_map(|s| {
+            let d = s * largest_mm;
+            [(d, 0.0), (-d, 0.0), (0.0, d), (0.0, -d)]
+        })
+        .collect();
+    let menu_px: Vec<(f64, f64)> = menu_mm.iter().map(|m| (m.0 * scale, m.1 * scale)).collect();
+    let frame = (f64::from(sensor_px.0), f64::from(sensor_px.1));
+    let design = design_for(open, runs, &existing_px, &menu_px, frame);
+    let mut request = CalibrationPlan {
+        move_sizes_mm: vec![largest_mm],
+        ..calibration
+    }
+    .experiment(limits, sensor_px)?;
+    request.moves = design
+        .moves_px
+        .iter()
+        .enumerate()
+        .map(|(k, m)| MoveSpec {
+            id: format!("m{}", k + 1),
+            dx_mm: m.0 / scale,
+            dy_mm: m.1 / scale,
+        })
+        .collect();
+    if request.moves.is_empty() && request.step_series.is_empty() {
+        // Static frames alone: an experiment has a move; the smallest of the menu.
+        request.moves.push(MoveSpec {
+            id: "m1".into(),
+            dx_mm: menu_mm[0].0,
+            dy_mm: 0.0,
+        });
+    }
+    Ok((request, design))
 }
 
 /// The dataset in `base_dir` with the runs of the stored dataset `added` appended (ids, frame
@@ -208,22 +256,26 @@ fn design_confounds(r: &Rounds) -> Vec<String> {
 fn capture_and_merge(
     service: &Service,
     dataset: &DatasetId,
-    options: &CompareOptions,
+    open: &[Confounded],
     bench: &mut OnBenchCapture,
     ctx: &JobContext,
 ) -> Result<DatasetRecord, JobError> {
     let dir = service.store.dataset_dir(dataset);
     let manifest = Manifest::read(&dir).map_err(JobError::failed)?;
-    let plan = separating_plan(&manifest, &bench.runs, options).map_err(JobError::failed)?;
-    let experiment = plan
-        .experiment(&service.limits, service.sensor_px)
-        .and_then(|request| request.plan(&service.limits))
-        .map_err(JobError::failed)?;
+    let (request, design) = separating_plan(
+        &manifest,
+        (open, &bench.runs),
+        &service.limits,
+        service.sensor_px,
+    )
+    .map_err(JobError::failed)?;
+    let experiment = request.plan(&service.limits).map_err(JobError::failed)?;
     service
         .store
         .check_runs_room(experiment.frame_count() as u64 * service.frame_bytes)
         .map_err(JobError::failed)?;
-    bench.plan = Some(plan);
+    bench.plan = Some(request);
+    bench.design = Some(design);
     let capture = ScaledSink {
         inner: ctx,
         from: FIRST_SHARE,
@@ -312,7 +364,8 @@ impl Job for OnBenchJob {
                 },
             });
         }
-        let merged = capture_and_merge(&service, &dataset, &options, &mut bench, ctx)?;
+        let (open, _) = open_questions(&before.diagnoses);
+        let merged = capture_and_merge(&service, &dataset, &open, &mut bench, ctx)?;
         let second = part(
             FIRST_SHARE + CAPTURE_SHARE,
             1.0 - FIRST_SHARE - CAPTURE_SHARE,
