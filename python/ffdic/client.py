@@ -692,6 +692,18 @@ class Client:
         folder, _, name = path.partition("/")
         return self._bytes("GET", f"/jobs/{_quote(job_id)}/files/{_quote(folder)}/{_quote(name)}")
 
+    def _dataset_job(
+        self,
+        dataset_id: str,
+        kind: str,
+        body: Mapping[str, Any],
+        idempotency_key: Optional[str],
+        progress: Union[ProgressCallback, bool, None],
+    ) -> JobResult:
+        """``POST /datasets/{id}/{kind}`` with ``body``, followed to its end: its results."""
+        job_id = self._submit(f"/datasets/{_quote(dataset_id)}/{kind}", body, idempotency_key)
+        return self._job_result(job_id, progress)
+
     def _job_result(self, job_id: str, progress: Union[ProgressCallback, bool, None]) -> JobResult:
         job = self.follow(job_id, progress=progress, kind="job")
         doc_path = _JOB_DOCUMENT.get(str(job.get("kind")), "results/study.json")
@@ -819,8 +831,7 @@ class Client:
         fields: ``schemes``, ``dic``, ``seed``. Each comparison joins the dataset's
         :meth:`history`. Raises :class:`RunFailed` if the job fails."""
         body = {"model": model, **request}
-        job_id = self._submit(f"/datasets/{_quote(dataset_id)}/comparisons", body, idempotency_key)
-        return self._job_result(job_id, progress)
+        return self._dataset_job(dataset_id, "comparisons", body, idempotency_key, progress)
 
     def diagnose(
         self,
@@ -839,8 +850,7 @@ class Client:
         model with the effect added (:meth:`add_model` stores it). ``rounds`` > 1 (up to 8) adds
         each winner and diagnoses again, and puts every step into the dataset's history."""
         body = {"model": model, "rounds": rounds, **request}
-        job_id = self._submit(f"/datasets/{_quote(dataset_id)}/diagnoses", body, idempotency_key)
-        return self._job_result(job_id, progress)
+        return self._dataset_job(dataset_id, "diagnoses", body, idempotency_key, progress)
 
     def diagnose_on_bench(
         self,
@@ -860,8 +870,7 @@ class Client:
         ``not_identifiable`` effects), ``bench`` (``runs``, ``plan``, ``captured`` and
         ``dataset``: the new dataset's id; all null when nothing was left for a bench)."""
         body = {"model": model, "rounds": rounds, **request}
-        job_id = self._submit(f"/datasets/{_quote(dataset_id)}/on-bench", body, idempotency_key)
-        return self._job_result(job_id, progress)
+        return self._dataset_job(dataset_id, "on-bench", body, idempotency_key, progress)
 
     def history(self, dataset_id: str) -> List[Dict[str, Any]]:
         """``GET /datasets/{id}/history``: the dataset's comparisons, oldest first, each with

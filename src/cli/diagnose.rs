@@ -266,7 +266,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
 /// What the bench captured, and where the merged dataset is.
 fn on_bench_text(b: &OnBench) -> String {
     let (Some(plan), Some(folder)) = (&b.bench.plan, &b.folder) else {
-        return "\n== on the bench: nothing to capture (no pair confounded by the dataset's design, no effect a move, a step series or static frames would reveal)\n".into();
+        return format!("\n== on the bench: {}\n", b.message);
     };
     let runs: Vec<&str> = b.bench.runs.iter().map(|r| r.describe()).collect();
     let moves: Vec<String> = plan

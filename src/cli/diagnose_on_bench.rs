@@ -19,6 +19,8 @@ pub struct OnBench {
     pub bench: OnBenchCapture,
     pub folder: Option<PathBuf>,
     pub after: Option<Rounds>,
+    /// The job's closing message (what it captured, or why nothing).
+    pub message: String,
 }
 
 /// The dataset in `dir` diagnosed with `model`, `options` and `rounds`, completed on `config`'s
@@ -37,7 +39,7 @@ pub fn on_bench(
         let job =
             OnBenchJob::for_model(&service, &dataset, model.clone(), options.clone(), rounds)?;
         let (record, _) = service.submit(job, None)?;
-        wait(
+        let record = wait(
             &service,
             &record.id,
             "diagnosing, capturing, diagnosing again",
@@ -60,6 +62,7 @@ pub fn on_bench(
                     .map(|id| service.store.dataset_dir(id)),
                 bench: *bench,
                 after: after.map(|a| *a),
+                message: record.message,
             },
         ))
     })();

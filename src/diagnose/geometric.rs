@@ -6,6 +6,7 @@
 
 use super::basis::GeometricParam;
 use super::fit_geometric::GeometricFit;
+use super::identifiability::Confounded;
 use crate::model::{EffectId, Effects};
 
 /// What the geometric fits need beyond the field samples.
@@ -74,6 +75,15 @@ impl Geometric {
             | EffectId::IlluminationChange
             | EffectId::MotionBlur => None,
         }
+    }
+
+    /// A confounded pair's two sides as geometric effects; None unless both are.
+    pub fn pair_of(c: &Confounded) -> Option<[Geometric; 2]> {
+        let [a, b] = c
+            .effects
+            .each_ref()
+            .map(|e| e.parse::<EffectId>().ok().and_then(Geometric::of));
+        Some([a?, b?])
     }
 
     /// The basis fields of the effect `model` holds, as a re-estimation frees them: every term

@@ -245,16 +245,7 @@ pub fn design_for(
     menu_px: &[(f64, f64)],
     frame: (f64, f64),
 ) -> MoveDesign {
-    let pairs: Vec<[Geometric; 2]> = confounded
-        .iter()
-        .filter_map(|c| {
-            let [a, b] = c
-                .effects
-                .each_ref()
-                .map(|e| e.parse::<EffectId>().ok().and_then(Geometric::of));
-            Some([a?, b?])
-        })
-        .collect();
+    let pairs: Vec<[Geometric; 2]> = confounded.iter().filter_map(Geometric::pair_of).collect();
     let rules = MoveRules {
         several_sizes: runs.contains(&SeparatingRuns::SeveralMoveSizes),
         both_axes: runs.contains(&SeparatingRuns::BothAxes),

@@ -74,21 +74,15 @@ fn runs_for(
 ) -> Vec<SeparatingRuns> {
     let mut runs: Vec<SeparatingRuns> = confounded
         .iter()
-        .filter(|c| c.evidence == "design" || both_geometric(c))
+        // Two geometric fields the data could not tell apart: other moves make them differ
+        // (`move_design.rs` chooses them).
+        .filter(|c| c.evidence == "design" || Geometric::pair_of(c).is_some())
         .flat_map(for_confounded)
         .chain(not_identifiable.iter().flat_map(for_not_identifiable))
         .collect();
     runs.sort();
     runs.dedup();
     runs
-}
-
-/// Whether both sides of a pair are geometric effects: two fields the data could not tell
-/// apart, which other moves make different (`move_design.rs` chooses them).
-fn both_geometric(c: &Confounded) -> bool {
-    c.effects
-        .iter()
-        .all(|e| e.parse::<EffectId>().ok().and_then(Geometric::of).is_some())
 }
 
 /// The runs that separate a confounded pair (empty when one side is not a catalogue effect a

@@ -6,7 +6,7 @@
 //! lens blur (their bias against the sub-pixel phase differs), the repeats give the noise floor.
 //! Plans are TOML files like experiments; unknown keys are refused with the key named.
 
-use super::request::{ExperimentRequest, FieldError, SchemeSpec};
+use super::request::{field_error, ExperimentRequest, FieldError, SchemeSpec};
 use super::spec::{MoveSpec, PatternSpec, StepSeries};
 use crate::bench::BenchLimits;
 use crate::dic::DicSettings;
@@ -135,32 +135,11 @@ impl CalibrationPlan {
         limits: &BenchLimits,
         size: (u32, u32),
     ) -> Result<ExperimentRequest, FieldError> {
-        let bad = |field: &str, reason: String| FieldError {
-            field: field.into(),
-            reason,
-        };
         let sizes = self.sizes_mm(limits, size.0);
         if let Some(s) = sizes.iter().find(|s| !(s.is_finite() && **s > 0.0)) {
-            return Err(bad(
+            return Err(field_error(
                 "move_sizes_mm",
                 format!("every size must be a positive number of mm, got {s}"),
-            ));
-        }
-        let max_px = self.dic.max_motion_px as f64;
-        if let Some(s) = sizes.iter().find(|s| **s * limits.scale_px_per_mm > max_px) {
-            return Err(bad(
-                "move_sizes_mm",
-                format!(
-                    "a {s} mm move is {:.0} px at {} px/mm, beyond what the DIC tracks (dic.max_motion_px, {max_px:.0})",
-                    s * limits.scale_px_per_mm,
-                    limits.scale_px_per_mm
-                ),
-            ));
-        }
-        if !(self.phase_scan_step_px.is_finite() && self.phase_scan_step_px >= 0.0) {
-            return Err(bad(
-                "phase_scan_step_px",
-                "must be a non-negative number of px".into(),
             ));
         }
         let mut moves = Vec::new();
@@ -177,6 +156,40 @@ impl CalibrationPlan {
                     dy_mm: dy * size,
                 });
             }
+        }
+        self.experiment_with_moves(limits, size, moves)
+    }
+
+    /// [`Self::experiment`] with `moves` in place of the plan's sizes' (an on-bench diagnosis's
+    /// designed moves): the plan's target, phase scan, static frames and DIC; every move within
+    /// what the DIC tracks.
+    pub fn experiment_with_moves(
+        &self,
+        limits: &BenchLimits,
+        size: (u32, u32),
+        moves: Vec<MoveSpec>,
+    ) -> Result<ExperimentRequest, FieldError> {
+        let max_px = self.dic.max_motion_px as f64;
+        let length_mm = |m: &MoveSpec| m.dx_mm.hypot(m.dy_mm);
+        if let Some(s) = moves
+            .iter()
+            .map(length_mm)
+            .find(|s| *s * limits.scale_px_per_mm > max_px)
+        {
+            return Err(field_error(
+                "move_sizes_mm",
+                format!(
+                    "a {s} mm move is {:.0} px at {} px/mm, beyond what the DIC tracks (dic.max_motion_px, {max_px:.0})",
+                    s * limits.scale_px_per_mm,
+                    limits.scale_px_per_mm
+                ),
+            ));
+        }
+        if !(self.phase_scan_step_px.is_finite() && self.phase_scan_step_px >= 0.0) {
+            return Err(field_error(
+                "phase_scan_step_px",
+                "must be a non-negative number of px",
+            ));
         }
         let step_mm = self.phase_scan_step_px / limits.scale_px_per_mm;
         let step_series = if self.phase_scan_count > 0 && step_mm > 0.0 {

@@ -13,6 +13,7 @@ pub use calibration_plan::{
     CalibrationPlan, PlanError, DEFAULT_LARGE_MOVE_FIELD_FRACTION, DEFAULT_MOVE_SIZE_RATIO,
 };
 pub use captures::{capture_plan, layout_seed, CaptureRun, TargetCapture};
+pub(crate) use request::field_error;
 pub use request::{
     check_dic, check_run_name, check_schemes, is_hardware_scheme_name, ExperimentPlan,
     ExperimentRequest, FieldError, SchemeSpec, MAX_FRAMES_AVERAGED, MAX_MOVES, MAX_PATTERNS,

@@ -93,7 +93,8 @@ pub struct FieldError {
     pub reason: String,
 }
 
-fn field_error(field: impl Into<String>, reason: impl Into<String>) -> FieldError {
+/// A [`FieldError`] naming `field`.
+pub(crate) fn field_error(field: impl Into<String>, reason: impl Into<String>) -> FieldError {
     FieldError {
         field: field.into(),
         reason: reason.into(),

@@ -20,7 +20,7 @@ pub use calibration::{calibration_options, card_prefix, CalibrationJob};
 pub use comparison::{CompareRequest, ComparisonJob};
 pub use diagnosis::DiagnosisJob;
 pub use experiment::ExperimentJob;
-pub use on_bench::{merge_into_store, separating_plan, OnBenchCapture, OnBenchJob, BENCH_PREFIX};
+pub use on_bench::{OnBenchCapture, OnBenchJob};
 pub use sweep::{plan_sweep, SweepJob, MAX_DAEMON_SENSOR_SIDE_PX, MAX_DAEMON_SWEEP_TASKS};
 
 use super::jobs::{JobContext, JobError, JobOutput, Lane};

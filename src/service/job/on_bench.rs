@@ -17,7 +17,8 @@ use crate::diagnose::{
     SeparatingRuns,
 };
 use crate::experiment::{
-    CalibrationPlan, ExperimentRequest, FieldError, MoveSpec, PatternSpec, RunSink, SchemeSpec,
+    field_error, CalibrationPlan, ExperimentRequest, FieldError, MoveSpec, PatternSpec, RunSink,
+    SchemeSpec,
 };
 use crate::model::ModelConfig;
 use crate::service::jobs::{JobContext, JobError, JobOutput, JobResult, Lane};
@@ -33,7 +34,7 @@ const FIRST_SHARE: f64 = 0.4;
 const CAPTURE_SHARE: f64 = 0.2;
 
 /// The prefix of the bench's run ids, frame files and pattern labels in the merged dataset.
-pub const BENCH_PREFIX: &str = "bench-";
+const BENCH_PREFIX: &str = "bench-";
 
 /// An on-bench diagnosis, checked: a diagnosis's request, a stage, a dataset that names the
 /// target the bench is to mount.
@@ -100,16 +101,9 @@ impl OnBenchJob {
             return Err(SubmitError::NoStage);
         }
         let manifest = Manifest::read(&job.service.store.dataset_dir(&job.dataset))
-            .map_err(|e| field("dataset", e.to_string()))?;
+            .map_err(|e| field_error("dataset", e.to_string()))?;
         target_label(&manifest)?;
         Ok(Self(job))
-    }
-}
-
-fn field(name: &str, reason: String) -> FieldError {
-    FieldError {
-        field: name.into(),
-        reason,
     }
 }
 
@@ -121,9 +115,9 @@ fn target_label(manifest: &Manifest) -> Result<String, FieldError> {
         .iter()
         .find_map(|r| r.pattern.as_ref().map(|p| p.label.clone()))
         .ok_or_else(|| {
-            field(
+            field_error(
                 "dataset",
-                "the dataset names no pattern: the bench must know which target to mount".into(),
+                "the dataset names no pattern: the bench must know which target to mount",
             )
         })
 }
@@ -134,7 +128,7 @@ fn target_label(manifest: &Manifest) -> Result<String, FieldError> {
 /// move) to meet the identifiability rules `runs` names and make the geometric pairs' fields
 /// differ, fewest first ([`crate::diagnose::design_for`]); a phase scan of four steps for a step
 /// series, two static frames for repeats.
-pub fn separating_plan(
+fn separating_plan(
     manifest: &Manifest,
     (open, runs): (&[Confounded], &[SeparatingRuns]),
     limits: &BenchLimits,
@@ -185,12 +179,7 @@ pub fn separating_plan(
     let menu_px: Vec<(f64, f64)> = menu_mm.iter().map(|m| (m.0 * scale, m.1 * scale)).collect();
     let frame = (f64::from(sensor_px.0), f64::from(sensor_px.1));
     let design = design_for(open, runs, &existing_px, &menu_px, frame);
-    let mut request = CalibrationPlan {
-        move_sizes_mm: vec![largest_mm],
-        ..calibration
-    }
-    .experiment(limits, sensor_px)?;
-    request.moves = design
+    let mut moves: Vec<MoveSpec> = design
         .moves_px
         .iter()
         .enumerate()
@@ -200,20 +189,21 @@ pub fn separating_plan(
             dy_mm: m.1 / scale,
         })
         .collect();
-    if request.moves.is_empty() && request.step_series.is_empty() {
+    if moves.is_empty() && !wants(SeparatingRuns::StepSeries) {
         // Static frames alone: an experiment has a move; the smallest of the menu.
-        request.moves.push(MoveSpec {
+        moves.push(MoveSpec {
             id: "m1".into(),
             dx_mm: menu_mm[0].0,
             dy_mm: 0.0,
         });
     }
+    let request = calibration.experiment_with_moves(limits, sensor_px, moves)?;
     Ok((request, design))
 }
 
 /// The dataset in `base_dir` with the runs of the stored dataset `added` appended (ids, frame
 /// files and pattern labels prefixed [`BENCH_PREFIX`]), committed to `store` as a new dataset.
-pub fn merge_into_store(
+fn merge_into_store(
     store: &RunStore,
     base_dir: &Path,
     added: &DatasetId,
