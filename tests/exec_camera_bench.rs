@@ -28,18 +28,29 @@ const SCALE_PX_PER_MM: f64 = 13.0;
 
 /// A daemon config whose camera is `command`, 640x540 16-bit, on the mock stage.
 fn config(data: &Path, command: &[String]) -> DaemonConfig {
+    config_sized(data, command, (640, 540), SCALE_PX_PER_MM)
+}
+
+/// A daemon config whose camera is `command`, `width` x `height` 16-bit at `scale_px_per_mm`,
+/// on the mock stage.
+pub(crate) fn config_sized(
+    data: &Path,
+    command: &[String],
+    (width, height): (u32, u32),
+    scale_px_per_mm: f64,
+) -> DaemonConfig {
     let text = format!(
         r#"
 data_dir = {data:?}
 listen = "127.0.0.1:0"
 [bench]
-scale_px_per_mm = {SCALE_PX_PER_MM}
+scale_px_per_mm = {scale_px_per_mm}
 frame_timeout_ms = 60000
 [camera]
 kind = "exec"
 command = {command}
-width = 640
-height = 540
+width = {width}
+height = {height}
 bit_depth = 16
 timeout_ms = 60000
 [stage]
@@ -64,7 +75,7 @@ fn generator() -> PathBuf {
 
 /// Writes `spec` to `dir/spec.json` and returns the exec camera's command on it: the generator
 /// rendering one frame per call.
-fn frame_command(spec: &Value, dir: &Path) -> Vec<String> {
+pub(crate) fn frame_command(spec: &Value, dir: &Path) -> Vec<String> {
     let spec_path = dir.join("spec.json");
     std::fs::write(&spec_path, spec.to_string()).unwrap();
     vec![

@@ -38,6 +38,7 @@ mod dic_sample3;
 mod dic_synthetic;
 mod disk_full;
 mod exec_camera_bench;
+mod exec_camera_perpendicularity;
 mod fuzz_parsers;
 mod hidden_effect;
 mod independent_diagnosis;

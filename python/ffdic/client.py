@@ -529,6 +529,23 @@ class Client:
         and ``experiment``. 404 until the card is written."""
         return self._json("GET", f"/calibrations/{_quote(run_id)}/card")  # type: ignore[no-any-return]
 
+    def check_perpendicularity(
+        self,
+        *,
+        progress: Union[ProgressCallback, bool, None] = None,
+        idempotency_key: Optional[str] = None,
+        **fields: Any,
+    ) -> Dict[str, Any]:
+        """``POST /perpendicularity-checks``, followed to its end: the mounted target moved along
+        +x and −x, and the reading of ``GET /perpendicularity-checks/{id}/reading`` —
+        ``tilt_about_y_rad``, ``tilt_about_x_rad`` (each with ``…_se_rad``) at
+        ``working_distance_mm`` (``working_distance_stated``), ``stage_angle_rad`` with
+        ``stage_angle_se_rad``, ``significant``, ``notes``. ``fields``: ``pattern``, ``move_mm``
+        (0: the default), ``dic``, ``seed``. Raises :class:`RunFailed` when the check fails."""
+        run_id = self._submit("/perpendicularity-checks", dict(fields), idempotency_key)
+        self.follow(run_id, progress=progress, kind="job")
+        return self._json("GET", f"/perpendicularity-checks/{_quote(run_id)}/reading")  # type: ignore[no-any-return]
+
     # --- events -----------------------------------------------------------------------------
 
     def events(

@@ -244,6 +244,17 @@ def test_what_one_move_leaves_open_is_resolved_on_the_bench(client: Client) -> N
     assert client.dataset(doc["bench"]["dataset"])["runs"] > 1
 
 
+def test_a_perpendicularity_check_reads_the_mock_benchs_square_target(client: Client) -> None:
+    reading = client.check_perpendicularity(pattern="a", dic=SMALL_DIC)
+    # The mock bench's target is square to the camera and its stage turned 6.15 mrad.
+    for axis in ("y", "x"):
+        value, se = reading[f"tilt_about_{axis}_rad"], reading[f"tilt_about_{axis}_se_rad"]
+        assert se > 0 and abs(value) < 4 * se, reading
+    assert not reading["significant"], reading
+    assert abs(reading["stage_angle_rad"] - 0.00615) < 4 * reading["stage_angle_se_rad"] + 2e-4, reading
+    assert reading["notes"], reading
+
+
 # --- datasets and models --------------------------------------------------------------------
 
 

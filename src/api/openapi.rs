@@ -3,7 +3,8 @@
 
 use super::problem::Problem;
 use super::routes::{
-    calibrations, camera, datasets, experiments, jobs, models, stage, sweeps, system,
+    calibrations, camera, datasets, experiments, jobs, models, perpendicularity, stage, sweeps,
+    system,
 };
 use crate::run_event::EventKind;
 use crate::service::Service;
@@ -24,9 +25,9 @@ use utoipa_axum::routes;
         (name = "system", description = "Health and status"),
         (name = "bench", description = "Camera and stage, directly"),
         (name = "experiments", description = "Translation experiments on the bench"),
-        (name = "calibrations", description = "Calibration plans on the bench and the camera cards they write"),
+        (name = "calibrations", description = "Calibration plans on the bench and the camera cards they write; perpendicularity checks"),
         (name = "datasets", description = "Measurements in format ffdic-dataset/1"),
-        (name = "jobs", description = "Any run: experiments, analyses, comparisons, diagnoses, on-bench diagnoses, sweeps, calibrations"),
+        (name = "jobs", description = "Any run: experiments, analyses, comparisons, diagnoses, on-bench diagnoses, sweeps, calibrations, perpendicularity checks"),
         (name = "models", description = "Analysis models: embedded and added by users"),
         (name = "sweeps", description = "Design maps: error against dot size, fill factor, noise, blur and sub-pixel motion"),
     )
@@ -58,6 +59,9 @@ pub fn router(max_upload_bytes: usize) -> OpenApiRouter<Service> {
         .routes(routes!(calibrations::create, calibrations::list))
         .routes(routes!(calibrations::get))
         .routes(routes!(calibrations::card))
+        .routes(routes!(perpendicularity::create))
+        .routes(routes!(perpendicularity::get))
+        .routes(routes!(perpendicularity::reading))
         .routes(routes!(datasets::list))
         .routes(routes!(datasets::get, datasets::delete))
         .routes(routes!(datasets::analyse))
@@ -137,7 +141,21 @@ pub const FILE_NAME_PATTERN: &str = r"^[A-Za-z0-9_][A-Za-z0-9._+\-]{0,127}$";
 
 /// Each submission's links: (from, method, status, to, to's method). Not results: they exist
 /// only once the run has succeeded.
-const LINKS: [(&str, &str, &str, &str, &str); 11] = [
+const LINKS: [(&str, &str, &str, &str, &str); 13] = [
+    (
+        "/api/v1/perpendicularity-checks",
+        "post",
+        "202",
+        "/api/v1/perpendicularity-checks/{id}",
+        "get",
+    ),
+    (
+        "/api/v1/perpendicularity-checks",
+        "post",
+        "202",
+        "/api/v1/jobs/{id}/cancel",
+        "post",
+    ),
     (
         "/api/v1/calibrations",
         "post",

@@ -52,13 +52,19 @@ pub fn refinements() -> Vec<(&'static str, &'static str, Value)> {
         "AnalysisRequest",
         "CompareRequest",
         "CalibrationPlan",
+        "PerpendicularityCheck",
     ] {
         out.push((body, "dic", reference("DicSettings")));
     }
     for body in ["ExperimentRequest", "AnalysisRequest", "CompareRequest"] {
         out.push((body, "schemes", schemes.clone()));
     }
-    for body in ["ExperimentRequest", "CompareRequest", "CalibrationPlan"] {
+    for body in [
+        "ExperimentRequest",
+        "CompareRequest",
+        "CalibrationPlan",
+        "PerpendicularityCheck",
+    ] {
         out.push((body, "seed", json!({ "maximum": u64::MAX })));
     }
     out.extend(calibration_refinements());
@@ -155,12 +161,16 @@ pub fn apply(schemas: &mut Map<String, Value>) {
     }
 }
 
-/// `POST /calibrations`: `crate::experiment::CalibrationPlan`, which becomes an experiment
-/// request (its checks then apply: the travel, the counts).
+/// `POST /calibrations` and `POST /perpendicularity-checks`: `crate::experiment::CalibrationPlan`
+/// and `PerpendicularityCheck`, which become experiment requests (their checks then apply: the
+/// travel, the counts).
 fn calibration_refinements() -> Vec<(&'static str, &'static str, Value)> {
     vec![
         ("CalibrationPlan", "name", run_name_schema()),
         ("CalibrationPlan", "pattern", reference("PatternSpec")),
+        ("PerpendicularityCheck", "pattern", reference("PatternSpec")),
+        // 0 is the default move; a negative one is a 422 naming `move_mm`.
+        ("PerpendicularityCheck", "move_mm", json!({ "minimum": 0 })),
         (
             "CalibrationPlan",
             "move_sizes_mm",

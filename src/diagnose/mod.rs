@@ -121,6 +121,7 @@ mod stage;
 mod stage_landing;
 #[cfg(test)]
 mod test_fields;
+mod tilt_readout;
 mod unexplained;
 mod unexplained_words;
 mod verdict;
@@ -136,6 +137,9 @@ pub use image_stats::noise_variance;
 pub use measurement::{load_measurement, Measurement};
 pub use nominal::BASELINE_TOML;
 pub use rounds::{diagnose_rounds, diagnose_rounds_prepared, MAX_ROUNDS};
+pub use tilt_readout::{
+    read_perpendicularity, PerpendicularityReading, ReadoutError, ReadoutRun, ReadoutSetting,
+};
 
 pub use basis::GeometricParam;
 pub use card::{CameraCard, CardEffect, ImagingEntry};

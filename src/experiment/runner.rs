@@ -121,6 +121,47 @@ impl BenchGeometry {
     }
 }
 
+/// Captures `plan`'s frames on the bench and exports them (`frames/`, `ffdic-dataset/1`), without
+/// the study: for a reading of the frames' own (a perpendicularity check), which ends at half
+/// the progress an experiment's capture reports. The stage is left standing still on an error.
+pub fn capture_experiment(
+    plan: &ExperimentPlan,
+    bench: &BenchHandle,
+    lease: &BenchLease,
+    geometry: BenchGeometry,
+    timeouts: BenchTimeouts,
+    sink: &dyn RunSink,
+) -> Result<(Manifest, PathBuf), RunnerError> {
+    let mut files = Files {
+        sink,
+        written: Vec::new(),
+    };
+    let result = capture_on_bench(plan, bench, lease, geometry, timeouts, &mut files);
+    if result.is_err() {
+        let _ = bench.stop_stage_soon();
+    }
+    result.map(|c| (c.manifest, c.frames_dir))
+}
+
+/// The bench prepared, the frames captured and exported, the camera's read-out restored.
+fn capture_on_bench(
+    plan: &ExperimentPlan,
+    bench: &BenchHandle,
+    lease: &BenchLease,
+    geometry: BenchGeometry,
+    timeouts: BenchTimeouts,
+    files: &mut Files<'_>,
+) -> Result<Captured, RunnerError> {
+    let session = Session::prepare(plan, bench, lease, timeouts, files.sink)?;
+    let captured = session.capture(files, geometry);
+    // The camera's own binning and decimation go back to what they were, whatever happened.
+    let restored = session.restore_readout();
+    let captured = captured?;
+    restored?;
+    session.check()?;
+    Ok(captured)
+}
+
 /// The experiment's steps: prepare the bench, capture and export, analyse, write the results.
 fn capture_and_analyse(
     plan: &ExperimentPlan,
@@ -134,13 +175,7 @@ fn capture_and_analyse(
         sink,
         written: Vec::new(),
     };
-    let session = Session::prepare(plan, bench, lease, timeouts, sink)?;
-    let captured = session.capture(&mut files, geometry);
-    // The camera's own binning and decimation go back to what they were, whatever happened.
-    let restored = session.restore_readout();
-    let captured = captured?;
-    restored?;
-    session.check()?;
+    let captured = capture_on_bench(plan, bench, lease, geometry, timeouts, &mut files)?;
     let (captures, map_files) = analyse(plan, &captured, sink)?;
     let rows = write_results(plan, &captured.manifest, &captures, &mut files)?;
     files.written.extend(map_files);

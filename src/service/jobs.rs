@@ -3,7 +3,7 @@
 //! a time on the bench lane, others wait their turn — and its events go to the run's log and to
 //! live subscribers (SSE). Cancellation is cooperative: the work checks its token between steps.
 
-use crate::diagnose::{CameraCard, Comparison, Rounds};
+use crate::diagnose::{CameraCard, Comparison, PerpendicularityReading, Rounds};
 use crate::experiment::RunSink;
 use crate::run_event::EventKind;
 use crate::service::job::OnBenchCapture;
@@ -60,6 +60,8 @@ pub enum JobResult {
         bench: Box<OnBenchCapture>,
         after: Option<Box<Rounds>>,
     },
+    /// A perpendicularity check's reading.
+    Perpendicularity(Box<PerpendicularityReading>),
     /// Nothing beyond the files the job wrote (a design map's merged files).
     Files,
 }

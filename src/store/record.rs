@@ -28,10 +28,13 @@ pub enum RunKind {
     /// separate what the dataset left open captured, appended, diagnosed again; on the bench
     /// lane.
     OnBench,
+    /// A perpendicularity check (`POST /perpendicularity-checks`): a move back and forth, the
+    /// target's tilt and the stage's angle read from the fields; on the bench lane.
+    Perpendicularity,
 }
 
 impl RunKind {
-    pub const ALL: [RunKind; 7] = [
+    pub const ALL: [RunKind; 8] = [
         RunKind::Experiment,
         RunKind::Analysis,
         RunKind::Comparison,
@@ -39,6 +42,7 @@ impl RunKind {
         RunKind::Sweep,
         RunKind::Calibration,
         RunKind::OnBench,
+        RunKind::Perpendicularity,
     ];
 
     pub fn as_str(self) -> &'static str {
@@ -50,6 +54,7 @@ impl RunKind {
             RunKind::Sweep => "sweep",
             RunKind::Calibration => "calibration",
             RunKind::OnBench => "on_bench",
+            RunKind::Perpendicularity => "perpendicularity",
         }
     }
 
@@ -63,6 +68,7 @@ impl RunKind {
             RunKind::Sweep => "swp",
             RunKind::Calibration => "cal",
             RunKind::OnBench => "onb",
+            RunKind::Perpendicularity => "prp",
         }
     }
 }

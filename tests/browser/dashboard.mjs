@@ -324,11 +324,13 @@ async function main() {
     if (expect(await appears(page, "#perp-result[data-loaded=true]", 120 * SECOND), "the perpendicularity check reports")) {
       const stage = await page.locator("#perp-result [data-perp=stage_angle_rad]").innerText();
       expect(/±/.test(stage), `the stage's angle with its standard error: ${stage}`);
-      const tilts = await page.locator("#perp-result [data-perp^=angle_about]").allInnerTexts();
+      const tilts = await page.locator("#perp-result [data-perp^=tilt_about]").allInnerTexts();
       expect(tilts.length === 2 && tilts.every((t) => /±/.test(t)), `two tilt angles with their standard errors: ${tilts.join("; ")}`);
       log(`perpendicularity: stage ${stage}; tilt ${tilts.join(", ")}`);
       const models = await page.evaluate(async () => (await (await fetch("/api/v1/models")).json()).map((m) => m.name));
       expect(!models.some((n) => n.startsWith("card-perpendicularity-")), `a check keeps no model: ${models.join(", ")}`);
+      const calibrations = await page.evaluate(async () => (await (await fetch("/api/v1/calibrations")).json()).length);
+      expect(calibrations === 1, `a check is no calibration (${calibrations} calibrations)`);
     }
     // Kept checking while the mount is adjusted: the readings follow one another until unticked.
     await page.locator("#perp-live").setChecked(true);

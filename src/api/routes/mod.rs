@@ -6,6 +6,7 @@ pub mod datasets;
 pub mod experiments;
 pub mod jobs;
 pub mod models;
+pub mod perpendicularity;
 pub mod stage;
 mod submit;
 pub mod sweeps;

@@ -255,50 +255,34 @@ async function snapshot() {
 
 $("#snapshot-btn").addEventListener("click", snapshot);
 
-/** The perpendicularity check's plan: the calibration's default moves (±x, ±y at two sizes),
- * nothing else, one round — the card's tilt and stage angle, soonest. */
-const PERPENDICULARITY_PLAN = { name: "perpendicularity", phase_scan_count: 0, static_frames: 0, rounds: 1 };
-
-/** A small move back and forth on the bench (a calibration of the preset plan), then the
- * card's target tilt and stage angle with their standard errors. */
+/** A small move back and forth along x on the bench (`POST /perpendicularity-checks`), then the
+ * target's tilt and the stage's angle read from the two fields, each with its standard error. */
 async function checkPerpendicularity() {
   const status = $("#perp-status");
   showError($("#perp-error"), null);
   try {
-    const run = await api("/calibrations", { method: "POST", body: { ...PERPENDICULARITY_PLAN, pattern: $("#perp-pattern").value } });
+    const run = await api("/perpendicularity-checks", { method: "POST", body: { pattern: $("#perp-pattern").value } });
     const id = encodeURIComponent(run.id);
-    const record = await follow(`/calibrations/${id}`, `/jobs/${id}/events`, null,
+    const record = await follow(`/perpendicularity-checks/${id}`, `/jobs/${id}/events`, null,
       (r) => { status.textContent = `${r.status}, ${Math.round(100 * (r.progress || 0))} %`; });
     if (record.status !== "succeeded") throw new Error(`the check ${record.status}: ${record.message || ""}`);
-    const doc = await api(`/calibrations/${id}/card`);
-    const card = doc.card;
-    // A readout, not a card to carry on: its model is not kept among the models (the card itself
-    // stays in the calibration's folder). A refusal (the model in use) leaves it.
-    let kept = false;
-    try {
-      await api(`/models/${encodeURIComponent(doc.model)}`, { method: "DELETE" });
-    } catch (_) {
-      kept = true;
-    }
-    const tilt = card.geometry.find((g) => g.effect === "target_tilt");
-    const rows = [];
-    if (tilt) {
-      for (const [name, v] of Object.entries(tilt.params)) rows.push([name.replaceAll("_", " "), valuePm(v, tilt.stderr[name]), name]);
-      const wd = (tilt.derived || {}).working_distance_mm;
-      // Without a stated distance the angles are the first-order field's at an assumed one.
-      if (Number.isFinite(wd)) rows.push(["at a working distance of [mm]", `${num(wd, 4)}${(tilt.notes || []).length ? ` (${tilt.notes.join("; ")})` : ""}`, "working_distance_mm"]);
-    }
-    const s = card.stage;
-    if (s) rows.push(["stage angle to the rows [rad]", valuePm(s.angle_rad, s.angle_se_rad), "stage_angle_rad"]);
-    clear($("#perp-result"), rows.length
-      ? rows.flatMap(([name, value, key]) => [el("dt", {}, name), el("dd", { "data-perp": key }, value)])
-      : [el("dt", {}, "result"), el("dd", {}, "the moves did not separate a tilt: see the card")],
-    el("dt", {}, "card"), el("dd", {}, el("a", { href: `/calibrations/${run.id}` }, run.id),
-      tilt && tilt.significant ? " — the tilt is significant: adjust the mount" : " — no significant tilt",
-      kept ? "" : "; its model is not kept (a calibration keeps one)"));
+    const r = await api(`/perpendicularity-checks/${id}/reading`);
+    const rows = [
+      ["tilt about y (+x side farther) [rad]", valuePm(r.tilt_about_y_rad, r.tilt_about_y_se_rad), "tilt_about_y_rad"],
+      ["tilt about x (+y side farther) [rad]", valuePm(r.tilt_about_x_rad, r.tilt_about_x_se_rad), "tilt_about_x_rad"],
+      ["stage angle to the rows [rad]", valuePm(r.stage_angle_rad, r.stage_angle_se_rad), "stage_angle_rad"],
+    ];
+    // Without a stated distance the angles are those at an assumed one: one translation
+    // identifies tan θ over the distance.
+    const wd = `${num(r.working_distance_mm, 4)}${r.working_distance_stated ? "" : " (assumed: the bench states none)"}`;
+    clear($("#perp-result"),
+      rows.flatMap(([name, value, key]) => [el("dt", {}, name), el("dd", { "data-perp": key }, value)]),
+      el("dt", {}, "at a working distance of [mm]"), el("dd", { "data-perp": "working_distance_mm" }, wd),
+      el("dt", {}, "reading"), el("dd", {}, `${r.points} points, ${num(r.residual_px, 3)} px about the fit`,
+        r.significant ? " — the tilt is significant: adjust the mount" : " — no significant tilt"));
     status.textContent = `checked ${new Date().toLocaleTimeString()}`;
     $("#perp-result").dataset.loaded = "true";
-    return { rows, significant: !!(tilt && tilt.significant) };
+    return { rows, significant: r.significant };
   } catch (e) {
     showError($("#perp-error"), e);
     status.textContent = "";
@@ -310,7 +294,7 @@ async function checkPerpendicularity() {
 function addReading(reading) {
   const list = $("#perp-history");
   const n = list.children.length + 1;
-  const words = reading.rows.filter(([, , key]) => key !== "working_distance_mm").map(([name, value]) => `${name} ${value}`);
+  const words = reading.rows.map(([name, value]) => `${name} ${value}`);
   list.prepend(el("li", { "data-reading": String(n), "data-significant": String(reading.significant) },
     `${new Date().toLocaleTimeString()} — ${words.join("; ") || "no tilt separated"}${reading.significant ? " (significant)" : ""}`));
 }

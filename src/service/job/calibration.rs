@@ -5,7 +5,7 @@
 //! card, the rounds, the plan and the experiment it became), `results/card.txt` and
 //! `results/diagnosis.json`.
 
-use super::experiment::capture_dataset;
+use super::experiment::{bench_plan, capture_dataset};
 use super::{diagnose_failure, progress_reporter, Job};
 use crate::diagnose::{calibrate, CompareOptions};
 use crate::experiment::{
@@ -47,13 +47,7 @@ impl CalibrationJob {
             }));
         }
         let request = calibration.experiment(&service.limits, service.sensor_px)?;
-        let plan = request.plan(&service.limits)?;
-        if !service.limits.has_stage() {
-            return Err(SubmitError::NoStage);
-        }
-        service
-            .store
-            .check_runs_room(plan.frame_count() as u64 * service.frame_bytes)?;
+        let plan = bench_plan(service, &request)?;
         let model = service.requested_model(&calibration.model)?;
         let options = calibration_options(&calibration, service.sensor_px)?;
         Ok(Self {

@@ -2,15 +2,18 @@
 //! reductions, DIC), its frames registered as a dataset of their own.
 
 use super::Job;
+use crate::bench::BenchLease;
+use crate::dataset::Manifest;
 use crate::experiment::{
-    run_experiment, BenchGeometry, ExperimentOutcome, ExperimentPlan, ExperimentRequest, RunSink,
-    RunnerError,
+    capture_experiment, run_experiment, BenchGeometry, BenchTimeouts, ExperimentOutcome,
+    ExperimentPlan, ExperimentRequest, RunSink, RunnerError,
 };
 use crate::run_event::EventKind;
 use crate::service::jobs::{JobContext, JobError, JobOutput, JobResult, Lane};
 use crate::service::{Service, SubmitError};
 use crate::store::{DatasetId, DatasetRecord, DatasetSource, RunKind};
 use serde_json::json;
+use std::path::PathBuf;
 
 /// An experiment, checked against the bench's limits and the runs' quota.
 pub struct ExperimentJob {
@@ -23,13 +26,7 @@ impl ExperimentJob {
     /// Checks `request` against what the bench can do, and that its frames (every one at full
     /// resolution: an upper bound) fit the runs' quota: refused before the bench moves.
     pub fn plan(service: &Service, request: ExperimentRequest) -> Result<Self, SubmitError> {
-        let plan = request.plan(&service.limits)?;
-        if !service.limits.has_stage() {
-            return Err(SubmitError::NoStage);
-        }
-        service
-            .store
-            .check_runs_room(plan.frame_count() as u64 * service.frame_bytes)?;
+        let plan = bench_plan(service, &request)?;
         Ok(Self {
             service: service.clone(),
             request,
@@ -80,6 +77,23 @@ impl Job for ExperimentJob {
     }
 }
 
+/// `request` planned against what the bench can do, with a stage to move, and its frames (every
+/// one at full resolution: an upper bound) within the runs' quota: refused before the bench
+/// moves.
+pub(super) fn bench_plan(
+    service: &Service,
+    request: &ExperimentRequest,
+) -> Result<ExperimentPlan, SubmitError> {
+    let plan = request.plan(&service.limits)?;
+    if !service.limits.has_stage() {
+        return Err(SubmitError::NoStage);
+    }
+    service
+        .store
+        .check_runs_room(plan.frame_count() as u64 * service.frame_bytes)?;
+    Ok(plan)
+}
+
 /// Captures `plan` on the bench (events through `sink`) and registers its frames as a dataset
 /// of their own, so compare and diagnose read captured and imported measurements alike; the
 /// run's record names it as the dataset the run made.
@@ -115,26 +129,9 @@ pub(super) fn capture_frames(
     ctx: &JobContext,
     sink: &dyn RunSink,
 ) -> Result<(ExperimentOutcome, DatasetRecord), JobError> {
-    let lease = service
-        .bench
-        .hold(ctx.run_id.as_str())
-        .map_err(JobError::failed)?;
-    let outcome = run_experiment(
-        plan,
-        &service.bench,
-        &lease,
-        BenchGeometry {
-            scale_px_per_mm: service.config.bench.scale_px_per_mm,
-            working_distance_mm: service.config.bench.working_distance_mm,
-        },
-        service.timeouts(),
-        sink,
-    )
-    .map_err(|e| match e {
-        RunnerError::Cancelled => JobError::Cancelled,
-        other => JobError::failed(other),
+    let outcome = on_bench(service, ctx, |lease, geometry, timeouts| {
+        run_experiment(plan, &service.bench, lease, geometry, timeouts, sink)
     })?;
-    drop(lease);
     service
         .check_datasets_room(&outcome.frames_dir)
         .map_err(JobError::failed)?;
@@ -147,4 +144,38 @@ pub(super) fn capture_frames(
         )
         .map_err(JobError::failed)?;
     Ok((outcome, dataset))
+}
+
+/// Captures `plan` on the bench for the run `ctx` (events through `sink`), without the study:
+/// the manifest and the folder of the exported frames, registered as nothing (a
+/// perpendicularity check reads them and deletes them).
+pub(super) fn capture_only(
+    service: &Service,
+    plan: &ExperimentPlan,
+    ctx: &JobContext,
+    sink: &dyn RunSink,
+) -> Result<(Manifest, PathBuf), JobError> {
+    on_bench(service, ctx, |lease, geometry, timeouts| {
+        capture_experiment(plan, &service.bench, lease, geometry, timeouts, sink)
+    })
+}
+
+/// `step` on the bench held for the run `ctx`, told the bench's geometry and timeouts.
+fn on_bench<T>(
+    service: &Service,
+    ctx: &JobContext,
+    step: impl FnOnce(&BenchLease, BenchGeometry, BenchTimeouts) -> Result<T, RunnerError>,
+) -> Result<T, JobError> {
+    let lease = service
+        .bench
+        .hold(ctx.run_id.as_str())
+        .map_err(JobError::failed)?;
+    let geometry = BenchGeometry {
+        scale_px_per_mm: service.config.bench.scale_px_per_mm,
+        working_distance_mm: service.config.bench.working_distance_mm,
+    };
+    step(&lease, geometry, service.timeouts()).map_err(|e| match e {
+        RunnerError::Cancelled => JobError::Cancelled,
+        other => JobError::failed(other),
+    })
 }

@@ -13,6 +13,7 @@ mod comparison;
 mod diagnosis;
 mod experiment;
 mod on_bench;
+mod perpendicularity;
 mod sweep;
 
 pub use analysis::{AnalysisJob, AnalysisRequest};
@@ -21,6 +22,7 @@ pub use comparison::{CompareRequest, ComparisonJob};
 pub use diagnosis::DiagnosisJob;
 pub use experiment::ExperimentJob;
 pub use on_bench::{OnBenchCapture, OnBenchJob};
+pub use perpendicularity::PerpendicularityJob;
 pub use sweep::{plan_sweep, SweepJob, MAX_DAEMON_SENSOR_SIDE_PX, MAX_DAEMON_SWEEP_TASKS};
 
 use super::jobs::{JobContext, JobError, JobOutput, Lane};
@@ -91,7 +93,9 @@ pub fn dataset_page_row(kind: RunKind) -> DatasetPageRow {
         // An on-bench diagnosis's `results/diagnosis.json` is the listed dataset's own.
         RunKind::Diagnosis | RunKind::OnBench => DatasetPageRow::Headline("results/diagnosis.json"),
         RunKind::Analysis => DatasetPageRow::Listed,
-        RunKind::Experiment | RunKind::Sweep | RunKind::Calibration => DatasetPageRow::NotListed,
+        RunKind::Experiment | RunKind::Sweep | RunKind::Calibration | RunKind::Perpendicularity => {
+            DatasetPageRow::NotListed
+        }
     }
 }
 
