@@ -93,10 +93,19 @@ pub fn run_experiment(
     timeouts: BenchTimeouts,
     sink: &dyn RunSink,
 ) -> Result<ExperimentOutcome, RunnerError> {
-    let result = capture_and_analyse(plan, bench, lease, geometry, timeouts, sink);
+    still_on_error(
+        bench,
+        capture_and_analyse(plan, bench, lease, geometry, timeouts, sink),
+    )
+}
+
+/// `result`, the stage told to stand still first when it is an error: whatever happened (not
+/// waited for: a cancel inside a half-second mock exposure would otherwise wait for it).
+fn still_on_error<T>(
+    bench: &BenchHandle,
+    result: Result<T, RunnerError>,
+) -> Result<T, RunnerError> {
     if result.is_err() {
-        // Whatever happened, leave the stage standing still (not waited for: a cancel inside a
-        // half-second mock exposure would otherwise wait for it).
         let _ = bench.stop_stage_soon();
     }
     result
@@ -136,11 +145,11 @@ pub fn capture_experiment(
         sink,
         written: Vec::new(),
     };
-    let result = capture_on_bench(plan, bench, lease, geometry, timeouts, &mut files);
-    if result.is_err() {
-        let _ = bench.stop_stage_soon();
-    }
-    result.map(|c| (c.manifest, c.frames_dir))
+    still_on_error(
+        bench,
+        capture_on_bench(plan, bench, lease, geometry, timeouts, &mut files),
+    )
+    .map(|c| (c.manifest, c.frames_dir))
 }
 
 /// The bench prepared, the frames captured and exported, the camera's read-out restored.
