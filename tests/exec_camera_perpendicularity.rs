@@ -126,3 +126,52 @@ fn the_check_reads_the_generators_hidden_tilt_within_five_hundredths_of_a_degree
     );
     service.stop(Duration::from_secs(5));
 }
+
+/// A camera that fails on the check's third frame (the move to −x): the check fails with the
+/// camera's words and keeps none of the frames it had; the next check, on a camera that works
+/// again, reads.
+#[test]
+fn a_check_whose_camera_fails_keeps_no_frames_and_the_next_one_reads() {
+    let root = tempfile::tempdir().unwrap();
+    let spec = json!({
+        "name": "failing", "seed": 4411,
+        "width": 640, "height": 540, "scale_px_per_mm": 13.0, "bit_depth": 16,
+        "white_level_dn": 30000.0, "read_noise_dn": 20.0,
+        "patterns": [{"label": "a", "dot_diameter_mm": 0.3, "dot_spacing_mm": 0.45, "contrast": 0.7}],
+        "moves": [], "step_series": [], "repeats": 1,
+        "frame_travel_mm": [-5.0, 5.0, -5.0, 5.0],
+        "effects": {"tilt_about_y_rad": 0.01}
+    });
+    let generator = frame_command(&spec, root.path());
+    let flag = root.path().join("fail");
+    std::fs::write(&flag, "").unwrap();
+    let command: Vec<String> = vec![
+        "sh".into(),
+        "-c".into(),
+        format!(
+            "if [ -e '{}' ] && [ \"$FFDIC_FRAME\" -ge 2 ]; then echo 'lamp failed' >&2; exit 2; fi; exec \"$@\"",
+            flag.display()
+        ),
+        "camera".into(),
+    ]
+    .into_iter()
+    .chain(generator)
+    .collect();
+    let config = config_sized(&root.path().join("data"), &command, (640, 540), 13.0);
+    let (service, _) = Service::start(config.clone(), open_bench(&config).unwrap()).unwrap();
+    service.jobs.keep_results();
+    let job = PerpendicularityJob::plan(&service, PerpendicularityCheck::default()).unwrap();
+    let (record, _) = service.submit(job, None).unwrap();
+    let record = daemon::ended(&service, &record.id);
+    assert_eq!(record.status, ffdic::store::RunStatus::Failed, "{record:?}");
+    assert!(record.message.contains("lamp failed"), "{}", record.message);
+    let dir = service.store.run_dir(&record.id);
+    assert!(!dir.join("frames").exists() && !dir.join("results/perpendicularity.json").exists());
+    std::fs::remove_file(&flag).unwrap();
+    let (reading, _) = check(&service);
+    assert!(
+        reading.significant && !reading.working_distance_stated,
+        "{reading:?}"
+    );
+    service.stop(Duration::from_secs(5));
+}

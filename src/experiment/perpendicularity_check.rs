@@ -58,10 +58,15 @@ impl PerpendicularityCheck {
     ) -> Result<ExperimentRequest, FieldError> {
         let d = self.move_for(limits, size.0);
         if !(d.is_finite() && d > 0.0) {
-            return Err(field_error(
-                "move_mm",
-                format!("must be a positive number of mm (or 0: the default), got {d}"),
-            ));
+            let reason = if self.move_mm == 0.0 {
+                format!(
+                    "the default move is {d} mm here (10 % of the field, within the stage's travel and 75 % of dic.max_motion_px, {}): state a positive move_mm",
+                    self.dic.max_motion_px
+                )
+            } else {
+                format!("must be a positive number of mm (or 0: the default), got {d}")
+            };
+            return Err(field_error("move_mm", reason));
         }
         let moves = vec![
             MoveSpec {
@@ -136,6 +141,19 @@ mod tests {
 
     #[test]
     fn a_move_beyond_what_the_dic_tracks_or_not_positive_is_named() {
+        // A default that comes out as nothing: the DIC tracks no motion.
+        let still = PerpendicularityCheck {
+            dic: DicSettings {
+                max_motion_px: 0,
+                ..DicSettings::default()
+            },
+            ..PerpendicularityCheck::default()
+        };
+        let e = still.experiment(&paper(), (2560, 2160)).unwrap_err();
+        assert!(
+            e.field == "move_mm" && e.reason.contains("default"),
+            "{e:?}"
+        );
         for bad in [9.85, -1.0, f64::NAN] {
             let check = PerpendicularityCheck {
                 move_mm: bad,

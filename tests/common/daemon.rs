@@ -331,18 +331,26 @@ impl ServeProcess {
     }
 }
 
+/// Waits for job `id` to end, however it ends.
+pub fn ended(
+    service: &ffdic::service::Service,
+    id: &ffdic::store::RunId,
+) -> ffdic::store::RunRecord {
+    loop {
+        let r = service.store.get(id).unwrap();
+        if r.status.is_terminal() {
+            return r;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}
+
 /// Waits for job `id` to end; it must have succeeded.
 pub fn succeeded(
     service: &ffdic::service::Service,
     id: &ffdic::store::RunId,
 ) -> ffdic::store::RunRecord {
-    let record = loop {
-        let r = service.store.get(id).unwrap();
-        if r.status.is_terminal() {
-            break r;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(50));
-    };
+    let record = ended(service, id);
     assert_eq!(
         record.status,
         ffdic::store::RunStatus::Succeeded,

@@ -64,10 +64,12 @@ impl Job for PerpendicularityJob {
             from: 0.0,
             span: 2.0 * CAPTURE_SHARE,
         };
-        let (manifest, frames_dir) = capture_only(&self.service, &self.plan, ctx, &capture)?;
-        let read = read_frames(&self.service, &self.plan, &manifest, &frames_dir);
-        // The frames were for this reading only, whatever it gave.
-        let _ = std::fs::remove_dir_all(&frames_dir);
+        let read = capture_only(&self.service, &self.plan, ctx, &capture).and_then(
+            |(manifest, frames_dir)| read_frames(&self.service, &self.plan, &manifest, &frames_dir),
+        );
+        // The frames were for this reading only, whatever it gave: a failed or cancelled
+        // capture's too.
+        let _ = std::fs::remove_dir_all(ctx.store().run_dir(&ctx.run_id).join("frames"));
         let reading = read?;
         ctx.write(
             "results/perpendicularity.json",
