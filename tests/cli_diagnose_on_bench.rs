@@ -133,8 +133,12 @@ fn what_one_move_leaves_open_is_captured_on_the_bench_and_resolved() {
         .map(|r| r["id"].as_str().unwrap())
         .collect();
     assert_eq!(ids[0], "a-x2mm", "{ids:?}");
-    // The original run, the designed moves, four phase-scan steps along each axis.
-    assert_eq!(ids.len(), 1 + moves.len() + 8, "{ids:?}");
+    // The original run, the designed moves, the rule's three phase-scan steps along each axis.
+    assert_eq!(
+        ids.len(),
+        1 + moves.len() + 2 * ffdic::diagnose::STEP_SERIES_MIN_STEPS,
+        "{ids:?}"
+    );
     assert!(
         ids[1..].iter().all(|id| id.starts_with("bench-")),
         "{ids:?}"

@@ -706,9 +706,6 @@ fn design_confounds(rounds: &ffdic::diagnose::Rounds) -> Vec<[String; 2]> {
 /// open question and names the distortion near its truth.
 #[test]
 fn what_one_move_leaves_open_the_generators_bench_resolves() {
-    use ffdic::experiment::SchemeSpec;
-    use ffdic::service::job::{CompareRequest, OnBenchJob};
-    use ffdic::service::JobResult;
     let root = tempfile::tempdir().unwrap();
     let mut spec = hidden_bench(3306, json!([{"id": "x5", "dx_mm": 5.0, "dy_mm": 0.0}]));
     spec["scale_px_per_mm"] = json!(SCALE_PX_PER_MM);
@@ -718,18 +715,75 @@ fn what_one_move_leaves_open_the_generators_bench_resolves() {
     let dir = root.path().join("one-move");
     independent::generate(&spec, &dir);
     let command = frame_command(&spec, root.path());
-    let config = config(&root.path().join("data"), &command);
+    let OnBenchRun {
+        service,
+        dataset,
+        message,
+        before,
+        bench,
+        after,
+    } = on_bench_run(&config(&root.path().join("data"), &command), &dir, 2);
+    eprintln!(
+        "on the bench: {message}; confounded by the design {:?} -> {:?}; verdicts {:?} -> {:?}",
+        design_confounds(&before),
+        design_confounds(&after),
+        before.verdicts,
+        after.verdicts
+    );
+    check_what_the_bench_asked_and_captured(&bench);
+    // The merged dataset: the original run, then the bench's under their prefix (the designed
+    // moves; the rule's three phase-scan steps along each axis, which the aperture against the
+    // blur asks for); the stored original keeps its one run.
+    let merged =
+        ffdic::dataset::Manifest::read(&service.store.dataset_dir(bench.dataset.as_ref().unwrap()))
+            .unwrap();
+    let ids: Vec<&str> = merged.runs.iter().map(|r| r.id.as_str()).collect();
+    let moves = bench.plan.as_ref().unwrap().moves.len();
+    assert_eq!(
+        ids.len(),
+        1 + moves + 2 * ffdic::diagnose::STEP_SERIES_MIN_STEPS,
+        "{ids:?}"
+    );
+    assert!(
+        ids[1..].iter().all(|id| id.starts_with("bench-")),
+        "{ids:?}"
+    );
+    let original = ffdic::dataset::Manifest::read(&service.store.dataset_dir(&dataset)).unwrap();
+    assert_eq!(original.runs.len(), 1);
+    check_resolved_and_named(&before, &after);
+    service.stop(Duration::from_secs(5));
+}
+
+/// An on-bench job's daemon and what it gave.
+pub(crate) struct OnBenchRun {
+    pub service: ffdic::service::Service,
+    /// The dataset diagnosed first.
+    pub dataset: ffdic::store::DatasetId,
+    /// The job's closing message.
+    pub message: String,
+    pub before: ffdic::diagnose::Rounds,
+    pub bench: ffdic::service::job::OnBenchCapture,
+    /// The merged dataset's diagnosis.
+    pub after: ffdic::diagnose::Rounds,
+}
+
+/// The daemon on `config`'s bench, the dataset folder `dir` imported, and the on-bench job of
+/// `rounds` native-resolution rounds on it, run to its end (the bench must capture runs).
+pub(crate) fn on_bench_run(config: &DaemonConfig, dir: &Path, rounds: usize) -> OnBenchRun {
+    use ffdic::experiment::SchemeSpec;
+    use ffdic::service::job::{CompareRequest, OnBenchJob};
+    use ffdic::service::JobResult;
     let (service, _) =
-        ffdic::service::Service::start(config.clone(), open_bench(&config).unwrap()).unwrap();
+        ffdic::service::Service::start(config.clone(), open_bench(config).unwrap()).unwrap();
     service.jobs.keep_results();
     let dataset = service
         .store
-        .import_dataset_dir(&dir, "one move", ffdic::store::DatasetSource::Upload)
+        .import_dataset_dir(dir, "on the bench", ffdic::store::DatasetSource::Upload)
         .unwrap()
         .id;
     let request = CompareRequest {
         schemes: vec![SchemeSpec::Preset("native".into())],
-        rounds: 2,
+        rounds,
         ..CompareRequest::default()
     };
     let job = OnBenchJob::plan(&service, &dataset, request).unwrap();
@@ -744,32 +798,14 @@ fn what_one_move_leaves_open_the_generators_bench_resolves() {
         panic!("an on-bench result");
     };
     let after = after.expect("the bench captured runs and the merged dataset was diagnosed");
-    eprintln!(
-        "on the bench: {}; confounded by the design {:?} -> {:?}; verdicts {:?} -> {:?}",
-        record.message,
-        design_confounds(&before),
-        design_confounds(&after),
-        before.verdicts,
-        after.verdicts
-    );
-    check_what_the_bench_asked_and_captured(&bench);
-    // The merged dataset: the original run, then the bench's under their prefix (the designed
-    // moves; four phase-scan steps along each axis, which the aperture against the blur asks
-    // for); the stored original keeps its one run.
-    let merged =
-        ffdic::dataset::Manifest::read(&service.store.dataset_dir(bench.dataset.as_ref().unwrap()))
-            .unwrap();
-    let ids: Vec<&str> = merged.runs.iter().map(|r| r.id.as_str()).collect();
-    let moves = bench.plan.as_ref().unwrap().moves.len();
-    assert_eq!(ids.len(), 1 + moves + 8, "{ids:?}");
-    assert!(
-        ids[1..].iter().all(|id| id.starts_with("bench-")),
-        "{ids:?}"
-    );
-    let original = ffdic::dataset::Manifest::read(&service.store.dataset_dir(&dataset)).unwrap();
-    assert_eq!(original.runs.len(), 1);
-    check_resolved_and_named(&before, &after);
-    service.stop(Duration::from_secs(5));
+    OnBenchRun {
+        service,
+        dataset,
+        message: record.message,
+        before: *before,
+        bench: *bench,
+        after: *after,
+    }
 }
 
 /// The effects a diagnosis's rounds could not reveal.

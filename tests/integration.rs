@@ -37,6 +37,7 @@ mod dic_deformation;
 mod dic_sample3;
 mod dic_synthetic;
 mod disk_full;
+mod exec_camera_aperture;
 mod exec_camera_bench;
 mod exec_camera_perpendicularity;
 mod fuzz_parsers;

@@ -60,10 +60,13 @@ pub fn merge_datasets(
         repeat_of: r.repeat_of.as_ref().map(with_prefix),
         twin_of: r.twin_of.as_ref().map(with_prefix),
         // A later session's target is its own pattern: the diagnosis calibrates its print on
-        // its own reference (and that reference's static frames), placed anew.
+        // its own reference (and that reference's static frames), placed anew. The same label
+        // is the same print, so what the base states of it (a characterised print's profile,
+        // contrast and MTF) holds for the added frames too: a bench records a preset only
+        // nominally, and the print would otherwise be calibrated again, absorbing any blur.
         pattern: r.pattern.as_ref().map(|p| PatternInfo {
             label: with_prefix(&p.label),
-            ..p.clone()
+            ..stated_by(&base, &p.label).unwrap_or(p).clone()
         }),
         ..r.clone()
     }));
@@ -80,6 +83,15 @@ pub fn merge_datasets(
     }
     merged.write(out)?;
     Ok(merged)
+}
+
+/// What `manifest`'s runs state of the print labelled `label` (the first run's statement).
+fn stated_by<'a>(manifest: &'a Manifest, label: &str) -> Option<&'a PatternInfo> {
+    manifest
+        .runs
+        .iter()
+        .filter_map(|r| r.pattern.as_ref())
+        .find(|p| p.label == label)
 }
 
 fn link_or_copy(from: &Path, to: &Path) -> Result<(), DatasetError> {
@@ -132,11 +144,7 @@ mod tests {
     #[test]
     fn the_added_runs_follow_the_base_under_their_prefix() {
         let tmp = tempfile::tempdir().unwrap();
-        let (base, added, out) = (
-            tmp.path().join("base"),
-            tmp.path().join("added"),
-            tmp.path().join("out"),
-        );
+        let [base, added, out] = ["base", "added", "out"].map(|d| tmp.path().join(d));
         dataset(&base, "paper", 26.0, &[("x5", 5.0)]);
         dataset(&added, "bench", 26.0, &[("x5", 5.0), ("x1", 1.0)]);
         let m = merge_datasets(&base, &added, "bench-", &out).unwrap();
@@ -163,5 +171,45 @@ mod tests {
             &tmp.path().join("o2"),
         );
         assert!(e.unwrap_err().to_string().contains("not the same bench"));
+    }
+
+    /// The base's statement of a print holds for the added runs of the same label (a bench
+    /// records its preset only nominally); another label keeps the added manifest's own.
+    #[test]
+    fn the_added_runs_take_the_bases_statement_of_the_same_print() {
+        let tmp = tempfile::tempdir().unwrap();
+        let [base, added, out] = ["base", "added", "out"].map(|d| tmp.path().join(d));
+        dataset(&base, "paper", 26.0, &[("x5", 5.0)]);
+        let mut m = Manifest::read(&base).unwrap();
+        let stated = PatternInfo {
+            label: "a".into(),
+            dot_diameter_mm: Some(0.18),
+            profile: Some(crate::dataset::DotProfile::Gaussian),
+            contrast: Some(0.7),
+            ..Default::default()
+        };
+        m.runs[0].pattern = Some(stated.clone());
+        m.write(&base).unwrap();
+        dataset(&added, "bench", 26.0, &[("x1", 1.0), ("y1", 0.0)]);
+        let mut a = Manifest::read(&added).unwrap();
+        a.runs[0].pattern.as_mut().unwrap().dot_diameter_mm = Some(0.2);
+        a.runs[1].pattern.as_mut().unwrap().label = "b".into();
+        a.write(&added).unwrap();
+        let merged = merge_datasets(&base, &added, "bench-", &out).unwrap();
+        let pattern = |i: usize| merged.runs[i].pattern.clone().unwrap();
+        assert_eq!(
+            pattern(1),
+            PatternInfo {
+                label: "bench-a".into(),
+                ..stated
+            }
+        );
+        assert_eq!(
+            pattern(2),
+            PatternInfo {
+                label: "bench-b".into(),
+                ..Default::default()
+            }
+        );
     }
 }

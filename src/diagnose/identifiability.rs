@@ -114,6 +114,11 @@ pub fn design_of(manifest: &Manifest, width: usize) -> DatasetDesign {
 
 pub const SEVERAL_SIZES: &str =
     "translations of several sizes (e.g. 1/4, 1/2 and all of the largest move): distortion grows with the move, a scale change does not";
+/// The sub-pixel steps along each axis a step series needs before the aperture and the blur count
+/// as separable by the design ([`DatasetDesign::confounded`]); a bench's separating plan captures
+/// exactly this many.
+pub const STEP_SERIES_MIN_STEPS: usize = 3;
+
 pub const STEP_SERIES: &str =
     "a sub-pixel step series in x and in y (at least 3 moves below 2 px along each axis, e.g. step_series with dx_step_mm, dy_step_mm)";
 
@@ -183,7 +188,8 @@ impl DatasetDesign {
         }
         if has(EffectId::FillFactor)
             && has(EffectId::PsfBlur)
-            && (self.subpixel_steps_x < 3 || self.subpixel_steps_y < 3)
+            && (self.subpixel_steps_x < STEP_SERIES_MIN_STEPS
+                || self.subpixel_steps_y < STEP_SERIES_MIN_STEPS)
         {
             out.push(Confounded {
                 effects: pair(&EffectId::FillFactor.into(), &EffectId::PsfBlur.into()),

@@ -146,7 +146,7 @@ pub use card::{CameraCard, CardEffect, ImagingEntry};
 pub use card_stage::StageMap;
 pub use discrepancy::{DiscrepancyErrors, RunDiscrepancy};
 pub use history::HistoryEntry;
-pub use identifiability::{Confounded, NotIdentifiable};
+pub use identifiability::{Confounded, NotIdentifiable, STEP_SERIES_MIN_STEPS};
 pub use image_stats::{FrameStats, MeanMap, PsdBin, PtcPoint};
 pub use move_design::{design_for, DesignedPair, MoveDesign, MAX_VARIANCE_INFLATION};
 pub use nominal::{Nominal, PatternEstimate};

@@ -14,7 +14,7 @@ use crate::bench::BenchLimits;
 use crate::dataset::{merge_datasets, Manifest};
 use crate::diagnose::{
     design_for, diagnose_rounds, open_questions, CompareOptions, Confounded, MoveDesign, Rounds,
-    SeparatingRuns,
+    SeparatingRuns, STEP_SERIES_MIN_STEPS,
 };
 use crate::experiment::{
     field_error, CalibrationPlan, ExperimentRequest, FieldError, MoveSpec, PatternSpec, RunSink,
@@ -126,8 +126,8 @@ fn target_label(manifest: &Manifest) -> Result<String, FieldError> {
 /// diagnosis left confounded), with the design of its moves: chosen from ±x and ±y at a quarter,
 /// a half and all of the dataset's largest move (the calibration's default size when it has no
 /// move) to meet the identifiability rules `runs` names and make the geometric pairs' fields
-/// differ, fewest first ([`crate::diagnose::design_for`]); a phase scan of four steps for a step
-/// series, two static frames for repeats.
+/// differ, fewest first ([`crate::diagnose::design_for`]); a phase scan of the rule's
+/// [`STEP_SERIES_MIN_STEPS`] steps along each axis for a step series, two static frames for repeats.
 fn separating_plan(
     manifest: &Manifest,
     (open, runs): (&[Confounded], &[SeparatingRuns]),
@@ -149,8 +149,10 @@ fn separating_plan(
     let calibration = CalibrationPlan {
         name: "on-bench".into(),
         pattern: PatternSpec::Preset(target_label(manifest)?),
+        // The fewest steps the identifiability rule takes as a series, along each axis: six
+        // runs (issue 33: at most six for a confound).
         phase_scan_count: if wants(SeparatingRuns::StepSeries) {
-            4
+            STEP_SERIES_MIN_STEPS
         } else {
             0
         },

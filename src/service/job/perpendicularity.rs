@@ -9,7 +9,7 @@ use super::experiment::{bench_plan, capture_only};
 use super::Job;
 use crate::dataset::Manifest;
 use crate::diagnose::{read_perpendicularity, PerpendicularityReading, ReadoutRun, ReadoutSetting};
-use crate::dic::PreparedReference;
+use crate::dic::{DicError, PreparedReference, Watch};
 use crate::experiment::{ExperimentPlan, PerpendicularityCheck, RunSink};
 use crate::image::read_image;
 use crate::run_event::EventKind;
@@ -65,7 +65,9 @@ impl Job for PerpendicularityJob {
             span: 2.0 * CAPTURE_SHARE,
         };
         let read = capture_only(&self.service, &self.plan, ctx, &capture).and_then(
-            |(manifest, frames_dir)| read_frames(&self.service, &self.plan, &manifest, &frames_dir),
+            |(manifest, frames_dir)| {
+                read_frames(&self.service, &self.plan, &manifest, &frames_dir, ctx)
+            },
         );
         // The frames were for this reading only, whatever it gave: a failed or cancelled
         // capture's too.
@@ -99,12 +101,14 @@ impl Job for PerpendicularityJob {
     }
 }
 
-/// The reference against each moved frame, then the reading.
+/// The reference against each moved frame, then the reading; a cancel of `ctx` ends a
+/// correlation within a point.
 fn read_frames(
     service: &Service,
     plan: &ExperimentPlan,
     manifest: &Manifest,
     frames_dir: &Path,
+    ctx: &JobContext,
 ) -> Result<PerpendicularityReading, JobError> {
     let runs = &manifest.runs;
     let first = runs
@@ -119,10 +123,18 @@ fn read_frames(
     let (width, height) = (reference.width(), reference.height());
     let prepared = PreparedReference::new(&reference, &plan.dic).map_err(JobError::failed)?;
     let mut fields = Vec::with_capacity(runs.len());
+    let cancelled = || ctx.cancelled();
+    let watch = || Watch {
+        progress: None,
+        cancelled: Some(&cancelled),
+    };
     for run in runs {
         let dic = prepared
-            .correlate(&image(&run.deformed)?, None)
-            .map_err(JobError::failed)?;
+            .correlate_watched(&image(&run.deformed)?, watch())
+            .map_err(|e| match e {
+                DicError::Cancelled => JobError::Cancelled,
+                e => JobError::failed(e),
+            })?;
         fields.push(((run.stage.dx_mm, run.stage.dy_mm), dic));
     }
     let readout: Vec<ReadoutRun> = fields
