@@ -21,12 +21,13 @@ const SCALE_PX_PER_MM: f64 = 13.0;
 /// The generator's bench, 640x540 at 13 px/mm, with `effects` hidden. Its print is small dots
 /// (0.18 mm, σ ≈ 1 px) stated as characterised (profile, contrast, MTF in the manifest): with a
 /// calibrated print the print absorbs any blur and neither effect can be told (`PRINT_SEPARATION`).
+/// Its label is a lab's own, not a preset's: the bench mounts the print the dataset states.
 fn bench(seed: u64, effects: Value) -> Value {
     json!({
         "name": "aperture-or-blur", "seed": seed,
         "width": 640, "height": 540, "scale_px_per_mm": SCALE_PX_PER_MM, "bit_depth": 16,
         "white_level_dn": 30000.0, "read_noise_dn": 20.0,
-        "patterns": [{"label": "a", "dot_diameter_mm": 0.18, "dot_spacing_mm": 0.27, "contrast": 0.7}],
+        "patterns": [{"label": "lab-7", "dot_diameter_mm": 0.18, "dot_spacing_mm": 0.27, "contrast": 0.7}],
         "state_print": "characterised",
         "moves": [
             {"id": "x1", "dx_mm": 1.25, "dy_mm": 0.0}, {"id": "x2", "dx_mm": 2.5, "dy_mm": 0.0},

@@ -20,7 +20,7 @@ use crate::experiment::{
     field_error, CalibrationPlan, ExperimentRequest, FieldError, MoveSpec, PatternSpec, RunSink,
     SchemeSpec,
 };
-use crate::model::ModelConfig;
+use crate::model::{ModelConfig, SpecklePattern};
 use crate::service::jobs::{JobContext, JobError, JobOutput, JobResult, Lane};
 use crate::service::scaled_sink::ScaledSink;
 use crate::service::{Service, SubmitError};
@@ -102,24 +102,49 @@ impl OnBenchJob {
         }
         let manifest = Manifest::read(&job.service.store.dataset_dir(&job.dataset))
             .map_err(|e| field_error("dataset", e.to_string()))?;
-        target_label(&manifest)?;
+        target_pattern(&manifest)?;
         Ok(Self(job))
     }
 }
 
-/// The target the bench mounts: the dataset's first named pattern (a preset name the mock
-/// bench renders, the label an exec camera is told, the target a lab mounts by hand).
-fn target_label(manifest: &Manifest) -> Result<String, FieldError> {
-    manifest
+/// The target the bench mounts: the dataset's first named pattern. A preset's name is that preset
+/// (what the mock bench renders); another label is the print the dataset states (its dot
+/// diameter, spacing and contrast; softness, placement and profile where stated), which a lab's
+/// own target needs to be mounted by name. An exec camera is told the label either way.
+fn target_pattern(manifest: &Manifest) -> Result<PatternSpec, FieldError> {
+    let info = manifest
         .runs
         .iter()
-        .find_map(|r| r.pattern.as_ref().map(|p| p.label.clone()))
+        .find_map(|r| r.pattern.as_ref())
         .ok_or_else(|| {
             field_error(
                 "dataset",
                 "the dataset names no pattern: the bench must know which target to mount",
             )
-        })
+        })?;
+    if SpecklePattern::preset(&info.label).is_some() {
+        return Ok(PatternSpec::Preset(info.label.clone()));
+    }
+    let (Some(dot_diameter_mm), Some(dot_spacing_mm), Some(contrast)) =
+        (info.dot_diameter_mm, info.dot_spacing_mm, info.contrast)
+    else {
+        return Err(field_error(
+            "dataset",
+            format!(
+                "the dataset's pattern '{}' is not a preset the bench knows (a, b, c) and does not state its dot_diameter_mm, dot_spacing_mm and contrast: the bench cannot mount it",
+                info.label
+            ),
+        ));
+    };
+    Ok(PatternSpec::Custom(SpecklePattern {
+        label: info.label.clone(),
+        dot_diameter_mm,
+        dot_spacing_mm,
+        contrast,
+        edge_softness_mm: info.edge_softness_mm.unwrap_or(0.0),
+        placement: info.placement.unwrap_or_default(),
+        profile: info.profile.unwrap_or_default(),
+    }))
 }
 
 /// The experiment that captures `runs` on the dataset's target (`open`: the pairs the
@@ -148,7 +173,7 @@ fn separating_plan(
     let wants = |k: SeparatingRuns| runs.contains(&k);
     let calibration = CalibrationPlan {
         name: "on-bench".into(),
-        pattern: PatternSpec::Preset(target_label(manifest)?),
+        pattern: target_pattern(manifest)?,
         // The fewest steps the identifiability rule takes as a series, along each axis: six
         // runs (issue 33: at most six for a confound).
         phase_scan_count: if wants(SeparatingRuns::StepSeries) {
@@ -388,5 +413,45 @@ impl Job for OnBenchJob {
                 after: Some(Box::new(after)),
             },
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn with_pattern(pattern: serde_json::Value) -> Manifest {
+        serde_json::from_value(json!({"format": crate::dataset::FORMAT, "name": "lab",
+            "scale_px_per_mm": 26.0, "runs": [{"id": "x5", "pattern": pattern,
+            "reference": "ref.tif", "deformed": "x5.tif", "stage": {"dx_mm": 5.0, "dy_mm": 0.0}}]}))
+        .unwrap()
+    }
+
+    /// A preset's name mounts the preset; a lab's own label mounts the print its dataset states;
+    /// a label with nothing stated is refused, naming what is missing.
+    #[test]
+    fn the_bench_mounts_a_preset_or_the_print_the_dataset_states() {
+        assert_eq!(
+            target_pattern(&with_pattern(json!({"label": "b", "dot_diameter_mm": 0.3}))).unwrap(),
+            PatternSpec::Preset("b".into())
+        );
+        let own = with_pattern(json!({"label": "lab-print-7", "dot_diameter_mm": 0.18,
+            "dot_spacing_mm": 0.27, "contrast": 0.6, "placement": "hard_core"}));
+        let PatternSpec::Custom(p) = target_pattern(&own).unwrap() else {
+            panic!("the stated print");
+        };
+        assert_eq!(
+            (
+                p.label.as_str(),
+                p.dot_diameter_mm,
+                p.dot_spacing_mm,
+                p.contrast
+            ),
+            ("lab-print-7", 0.18, 0.27, 0.6)
+        );
+        assert_eq!(p.placement, crate::model::Placement::HardCore);
+        let unstated = with_pattern(json!({"label": "lab-print-7", "dot_diameter_mm": 0.18}));
+        let e = target_pattern(&unstated).unwrap_err().to_string();
+        assert!(e.contains("lab-print-7") && e.contains("contrast"), "{e}");
     }
 }
