@@ -35,12 +35,7 @@ pub struct CardGeometry {
 impl CardGeometry {
     /// The fitted field at `p` (px from the image centre) for the move `t`, px.
     pub fn displacement(&self, p: (f64, f64), t: (f64, f64)) -> (f64, f64) {
-        let (mut u, mut v) = (0.0, 0.0);
-        for (q, value) in self.linear.params.iter().zip(&self.linear.values) {
-            let (bu, bv) = geometric_basis(*q, p, t, self.r0);
-            u += value * bu;
-            v += value * bv;
-        }
+        let (mut u, mut v) = self.linear.field_at(p, t, self.r0);
         if let Some(c) = &self.centred {
             let k2 = c.k2.map_or(0.0, |k| k.0);
             let (du, dv) = radial_difference(
@@ -98,11 +93,6 @@ fn is_distortion(p: GeometricParam) -> bool {
     )
 }
 
-fn value_of(fit: &GeometricFit, p: GeometricParam) -> Option<(f64, f64)> {
-    let i = fit.params.iter().position(|q| *q == p)?;
-    Some((fit.values[i], fit.stderr[i]))
-}
-
 /// The card's geometry from the linear joint fit: the distortion refitted about its own centre
 /// when the fit holds k1 (beyond two standard errors) and p1, p2, else the linear fit as it is.
 pub fn card_geometry(
@@ -117,9 +107,9 @@ pub fn card_geometry(
         r0,
     };
     let (Some((k1, k1_se)), Some((p1, _)), Some((p2, _))) = (
-        value_of(&linear, GeometricParam::DistortionK1),
-        value_of(&linear, GeometricParam::DistortionP1),
-        value_of(&linear, GeometricParam::DistortionP2),
+        linear.value(GeometricParam::DistortionK1),
+        linear.value(GeometricParam::DistortionP1),
+        linear.value(GeometricParam::DistortionP2),
     ) else {
         return as_is(linear);
     };

@@ -105,8 +105,7 @@ mod tests {
 
     /// The fit's value of `p` lies within three of its standard errors of `truth`.
     fn within_3_errors(fit: &GeometricFit, p: GeometricParam, truth: f64) {
-        let i = fit.params.iter().position(|q| *q == p).unwrap();
-        let (v, se) = (fit.values[i], fit.stderr[i]);
+        let (v, se) = fit.value(p).unwrap();
         assert!(
             (v - truth).abs() < 3.0 * se,
             "{p:?} = {v} ± {se} against {truth}"

@@ -38,6 +38,25 @@ pub struct GeometricFit {
     pub chi2_drop: f64,
 }
 
+impl GeometricFit {
+    /// The fitted value of `p` and its standard error, when the fit holds `p`.
+    pub fn value(&self, p: GeometricParam) -> Option<(f64, f64)> {
+        let i = self.params.iter().position(|q| *q == p)?;
+        Some((self.values[i], self.stderr[i]))
+    }
+
+    /// The fitted fields' sum at `p` (px from the image centre) for the move `t`, px.
+    pub fn field_at(&self, p: (f64, f64), t: (f64, f64), r0: f64) -> (f64, f64) {
+        self.params
+            .iter()
+            .zip(&self.values)
+            .fold((0.0, 0.0), |(u, v), (&q, &b)| {
+                let (bu, bv) = geometric_basis(q, p, t, r0);
+                (u + b * bu, v + b * bv)
+            })
+    }
+}
+
 /// The weighted normal matrix N (k×k) and right-hand side r of one run and scheme, each basis
 /// column and the data centred on their own means (the per-run constant offsets are nuisances:
 /// sub-pixel bias, travel, misalignment).

@@ -20,13 +20,14 @@
 //! sum, +d and −d from the reference, is zero for a stage that lands where told (a rough figure:
 //! two degrees of freedom).
 
-use super::basis::{geometric_basis, GeometricParam};
+use super::basis::GeometricParam;
 use super::bic::inflation;
 use super::discrepancy::CommonPoint;
 use super::fit_geometric::{fit_geometric, FieldSample, GeometricFit};
 use super::write_geometric::ASSUMED_WORKING_DISTANCE_MM;
 use crate::dic::DicResult;
 use crate::reduce::Scheme;
+use crate::stats::median;
 use serde::{Deserialize, Serialize};
 
 /// The readout's terms, in the order they are admitted: k1 only when the runs tell it from the
@@ -276,9 +277,7 @@ impl Fields {
             .iter()
             .enumerate()
             .map(|(run, pts)| {
-                residual_var(pts, |p| {
-                    field_at(&first, frame.rel(p), moves[run], frame.r0)
-                })
+                residual_var(pts, |p| first.field_at(frame.rel(p), moves[run], frame.r0))
             })
             .collect();
         let fit = fit_with(&var).ok_or(ReadoutError::NotSeparated)?;
@@ -292,14 +291,13 @@ impl Fields {
     }
 
     fn value(&self, p: GeometricParam) -> Option<(f64, f64)> {
-        let i = self.fit.params.iter().position(|q| *q == p)?;
-        Some((self.fit.values[i], self.fit.stderr[i]))
+        self.fit.value(p)
     }
 
     /// The run's rigid move: its displacement less the fitted fields, averaged.
     fn landing(&self, run: usize, frame: &Frame) -> (f64, f64) {
         rigid_move(&self.points[run], |p| {
-            field_at(&self.fit, frame.rel(p), self.moves[run], frame.r0)
+            self.fit.field_at(frame.rel(p), self.moves[run], frame.r0)
         })
     }
 
@@ -341,25 +339,10 @@ fn valid_points(dic: &DicResult) -> Vec<CommonPoint> {
 
 /// The median displacement: the move's image, robust to a few wrong points.
 fn median_move(points: &[CommonPoint]) -> (f64, f64) {
-    let median = |mut v: Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
+    let of = |component: fn(&CommonPoint) -> f64| {
+        median(&mut points.iter().map(component).collect::<Vec<f64>>())
     };
-    (
-        median(points.iter().map(|p| p.du).collect()),
-        median(points.iter().map(|p| p.dv).collect()),
-    )
-}
-
-/// The fitted fields' sum at `rel` (px from the centre) for the move `t`.
-fn field_at(fit: &GeometricFit, rel: (f64, f64), t: (f64, f64), r0: f64) -> (f64, f64) {
-    fit.params
-        .iter()
-        .zip(&fit.values)
-        .fold((0.0, 0.0), |(u, v), (&p, &b)| {
-            let (bu, bv) = geometric_basis(p, rel, t, r0);
-            (u + b * bu, v + b * bv)
-        })
+    (of(|p| p.du), of(|p| p.dv))
 }
 
 /// The mean of the displacement less `field`: the run's rigid move.

@@ -123,11 +123,9 @@ pub fn write_joint(
     out
 }
 
+/// The fitted value of `p` and its error, zero where the fit does not hold it.
 fn value_of(fit: &GeometricFit, p: GeometricParam) -> (f64, f64) {
-    fit.params
-        .iter()
-        .position(|q| *q == p)
-        .map_or((0.0, 0.0), |i| (fit.values[i], fit.stderr[i]))
+    fit.value(p).unwrap_or((0.0, 0.0))
 }
 
 /// A geometric fit as the model writes it.

@@ -141,10 +141,7 @@ pub fn capture_experiment(
     timeouts: BenchTimeouts,
     sink: &dyn RunSink,
 ) -> Result<(Manifest, PathBuf), RunnerError> {
-    let mut files = Files {
-        sink,
-        written: Vec::new(),
-    };
+    let mut files = Files::new(sink);
     still_on_error(
         bench,
         capture_on_bench(plan, bench, lease, geometry, timeouts, &mut files),
@@ -180,10 +177,7 @@ fn capture_and_analyse(
     timeouts: BenchTimeouts,
     sink: &dyn RunSink,
 ) -> Result<ExperimentOutcome, RunnerError> {
-    let mut files = Files {
-        sink,
-        written: Vec::new(),
-    };
+    let mut files = Files::new(sink);
     let captured = capture_on_bench(plan, bench, lease, geometry, timeouts, &mut files)?;
     let (captures, map_files) = analyse(plan, &captured, sink)?;
     let rows = write_results(plan, &captured.manifest, &captures, &mut files)?;
@@ -207,7 +201,14 @@ struct Files<'a> {
     written: Vec<String>,
 }
 
-impl Files<'_> {
+impl<'a> Files<'a> {
+    fn new(sink: &'a dyn RunSink) -> Self {
+        Self {
+            sink,
+            written: Vec::new(),
+        }
+    }
+
     fn write(&mut self, rel: String, bytes: &[u8]) -> Result<PathBuf, RunnerError> {
         let path = self.sink.write(&rel, bytes).map_err(RunnerError::Write)?;
         self.written.push(rel);

@@ -122,25 +122,27 @@ fn read_frames(
     let reference = image(&first.reference)?;
     let (width, height) = (reference.width(), reference.height());
     let prepared = PreparedReference::new(&reference, &plan.dic).map_err(JobError::failed)?;
-    let mut fields = Vec::with_capacity(runs.len());
     let cancelled = || ctx.cancelled();
-    let watch = || Watch {
-        progress: None,
-        cancelled: Some(&cancelled),
-    };
-    for run in runs {
-        let dic = prepared
-            .correlate_watched(&image(&run.deformed)?, watch())
-            .map_err(|e| match e {
-                DicError::Cancelled => JobError::Cancelled,
-                e => JobError::failed(e),
-            })?;
-        fields.push(((run.stage.dx_mm, run.stage.dy_mm), dic));
-    }
-    let readout: Vec<ReadoutRun> = fields
+    let fields = runs
         .iter()
-        .map(|(commanded_mm, dic)| ReadoutRun {
-            commanded_mm: *commanded_mm,
+        .map(|run| {
+            let watch = Watch {
+                progress: None,
+                cancelled: Some(&cancelled),
+            };
+            prepared
+                .correlate_watched(&image(&run.deformed)?, watch)
+                .map_err(|e| match e {
+                    DicError::Cancelled => JobError::Cancelled,
+                    e => JobError::failed(e),
+                })
+        })
+        .collect::<Result<Vec<_>, JobError>>()?;
+    let readout: Vec<ReadoutRun> = runs
+        .iter()
+        .zip(&fields)
+        .map(|(run, dic)| ReadoutRun {
+            commanded_mm: (run.stage.dx_mm, run.stage.dy_mm),
             dic,
         })
         .collect();
