@@ -6,7 +6,7 @@
 
 use crate::common::independent;
 
-use ffdic::diagnose::{Candidate, Diagnosis, Rounds};
+use ffdic::diagnose::{diagnose_rounds_prepared, load_measurement, Candidate, Diagnosis, Rounds};
 use ffdic::model::effects::verdict_name;
 use independent::{bench, candidate, diagnose, Draw};
 use serde_json::{json, Value};
@@ -189,19 +189,30 @@ fn baseline_with_user(name: &str, text: &str) -> ffdic::model::ModelConfig {
     model
 }
 
-/// The baseline with the bow written as a user effect (see below).
-fn with_bow() -> ffdic::model::ModelConfig {
-    baseline_with_user(
-        "bow",
+/// The baseline with a target out of its plane written as the user effect `name`: a move t (px)
+/// changes the displacement by c·`depth`·t, `depth` a quadratic in the image coordinates (px from
+/// the axis), c free in ±1e-7 /px².
+fn with_depth_effect(name: &str, description: &str, depth: &str) -> ffdic::model::ModelConfig {
+    let text = format!(
         r#"
-        description = "a print bowed towards or away from the camera"
-        u = "c * (x^2 + y^2) * tx"
-        v = "c * (x^2 + y^2) * ty"
+        description = "{description}"
+        u = "c * ({depth}) * tx"
+        v = "c * ({depth}) * ty"
         [params.c]
         unit = "1/px^2"
         min = -1e-7
         max = 1e-7
-        "#,
+        "#
+    );
+    baseline_with_user(name, &text)
+}
+
+/// The baseline with the bow written as a user effect (see below).
+fn with_bow() -> ffdic::model::ModelConfig {
+    with_depth_effect(
+        "bow",
+        "a print bowed towards or away from the camera",
+        "x^2 + y^2",
     )
 }
 
@@ -461,6 +472,83 @@ fn a_distortion_beside_a_user_effect_is_re_estimated_and_both_are_named() {
     let fitted = r.final_model.effects.user["bow"].values().expect("fitted")[0];
     within("c", fitted, 0.0, -bow / (2.0 * z_mm * 13.0 * 13.0));
     falls_3x(&r);
+}
+
+/// A scale change beside a saddle-shaped target (the generator's `target_saddle_per_mm`, depth
+/// κs(Px² − Py²)/2 mm, outside the catalogue), the scale the stronger: drawn so that it explains
+/// 70–90 % of the low-order field the baseline leaves, below the share a clean verdict needs
+/// (measured on another draw: 74 %).
+fn scale_and_saddle_spec(test: u64) -> (Value, f64, f64) {
+    let mut draw = Draw::new(test);
+    let mut spec = bench("scale-and-saddle", &mut draw, false);
+    let ds = draw.range(5.0e-5, 7.0e-5) * draw.sign();
+    let saddle = draw.range(0.9e-3, 1.2e-3) * draw.sign();
+    spec["effects"] = json!({"scale_ds": ds, "target_saddle_per_mm": saddle});
+    (spec, ds, saddle)
+}
+
+/// A verdict that explains only part of the field is kept when an effect the user proposed
+/// explains the rest, and withheld when nothing does: the same dataset (a scale change beside a
+/// saddle, above) diagnosed by the baseline and by the baseline holding the saddle as a user
+/// effect (u, v = c·(x² − y²)·(tx, ty)). No catalogue effect imitates a saddle well enough to
+/// explain half of what the scale leaves, so only the user's effect decides.
+#[test]
+fn a_partial_verdict_is_kept_when_a_proposed_user_effect_explains_the_rest() {
+    let (spec, ds, saddle) = scale_and_saddle_spec(3215);
+    let root = tempfile::tempdir().unwrap();
+    let dir = root.path().join("dataset");
+    let truth = independent::generate(&spec, &dir);
+    let meas = load_measurement(&dir, &independent::options(), &|_, _| true).unwrap();
+    let diagnose = |model: &ffdic::model::ModelConfig, rounds: usize| {
+        let r = diagnose_rounds_prepared(&meas, model, rounds, &|_, _| true).unwrap();
+        independent::report("scale-and-saddle", &r);
+        r
+    };
+
+    // Without the proposal: the scale withheld, explaining part of the field, nothing named.
+    let alone = diagnose(&independent::baseline(), 1);
+    let d = &alone.diagnoses[0];
+    assert_eq!(verdict_name(&d.verdict), "none");
+    let w = d.withheld.as_ref().expect("the scale withheld");
+    assert_eq!(w.effect.to_string(), "scale");
+    assert!(
+        (0.5..0.9).contains(&w.explained_fraction),
+        "the scale explains {} of the field",
+        w.explained_fraction
+    );
+    assert!(d.unexplained.significant, "{}", d.unexplained.summary);
+
+    // With it: the scale kept as a partial verdict, then the saddle named.
+    let with_saddle = with_depth_effect("saddle", "a saddle-shaped print", "x^2 - y^2");
+    let r = diagnose(&with_saddle, 3);
+    let first = &r.diagnoses[0];
+    assert_eq!(
+        verdict_name(&first.verdict),
+        "scale",
+        "{:?}",
+        first.withheld
+    );
+    assert!(first.partial, "the scale explains only part of the field");
+    // The same scale, the same comparison after it: what the user's effect changes is the rest.
+    let kept = first.explained_fraction.expect("measured");
+    assert!(
+        (kept - w.explained_fraction).abs() < 1e-6,
+        "{kept} against {w:?}"
+    );
+    let scale = candidate(first, "scale");
+    within("ds", scale.params["ds"], scale.stderr["ds"], ds);
+    assert_eq!(verdict_name(&r.diagnoses[1].verdict), "user.saddle");
+    let z_mm = truth["effects"]["working_distance_mm"].as_f64().unwrap();
+    let fitted = r.final_model.effects.user["saddle"]
+        .values()
+        .expect("fitted")[0];
+    within("c", fitted, 0.0, -saddle / (2.0 * z_mm * 13.0 * 13.0));
+    falls_3x(&r);
+    assert!(
+        !r.final_unexplained.significant,
+        "{}",
+        r.final_unexplained.summary
+    );
 }
 
 /// A lamp that drifted after the references were taken (the generator's `lamp_ramp_per_px`):

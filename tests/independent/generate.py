@@ -114,6 +114,7 @@ OPTIONAL_EFFECTS = {
     "p2_norm": 0.0,
     "distortion_centre_px": [0.0, 0.0],  # distortion centre relative to the optical axis (px)
     "target_bow_per_mm": 0.0,         # κ: depth offset κ|P|²/2 (mm) of a bowed target
+    "target_saddle_per_mm": 0.0,      # κs: depth offset κs (Px² − Py²)/2 (mm) of a saddle-shaped target
     "lamp_ramp_per_px": [0.0, 0.0],   # moved frames lit by a drifted lamp: × (1 + ax·x + ay·y)
 }
 
@@ -257,7 +258,8 @@ def _validate(spec: dict) -> None:
         raise SpecError("working_distance_mm must be a positive number (mm)")
     if not isinstance(opt_top(spec, "state_working_distance"), bool):
         raise SpecError("state_working_distance must be true or false")
-    for k in ("tilt_about_y_rad", "tilt_about_x_rad", "k2_norm", "p1_norm", "p2_norm", "target_bow_per_mm"):
+    for k in ("tilt_about_y_rad", "tilt_about_x_rad", "k2_norm", "p1_norm", "p2_norm", "target_bow_per_mm",
+              "target_saddle_per_mm"):
         v = opt_effect(spec, k)
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
             raise SpecError(f"effects.{k} must be a finite number")
@@ -434,9 +436,12 @@ class Camera:
         self.theta_x = float(opt_effect(spec, "tilt_about_x_rad"))
         self.theta_y = float(opt_effect(spec, "tilt_about_y_rad"))
         self.bow = float(opt_effect(spec, "target_bow_per_mm"))
+        self.saddle = float(opt_effect(spec, "target_saddle_per_mm"))
+        # a target out of its plane: bowed and/or saddle-shaped (the depth depends on P)
+        self.curved = bool(self.bow != 0 or self.saddle != 0)
         self.ramp = np.array([float(v) for v in opt_effect(spec, "lamp_ramp_per_px")])
         self.R3 = tilt_matrix(self.theta_x, self.theta_y)
-        self.perspective_on = bool(self.theta_x != 0 or self.theta_y != 0 or self.bow != 0)
+        self.perspective_on = bool(self.theta_x != 0 or self.theta_y != 0 or self.curved)
         # the distortion must be monotonic over the frame (no fold-over): for k1 < 0, r(1 + k1 r²)
         # peaks at r = 1/sqrt(−3 k1) with the value (2/3)/sqrt(−3 k1)
         if self.k1 < 0 and 1.05 * self.r0 >= (2.0 / 3.0) / math.sqrt(-3.0 * self.k1):
@@ -537,6 +542,8 @@ class Camera:
         Wz = R[2, 0] * q[:, 0] + R[2, 1] * q[:, 1] + self.Z
         if self.bow != 0:
             Wz = Wz + 0.5 * self.bow * (P * P).sum(axis=1)
+        if self.saddle != 0:
+            Wz = Wz + 0.5 * self.saddle * (P[:, 0] ** 2 - P[:, 1] ** 2)
         f = self.Z / Wz
         u2 = self.scale * np.stack([f * Wx, f * Wy], axis=1)
         if not jacobian:
@@ -544,6 +551,9 @@ class Camera:
         dWz = np.tile(R[2, :2], (q.shape[0], 1))
         if self.bow != 0:
             dWz = dWz + self.bow * (P @ Minv)  # ∂z/∂q_j = κ Σ_i P_i (M⁻¹)_ij
+        if self.saddle != 0:
+            # ∂z/∂q_j = κs Σ_i s_i P_i (M⁻¹)_ij, s = (1, −1)
+            dWz = dWz + self.saddle * ((P * np.array([1.0, -1.0])) @ Minv)
         J = np.empty((q.shape[0], 2, 2))
         for row, Wc in ((0, Wx), (1, Wy)):
             for j in range(2):
@@ -552,7 +562,7 @@ class Camera:
 
     def unproject(self, u2: np.ndarray, fr: "Frame") -> np.ndarray:
         """Inverse of the perspective for frame fr: undistorted image offsets u' (px) → in-plane
-        offsets u = scale·q (px). Flat target: exact ray–plane intersection; with a bow, Newton
+        offsets u = scale·q (px). Flat target: exact ray–plane intersection; bowed or saddle-shaped, Newton
         iterations from there (analytic Jacobian) to 1e-9 px."""
         R = self.R3
         n = R[:, 2]  # the plane's normal
@@ -564,7 +574,7 @@ class Camera:
         t = self.Z * n[2] / den
         Wrel = t[:, None] * ray - np.array([0.0, 0.0, self.Z])
         q = Wrel @ R[:, :2]  # in-plane coordinates: Rᵀ(W − Z e_z), first two
-        if self.bow != 0:
+        if self.curved:
             Minv = np.linalg.inv(fr.M)
             for _ in range(100):
                 P = q @ Minv.T - fr.d / self.scale
@@ -1641,6 +1651,12 @@ def generate(spec: dict, out_dir, overwrite: bool | None = None, quiet: bool = T
         "frames": frames_truth,
         "total_seconds": round(time.perf_counter() - t_start, 3),
     }
+    if cam.saddle != 0:
+        # written only when used: a spec without it keeps its truth.json byte for byte
+        truth["effects"]["target_saddle_per_mm"] = cam.saddle
+        truth["effects"]["saddle_model"] = (
+            "depth offset z(P) = target_saddle_per_mm (P_x^2 - P_y^2)/2 (mm), added to the bow's and moving "
+            "with the print as it does. Not in ffdic's catalogue on purpose")
     with open(out_dir / "truth.json", "w") as fh:
         json.dump(truth, fh, indent=2)
         fh.write("\n")
