@@ -121,10 +121,10 @@ pub fn fit_psf_blur(
     // density), and only above half its dot-spacing frequency: below it the shape is the dots'
     // placement statistics (which the comparison chose there, `compare::choose_placement`), above
     // it their profile and whatever blurs it. A characterised print's level is stated, so the
-    // level is evidence too: read as the verdict's image χ² reads it. On the shape alone the
-    // independent generator's characterised prints gave σ 2–3 SE high (0.643 ± 0.017 and
-    // 0.671 ± 0.051 px for a truth of 0.6), and a later round named an aperture for the rest
-    // of the spectrum (docs/calibration.md).
+    // level is evidence too: read as the verdict's image χ² reads it. On the shape alone, five
+    // realisations of the independent generator's characterised prints gave σ 1.4–3.4 SE high
+    // (0.623–0.671 px for a truth of 0.6), and every one then named an aperture for the rest of
+    // the spectrum (docs/calibration.md).
     let nominal = &before.model.nominal;
     let f_min: Vec<f64> = nominal
         .patterns
