@@ -205,7 +205,7 @@ fn check_resolved(
             "{name} {value} ± {se}, truth {t}"
         );
     }
-    // Neither before nor after: a blur fitted on its spectra's shape alone came out 2–3 SE
+    // Neither before nor after: a blur fitted on its spectra's shape alone came out 1.4–3.4 SE
     // high and a later round named an aperture for the rest (docs/calibration.md).
     for rounds in [&before, &after] {
         assert!(

@@ -7,8 +7,8 @@
 #![allow(dead_code)]
 
 use ffdic::diagnose::{
-    diagnose_rounds_prepared, load_measurement, Candidate, CompareOptions, Diagnosis, Rounds,
-    BASELINE_TOML,
+    diagnose_rounds_prepared, load_measurement, Candidate, CompareOptions, Diagnosis, Measurement,
+    Rounds, BASELINE_TOML,
 };
 use ffdic::dic::DicSettings;
 use ffdic::model::ModelConfig;
@@ -205,13 +205,40 @@ pub fn diagnose(spec: &Value, rounds: usize) -> (Rounds, Value) {
 
 /// [`diagnose`] of `model` instead of the baseline.
 pub fn diagnose_model(spec: &Value, model: &ModelConfig, rounds: usize) -> (Rounds, Value) {
+    let measured = measure(spec);
+    let r = measured.diagnose(model, rounds);
+    (r, measured.truth)
+}
+
+/// A generated dataset measured once, so that several models can be diagnosed against it.
+pub struct Measured {
+    pub measurement: Measurement,
+    pub truth: Value,
+    name: String,
+    /// The dataset's folder, kept while the measurement is.
+    _root: tempfile::TempDir,
+}
+
+/// Generates `spec` and measures it with the tests' [`options`].
+pub fn measure(spec: &Value) -> Measured {
     let root = tempfile::tempdir().unwrap();
     let dir = root.path().join("dataset");
     let truth = generate(spec, &dir);
-    let meas = load_measurement(&dir, &options(), &|_, _| true).unwrap();
-    let r = diagnose_rounds_prepared(&meas, model, rounds, &|_, _| true).unwrap();
-    report(spec["name"].as_str().unwrap_or("?"), &r);
-    (r, truth)
+    Measured {
+        measurement: load_measurement(&dir, &options(), &|_, _| true).unwrap(),
+        truth,
+        name: spec["name"].as_str().unwrap_or("?").to_string(),
+        _root: root,
+    }
+}
+
+impl Measured {
+    /// `model` diagnosed against the measurement for up to `rounds` rounds, reported.
+    pub fn diagnose(&self, model: &ModelConfig, rounds: usize) -> Rounds {
+        let r = diagnose_rounds_prepared(&self.measurement, model, rounds, &|_, _| true).unwrap();
+        report(&self.name, &r);
+        r
+    }
 }
 
 pub fn report(name: &str, r: &Rounds) {
