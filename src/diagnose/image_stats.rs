@@ -18,7 +18,7 @@
 //! sub-blocks, pixels), used by the χ² of [`super::bic`].
 
 use crate::image::Image;
-use ffdic_fft::{Complex, Planner64};
+use ffdic_fft::{Complex, Fft, Planner64};
 use serde::{Deserialize, Serialize};
 
 /// Side of the centred crop the spectra and noise are computed on.
@@ -191,8 +191,16 @@ pub fn ptc(a: &Image, repeat: Option<&Image>) -> Vec<PtcPoint> {
         .collect()
 }
 
-/// Row (along x) or column (along y) spectra of a crop in log-spaced bins.
-/// Power spectrum along x (rows) or y (columns) of a crop.
+/// A forward FFT of `len` points from this thread's planner, which keeps the plans it made (a
+/// print's calibration takes the spectra of some two hundred crops of one size).
+fn planned_forward(len: usize) -> std::sync::Arc<dyn Fft<f64>> {
+    thread_local! {
+        static PLANNER: std::cell::RefCell<Planner64> = std::cell::RefCell::new(Planner64::new());
+    }
+    PLANNER.with_borrow_mut(|planner| planner.plan_fft_forward(len))
+}
+
+/// Power spectrum along x (rows) or y (columns) of a crop, in log-spaced bins.
 pub fn psd(img: &Image, along_x: bool) -> Vec<PsdBin> {
     let (w, h) = (img.width(), img.height());
     let (len, count) = if along_x { (w, h) } else { (h, w) };
@@ -205,7 +213,8 @@ pub fn psd(img: &Image, along_x: bool) -> Vec<PsdBin> {
         .map(|i| 0.5 - 0.5 * (2.0 * std::f64::consts::PI * i as f64 / len as f64).cos())
         .collect();
     let wsum2: f64 = window.iter().map(|x| x * x).sum();
-    let fft = Planner64::new().plan_fft_forward(len);
+    let fft = planned_forward(len);
+    let mut scratch = vec![Complex::new(0.0, 0.0); fft.get_inplace_scratch_len()];
     let nbins = 12usize;
     let (fmin, fmax) = (2.0 / len as f64, 0.5);
     let edges: Vec<f64> = (0..=nbins)
@@ -236,14 +245,19 @@ pub fn psd(img: &Image, along_x: bool) -> Vec<PsdBin> {
             .collect::<Vec<f32>>()
             .into()
     };
-    let windowed = |line: usize| -> Vec<f64> {
+    // One line's mean-removed, windowed values into the real (`im` false) or imaginary part
+    // of `buf`.
+    let window_into = |buf: &mut [Complex<f64>], line: usize, im: bool| {
         let values = &lines[line * len..][..len];
         let lm = values.iter().map(|&v| v as f64).sum::<f64>() / len as f64;
-        values
-            .iter()
-            .zip(&window)
-            .map(|(&v, wv)| (v as f64 - lm) * wv)
-            .collect()
+        for ((z, &v), wv) in buf.iter_mut().zip(values).zip(&window) {
+            let x = (v as f64 - lm) * wv;
+            if im {
+                z.im = x;
+            } else {
+                z.re = x;
+            }
+        }
     };
     // Two real lines per complex transform, one in the real part and one in the imaginary:
     // their spectra separate by conjugate symmetry, A_k = (Z_k + conj Z_{N−k})/2 and
@@ -252,24 +266,26 @@ pub fn psd(img: &Image, along_x: bool) -> Vec<PsdBin> {
     let mut buf = vec![Complex::new(0.0, 0.0); len];
     for first in (0..count).step_by(2) {
         let second = (first + 1 < count).then_some(first + 1);
-        let a = windowed(first);
-        let b = second.map(windowed);
-        for (i, z) in buf.iter_mut().enumerate() {
-            *z = Complex::new(a[i], b.as_ref().map_or(0.0, |b| b[i]));
+        window_into(&mut buf, first, false);
+        match second {
+            Some(second) => window_into(&mut buf, second, true),
+            None => buf.iter_mut().for_each(|z| z.im = 0.0),
         }
-        fft.process(&mut buf);
+        fft.process_with_scratch(&mut buf, &mut scratch);
+        // The lines' groups, once per transform (not per frequency).
+        let ga = first * groups / count;
+        let gb = second.map(|second| second * groups / count);
         for (k, bin) in bins.iter().enumerate().take(len / 2 + 1).skip(1) {
             let Some(bin) = *bin else { continue };
-            let (zk, zm) = (buf[k], buf[(len - k) % len].conj());
+            // 1 ≤ k ≤ len/2: N − k is within the buffer, no wrap.
+            let (zk, zm) = (buf[k], buf[len - k].conj());
             let power_a = 0.25 * (zk + zm).norm_sqr();
             let power_b = 0.25 * (zk - zm).norm_sqr();
-            let g = first * groups / count;
-            sums[g][bin] += power_a * scale;
-            counts[g][bin] += 1;
-            if let Some(second) = second {
-                let g = second * groups / count;
-                sums[g][bin] += power_b * scale;
-                counts[g][bin] += 1;
+            sums[ga][bin] += power_a * scale;
+            counts[ga][bin] += 1;
+            if let Some(gb) = gb {
+                sums[gb][bin] += power_b * scale;
+                counts[gb][bin] += 1;
             }
         }
     }

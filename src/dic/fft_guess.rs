@@ -95,7 +95,7 @@ impl ReferenceSpectrum {
                 a[r * l + c].re = window[r * kx + c];
             }
         }
-        fft2d(&mut Planner32::new(), &mut a, l, false);
+        with_planner(|planner| fft2d(planner, &mut a, l, false));
         Self {
             spectrum: a,
             side: l,
@@ -118,31 +118,41 @@ impl ReferenceSpectrum {
         // removing the mean) so they add nothing to the correlation.
         let dx0 = self.origin.0 as i64 - m as i64;
         let dy0 = self.origin.1 as i64 - m as i64;
-        let inside = |c: i64, r: i64| {
-            c >= 0 && r >= 0 && (c as usize) < deformed.width() && (r as usize) < deformed.height()
+        // The frame's rows and columns that fall inside the image, and each inside row's pixels
+        // (the frame's column range of them), row after row as the frame holds them.
+        let inside = |origin: i64, size: usize| {
+            let lo = (-origin).clamp(0, l as i64) as usize;
+            let hi = (size as i64 - origin).clamp(lo as i64, l as i64) as usize;
+            lo..hi
+        };
+        let cols = inside(dx0, deformed.width());
+        let rows = if cols.is_empty() {
+            0..0
+        } else {
+            inside(dy0, deformed.height())
+        };
+        let row_pixels = |r: usize| {
+            let y = (dy0 + r as i64) as usize;
+            let x0 = (dx0 + cols.start as i64) as usize;
+            &deformed.data()[y * deformed.width() + x0..][..cols.len()]
         };
         let (mut sum, mut n) = (0.0f64, 0usize);
-        for r in 0..l as i64 {
-            for c in 0..l as i64 {
-                if inside(dx0 + c, dy0 + r) {
-                    sum += deformed.get((dx0 + c) as usize, (dy0 + r) as usize) as f64;
-                    n += 1;
-                }
+        for r in rows.clone() {
+            for &v in row_pixels(r) {
+                sum += v as f64;
             }
+            n += cols.len();
         }
         let def_mean = if n > 0 { sum / n as f64 } else { 0.0 };
         let mut b = vec![Complex::new(0.0f32, 0.0); l * l];
-        for r in 0..l as i64 {
-            for c in 0..l as i64 {
-                if inside(dx0 + c, dy0 + r) {
-                    let v = deformed.get((dx0 + c) as usize, (dy0 + r) as usize) as f64 - def_mean;
-                    b[r as usize * l + c as usize].re = v as f32;
-                }
+        for r in rows.clone() {
+            let frame_row = &mut b[r * l + cols.start..][..cols.len()];
+            for (z, &v) in frame_row.iter_mut().zip(row_pixels(r)) {
+                z.re = (v as f64 - def_mean) as f32;
             }
         }
 
-        let mut planner = Planner32::new();
-        fft2d(&mut planner, &mut b, l, false);
+        with_planner(|planner| fft2d(planner, &mut b, l, false));
         // Half-way whitening (divide by sqrt|X|): sharper than plain cross-correlation, steadier
         // than full phase correlation, whose flat weighting lets the padding edges speak.
         for (x, y) in self.spectrum.iter().zip(b.iter_mut()) {
@@ -154,7 +164,7 @@ impl ReferenceSpectrum {
                 Complex::new(0.0, 0.0)
             };
         }
-        fft2d(&mut planner, &mut b, l, true);
+        with_planner(|planner| fft2d(planner, &mut b, l, true));
 
         // Only shifts within ±m: the frame is larger than window + 2m (a 5-smooth length), and
         // a peak in the excess would be a motion the user ruled out.
@@ -170,6 +180,19 @@ impl ReferenceSpectrum {
         }
         (best_at.0 as i64 - m as i64, best_at.1 as i64 - m as i64)
     }
+}
+
+/// `f` with this thread's FFT planner, which keeps the plans it made: every image pair of a
+/// diagnosis transforms frames of one size. Taken out while `f` runs (a transform's rows run on
+/// rayon, whose thread may meanwhile run another correlation: that one makes its own planner).
+fn with_planner<T>(f: impl FnOnce(&mut Planner32) -> T) -> T {
+    thread_local! {
+        static PLANNER: std::cell::Cell<Option<Planner32>> = const { std::cell::Cell::new(None) };
+    }
+    let mut planner = PLANNER.take().unwrap_or_default();
+    let out = f(&mut planner);
+    PLANNER.set(Some(planner));
+    out
 }
 
 /// In-place 2D FFT of an n x n row-major array (rows in parallel, then columns through a
