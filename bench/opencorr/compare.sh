@@ -2,11 +2,14 @@
 # Interleaved speed comparison on one machine: ffdic (and optionally an older ffdic binary) against
 # OpenCorr's FFTCC + ICGN2D1 on the same noisy pairs and the same points, 1 and 2 threads.
 #   bench/opencorr/compare.sh ROUNDS
+# env STEP: the grid's step, px (default 5; the paper's grid, where the engine's fixed cost per pair
+# dominates, is 20).
 # env: FFDIC (default target/release/ffdic), FFDIC_OLD (optional second binary), OCBENCH (the
 # ocbench binary, see README.md), PAIRS (folder with ref.tif, trans.tif, stretchrot.tif from
 # make_pair.py), OUT (scratch folder). Prints per-case medians and per-round ratios.
 set -euo pipefail
 R=${1:-5}
+STEP=${STEP:-5}
 FFDIC=${FFDIC:-target/release/ffdic}
 OCBENCH=${OCBENCH:-../opencorr-bench/build/ocbench}
 PAIRS=${PAIRS:-/tmp/ffdic-speed-pairs}
@@ -22,8 +25,8 @@ mkdir -p "$OUT"
 RES=$OUT/runs.tsv; : > "$RES"
 now() { date +%s.%N; }
 for pair in trans stretchrot; do
-  # The points: ffdic's own grid at step 5, handed to OpenCorr as a CSV.
-  "$FFDIC" analyze "$PAIRS/ref.tif" "$PAIRS/$pair.tif" --step 5 --json --out "$OUT/points_$pair" > /dev/null
+  # The points: ffdic's own grid at the step, handed to OpenCorr as a CSV.
+  "$FFDIC" analyze "$PAIRS/ref.tif" "$PAIRS/$pair.tif" --step "$STEP" --json --out "$OUT/points_$pair" > /dev/null
 done
 for ((r = 1; r <= R; r++)); do
   for pair in trans stretchrot; do
@@ -37,7 +40,7 @@ for ((r = 1; r <= R; r++)); do
             read -r valid compute icgn < <(python3 -c "import json;d=json.load(open('$OUT/o.json'));print(d['valid'],d['compute_ms']/1000,d['icgn_ms']/1000)") ;;
           *)
             bin=$FFDIC; [ "$tool" = old ] && bin=$FFDIC_OLD
-            "$bin" analyze "$PAIRS/ref.tif" "$PAIRS/$pair.tif" --step 5 --threads "$T" --json > "$OUT/f.json"
+            "$bin" analyze "$PAIRS/ref.tif" "$PAIRS/$pair.tif" --step "$STEP" --threads "$T" --json > "$OUT/f.json"
             t1=$(now)
             read -r valid compute icgn < <(python3 -c "import json;d=json.load(open('$OUT/f.json'));print(d['valid'],d['elapsed_s'],'nan')") ;;
         esac
@@ -47,14 +50,15 @@ for ((r = 1; r <= R; r++)); do
   done
   echo "round $r done" >&2
 done
-python3 - "$RES" <<'PY'
+python3 - "$RES" "$OUT" <<'PY'
 import sys, statistics as st
 from collections import defaultdict
 runs = defaultdict(list)
 for line in open(sys.argv[1]):
     r, p, T, tool, wall, valid, comp, icgn = line.split('\t')
     runs[(p, int(T), tool)].append((float(wall), int(valid), float(comp), float(icgn)))
-n = 25921
+# The points of the grid (one header line in each pair's points.csv; the same grid for both).
+n = sum(1 for _ in open(f"{sys.argv[2]}/points_trans/points.csv")) - 1
 tools = sorted({k[2] for k in runs}, key=['new', 'old', 'opencorr'].index)
 print("| pair | threads | tool | compute s median [min-max] | POI/s | valid |")
 print("|---|---|---|---|---|---|")

@@ -30,8 +30,11 @@ pub fn gaussian_blur<'a>(image: impl Into<ImageView<'a>>, sigma_px: f64) -> Imag
     tmp.par_chunks_mut(w).enumerate().for_each_init(
         || vec![0.0f32; w + 2 * r],
         |line, (row, out)| {
-            for (i, v) in line.iter_mut().enumerate() {
-                *v = src[row * w + mirror(i as isize - radius, w)];
+            // The row in the middle, the mirror only for the 2r samples beyond its ends.
+            let own = &src[row * w..(row + 1) * w];
+            line[r..r + w].copy_from_slice(own);
+            for i in (0..r).chain(r + w..w + 2 * r) {
+                line[i] = own[mirror(i as isize - radius, w)];
             }
             for (c, o) in out.iter_mut().enumerate() {
                 *o = kernel
