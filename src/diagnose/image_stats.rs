@@ -289,11 +289,20 @@ pub fn psd(img: &Image, along_x: bool) -> Vec<PsdBin> {
             }
         }
     }
-    (0..nbins)
+    group_bins(&sums, &counts, &edges)
+}
+
+/// Each bin's mean over the groups of lines that reached it (`sums[group][bin]` over
+/// `counts[group][bin]` lines), with the groups' scatter as its standard error; a bin at the
+/// geometric centre of `edges[b]..edges[b + 1]`, left out where fewer than two groups reached it.
+fn group_bins(sums: &[Vec<f64>], counts: &[Vec<usize>], edges: &[f64]) -> Vec<PsdBin> {
+    (0..edges.len() - 1)
         .filter_map(|b| {
-            let means: Vec<f64> = (0..groups)
-                .filter(|&g| counts[g][b] > 0)
-                .map(|g| sums[g][b] / counts[g][b] as f64)
+            let means: Vec<f64> = sums
+                .iter()
+                .zip(counts)
+                .filter(|(_, n)| n[b] > 0)
+                .map(|(s, n)| s[b] / n[b] as f64)
                 .collect();
             if means.len() < 2 {
                 return None;
@@ -302,7 +311,7 @@ pub fn psd(img: &Image, along_x: bool) -> Vec<PsdBin> {
             let m = means.iter().sum::<f64>() / k;
             let sd = (means.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (k - 1.0)).sqrt();
             Some(PsdBin {
-                f: (edge(b) * edge(b + 1)).sqrt(),
+                f: (edges[b] * edges[b + 1]).sqrt(),
                 value: m,
                 se: sd / k.sqrt(),
             })
