@@ -1,4 +1,4 @@
-//! FFT plans for ffdic: rustfft's planner behind one type per float width.
+//! FFT plans for ffdic: rustfft's planner, one plan cache per float width and thread.
 //!
 //! Why a crate of its own: rustfft's planner is generic over the float, and every algorithm it
 //! may pick (scalar, SSE and AVX butterflies of many prime sizes, mixed radix, Bluestein) is
@@ -8,53 +8,44 @@
 //! Python wheel. Named here they are compiled once, and with the dependencies' profile (see the
 //! workspace's `Cargo.toml`) the test build and the wheel share that one build. A plan is a trait
 //! object either way, so the transforms run the same code as before.
+//!
+//! Why one cache per thread: a diagnosis transforms frames of a few sizes thousands of times,
+//! and planning (choosing an algorithm, computing its twiddles) costs more than a small
+//! transform. The cache is borrowed only while a plan is looked up, never while it runs, so a
+//! transform whose rows run on rayon may plan again from any thread without a conflict.
 
+use std::cell::RefCell;
 use std::sync::Arc;
 
 pub use rustfft::num_complex::Complex;
 pub use rustfft::Fft;
+use rustfft::FftPlanner;
 
-/// Plans of single-precision transforms, cached by length (rustfft's `FftPlanner<f32>`).
-pub struct Planner32(rustfft::FftPlanner<f32>);
-
-/// Plans of double-precision transforms, cached by length (rustfft's `FftPlanner<f64>`).
-pub struct Planner64(rustfft::FftPlanner<f64>);
-
-impl Default for Planner32 {
-    fn default() -> Self {
-        Self::new()
-    }
+/// Which way a plan transforms. Both are unnormalised: a forward and an inverse transform of
+/// `len` points scale the input by `len`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Direction {
+    Forward,
+    Inverse,
 }
 
-impl Planner32 {
-    pub fn new() -> Self {
-        Self(rustfft::FftPlanner::new())
-    }
-
-    /// The forward transform of `len` points (unnormalised).
-    pub fn plan_fft_forward(&mut self, len: usize) -> Arc<dyn Fft<f32>> {
-        self.0.plan_fft_forward(len)
-    }
-
-    /// The inverse transform of `len` points (unnormalised: a round trip scales by `len`).
-    pub fn plan_fft_inverse(&mut self, len: usize) -> Arc<dyn Fft<f32>> {
-        self.0.plan_fft_inverse(len)
-    }
+thread_local! {
+    static PLANS_F32: RefCell<FftPlanner<f32>> = RefCell::new(FftPlanner::new());
+    static PLANS_F64: RefCell<FftPlanner<f64>> = RefCell::new(FftPlanner::new());
 }
 
-impl Default for Planner64 {
-    fn default() -> Self {
-        Self::new()
-    }
+/// The single-precision transform of `len` points from this thread's plan cache.
+pub fn plan_f32(len: usize, direction: Direction) -> Arc<dyn Fft<f32>> {
+    PLANS_F32.with_borrow_mut(|planner| match direction {
+        Direction::Forward => planner.plan_fft_forward(len),
+        Direction::Inverse => planner.plan_fft_inverse(len),
+    })
 }
 
-impl Planner64 {
-    pub fn new() -> Self {
-        Self(rustfft::FftPlanner::new())
-    }
-
-    /// The forward transform of `len` points (unnormalised).
-    pub fn plan_fft_forward(&mut self, len: usize) -> Arc<dyn Fft<f64>> {
-        self.0.plan_fft_forward(len)
-    }
+/// The double-precision transform of `len` points from this thread's plan cache.
+pub fn plan_f64(len: usize, direction: Direction) -> Arc<dyn Fft<f64>> {
+    PLANS_F64.with_borrow_mut(|planner| match direction {
+        Direction::Forward => planner.plan_fft_forward(len),
+        Direction::Inverse => planner.plan_fft_inverse(len),
+    })
 }

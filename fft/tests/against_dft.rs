@@ -1,10 +1,10 @@
-//! The planners' transforms against the discrete Fourier transform written out. An integration
+//! The plan caches' transforms against the discrete Fourier transform written out. An integration
 //! test, not a unit test: a unit-test harness would compile every rustfft algorithm again (the
 //! crate's whole cost), while this file only calls the built library.
 
-use ffdic_fft::{Complex, Planner32, Planner64};
+use ffdic_fft::{plan_f32, plan_f64, Complex, Direction};
 
-/// Each planner's transform against the DFT written out, at a power of two, a prime that
+/// Each width's transform against the DFT written out, at a power of two, a prime that
 /// rustfft serves with a SIMD butterfly (31) and one it serves with Bluestein's algorithm (67).
 #[test]
 fn transforms_match_the_dft_written_out() {
@@ -23,13 +23,12 @@ fn transforms_match_the_dft_written_out() {
             })
             .collect();
         let mut y64 = x.clone();
-        Planner64::new().plan_fft_forward(len).process(&mut y64);
+        plan_f64(len, Direction::Forward).process(&mut y64);
         let mut y32: Vec<Complex<f32>> = x
             .iter()
             .map(|v| Complex::new(v.re as f32, v.im as f32))
             .collect();
-        let mut p32 = Planner32::new();
-        p32.plan_fft_forward(len).process(&mut y32);
+        plan_f32(len, Direction::Forward).process(&mut y32);
         let scale: f64 = dft.iter().map(|v| v.norm()).fold(0.0, f64::max);
         for k in 0..len {
             assert!(
@@ -40,7 +39,7 @@ fn transforms_match_the_dft_written_out() {
             assert!(d32.norm() < 1e-5 * scale, "f32, len {len}, bin {k}");
         }
         // The inverse undoes the forward up to the factor len.
-        p32.plan_fft_inverse(len).process(&mut y32);
+        plan_f32(len, Direction::Inverse).process(&mut y32);
         for (v, orig) in y32.iter().zip(&x) {
             let back = Complex::new(v.re as f64, v.im as f64) / len as f64;
             assert!(

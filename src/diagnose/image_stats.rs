@@ -18,7 +18,7 @@
 //! sub-blocks, pixels), used by the χ² of [`super::bic`].
 
 use crate::image::Image;
-use ffdic_fft::{Complex, Fft, Planner64};
+use ffdic_fft::{plan_f64, Complex, Direction};
 use serde::{Deserialize, Serialize};
 
 /// Side of the centred crop the spectra and noise are computed on.
@@ -191,15 +191,6 @@ pub fn ptc(a: &Image, repeat: Option<&Image>) -> Vec<PtcPoint> {
         .collect()
 }
 
-/// A forward FFT of `len` points from this thread's planner, which keeps the plans it made (a
-/// print's calibration takes the spectra of some two hundred crops of one size).
-fn planned_forward(len: usize) -> std::sync::Arc<dyn Fft<f64>> {
-    thread_local! {
-        static PLANNER: std::cell::RefCell<Planner64> = std::cell::RefCell::new(Planner64::new());
-    }
-    PLANNER.with_borrow_mut(|planner| planner.plan_fft_forward(len))
-}
-
 /// Power spectrum along x (rows) or y (columns) of a crop, in log-spaced bins.
 pub fn psd(img: &Image, along_x: bool) -> Vec<PsdBin> {
     let (w, h) = (img.width(), img.height());
@@ -213,7 +204,9 @@ pub fn psd(img: &Image, along_x: bool) -> Vec<PsdBin> {
         .map(|i| 0.5 - 0.5 * (2.0 * std::f64::consts::PI * i as f64 / len as f64).cos())
         .collect();
     let wsum2: f64 = window.iter().map(|x| x * x).sum();
-    let fft = planned_forward(len);
+    // From this thread's plan cache: a print's calibration takes the spectra of some two
+    // hundred crops of one size.
+    let fft = plan_f64(len, Direction::Forward);
     let mut scratch = vec![Complex::new(0.0, 0.0); fft.get_inplace_scratch_len()];
     let nbins = 12usize;
     let (fmin, fmax) = (2.0 / len as f64, 0.5);

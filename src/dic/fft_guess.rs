@@ -8,7 +8,7 @@
 //! direction is found without circular wrap-around.
 
 use crate::image::{Image, Roi};
-use ffdic_fft::{Complex, Planner32};
+use ffdic_fft::{plan_f32, Complex, Direction};
 use rayon::prelude::*;
 
 /// Side of the reference window: big enough for a sharp peak, small enough to stay cheap.
@@ -95,7 +95,7 @@ impl ReferenceSpectrum {
                 a[r * l + c].re = window[r * kx + c];
             }
         }
-        with_planner(|planner| fft2d(planner, &mut a, l, false));
+        fft2d(&mut a, l, Direction::Forward);
         Self {
             spectrum: a,
             side: l,
@@ -152,7 +152,7 @@ impl ReferenceSpectrum {
             }
         }
 
-        with_planner(|planner| fft2d(planner, &mut b, l, false));
+        fft2d(&mut b, l, Direction::Forward);
         // Half-way whitening (divide by sqrt|X|): sharper than plain cross-correlation, steadier
         // than full phase correlation, whose flat weighting lets the padding edges speak.
         for (x, y) in self.spectrum.iter().zip(b.iter_mut()) {
@@ -164,7 +164,7 @@ impl ReferenceSpectrum {
                 Complex::new(0.0, 0.0)
             };
         }
-        with_planner(|planner| fft2d(planner, &mut b, l, true));
+        fft2d(&mut b, l, Direction::Inverse);
 
         // Only shifts within ±m: the frame is larger than window + 2m (a 5-smooth length), and
         // a peak in the excess would be a motion the user ruled out.
@@ -182,27 +182,11 @@ impl ReferenceSpectrum {
     }
 }
 
-/// `f` with this thread's FFT planner, which keeps the plans it made: every image pair of a
-/// diagnosis transforms frames of one size. Taken out while `f` runs (a transform's rows run on
-/// rayon, whose thread may meanwhile run another correlation: that one makes its own planner).
-fn with_planner<T>(f: impl FnOnce(&mut Planner32) -> T) -> T {
-    thread_local! {
-        static PLANNER: std::cell::Cell<Option<Planner32>> = const { std::cell::Cell::new(None) };
-    }
-    let mut planner = PLANNER.take().unwrap_or_default();
-    let out = f(&mut planner);
-    PLANNER.set(Some(planner));
-    out
-}
-
 /// In-place 2D FFT of an n x n row-major array (rows in parallel, then columns through a
-/// transpose).
-pub(super) fn fft2d(planner: &mut Planner32, data: &mut [Complex<f32>], n: usize, inverse: bool) {
-    let fft = if inverse {
-        planner.plan_fft_inverse(n)
-    } else {
-        planner.plan_fft_forward(n)
-    };
+/// transpose), planned from this thread's cache: every image pair of a diagnosis transforms
+/// frames of one size.
+pub(super) fn fft2d(data: &mut [Complex<f32>], n: usize, direction: Direction) {
+    let fft = plan_f32(n, direction);
     let rows = |data: &mut [Complex<f32>]| {
         data.par_chunks_mut(n * 16)
             .for_each(|chunk| fft.process(chunk));

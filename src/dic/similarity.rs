@@ -12,7 +12,7 @@
 use super::fft_guess::{fast_fft_len_at_most, fft2d, ReferenceSpectrum};
 use super::Warp;
 use crate::image::{Image, Roi};
-use ffdic_fft::{Complex, Planner32};
+use ffdic_fft::{Complex, Direction};
 
 /// Side of the square windows whose spectra are compared.
 const SPECTRUM_WINDOW_PX: usize = 256;
@@ -79,8 +79,7 @@ pub fn estimate_similarity(
     // The spectra must hold the same material: the deformed window sits where the rigid
     // offset puts it — but a rigid offset found under a large rotation may be a false peak, so
     // the window in place is tried as well, and the sharper log-polar peak wins.
-    let mut planner = Planner32::new();
-    let ref_spectrum = magnitude_spectrum(&mut planner, reference, (rx, ry), k)?;
+    let ref_spectrum = magnitude_spectrum(reference, (rx, ry), k)?;
     let n = LOG_POLAR_SAMPLES;
     let max_radius = k as f64 / 2.0 - 2.0;
     let log_step = (max_radius / MIN_RADIUS_BINS).ln() / n as f64;
@@ -93,9 +92,9 @@ pub fn estimate_similarity(
         .into_iter()
         .filter_map(|(ox, oy)| {
             let at = (place(cx as i64 + ox, k, w), place(cy as i64 + oy, k, h));
-            let spectrum = magnitude_spectrum(&mut planner, deformed, at, k)?;
+            let spectrum = magnitude_spectrum(deformed, at, k)?;
             let b = log_polar(&spectrum, k, log_step);
-            rotation_and_scale(&mut planner, ref_log_polar.clone(), b, log_step)
+            rotation_and_scale(ref_log_polar.clone(), b, log_step)
         })
         .max_by(|a, b| a.2.total_cmp(&b.2))?;
     if !(scale.is_finite() && (0.5..2.0).contains(&scale)) {
@@ -150,14 +149,13 @@ pub fn estimate_similarity(
 /// Phase correlation of two log-polar spectra: (angle, scale, peak height). Rows are angle,
 /// columns log-radius; shifts beyond half an axis are negative.
 fn rotation_and_scale(
-    planner: &mut Planner32,
     mut a: Vec<Complex<f32>>,
     mut b: Vec<Complex<f32>>,
     log_step: f64,
 ) -> Option<(f64, f64, f64)> {
     let n = LOG_POLAR_SAMPLES;
-    fft2d(planner, &mut a, n, false);
-    fft2d(planner, &mut b, n, false);
+    fft2d(&mut a, n, Direction::Forward);
+    fft2d(&mut b, n, Direction::Forward);
     for (x, y) in a.iter_mut().zip(&b) {
         let cross = x.conj() * y;
         let mag = cross.norm();
@@ -167,7 +165,7 @@ fn rotation_and_scale(
             Complex::new(0.0, 0.0)
         };
     }
-    fft2d(planner, &mut a, n, true);
+    fft2d(&mut a, n, Direction::Inverse);
     let (mut best, mut at) = (f32::NEG_INFINITY, (0usize, 0usize));
     for (idx, v) in a.iter().enumerate() {
         if v.re > best {
@@ -200,12 +198,7 @@ fn rotation_and_scale(
 /// |FFT| of the Hann-windowed, zero-mean k x k window at `origin`, centred (DC at k/2) and
 /// weighted by Reddy & Chatterji's high-pass (1 − cos πξ cos πη)(2 − cos πξ cos πη), which
 /// lets the texture's frequencies speak rather than the window's.
-fn magnitude_spectrum(
-    planner: &mut Planner32,
-    image: &Image,
-    (x0, y0): (usize, usize),
-    k: usize,
-) -> Option<Vec<f32>> {
+fn magnitude_spectrum(image: &Image, (x0, y0): (usize, usize), k: usize) -> Option<Vec<f32>> {
     let (mean, std) = image.crop(Roi::new(x0, y0, k, k)).mean_std();
     if !(std > 0.0) {
         return None;
@@ -220,7 +213,7 @@ fn magnitude_spectrum(
             data[r * k + c].re = v as f32;
         }
     }
-    fft2d(planner, &mut data, k, false);
+    fft2d(&mut data, k, Direction::Forward);
     let mut out = vec![0.0f32; k * k];
     for r in 0..k {
         for c in 0..k {
