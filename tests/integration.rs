@@ -12,6 +12,7 @@ static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 mod common;
 
+mod analysis_memo;
 mod api_bounded;
 mod api_dashboard;
 mod api_deletion;

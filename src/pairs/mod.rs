@@ -9,11 +9,18 @@
 //! scheme's. A run the camera read out in its own binning or decimation (`capture`) is
 //! correlated as it is, once, under its hardware scheme ([`hardware_geometry`]); every other run
 //! under each scheme given.
+//!
+//! An analysis this process already made of the same frames' content, scheme and settings is
+//! taken from [`memo::AnalysisMemo`] instead of made again, and a reference is prepared for a
+//! scheme only when one of its runs is not remembered.
+
+pub mod memo;
 
 use crate::dataset::{check_pair, PairCheck, Run};
 use crate::dic::{DicError, DicResult, DicSettings, PreparedReference, Watch};
 use crate::image::{read_image, Image, ImageError};
 use crate::reduce::{reduce, AxisScheme, ReduceError, Scheme};
+use memo::{AnalysisKey, AnalysisMemo, FrameDigest};
 use std::borrow::Cow;
 use std::path::Path;
 
@@ -78,20 +85,35 @@ pub trait PairVisitor {
     ) -> Result<(), Self::Error>;
 }
 
-/// A reference frame as read, with its schemes and their prepared references.
+/// A reference frame as read, with its schemes and, once a scheme's first run is not
+/// remembered, its prepared reference.
 struct PreparedFrame {
     file: String,
     /// The hardware scheme the frame was read out in; None at full resolution.
     mode: Option<String>,
     image: Image,
+    digest: FrameDigest,
     bit_depth: u8,
     schemes: Vec<Scheme>,
-    prepared: Vec<PreparedReference>,
+    prepared: Vec<Option<PreparedReference>>,
 }
 
 /// Correlates every run of `runs` (frames in `dir`) under each of `schemes`, or under its own
-/// hardware scheme when the camera read it out in one; see the module doc.
+/// hardware scheme when the camera read it out in one, with this process's memo of analyses;
+/// see the module doc.
 pub fn correlate_pairs<V: PairVisitor + Sync>(
+    dir: &Path,
+    runs: &[Run],
+    schemes: &[Scheme],
+    dic: &DicSettings,
+    visitor: &mut V,
+) -> Result<(), V::Error> {
+    correlate_pairs_in(AnalysisMemo::global(), dir, runs, schemes, dic, visitor)
+}
+
+/// [`correlate_pairs`] with the analyses recalled from and remembered in `memo`.
+pub fn correlate_pairs_in<V: PairVisitor + Sync>(
+    memo: &AnalysisMemo,
     dir: &Path,
     runs: &[Run],
     schemes: &[Scheme],
@@ -104,9 +126,9 @@ pub fn correlate_pairs<V: PairVisitor + Sync>(
         let position = kept
             .iter()
             .position(|f| f.file == run.reference && f.mode == mode);
-        let frame = match position {
+        let mut frame = match position {
             Some(k) => kept.remove(k),
-            None => prepare(dir, run, schemes, dic, &|| visitor.cancelled())?,
+            None => prepare(dir, run, schemes)?,
         };
         let (deformed, _) = read_image(&dir.join(&run.deformed)).map_err(PairError::from)?;
         check_pair(&frame.image, &deformed).map_err(|source| PairError::Frames {
@@ -124,7 +146,25 @@ pub fn correlate_pairs<V: PairVisitor + Sync>(
             return Err(PairError::Cancelled.into());
         }
         visitor.frames(&pair)?;
-        for (scheme, prepared) in frame.schemes.iter().zip(&frame.prepared) {
+        let deformed_digest = FrameDigest::of(&deformed);
+        for (scheme, prepared) in frame.schemes.iter().zip(frame.prepared.iter_mut()) {
+            let key = AnalysisKey::new(
+                frame.digest,
+                deformed_digest,
+                run.capture.is_some(),
+                scheme,
+                dic,
+            );
+            if let Some(known) = memo.recall(&key) {
+                visitor.result(&pair, scheme, DicResult::clone(&known))?;
+                continue;
+            }
+            let prepared = match prepared {
+                Some(p) => p,
+                None => prepared.insert(prepare_scheme(&frame.image, run, scheme, dic, &|| {
+                    visitor.cancelled()
+                })?),
+            };
             let moved = as_analysed(&deformed, run, scheme)?;
             let watching: &V = visitor;
             let watch = Watch {
@@ -141,6 +181,7 @@ pub fn correlate_pairs<V: PairVisitor + Sync>(
                         source,
                     },
                 })?;
+            memo.remember(key, &result);
             visitor.result(&pair, scheme, result)?;
         }
         // One reference per read-out mode: a mode's runs come one pattern after another, and an
@@ -151,40 +192,43 @@ pub fn correlate_pairs<V: PairVisitor + Sync>(
     Ok(())
 }
 
-/// Reads `run`'s reference and prepares it for each scheme (the hardware scheme's alone, as
-/// read, for a capture-mode run).
-fn prepare(
-    dir: &Path,
-    run: &Run,
-    schemes: &[Scheme],
-    dic: &DicSettings,
-    cancelled: &dyn Fn() -> bool,
-) -> Result<PreparedFrame, PairError> {
+/// Reads `run`'s reference and digests its content; its schemes are the hardware scheme's alone,
+/// as read, for a capture-mode run.
+fn prepare(dir: &Path, run: &Run, schemes: &[Scheme]) -> Result<PreparedFrame, PairError> {
     let (image, info) = read_image(&dir.join(&run.reference))?;
     let schemes = match &run.capture {
         Some(capture) => vec![hardware_geometry(capture)],
         None => schemes.to_vec(),
     };
-    let mut prepared = Vec::with_capacity(schemes.len());
-    for scheme in &schemes {
-        // A dense grid's preparation takes seconds a scheme.
-        if cancelled() {
-            return Err(PairError::Cancelled);
-        }
-        let p = PreparedReference::new(as_analysed(&image, run, scheme)?.as_ref(), dic);
-        prepared.push(p.map_err(|source| PairError::Dic {
-            run: run.id.clone(),
-            scheme: scheme.name.clone(),
-            source,
-        })?);
-    }
     Ok(PreparedFrame {
         file: run.reference.clone(),
         mode: run.capture.as_ref().map(|c| c.name.clone()),
         bit_depth: info.bit_depth.min(16),
+        digest: FrameDigest::of(&image),
+        prepared: schemes.iter().map(|_| None).collect(),
         image,
         schemes,
-        prepared,
+    })
+}
+
+/// The reference `image` of `run` prepared for `scheme`.
+fn prepare_scheme(
+    image: &Image,
+    run: &Run,
+    scheme: &Scheme,
+    dic: &DicSettings,
+    cancelled: &dyn Fn() -> bool,
+) -> Result<PreparedReference, PairError> {
+    // A dense grid's preparation takes seconds a scheme.
+    if cancelled() {
+        return Err(PairError::Cancelled);
+    }
+    PreparedReference::new(as_analysed(image, run, scheme)?.as_ref(), dic).map_err(|source| {
+        PairError::Dic {
+            run: run.id.clone(),
+            scheme: scheme.name.clone(),
+            source,
+        }
     })
 }
 
