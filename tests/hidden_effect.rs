@@ -14,7 +14,7 @@ use ffdic::model::effects::{
     FillFactor, LensDistortion, PsfBlur, Rotation, Scale, SensorNoise, StageMisalignment,
 };
 use ffdic::model::{Camera, Effects, ModelConfig};
-use ffdic::reduce::{AxisScheme, Scheme};
+use ffdic::reduce::Scheme;
 use std::path::Path;
 
 fn baseline() -> ModelConfig {
@@ -79,13 +79,9 @@ fn spec(pattern: &str, moves: Vec<MoveSpec>, steps: bool, static_frames: usize) 
     }
 }
 
+/// Every pixel as read.
 fn native() -> Scheme {
-    let one = AxisScheme {
-        block: 1,
-        first: 0,
-        active: 1,
-    };
-    Scheme::new("native", one, one).unwrap()
+    Scheme::preset("native").expect("a preset")
 }
 
 fn options(schemes: Vec<Scheme>, prefilter_sigma_px: f64) -> CompareOptions {

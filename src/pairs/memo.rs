@@ -139,7 +139,6 @@ fn bytes_of(result: &DicResult) -> usize {
 mod tests {
     use super::*;
     use crate::dic::{PoiGrid, PoiResult, PoiStatus, Summary};
-    use crate::reduce::AxisScheme;
 
     /// An analysis of `points` points on a row (their values do not matter here).
     fn result(points: usize) -> DicResult {
@@ -158,15 +157,6 @@ mod tests {
         }
     }
 
-    fn native() -> Scheme {
-        let one = AxisScheme {
-            block: 1,
-            first: 0,
-            active: 1,
-        };
-        Scheme::new("native", one, one).unwrap()
-    }
-
     #[test]
     fn a_key_changes_with_every_input() {
         let a = FrameDigest::of(&Image::filled(8, 8, 1.0));
@@ -177,31 +167,33 @@ mod tests {
             a,
             "the size is part of the content"
         );
+        let native = Scheme::preset("native").unwrap();
         let dic = DicSettings::default();
-        let key = AnalysisKey::new(a, b, false, &native(), &dic);
-        assert_eq!(key, AnalysisKey::new(a, b, false, &native(), &dic));
-        assert_ne!(key, AnalysisKey::new(b, a, false, &native(), &dic));
-        assert_ne!(key, AnalysisKey::new(a, b, true, &native(), &dic));
+        let key = AnalysisKey::new(a, b, false, &native, &dic);
+        assert_eq!(key, AnalysisKey::new(a, b, false, &native, &dic));
+        assert_ne!(key, AnalysisKey::new(b, a, false, &native, &dic));
+        assert_ne!(key, AnalysisKey::new(a, b, true, &native, &dic));
         let binned = Scheme::preset("ff100").unwrap();
         assert_ne!(key, AnalysisKey::new(a, b, false, &binned, &dic));
         let other = DicSettings {
             step_px: dic.step_px + 1,
             ..dic.clone()
         };
-        assert_ne!(key, AnalysisKey::new(a, b, false, &native(), &other));
+        assert_ne!(key, AnalysisKey::new(a, b, false, &native, &other));
     }
 
     #[test]
     fn the_memo_recalls_what_it_holds_and_forgets_the_oldest_beyond_its_budget() {
         let one = bytes_of(&result(100));
         let memo = AnalysisMemo::new(2 * one + one / 2);
+        let native = Scheme::preset("native").unwrap();
         let digest = |v: f32| FrameDigest::of(&Image::filled(4, 4, v));
         let key = |v: f32| {
             AnalysisKey::new(
                 digest(0.0),
                 digest(v),
                 false,
-                &native(),
+                &native,
                 &DicSettings::default(),
             )
         };

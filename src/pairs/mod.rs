@@ -128,7 +128,7 @@ pub fn correlate_pairs_in<V: PairVisitor + Sync>(
             .position(|f| f.file == run.reference && f.mode == mode);
         let mut frame = match position {
             Some(k) => kept.remove(k),
-            None => prepare(dir, run, schemes)?,
+            None => read_reference(dir, run, schemes)?,
         };
         let (deformed, _) = read_image(&dir.join(&run.deformed)).map_err(PairError::from)?;
         check_pair(&frame.image, &deformed).map_err(|source| PairError::Frames {
@@ -194,7 +194,7 @@ pub fn correlate_pairs_in<V: PairVisitor + Sync>(
 
 /// Reads `run`'s reference and digests its content; its schemes are the hardware scheme's alone,
 /// as read, for a capture-mode run.
-fn prepare(dir: &Path, run: &Run, schemes: &[Scheme]) -> Result<PreparedFrame, PairError> {
+fn read_reference(dir: &Path, run: &Run, schemes: &[Scheme]) -> Result<PreparedFrame, PairError> {
     let (image, info) = read_image(&dir.join(&run.reference))?;
     let schemes = match &run.capture {
         Some(capture) => vec![hardware_geometry(capture)],

@@ -12,7 +12,7 @@ use ffdic::diagnose::{
 };
 use ffdic::dic::DicSettings;
 use ffdic::model::ModelConfig;
-use ffdic::reduce::{AxisScheme, Scheme};
+use ffdic::reduce::Scheme;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -185,14 +185,9 @@ pub fn baseline() -> ModelConfig {
 }
 
 pub fn options() -> CompareOptions {
-    let one = AxisScheme {
-        block: 1,
-        first: 0,
-        active: 1,
-    };
     CompareOptions {
         dic: DicSettings::default(),
-        schemes: vec![Scheme::new("native", one, one).unwrap()],
+        schemes: vec![Scheme::preset("native").unwrap()],
         seed: 0x5EED,
     }
 }
