@@ -7,7 +7,7 @@ use super::image_stats::STATS_CROP_PX;
 use super::measurement::Measurement;
 use super::nominal::Nominal;
 use super::nominal::PatternEstimate;
-use super::optimise::golden;
+use super::optimise::{brent, golden_tolerance};
 use super::print::{
     placement_band_edge, spectral_shape_bins, spectral_shape_chi2, spectral_shape_chi2_below,
     PrintCalibration, PrintKnowledge,
@@ -340,7 +340,7 @@ fn contrast_of(img: &Image) -> f64 {
 }
 
 /// Fits pattern `pi`'s print with its profile: `rounds` rounds of contrast, then size — a
-/// Gaussian's σ, or a disk's diameter and then its edge softness — by golden section on the
+/// Gaussian's σ, or a disk's diameter and then its edge softness — by Brent's method on the
 /// spectral shape's χ², which it returns for the fitted print.
 #[allow(clippy::too_many_arguments)]
 fn fit_print(
@@ -362,22 +362,32 @@ fn fit_print(
             Err(_) => f64::INFINITY,
         }
     };
-    // One size of the print along the search's coordinate, from `current`: golden section
-    // assumes one minimum, and the χ² of a softness need not have one (on a hard print the
-    // second round's search ran to its bound at 3,500 times the χ² it started from), so the
-    // search's end is kept only where it is better than where it started.
+    // One size of the print along the search's coordinate, from `current`: the search assumes
+    // one minimum, and the χ² of a softness need not have one (on a hard print the second
+    // round's search ran to its bound at 3,500 times the χ² it started from), so the search's
+    // end is kept only where it is better than where it started. Brent's method, started where
+    // the print is (the χ² the guard needs anyway), to the precision `steps` golden-section
+    // steps on the bracket had.
     let search = |nominal: &mut Nominal,
                   set: &dyn Fn(&mut SpecklePattern, f64),
                   (lo, hi): (f64, f64),
                   current: f64,
-                  iters: usize| {
+                  steps: usize| {
         let trial = |x: f64| {
             let mut n = nominal.clone();
             set(&mut n.patterns[pi].pattern, x);
             chi2_of(&n)
         };
-        let (best, chi2_best) = golden(&trial, lo, hi, iters);
-        if chi2_best <= trial(current) {
+        let chi2_current = trial(current);
+        let start = if (lo..=hi).contains(&current) {
+            (current, chi2_current)
+        } else {
+            let x = lo + GOLDEN_START * (hi - lo);
+            (x, trial(x))
+        };
+        let tolerance = golden_tolerance(hi - lo, steps);
+        let (best, chi2_best) = brent(&trial, (lo, hi), start, tolerance, steps + 2);
+        if chi2_best <= chi2_current {
             set(&mut nominal.patterns[pi].pattern, best);
         } else {
             set(&mut nominal.patterns[pi].pattern, current);
@@ -442,6 +452,9 @@ fn match_contrast(
     }
     Ok(())
 }
+
+/// Where a search whose print lies outside its bracket starts: where a golden section starts.
+const GOLDEN_START: f64 = 0.381_966_011_250_105;
 
 /// A Gaussian dot of σ `sigma_mm` (the FWHM carries all of it; no separate softness).
 fn set_sigma(p: &mut SpecklePattern, sigma_mm: f64) {

@@ -9,13 +9,13 @@
 //!   the image χ² the verdict is judged by reads them; of a calibrated print, their shape alone
 //!   above half its dot-spacing frequency (the level is the calibrated contrast's, and below the
 //!   band edge the spectrum is the dots' placement, a printer's property no model knows);
-//!   coarse grid, then golden section.
+//!   coarse grid, then Brent's method.
 //! - `fill_factor` fx, fy: the same spectra (the aperture multiplies the x spectrum by
 //!   sinc²(fx·f), the y spectrum by sinc²(fy·f)); coarse grid, then Nelder–Mead.
 //! - `sensor_noise`, `vignetting` and `illumination_change`: from the statistics alone, without
 //!   a rendering per trial ([`super::fit_image_stats`]).
 //! - `motion_blur` length (0–4 px) along the largest move: that moved frame's spectra along x and
-//!   y; grid, then golden section.
+//!   y; grid, then Brent's method.
 
 use super::bic::image_chi2;
 use super::image_stats::{psd, FrameStats, PsdBin, STATS_CROP_PX};

@@ -10,7 +10,7 @@
 //!   sides carry the same noise, so the raw ratio is compared), and
 //! - the dot's imaged size, so the *shape* of the model's power spectra along x and y matches the
 //!   measured one (χ² of ln(measured/model) per bin about its weighted mean: the level is the
-//!   contrast's business), by golden section on σ.
+//!   contrast's business), by Brent's method on σ.
 //!
 //! Before either, the dots' **placement** ([`crate::model::Placement`]): below the dot-spacing
 //! frequency a print's spectrum is its placement statistics — a jittered grid (one dot per cell,
