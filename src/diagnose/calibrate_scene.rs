@@ -362,36 +362,12 @@ fn fit_print(
             Err(_) => f64::INFINITY,
         }
     };
-    // One size of the print along the search's coordinate, from `current`: the search assumes
-    // one minimum, and the χ² of a softness need not have one (on a hard print the second
-    // round's search ran to its bound at 3,500 times the χ² it started from), so the search's
-    // end is kept only where it is better than where it started. Brent's method, started where
-    // the print is (the χ² the guard needs anyway), to the precision `steps` golden-section
-    // steps on the bracket had.
     let search = |nominal: &mut Nominal,
                   set: &dyn Fn(&mut SpecklePattern, f64),
-                  (lo, hi): (f64, f64),
+                  bracket: (f64, f64),
                   current: f64,
                   steps: usize| {
-        let trial = |x: f64| {
-            let mut n = nominal.clone();
-            set(&mut n.patterns[pi].pattern, x);
-            chi2_of(&n)
-        };
-        let chi2_current = trial(current);
-        let start = if (lo..=hi).contains(&current) {
-            (current, chi2_current)
-        } else {
-            let x = lo + GOLDEN_START * (hi - lo);
-            (x, trial(x))
-        };
-        let tolerance = golden_tolerance(hi - lo, steps);
-        let (best, chi2_best) = brent(&trial, (lo, hi), start, tolerance, steps + 2);
-        if chi2_best <= chi2_current {
-            set(&mut nominal.patterns[pi].pattern, best);
-        } else {
-            set(&mut nominal.patterns[pi].pattern, current);
-        }
+        search_size(nominal, pi, &chi2_of, set, (bracket, current), steps);
     };
     for _ in 0..rounds {
         match_contrast(meas, nominal, model, pi, seed)?;
@@ -433,6 +409,52 @@ fn fit_print(
     // The size's last search moves the contrast of the crop: matched once more.
     match_contrast(meas, nominal, model, pi, seed)?;
     Ok(chi2_of(nominal))
+}
+
+/// One size of pattern `pi`'s print along a search's coordinate, in `bracket` from `current`:
+/// the search assumes one minimum, and the χ² of a softness need not have one (on a hard print
+/// the second round's search ran to its bound at 3,500 times the χ² it started from), so the
+/// search's end is kept only where it is better than where it started. Brent's method, started
+/// where the print is (the χ² the guard needs anyway), to the precision `steps` golden-section
+/// steps on the bracket had.
+fn search_size(
+    nominal: &mut Nominal,
+    pi: usize,
+    chi2_of: &dyn Fn(&Nominal) -> f64,
+    set: &dyn Fn(&mut SpecklePattern, f64),
+    ((lo, hi), current): ((f64, f64), f64),
+    steps: usize,
+) {
+    // Each trial renders a crop: counted for the log, where a round's time goes.
+    let renders = std::cell::Cell::new(0usize);
+    let trial = |x: f64| {
+        renders.set(renders.get() + 1);
+        let mut n = nominal.clone();
+        set(&mut n.patterns[pi].pattern, x);
+        chi2_of(&n)
+    };
+    let chi2_current = trial(current);
+    let start = if (lo..=hi).contains(&current) {
+        (current, chi2_current)
+    } else {
+        let x = lo + GOLDEN_START * (hi - lo);
+        (x, trial(x))
+    };
+    let tolerance = golden_tolerance(hi - lo, steps);
+    let (best, chi2_best) = brent(&trial, (lo, hi), start, tolerance, steps + 2);
+    tracing::debug!(
+        pattern = pi,
+        renders = renders.get(),
+        chi2_start = chi2_current,
+        chi2_end = chi2_best,
+        "a print size searched"
+    );
+    let size = if chi2_best <= chi2_current {
+        best
+    } else {
+        current
+    };
+    set(&mut nominal.patterns[pi].pattern, size);
 }
 
 /// Scales pattern `pi`'s dot depth so the model's reference crop has the measured contrast
