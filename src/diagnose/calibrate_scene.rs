@@ -7,7 +7,7 @@ use super::image_stats::STATS_CROP_PX;
 use super::measurement::Measurement;
 use super::nominal::Nominal;
 use super::nominal::PatternEstimate;
-use super::optimise::{brent, golden_tolerance};
+use super::optimise::{brent, golden_tolerance, GOLDEN_STEP};
 use super::print::{
     placement_band_edge, spectral_shape_bins, spectral_shape_chi2, spectral_shape_chi2_below,
     PrintCalibration, PrintKnowledge,
@@ -437,7 +437,8 @@ fn search_size(
     let start = if (lo..=hi).contains(&current) {
         (current, chi2_current)
     } else {
-        let x = lo + GOLDEN_START * (hi - lo);
+        // A print outside the bracket: started where a golden section starts.
+        let x = lo + GOLDEN_STEP * (hi - lo);
         (x, trial(x))
     };
     let tolerance = golden_tolerance(hi - lo, steps);
@@ -474,9 +475,6 @@ fn match_contrast(
     }
     Ok(())
 }
-
-/// Where a search whose print lies outside its bracket starts: where a golden section starts.
-const GOLDEN_START: f64 = 0.381_966_011_250_105;
 
 /// A Gaussian dot of σ `sigma_mm` (the FWHM carries all of it; no separate softness).
 fn set_sigma(p: &mut SpecklePattern, sigma_mm: f64) {

@@ -1,11 +1,12 @@
-//! The optimisers of the fits: golden section and Brent's method (after a coarse grid), Nelder–Mead
-//! in a box, and standard errors from the curvature of χ² at the minimum (σ² = 2/∂²χ²).
+//! The optimisers of the fits: Brent's method (after a coarse grid), Nelder–Mead in a box, and
+//! standard errors from the curvature of χ² at the minimum (σ² = 2/∂²χ²).
 //!
-//! Golden section: Kiefer, Proc. AMS 4 (1953), the bracket shrinking by 1/φ per evaluation.
-//! Brent's method: Brent, *Algorithms for Minimization without Derivatives* (1973), ch. 5: golden
-//! section where a parabola through the best three points would not help, the parabola's
+//! Brent's method: Brent, *Algorithms for Minimization without Derivatives* (1973), ch. 5:
+//! golden-section steps (Kiefer, Proc. AMS 4 (1953), the bracket shrinking by 1/φ per
+//! evaluation) where a parabola through the best three points would not help, the parabola's
 //! minimum where it would; each evaluation of the print's and the image fits' objectives renders
-//! crops, so the evaluations it saves are the fits' time.
+//! crops, so the evaluations it saves are the fits' time. Its precision is stated as the golden
+//! section's after a number of steps ([`golden_tolerance`]).
 //! Nelder & Mead, Computer J. 7 (1965), with their standard coefficients (reflection 1,
 //! expansion 2, inside contraction and shrink ½) and only the inside contraction; a point
 //! outside the box is clamped onto it, as Box's complex method does (Computer J. 8, 1965). The curvature's σ² = 2/∂²χ² is the 1σ interval
@@ -26,6 +27,10 @@ pub fn unless_stopped<'a>(
         }
     }
 }
+
+/// A golden-section step's fraction of the larger part of a bracket: (3 − √5)/2. Where a
+/// golden section starts, and Brent's method's step where no parabola is taken.
+pub const GOLDEN_STEP: f64 = 0.381_966_011_250_105;
 
 /// The golden section's precision after `iters` steps on a bracket `width` wide, as an absolute
 /// tolerance for [`brent`]. Of a unimodal function, the golden section's end lies within 0.618 of
@@ -52,8 +57,6 @@ pub fn brent(
     tol: f64,
     max_evaluations: usize,
 ) -> (f64, f64) {
-    // The golden section's fraction of the larger part: (3 − √5)/2.
-    const C: f64 = 0.381_966_011_250_105;
     // √ε: below it a relative step is lost in rounding.
     let eps = f64::EPSILON.sqrt();
     let (mut a, mut b) = (a.min(b), a.max(b));
@@ -93,7 +96,7 @@ pub fn brent(
         }
         if !parabolic {
             e = if x < m { b - x } else { a - x };
-            d = C * e;
+            d = GOLDEN_STEP * e;
         }
         let u = if d.abs() >= tol1 {
             x + d
