@@ -385,6 +385,88 @@ fn effects_between_frames_leave_the_reference_frame_unchanged() {
     assert_ne!(render(&optics, false), render(&Effects::default(), false));
 }
 
+/// What the residual of `frames`' mean leaves after the best line through `clean` (a gain and
+/// an offset): its RMS, DN.
+fn rms_beside_line(frames: &[Vec<f32>], clean: &[f32]) -> f64 {
+    let n = clean.len() as f64;
+    let mean: Vec<f64> = (0..clean.len())
+        .map(|i| frames.iter().map(|f| f[i] as f64).sum::<f64>() / frames.len() as f64)
+        .collect();
+    let (mx, my) = (
+        clean.iter().map(|&v| v as f64).sum::<f64>() / n,
+        mean.iter().sum::<f64>() / n,
+    );
+    let sxy: f64 = clean
+        .iter()
+        .zip(&mean)
+        .map(|(&x, &y)| (x as f64 - mx) * (y - my))
+        .sum();
+    let sxx: f64 = clean.iter().map(|&x| (x as f64 - mx).powi(2)).sum();
+    let gain = sxy / sxx;
+    let ss: f64 = clean
+        .iter()
+        .zip(&mean)
+        .map(|(&x, &y)| (y - my - gain * (x as f64 - mx)).powi(2))
+        .sum();
+    (ss / n).sqrt()
+}
+
+/// An effect that only adds noise ([`EffectId::only_adds_noise`]) leaves the light as it was:
+/// the mean of its frames over seeds is the noiseless frame up to a gain and an offset (the
+/// sensor's DN scale), with a residual that falls as 1/√seeds. That is what lets a noise
+/// candidate's comparison keep the calibrated print (`SceneFrom::Rematch`). A blur changes the
+/// light: its residual stays.
+#[test]
+fn effects_that_only_add_noise_leave_the_light_as_it_was() {
+    use ffdic::model::effects::PsfBlur;
+    use ffdic::model::EffectId;
+    let camera = camera_13_px_per_mm(160, 120);
+    let dots = SpecklePattern::preset("b")
+        .unwrap()
+        .dots(camera.field_mm(2.0), 11)
+        .unwrap();
+    let render = |effects: &Effects, seed: u64| {
+        let frame = FrameSpec {
+            stage_dx_mm: 0.0,
+            stage_dy_mm: 0.0,
+            moved: false,
+            seed,
+        };
+        render_frame(&camera, effects, &dots, &frame)
+            .data()
+            .to_vec()
+    };
+    let clean = render(&Effects::default(), 1);
+    let noise = Effects {
+        sensor_noise: Some(SensorNoise {
+            full_well_e: 30000.0,
+            read_noise_e: 5.0,
+            gain: 0.5,
+        }),
+        ..Effects::default()
+    };
+    assert!(noise.enabled().iter().all(|e| e.only_adds_noise()));
+    assert_eq!(noise.reference_light(), Effects::default());
+    assert_ne!(noise.reference_part(), Effects::default());
+    let residual = |effects: &Effects, seeds: u64| {
+        let frames: Vec<Vec<f32>> = (0..seeds).map(|s| render(effects, 100 + s)).collect();
+        rms_beside_line(&frames, &clean)
+    };
+    let (one, sixteen) = (residual(&noise, 1), residual(&noise, 16));
+    // Pure noise: 1/4 after 16 seeds (0.25 ± the estimate's scatter over 19,200 pixels).
+    assert!(one > 1.0, "the noise is there: {one} DN");
+    assert!((sixteen / one - 0.25).abs() < 0.05, "{sixteen} / {one}");
+    // A blur on top is light changed: its residual does not average away.
+    let blurred = Effects {
+        psf_blur: Some(PsfBlur { sigma_px: 1.0 }),
+        ..noise.clone()
+    };
+    assert_ne!(blurred.reference_light(), Effects::default());
+    let (one, sixteen) = (residual(&blurred, 1), residual(&blurred, 16));
+    assert!(sixteen / one > 0.5, "{sixteen} / {one}");
+    assert!(!EffectId::PsfBlur.only_adds_noise());
+}
+
 /// A user's intensity effect multiplies the moved frame's irradiance by 1 + its expression at
 /// each pixel (px from the image centre) and leaves the reference as it was.
 #[test]

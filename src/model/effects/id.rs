@@ -90,6 +90,19 @@ impl EffectId {
         }
     }
 
+    /// Whether the effect only adds noise to what the sensor reads out — the shot and read
+    /// noise, a fixed pattern, the ADC's steps — and leaves the light that reaches it as it was:
+    /// a print calibrated under one noise is the same print under another, its white level and
+    /// contrast matched again ([`super::Effects::reference_light`]).
+    pub fn only_adds_noise(self) -> bool {
+        use EffectId::*;
+        match self {
+            SensorNoise | FixedPattern | Quantization => true,
+            StageMisalignment | StageError | Rotation | Scale | LensDistortion | TargetTilt
+            | PsfBlur | FillFactor | Vignetting | IlluminationChange | MotionBlur => false,
+        }
+    }
+
     /// The chain position.
     pub fn stage(self) -> Stage {
         use EffectId::*;

@@ -135,6 +135,18 @@ impl Effects {
     /// against the measured reference under one holds for the other. User effects are left out
     /// too: the renderer applies both kinds (a displacement, an intensity) to moved frames only.
     pub fn reference_part(&self) -> Effects {
+        self.part(|id| !id.leaves_the_reference())
+    }
+
+    /// The reference part ([`Effects::reference_part`]) without the effects that only add
+    /// noise ([`EffectId::only_adds_noise`]): two models with the same reference light image the
+    /// print alike and differ at most in the noise and the level the sensor reads out.
+    pub fn reference_light(&self) -> Effects {
+        self.part(|id| !id.leaves_the_reference() && !id.only_adds_noise())
+    }
+
+    /// The catalogue effects `keep` names, user effects left out.
+    fn part(&self, keep: impl Fn(EffectId) -> bool) -> Effects {
         // Every field named: a new effect's field is a compile error here until it is sorted.
         let Effects {
             stage_misalignment,
@@ -153,7 +165,6 @@ impl Effects {
             motion_blur,
             user: _,
         } = self.clone();
-        let keep = |id: EffectId| !id.leaves_the_reference();
         Effects {
             stage_misalignment: stage_misalignment.filter(|_| keep(EffectId::StageMisalignment)),
             stage_error: stage_error.filter(|_| keep(EffectId::StageError)),
