@@ -20,7 +20,9 @@
 use super::bic::image_chi2;
 use super::image_stats::{psd, FrameStats, PsdBin, STATS_CROP_PX};
 use super::measurement::Measurement;
-use super::optimise::{curvature_stderr, minimise_1d, nelder_mead, unless_stopped};
+use super::optimise::{
+    curvature_stderr, dispersion_factor, minimise_1d, nelder_mead, unless_stopped,
+};
 use super::print::PrintKnowledge;
 use super::results::{Comparison, ImageFit};
 use super::scene::{Scene, Shot};
@@ -29,8 +31,9 @@ use crate::model::EffectId;
 use crate::model::Effects;
 use std::collections::BTreeMap;
 
-fn spectra_chi2(measured: &[&FrameStats], crops: &[crate::image::Image]) -> f64 {
-    let mut c = 0.0;
+/// χ² of the crops' spectra against the measured frames' and its terms (bins).
+fn spectra_chi2(measured: &[&FrameStats], crops: &[crate::image::Image]) -> (f64, usize) {
+    let (mut c, mut n) = (0.0, 0);
     for (m, img) in measured.iter().zip(crops) {
         // Spectra only: no noise curve, no mean map, no contrast (NaN is skipped).
         let empty = super::image_stats::MeanMap {
@@ -52,29 +55,34 @@ fn spectra_chi2(measured: &[&FrameStats], crops: &[crate::image::Image]) -> f64 
             psd_y: psd(img, false),
             ..only.clone()
         };
-        c += image_chi2(&only, &o).0;
+        let (ci, ni) = image_chi2(&only, &o);
+        c += ci;
+        n += ni;
     }
-    c
+    (c, n)
 }
 
-/// χ² of ln(moved/reference) measured against the same ratio of the model, per spectrum bin.
-fn ratio_chi2(m_moved: &[PsdBin], m_ref: &[PsdBin], o_moved: &[PsdBin], o_ref: &[PsdBin]) -> f64 {
+/// χ² of ln(moved/reference) measured against the same ratio of the model, per spectrum bin, and
+/// its terms.
+fn ratio_chi2(
+    m_moved: &[PsdBin],
+    m_ref: &[PsdBin],
+    o_moved: &[PsdBin],
+    o_ref: &[PsdBin],
+) -> (f64, usize) {
     let rel = |b: &PsdBin| (b.se / b.value).powi(2);
-    m_moved
+    let terms: Vec<f64> = m_moved
         .iter()
         .zip(m_ref)
         .zip(o_moved.iter().zip(o_ref))
         .filter(|((a, b), (c, d))| a.value > 0.0 && b.value > 0.0 && c.value > 0.0 && d.value > 0.0)
-        .map(|((a, b), (c, d))| {
+        .filter_map(|((a, b), (c, d))| {
             let r = (a.value / b.value).ln() - (c.value / d.value).ln();
             let var = rel(a) + rel(b) + rel(c) + rel(d);
-            if var > 0.0 {
-                r * r / var
-            } else {
-                0.0
-            }
+            (var > 0.0).then(|| r * r / var)
         })
-        .sum()
+        .collect();
+    (terms.iter().sum(), terms.len())
 }
 
 /// The comparison before a fit built a scene from the same nominal model and manifest, and the
@@ -96,6 +104,26 @@ fn reference_crops(
     .expect(TARGET_BUILT);
     (0..meas.labels.len())
         .map(|pi| scene.render(pi, Shot::REFERENCE, Some(STATS_CROP_PX)))
+        .collect()
+}
+
+/// The standard errors of an image fit at its minimum `x`: from χ²'s curvature (`obj`), scaled
+/// by the scatter its terms leave there beyond their own errors (`obj_dof`: χ² and its terms;
+/// [`dispersion_factor`]). Measured on the independent generator's benches: docs/calibration.md.
+fn honest_stderr(
+    effect: EffectId,
+    obj: &dyn Fn(&[f64]) -> f64,
+    obj_dof: &dyn Fn(&[f64]) -> (f64, usize),
+    x: &[f64],
+    h: &[f64],
+    (lo, hi): (&[f64], &[f64]),
+) -> Vec<f64> {
+    let (chi2, terms) = obj_dof(x);
+    let factor = dispersion_factor(chi2, terms.saturating_sub(x.len()));
+    tracing::debug!(%effect, chi2, terms, factor, "an image fit's minimum");
+    curvature_stderr(obj, x, chi2, h, lo, hi)
+        .into_iter()
+        .map(|se| se * factor)
         .collect()
 }
 
@@ -131,7 +159,7 @@ pub fn fit_psf_blur(
         .iter()
         .map(|p| super::print::placement_band_edge(&p.pattern, nominal.scale_px_per_mm))
         .collect();
-    let obj = |x: &[f64]| {
+    let obj_dof = |x: &[f64]| {
         measured
             .iter()
             .zip(reference_crops(meas, before, &with(x[0])))
@@ -140,11 +168,19 @@ pub fn fit_psf_blur(
                 PrintKnowledge::Characterised => spectra_chi2(&[m], std::slice::from_ref(&crop)),
                 PrintKnowledge::Calibrated => super::print::spectral_shape_chi2_above(m, &crop, *f),
             })
-            .sum::<f64>()
+            .fold((0.0, 0), |(c, n), (ci, ni)| (c + ci, n + ni))
     };
-    let obj = unless_stopped(&obj, stop);
+    let chi2 = |x: &[f64]| obj_dof(x).0;
+    let obj = unless_stopped(&chi2, stop);
     let sigma = minimise_1d(&|s| obj(&[s]), 0.0, 3.0, 9);
-    let se = curvature_stderr(&obj, &[sigma], &[0.05], &[0.0], &[3.0])[0];
+    let se = honest_stderr(
+        EffectId::PsfBlur,
+        &obj,
+        &obj_dof,
+        &[sigma],
+        &[0.05],
+        (&[0.0], &[3.0]),
+    )[0];
     ImageFit {
         geometric: Default::default(),
         effect: EffectId::PsfBlur.into(),
@@ -171,9 +207,10 @@ pub fn fit_fill_factor(
         }),
         ..model.clone()
     };
-    let obj =
+    let obj_dof =
         |x: &[f64]| spectra_chi2(&measured, &reference_crops(meas, before, &with(x[0], x[1])));
-    let obj = unless_stopped(&obj, stop);
+    let chi2 = |x: &[f64]| obj_dof(x).0;
+    let obj = unless_stopped(&chi2, stop);
     let mut best = (f64::INFINITY, [1.0, 1.0]);
     for fx in [0.3, 0.65, 1.0] {
         for fy in [0.3, 0.65, 1.0] {
@@ -185,7 +222,14 @@ pub fn fit_fill_factor(
     }
     let (lo, hi) = ([0.05, 0.05], [1.0, 1.0]);
     let x = nelder_mead(&obj, &best.1, &[0.12, 0.12], &lo, &hi, 40);
-    let se = curvature_stderr(&obj, &x, &[0.04, 0.04], &lo, &hi);
+    let se = honest_stderr(
+        EffectId::FillFactor,
+        &obj,
+        &obj_dof,
+        &x,
+        &[0.04, 0.04],
+        (&lo, &hi),
+    );
     ImageFit {
         geometric: Default::default(),
         effect: EffectId::FillFactor.into(),
@@ -205,20 +249,13 @@ pub fn fit_motion_blur(
     stop: &dyn Fn() -> bool,
 ) -> Option<ImageFit> {
     let runs = &meas.manifest.runs;
-    // The three largest moves.
-    let mut order: Vec<usize> = (0..runs.len())
-        .filter(|&i| runs[i].stage.dx_mm != 0.0 || runs[i].stage.dy_mm != 0.0)
-        .collect();
-    if order.is_empty() {
-        return None;
-    }
-    order.sort_by(|&a, &b| {
-        let m = |i: usize| runs[i].stage.dx_mm.hypot(runs[i].stage.dy_mm);
-        m(b).total_cmp(&m(a))
-    });
-    // The largest move: blur grows with the stage's speed, and every trial renders the path.
-    order.truncate(1);
-    let first = &runs[order[0]].stage;
+    // The largest move (the first of equals): blur grows with the stage's speed, and every
+    // trial renders the path.
+    let m = |i: &usize| runs[*i].stage.dx_mm.hypot(runs[*i].stage.dy_mm);
+    let i = (0..runs.len())
+        .filter(|i| m(i) != 0.0)
+        .min_by(|a, b| m(b).total_cmp(&m(a)))?;
+    let first = &runs[i].stage;
     let angle = first.dy_mm.atan2(first.dx_mm) + before.model.nominal.misalignment_rad;
     let with = |l: f64| Effects {
         motion_blur: Some(MotionBlur {
@@ -237,20 +274,15 @@ pub fn fit_motion_blur(
         meas.options.seed,
     )
     .expect(TARGET_BUILT);
-    let pairs: Vec<(&FrameStats, &FrameStats, Vec<PsdBin>, Vec<PsdBin>)> = order
-        .iter()
-        .map(|&i| {
-            let pi = meas.pattern_of_run[i];
-            let r = ref_scene.render(pi, Shot::REFERENCE, Some(STATS_CROP_PX));
-            (
-                &meas.moved_stats[i],
-                &meas.reference_stats[pi],
-                psd(&r, true),
-                psd(&r, false),
-            )
-        })
-        .collect();
-    let obj = |x: &[f64]| {
+    let pi = meas.pattern_of_run[i];
+    let r = ref_scene.render(pi, Shot::REFERENCE, Some(STATS_CROP_PX));
+    let (rx, ry) = (psd(&r, true), psd(&r, false));
+    let (moved, reference) = (&meas.moved_stats[i], &meas.reference_stats[pi]);
+    let at = before
+        .model
+        .nominal
+        .landed_command(i, (first.dx_mm, first.dy_mm));
+    let obj_dof = |x: &[f64]| {
         let scene = Scene::new(
             &before.model.nominal,
             &with(x[0]),
@@ -258,31 +290,22 @@ pub fn fit_motion_blur(
             meas.options.seed,
         )
         .expect(TARGET_BUILT);
-        let crops: Vec<_> = order
-            .iter()
-            .map(|&i| {
-                let r = &runs[i];
-                let at = before
-                    .model
-                    .nominal
-                    .landed_command(i, (r.stage.dx_mm, r.stage.dy_mm));
-                scene.render(
-                    meas.pattern_of_run[i],
-                    Shot::of_run(i, at),
-                    Some(STATS_CROP_PX),
-                )
-            })
-            .collect();
-        let mut c = 0.0;
-        for ((moved, reference, rx, ry), crop) in pairs.iter().zip(&crops) {
-            c += ratio_chi2(&moved.psd_x, &reference.psd_x, &psd(crop, true), rx);
-            c += ratio_chi2(&moved.psd_y, &reference.psd_y, &psd(crop, false), ry);
-        }
-        c
+        let crop = scene.render(pi, Shot::of_run(i, at), Some(STATS_CROP_PX));
+        let (cx, nx) = ratio_chi2(&moved.psd_x, &reference.psd_x, &psd(&crop, true), &rx);
+        let (cy, ny) = ratio_chi2(&moved.psd_y, &reference.psd_y, &psd(&crop, false), &ry);
+        (cx + cy, nx + ny)
     };
-    let obj = unless_stopped(&obj, stop);
+    let chi2 = |x: &[f64]| obj_dof(x).0;
+    let obj = unless_stopped(&chi2, stop);
     let l = minimise_1d(&|l| obj(&[l]), 0.0, 4.0, 9);
-    let se = curvature_stderr(&obj, &[l], &[0.2], &[0.0], &[4.0])[0];
+    let se = honest_stderr(
+        EffectId::MotionBlur,
+        &obj,
+        &obj_dof,
+        &[l],
+        &[0.2],
+        (&[0.0], &[4.0]),
+    )[0];
     Some(ImageFit {
         geometric: Default::default(),
         effect: EffectId::MotionBlur.into(),
@@ -313,9 +336,10 @@ mod tests {
         let m_moved = [bin(0.1, 2.0, 0.2), bin(0.2, 0.0, 0.1)];
         let m_ref = [bin(0.1, 1.0, 0.1), bin(0.2, 1.0, 0.1)];
         let o = [bin(0.1, 1.0, 0.1), bin(0.2, 1.0, 0.1)];
-        let chi2 = ratio_chi2(&m_moved, &m_ref, &o, &o);
+        let (chi2, terms) = ratio_chi2(&m_moved, &m_ref, &o, &o);
         let truth = 2f64.ln().powi(2) / 0.04;
         assert!((chi2 - truth).abs() < 1e-12, "{chi2} against {truth}");
+        assert_eq!(terms, 1);
     }
 
     proptest::proptest! {
@@ -334,10 +358,10 @@ mod tests {
             let blurred = |s: &[PsdBin]| -> Vec<PsdBin> {
                 s.iter().zip(&factors).map(|(b, f)| bin(b.f, b.value * f, b.se * f)).collect()
             };
-            let plain = ratio_chi2(&moved, &reference, &model, &model);
-            let common = ratio_chi2(&blurred(&moved), &blurred(&reference), &model, &model);
+            let (plain, _) = ratio_chi2(&moved, &reference, &model, &model);
+            let (common, _) = ratio_chi2(&blurred(&moved), &blurred(&reference), &model, &model);
             proptest::prop_assert!((plain - common).abs() <= 1e-9 * plain.max(1.0));
-            proptest::prop_assert!(ratio_chi2(&moved, &reference, &moved, &reference).abs() < 1e-12);
+            proptest::prop_assert!(ratio_chi2(&moved, &reference, &moved, &reference).0.abs() < 1e-12);
         }
     }
 
@@ -369,13 +393,14 @@ mod tests {
         };
         assert!(!measured.psd_x.is_empty());
         let crop = texture(1000.0);
-        let same = spectra_chi2(&[&measured], std::slice::from_ref(&crop));
+        let (same, terms) = spectra_chi2(&[&measured], std::slice::from_ref(&crop));
+        assert!(terms > 0);
         assert!(same < 1e-9, "{same}");
         let blurred = Image::from_fn(64, 64, |x, y| {
             let at = |x: usize| crop.data()[y * 64 + x.clamp(0, 63)];
             0.25 * at(x.saturating_sub(1)) + 0.5 * at(x) + 0.25 * at(x + 1)
         });
-        let blur = spectra_chi2(&[&measured], &[blurred]);
+        let (blur, _) = spectra_chi2(&[&measured], &[blurred]);
         assert!(blur > 100.0, "{blur}");
     }
 
