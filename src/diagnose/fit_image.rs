@@ -2,7 +2,8 @@
 //! statistics, by rendering the model's centred analysis crops with fixed seeds (the same speckle
 //! layout and noise for every trial, so the objective is smooth in the parameters) and minimising
 //! the χ² of the statistics the effect acts on. Standard errors from the curvature of χ² at the
-//! minimum (σ² = 2/∂²χ²).
+//! minimum (σ² = 2/∂²χ²), scaled by √ĉ where χ² per degree of freedom is above 1 there (a print
+//! the model draws only approximately leaves the value less certain; [`dispersion_factor`]).
 //!
 //! - `psf_blur` σ: the power spectra along x and y of the references (a Gaussian PSF multiplies
 //!   both by exp(−4π²σ²f²)). Of a characterised print, their level and shape in every bin, as
