@@ -17,6 +17,8 @@
 use std::cell::RefCell;
 use std::sync::Arc;
 
+use realfft::RealFftPlanner;
+pub use realfft::{ComplexToReal, RealToComplex};
 pub use rustfft::num_complex::Complex;
 pub use rustfft::Fft;
 use rustfft::FftPlanner;
@@ -32,6 +34,7 @@ pub enum Direction {
 thread_local! {
     static PLANS_F32: RefCell<FftPlanner<f32>> = RefCell::new(FftPlanner::new());
     static PLANS_F64: RefCell<FftPlanner<f64>> = RefCell::new(FftPlanner::new());
+    static REAL_PLANS_F32: RefCell<RealFftPlanner<f32>> = RefCell::new(RealFftPlanner::new());
 }
 
 /// The single-precision transform of `len` points from this thread's plan cache.
@@ -48,4 +51,18 @@ pub fn plan_f64(len: usize, direction: Direction) -> Arc<dyn Fft<f64>> {
         Direction::Forward => planner.plan_fft_forward(len),
         Direction::Inverse => planner.plan_fft_inverse(len),
     })
+}
+
+/// The single-precision transform of `len` real samples to their `len / 2 + 1` non-negative
+/// frequencies (realfft: a complex transform of half the length), from this thread's cache. Half
+/// the work of [`plan_f32`] on a real signal, whose other half of the spectrum is the conjugate.
+pub fn plan_real_forward_f32(len: usize) -> Arc<dyn RealToComplex<f32>> {
+    REAL_PLANS_F32.with_borrow_mut(|planner| planner.plan_fft_forward(len))
+}
+
+/// The inverse of [`plan_real_forward_f32`], unnormalised: `len / 2 + 1` frequencies to `len` real
+/// samples, `len` times the signal. The zero frequency's imaginary part (and, for even `len`, the
+/// Nyquist frequency's) must be zero.
+pub fn plan_real_inverse_f32(len: usize) -> Arc<dyn ComplexToReal<f32>> {
+    REAL_PLANS_F32.with_borrow_mut(|planner| planner.plan_fft_inverse(len))
 }
