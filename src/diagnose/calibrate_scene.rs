@@ -407,12 +407,11 @@ fn fit_print(
     for _ in 0..rounds {
         match_contrast(meas, nominal, model, pi, seed)?;
         let p = nominal.patterns[pi].pattern.clone();
-        let moved;
         // Keep the print physical: the dots' mean darkening — 2πσ²ρc for Gaussian dots
         // (Campbell's theorem), the covered fraction πR²ρ times c for disks — below 60 %, beyond
         // which dots pile up into black.
         let rho_per_mm2 = 1.0 / p.dot_spacing_mm.powi(2);
-        match p.profile {
+        let moved = match p.profile {
             DotProfile::Gaussian => {
                 let sigma0 = p.sigma_mm();
                 let sigma_max =
@@ -420,7 +419,7 @@ fn fit_print(
                 let hi = (sigma_max / sigma0).clamp(0.3, 4.0).ln();
                 let set =
                     |q: &mut SpecklePattern, ln_factor: f64| set_sigma(q, sigma0 * ln_factor.exp());
-                moved = search(nominal, &set, ((0.25f64).ln(), hi), 0.0, 12);
+                search(nominal, &set, ((0.25f64).ln(), hi), 0.0, 12)
             }
             DotProfile::Disk => {
                 let d0 = p.dot_diameter_mm;
@@ -436,9 +435,9 @@ fn fit_print(
                     q.edge_softness_mm = d * fraction;
                 };
                 let softness_moved = search(nominal, &set, (0.0, 0.5), fraction, 10);
-                moved = diameter_moved || softness_moved;
+                diameter_moved || softness_moved
             }
-        }
+        };
         if !go_on() {
             return Err(DiagnoseError::Cancelled);
         }

@@ -186,19 +186,21 @@ impl ReferenceSpectrum {
 /// transpose), planned from this thread's cache: every image pair of a diagnosis transforms
 /// frames of one size.
 pub(super) fn fft2d(data: &mut [Complex<f32>], n: usize, direction: Direction) {
-    let fft = plan_f32(n, direction);
-    let rows = |data: &mut [Complex<f32>]| {
-        data.par_chunks_mut(n * 16)
-            .for_each(|chunk| fft.process(chunk));
-    };
-    rows(data);
+    transform_rows(data, n, direction);
     transpose(data, n);
-    rows(data);
+    transform_rows(data, n, direction);
     transpose(data, n);
 }
 
-/// Rows of a real transform done together: enough work per rayon task, one scratch per task.
+/// Rows of a transform done together: enough work per rayon task (one scratch per task).
 const ROWS_PER_TASK: usize = 16;
+
+/// Every row of `len` points of the row-major `data` transformed in place, rows on rayon.
+fn transform_rows(data: &mut [Complex<f32>], len: usize, direction: Direction) {
+    let fft = plan_f32(len, direction);
+    data.par_chunks_mut(len * ROWS_PER_TASK)
+        .for_each(|chunk| fft.process(chunk));
+}
 
 /// The 2D FFT of a real l x l row-major `frame` (used as scratch), its non-negative x frequencies
 /// only: `h = l / 2 + 1` rows of `l`, row kx holding frequencies (kx, 0..l) (the transpose of the
@@ -206,7 +208,7 @@ const ROWS_PER_TASK: usize = 16;
 /// a transpose, then the columns' complex ones: about half the work of [`fft2d`] on a complex
 /// frame, which was most of a small frame's correlation (the rigid offset, 12 % of a 640x540
 /// diagnosis round).
-pub(super) fn real_fft2d(frame: &mut [f32], l: usize) -> Vec<Complex<f32>> {
+fn real_fft2d(frame: &mut [f32], l: usize) -> Vec<Complex<f32>> {
     let h = l / 2 + 1;
     let rows = plan_real_forward_f32(l);
     let mut half = vec![Complex::new(0.0f32, 0.0); l * h];
@@ -221,10 +223,7 @@ pub(super) fn real_fft2d(frame: &mut [f32], l: usize) -> Vec<Complex<f32>> {
             }
         });
     let mut spectrum = transposed(&half, l, h);
-    let columns = plan_f32(l, Direction::Forward);
-    spectrum
-        .par_chunks_mut(l * ROWS_PER_TASK)
-        .for_each(|chunk| columns.process(chunk));
+    transform_rows(&mut spectrum, l, Direction::Forward);
     spectrum
 }
 
@@ -232,12 +231,9 @@ pub(super) fn real_fft2d(frame: &mut [f32], l: usize) -> Vec<Complex<f32>> {
 /// frame, l² times the original. The x frequencies 0 and l/2 of a Hermitian spectrum are real
 /// after the columns' inverse: their rounding's imaginary part is dropped, as the real
 /// transform requires.
-pub(super) fn real_ifft2d(spectrum: &mut [Complex<f32>], l: usize) -> Vec<f32> {
+fn real_ifft2d(spectrum: &mut [Complex<f32>], l: usize) -> Vec<f32> {
     let h = l / 2 + 1;
-    let columns = plan_f32(l, Direction::Inverse);
-    spectrum
-        .par_chunks_mut(l * ROWS_PER_TASK)
-        .for_each(|chunk| columns.process(chunk));
+    transform_rows(spectrum, l, Direction::Inverse);
     let mut half = transposed(spectrum, h, l);
     let rows = plan_real_inverse_f32(l);
     let mut frame = vec![0.0f32; l * l];
