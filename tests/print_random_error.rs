@@ -47,21 +47,48 @@ fn paper_schemes() -> CompareOptions {
     }
 }
 
-/// Cases where the model's random error is known to miss the measured one, with the ratio
-/// (model / measured) recorded: open findings, not tolerances. Print b's ff25 v on the 5 mm move
-/// is 0.813 ± 0.041 with the disks' exact coverage (0.816 ± 0.043 with the strips it replaced,
-/// when the bound 0.90 − 2 SE was 0.814 and it passed by 0.002): 4.5 SE below 1, while its u is
-/// 1.22 ± 0.08 above. The cause is not the rendering (the exact coverage moved it 0.003); the
-/// model's print differs from this one in its dots' depth (±15 % against none) and their least
-/// distance (one diameter against 1.05). Each entry fails the test if the case comes back within
-/// the bounds (remove it) or moves by more than 2 SE from the ratio recorded.
-const KNOWN_MISSES: [(&str, f64); 1] = [("b-x5mm ff25 v", 0.813)];
+/// The model's seeds (speckle layout, noise and so the print's calibration): the model's random
+/// error is their mean, and their scatter is what one realisation of a random error scatters by.
+const MODEL_SEEDS: [u64; 3] = [0x5EED, 0x5EED + 1, 0x5EED + 2];
 
-/// The relative standard error of a std from its 95 % interval.
+/// The relative standard error of a std from its 95 % interval (the block bootstrap over the
+/// grid: `dic::stats`).
 fn relative_se(std: f64, ci95: [f64; 2]) -> f64 {
     (ci95[1] - ci95[0]) / (2.0 * 1.96 * std)
 }
 
+/// One run × scheme × axis: the measured random error, the model's by seed, and the bootstrap's
+/// relative error of the measured one.
+struct Case {
+    name: String,
+    measured: f64,
+    model: Vec<f64>,
+    bootstrap_rel_se: f64,
+}
+
+impl Case {
+    fn model_mean(&self) -> f64 {
+        self.model.iter().sum::<f64>() / self.model.len() as f64
+    }
+
+    /// The seeds' relative sample variance about their mean.
+    fn seed_rel_var(&self) -> f64 {
+        let m = self.model_mean();
+        let k = self.model.len() as f64;
+        self.model.iter().map(|o| (o - m).powi(2)).sum::<f64>() / (k - 1.0) / (m * m)
+    }
+}
+
+/// The model's random error against the measured, run × scheme × axis. A random error estimated
+/// from one realisation (≈ 700 points of one print, one noise draw) scatters from realisation
+/// to realisation by more than the block bootstrap of its grid says: over eight model seeds of
+/// this test's dataset the model's random error scattered by 2–14 % (SD, relative; median 6 %)
+/// against the bootstrap's 3–5 %, and over four more draws of the generator's print b the
+/// measured ff25 v of the 5 mm move was 0.0096–0.0101 px where this draw's is 0.0127 (`ffdic
+/// analyze` of the reduced pair, its default region). The
+/// measured side is one such realisation, so a ratio's error is that scatter, measured here
+/// from the model's seeds (pooled over the cases: 2 × 36 degrees of freedom), on the measured
+/// side in full and on the model's mean of `MODEL_SEEDS.len()` seeds divided by their count.
 #[test]
 fn the_model_random_error_matches_the_measured_for_every_print_and_scheme() {
     let mut draw = Draw::new(3701);
@@ -69,11 +96,85 @@ fn the_model_random_error_matches_the_measured_for_every_print_and_scheme() {
     let root = tempfile::tempdir().unwrap();
     let dir = root.path().join("dataset");
     generate(&spec, &dir);
-    let meas = load_measurement(&dir, &paper_schemes(), &|_, _| true).unwrap();
-    let cmp: Comparison = compare_prepared(&meas, &baseline(), &|_, _| true).unwrap();
+    let mut meas = load_measurement(&dir, &paper_schemes(), &|_, _| true).unwrap();
+    let mut cases: Vec<Case> = Vec::new();
+    for (k, seed) in MODEL_SEEDS.into_iter().enumerate() {
+        meas.options.seed = seed;
+        let cmp: Comparison = compare_prepared(&meas, &baseline(), &|_, _| true).unwrap();
+        print_calibrated(seed, &cmp);
+        let sides = cmp.runs.iter().flat_map(|r| {
+            let (m, o) = (&r.measured, &r.model);
+            [
+                ("u", m.random_px[0], o.random_px[0], &m.summary.u),
+                ("v", m.random_px[1], o.random_px[1], &m.summary.v),
+            ]
+            .map(|(axis, measured, model, stats)| {
+                let name = format!("{} {} {axis}", r.id, r.scheme);
+                (
+                    name,
+                    measured,
+                    model,
+                    relative_se(stats.std, stats.std_ci95),
+                )
+            })
+        });
+        for (i, (name, measured, model, bootstrap_rel_se)) in sides.enumerate() {
+            if k == 0 {
+                cases.push(Case {
+                    name,
+                    measured,
+                    model: vec![model],
+                    bootstrap_rel_se,
+                });
+            } else {
+                assert_eq!(
+                    cases[i].name, name,
+                    "the same runs and schemes for every seed"
+                );
+                cases[i].model.push(model);
+            }
+        }
+    }
+    let seeds = MODEL_SEEDS.len() as f64;
+    let realisation_rel_sd =
+        (cases.iter().map(Case::seed_rel_var).sum::<f64>() / cases.len() as f64).sqrt();
+    println!(
+        "one realisation's random error scatters by {:.3} (relative SD, pooled over {} cases of {} seeds)",
+        realisation_rel_sd,
+        cases.len(),
+        MODEL_SEEDS.len()
+    );
+    let (mut strict, mut misses) = (0, Vec::new());
+    for c in &cases {
+        let ratio = c.model_mean() / c.measured;
+        let one = realisation_rel_sd.max(c.bootstrap_rel_se);
+        let se = ratio * one * (1.0 + 1.0 / seeds).sqrt();
+        let by_seed: Vec<String> = c.model.iter().map(|o| format!("{o:.5}")).collect();
+        println!(
+            "{}: measured {:.5} px, model {} px (seeds {}), ratio {ratio:.3} ± {se:.3}",
+            c.name,
+            c.measured,
+            format_args!("{:.5}", c.model_mean()),
+            by_seed.join(", ")
+        );
+        strict += usize::from((ratio - 1.0).abs() <= 0.10);
+        // Within 10 %, or beyond it by less than two standard errors of the ratio.
+        if (ratio - 1.0).abs() > 0.10 + 2.0 * se {
+            misses.push(format!("{}: {ratio:.3} ± {se:.3}", c.name));
+        }
+    }
+    println!(
+        "{strict} of {} within 10 %; beyond 10 % by more than 2 SE: {misses:?}",
+        cases.len()
+    );
+    assert!(misses.is_empty(), "random error off: {misses:?}");
+}
+
+/// The prints a comparison calibrated, for the log.
+fn print_calibrated(seed: u64, cmp: &Comparison) {
     for p in &cmp.model.nominal.patterns {
         println!(
-            "print {}: {:?} {:?}, d {:.4} mm, softness {:.4} mm, contrast {:.3} (profile χ² {:?}, placement χ² {:?})",
+            "seed {seed}: print {}: {:?} {:?}, d {:.4} mm, softness {:.4} mm, contrast {:.3} (profile χ² {:?}, placement χ² {:?})",
             p.pattern.label,
             p.pattern.profile,
             p.pattern.placement,
@@ -84,56 +185,6 @@ fn the_model_random_error_matches_the_measured_for_every_print_and_scheme() {
             p.placement_chi2
         );
     }
-    let (mut strict, mut total, mut misses) = (0, 0, Vec::new());
-    for r in &cmp.runs {
-        let (m, o) = (&r.measured, &r.model);
-        let stats = [
-            (
-                &m.summary.u,
-                &o.summary.u,
-                m.random_px[0],
-                o.random_px[0],
-                "u",
-            ),
-            (
-                &m.summary.v,
-                &o.summary.v,
-                m.random_px[1],
-                o.random_px[1],
-                "v",
-            ),
-        ];
-        for (ms, os, measured, model, axis) in stats {
-            let ratio = model / measured;
-            let se =
-                ratio * relative_se(ms.std, ms.std_ci95).hypot(relative_se(os.std, os.std_ci95));
-            println!(
-                "{} {} {axis}: measured {measured:.5} px, model {model:.5} px, ratio {ratio:.3} ± {se:.3}",
-                r.id, r.scheme
-            );
-            total += 1;
-            strict += usize::from((ratio - 1.0).abs() <= 0.10);
-            // Within 10 %, or beyond it by less than two standard errors of the ratio (the two
-            // stds are each known to ±5–6 % at 95 % over ~700 points: a ratio of 1.12 ± 0.05
-            // is not shown to be off by more than 10 %). The note counts the strict ones.
-            let case = format!("{} {} {axis}", r.id, r.scheme);
-            let missed = (ratio - 1.0).abs() > 0.10 + 2.0 * se;
-            let known = KNOWN_MISSES.iter().find(|(known, _)| *known == case);
-            match known {
-                // A known miss must still be one, and no further off than it was.
-                Some((_, recorded)) if !missed || (ratio - recorded).abs() > 2.0 * se => misses
-                    .push(format!(
-                        "{case}: {ratio:.3} ± {se:.3}, listed as a known miss at {recorded}: \
-                         update KNOWN_MISSES"
-                    )),
-                Some(_) => {}
-                None if missed => misses.push(format!("{case}: {ratio:.3} ± {se:.3}")),
-                None => {}
-            }
-        }
-    }
-    println!("{strict} of {total} within 10 %; beyond 10 % by more than 2 SE: {misses:?}");
-    assert!(misses.is_empty(), "random error off: {misses:?}");
 }
 
 /// Diagnoses the paper-like dataset with `effects` hidden for one round; the verdict must be
