@@ -85,10 +85,10 @@ impl Case {
 /// this test's dataset the model's random error scattered by 2–14 % (SD, relative; median 6 %)
 /// against the bootstrap's 3–5 %, and over four more draws of the generator's print b the
 /// measured ff25 v of the 5 mm move was 0.0096–0.0101 px where this draw's is 0.0127 (`ffdic
-/// analyze` of the reduced pair, its default region). The
-/// measured side is one such realisation, so a ratio's error is that scatter, measured here
-/// from the model's seeds (pooled over the cases: 2 × 36 degrees of freedom), on the measured
-/// side in full and on the model's mean of `MODEL_SEEDS.len()` seeds divided by their count.
+/// analyze` of the reduced pair, its default region). The measured side is one such
+/// realisation, the model's side the mean of `MODEL_SEEDS.len()`: a ratio's relative error is
+/// that scatter (from the seeds, pooled over the cases: 2 × 36 degrees of freedom; at least the
+/// bootstrap's) times √(1 + 1/seeds).
 #[test]
 fn the_model_random_error_matches_the_measured_for_every_print_and_scheme() {
     let mut draw = Draw::new(3701);
@@ -147,14 +147,14 @@ fn the_model_random_error_matches_the_measured_for_every_print_and_scheme() {
     let (mut strict, mut misses) = (0, Vec::new());
     for c in &cases {
         let ratio = c.model_mean() / c.measured;
-        let one = realisation_rel_sd.max(c.bootstrap_rel_se);
-        let se = ratio * one * (1.0 + 1.0 / seeds).sqrt();
+        let one_rel_sd = realisation_rel_sd.max(c.bootstrap_rel_se);
+        let se = ratio * one_rel_sd * (1.0 + 1.0 / seeds).sqrt();
         let by_seed: Vec<String> = c.model.iter().map(|o| format!("{o:.5}")).collect();
         println!(
-            "{}: measured {:.5} px, model {} px (seeds {}), ratio {ratio:.3} ± {se:.3}",
+            "{}: measured {:.5} px, model {:.5} px (seeds {}), ratio {ratio:.3} ± {se:.3}",
             c.name,
             c.measured,
-            format_args!("{:.5}", c.model_mean()),
+            c.model_mean(),
             by_seed.join(", ")
         );
         strict += usize::from((ratio - 1.0).abs() <= 0.10);
