@@ -11,6 +11,7 @@ use crate::common::independent;
 use ffdic::diagnose::{compare_prepared, load_measurement, CompareOptions, Comparison, Rounds};
 use ffdic::dic::DicSettings;
 use ffdic::reduce::Scheme;
+use ffdic::stats::mean_and_variance_of_mean;
 use independent::{baseline, candidate, generate, report, Draw};
 use serde_json::{json, Value};
 
@@ -68,14 +69,13 @@ struct Case {
 
 impl Case {
     fn model_mean(&self) -> f64 {
-        self.model.iter().sum::<f64>() / self.model.len() as f64
+        mean_and_variance_of_mean(&self.model).0
     }
 
     /// The seeds' relative sample variance about their mean.
     fn seed_rel_var(&self) -> f64 {
-        let m = self.model_mean();
-        let k = self.model.len() as f64;
-        self.model.iter().map(|o| (o - m).powi(2)).sum::<f64>() / (k - 1.0) / (m * m)
+        let (mean, var_of_mean) = mean_and_variance_of_mean(&self.model);
+        var_of_mean * self.model.len() as f64 / (mean * mean)
     }
 }
 
