@@ -195,6 +195,9 @@ pub(super) fn predict(
 pub(super) type FittedModel = (ImageFit, ModelConfig, Option<Comparison>);
 /// Per fitted candidate, its [`FittedModel`].
 pub(super) type FittedModels = BTreeMap<CandidateId, FittedModel>;
+/// A candidate's fit, the model with it, and that model's comparison with how it was made, not
+/// yet judged ([`judge_candidates`]).
+pub(super) type UnjudgedFit = (ImageFit, ModelConfig, Option<(Comparison, Method)>);
 
 /// The effects the model lacks, split into those this dataset can reveal (to be fitted) and
 /// those it cannot (with the runs that would), then the model's proposed user effects. The stage
@@ -223,60 +226,70 @@ pub(super) fn candidates_to_fit(
     (fit_ids, not_identifiable)
 }
 
-/// Candidates fitted at once by [`fit_candidates`]: the second fills the core a fit's optimiser
-/// leaves idle (its steps render small crops; one round used ≈ 1.45 of 2 cores with one candidate
-/// at a time); more would multiply the memory (≈ 190 MB per candidate's rendered comparison at
-/// 2560x2160) for little, since each candidate's rendering and DIC are parallel inside.
+/// Jobs run at once by [`in_lanes`]: the second fills the core a fit's optimiser leaves idle
+/// (its steps render small crops; one round used ≈ 1.45 of 2 cores with one candidate at a
+/// time); more would multiply the memory (≈ 190 MB per rendered comparison at 2560x2160) for
+/// little, since each rendering and DIC are parallel inside.
 pub(super) const CANDIDATES_AT_ONCE: usize = 2;
 
-/// Fits each candidate, predicts (or, failing that, renders) the comparison of the model with
-/// it, and judges it. Candidates are independent (each its own fit, seeds and rendering):
-/// [`CANDIDATES_AT_ONCE`] lanes take them from one queue. The results keep `fit_ids`' order.
-pub(super) fn fit_candidates(
-    meas: &Measurement,
-    (model, refit): (&ModelConfig, &[EffectId]),
-    judge: &Judge<'_>,
-    fit_ids: &[CandidateId],
+/// Runs independent `jobs` in [`CANDIDATES_AT_ONCE`] lanes that take them from one queue, in
+/// order, calling `tick` after each; the results keep `jobs`' order. The first error ends the
+/// lanes (each stops at its next job).
+pub(super) fn in_lanes<J: Sync, R: Send>(
+    jobs: &[J],
+    run: &(dyn Fn(&J) -> Result<R, DiagnoseError> + Sync),
     tick: &(dyn Fn() -> Result<(), DiagnoseError> + Sync),
-    ask: Progress,
-) -> Result<(Vec<Candidate>, FittedModels), DiagnoseError> {
+) -> Result<Vec<R>, DiagnoseError> {
     let next = AtomicUsize::new(0);
-    let slots: Vec<Mutex<Option<(Candidate, FittedModel)>>> =
-        fit_ids.iter().map(|_| Mutex::new(None)).collect();
-    (0..CANDIDATES_AT_ONCE.min(fit_ids.len()))
+    let slots: Vec<Mutex<Option<R>>> = jobs.iter().map(|_| Mutex::new(None)).collect();
+    (0..CANDIDATES_AT_ONCE.min(jobs.len()))
         .into_par_iter()
         .try_for_each(|_| -> Result<(), DiagnoseError> {
             loop {
                 let i = next.fetch_add(1, Ordering::Relaxed);
-                let Some(id) = fit_ids.get(i) else {
+                let Some(job) = jobs.get(i) else {
                     return Ok(());
                 };
-                let fitted = fit_one_candidate(meas, (model, refit), judge, id, ask)?;
+                let done = run(job)?;
                 tick()?;
-                *slots[i].lock().expect("a lane never panics holding it") = fitted;
+                *slots[i].lock().expect("a lane never panics holding it") = Some(done);
             }
         })?;
-    let mut candidates = Vec::new();
-    let mut models = FittedModels::new();
-    for slot in slots {
-        let fitted = slot.into_inner().expect("a lane never panics holding it");
-        if let Some((candidate, (fit, with, after))) = fitted {
-            candidates.push(candidate);
-            models.insert(fit.effect.clone(), (fit, with, after));
-        }
-    }
-    Ok((candidates, models))
+    Ok(slots
+        .into_iter()
+        .map(|slot| {
+            slot.into_inner()
+                .expect("a lane never panics holding it")
+                .expect("every job ran: an error would have returned above")
+        })
+        .collect())
 }
 
-/// One candidate of [`fit_candidates`]: None when the effect has no fit on this dataset.
+/// Judges each fitted candidate against `judge`, in the order given; the candidates, and per
+/// candidate its fit, model and comparison.
+pub(super) fn judge_candidates(
+    judge: &Judge<'_>,
+    fitted: impl IntoIterator<Item = UnjudgedFit>,
+) -> (Vec<Candidate>, FittedModels) {
+    let mut candidates = Vec::new();
+    let mut models = FittedModels::new();
+    for (fit, with, after) in fitted {
+        candidates.push(judge.candidate(&fit, after.as_ref()));
+        models.insert(fit.effect.clone(), (fit, with, after.map(|a| a.0)));
+    }
+    (candidates, models)
+}
+
+/// Fits candidate `id` against the model's comparison `before` and predicts (or, failing that,
+/// renders) the comparison of the model with it: None when the effect has no fit on this
+/// dataset. Candidates are independent (each its own fit, seeds and rendering).
 pub(super) fn fit_one_candidate(
     meas: &Measurement,
     (model, refit): (&ModelConfig, &[EffectId]),
-    judge: &Judge<'_>,
+    before: &Comparison,
     id: &CandidateId,
     ask: Progress,
-) -> Result<Option<(Candidate, FittedModel)>, DiagnoseError> {
-    let before = judge.before;
+) -> Result<Option<UnjudgedFit>, DiagnoseError> {
     let _span = tracing::debug_span!("candidate", %id).entered();
     // A cancelled job's fit ends early; the tick after it reports the cancel.
     let stop = || !ask(0, 0);
@@ -322,8 +335,7 @@ pub(super) fn fit_one_candidate(
         let rendered = compare_with_scene(meas, &with, meas.options.seed, scene, ask)?;
         Some((rendered, Method::Rendered))
     };
-    let candidate = judge.candidate(&fit, after.as_ref());
-    Ok(Some((candidate, (fit, with, after.map(|a| a.0)))))
+    Ok(Some((fit, with, after)))
 }
 
 /// The winner is rendered: a predicted comparison is first order in the effect. When the

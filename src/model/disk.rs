@@ -69,10 +69,16 @@ impl DiskDot {
         let t: Vec<f64> = (0..=n).map(|k| -1.0 + 2.0 * k as f64 / n as f64).collect();
         // ∫ √(1 − t²) dt = (t√(1 − t²) + asin t) / 2.
         let area = |t: f64| 0.5 * (t * (1.0 - t * t).max(0.0).sqrt() + t.asin());
-        let half_widths = t
+        let mut half_widths: Vec<f64> = t
             .windows(2)
             .map(|w| self.radius_x_px * (area(w[1]) - area(w[0])) / (w[1] - w[0]))
             .collect();
+        // The disk is symmetric about its centre line: the upper half's widths are the lower
+        // half's to the bit (rounding left one in two a last bit apart), so a strip and its
+        // mirror image share one profile along x ([`DiskDot::blurred_coverage`]).
+        for k in 0..n / 2 {
+            half_widths[n - 1 - k] = half_widths[k];
+        }
         (t, half_widths)
     }
 
@@ -134,6 +140,12 @@ impl DiskDot {
     /// A blurred disk's darkening of the pixels `cols` x `rows`, row after row: the sum of its strips, each a
     /// separable rectangle, accumulated into one patch over only the pixels each strip reaches
     /// (a strip 1/8 px high reaches a few rows), the patch then added as a hard disk's is.
+    ///
+    /// The ramps at the pixel edges ([`box_rect_span`]) were most of a blurred disk's time, and
+    /// half of them were computed twice: a strip's upper boundary is the next one's lower
+    /// ([`BoundaryRamps`]), and a strip's mirror image about the centre has the same half-width,
+    /// so the same profile along x. Both are taken again only where the inputs agree to the bit,
+    /// so the patch is the one computed strip by strip.
     fn blurred_coverage(
         &self,
         (c_lo, c_hi): (usize, usize),
@@ -143,29 +155,110 @@ impl DiskDot {
         let (nc, nr) = (c_hi - c_lo + 1, r_hi - r_lo + 1);
         let strips = self.strips();
         let (t, half_widths) = (&strips.0, &strips.1);
+        let n = half_widths.len();
         let mut values = vec![0.0; nc * nr];
-        let (mut wx, mut wy) = (Vec::with_capacity(nc), Vec::with_capacity(nr));
+        let mut wy = Vec::with_capacity(nr);
+        // Each strip's profile along x: its first column and its place in `wx_all`.
+        let mut wx_all: Vec<f64> = Vec::new();
+        let mut wx_at: Vec<(usize, std::ops::Range<usize>)> = Vec::with_capacity(n);
+        let mut wx = Vec::with_capacity(nc);
+        let mut below = BoundaryRamps::default();
         for (k, w) in half_widths.iter().enumerate() {
             let (x0, x1) = (self.x_px - w, self.x_px + w);
             let y0 = self.y_px + t[k] * self.radius_y_px;
             let y1 = self.y_px + t[k + 1] * self.radius_y_px;
-            let c0 = box_rect_span(&mut wx, (c_lo, c_hi), fx, (x0, x1), self.blur_x_px, 1.0);
-            let r0 = box_rect_span(
-                &mut wy,
-                (r_lo, r_hi),
-                fy,
-                (y0, y1),
-                self.blur_y_px,
-                self.depth,
-            );
+            let mirror = n - 1 - k;
+            let (c0, at) = if mirror < k && half_widths[mirror].to_bits() == w.to_bits() {
+                wx_at[mirror].clone()
+            } else {
+                let c0 = box_rect_span(&mut wx, (c_lo, c_hi), fx, (x0, x1), self.blur_x_px, 1.0);
+                let start = wx_all.len();
+                wx_all.extend_from_slice(&wx);
+                (c0, start..wx_all.len())
+            };
+            wx_at.push((c0, at.clone()));
+            let wx = &wx_all[at];
+            let r0 = if fy == 1.0 && self.blur_y_px > 0.0 {
+                below.strip(&mut wy, (r_lo, r_hi), (y0, y1), self.blur_y_px, self.depth)
+            } else {
+                box_rect_span(
+                    &mut wy,
+                    (r_lo, r_hi),
+                    fy,
+                    (y0, y1),
+                    self.blur_y_px,
+                    self.depth,
+                )
+            };
             for (r, &a) in (r0 - r_lo..).zip(&wy) {
                 let row = &mut values[r * nc + (c0 - c_lo)..][..wx.len()];
-                for (cell, &v) in row.iter_mut().zip(&wx) {
+                for (cell, &v) in row.iter_mut().zip(wx) {
                     *cell += a * v;
                 }
             }
         }
         values
+    }
+}
+
+/// The ramps σ·G((e − y)/σ) of one strip boundary y at the pixel edges e = c − 1/2, c =
+/// `first`.., kept by [`BoundaryRamps::strip`] for the next strip, whose lower boundary it is.
+#[derive(Default)]
+struct BoundaryRamps {
+    y_bits: Option<u64>,
+    first: usize,
+    ramps: Vec<f64>,
+    /// The strip's upper ramps while they are computed (swapped into `ramps` after).
+    next: Vec<f64>,
+}
+
+impl BoundaryRamps {
+    /// [`box_rect_span`] with a full aperture and σ > 0 for the strip [`y0`, `y1`], its lower
+    /// boundary's ramps taken from the strip below where it computed them (the same values: the
+    /// same expression of the same inputs), its upper boundary's kept for the strip above.
+    fn strip(
+        &mut self,
+        out: &mut Vec<f64>,
+        (lo, hi): (usize, usize),
+        (y0, y1): (f64, f64),
+        sigma: f64,
+        scale: f64,
+    ) -> usize {
+        out.clear();
+        let reach = NORMAL_RANGE * sigma + 0.5;
+        let first = (y0 - reach).floor().max(lo as f64) as usize;
+        let last = ((y1 + reach).ceil().max(0.0) as usize).min(hi);
+        if first > last {
+            self.y_bits = None;
+            return lo;
+        }
+        let kept = if self.y_bits == Some(y0.to_bits()) {
+            self.first..self.first + self.ramps.len()
+        } else {
+            0..0
+        };
+        let lower = |c: usize| {
+            if kept.contains(&c) {
+                self.ramps[c - self.first]
+            } else {
+                ramp(c as f64 - 0.5 - y0, sigma)
+            }
+        };
+        self.next.clear();
+        self.next
+            .extend((first..=last + 1).map(|c| ramp(c as f64 - 0.5 - y1, sigma)));
+        let edge = |c: usize| lower(c) - self.next[c - first];
+        let mut below = edge(first);
+        out.extend((first..=last).map(|c| {
+            let above = edge(c + 1);
+            let v = scale * (above - below);
+            below = above;
+            v
+        }));
+        std::mem::swap(&mut self.ramps, &mut self.next);
+        self.first = first;
+        self.y_bits = Some(y1.to_bits());
+        first
     }
 }
 
