@@ -50,7 +50,22 @@ enum Command {
 #[global_allocator]
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
+/// mimalloc hands an arena's freed memory back to the kernel 100 ms after it is freed (its
+/// purge delay, 10 ms, times the arenas' multiplier, 10). A diagnosis frees a frame's buffers and
+/// allocates the next ones further apart than that, and faulted them back in page by page: on
+/// the paper-size example ≈ 110,000 page faults and 1.3 s of system time a round, 0.96 ± 0.20 s
+/// of its wall time (four interleaved pairs, docs/performance.md). A multiplier of 1000 keeps
+/// freed memory for ten seconds: the next frame takes it, and a finished job still gives it back.
+fn keep_freed_memory() {
+    // `mi_option_arena_purge_mult` in mimalloc 3's mimalloc.h (libmimalloc-sys 0.1.49 builds
+    // mimalloc 3 and names no constant for it).
+    const ARENA_PURGE_MULT: libmimalloc_sys::mi_option_t = 24;
+    // SAFETY: sets one of mimalloc's options, which it reads when it next purges.
+    unsafe { libmimalloc_sys::mi_option_set(ARENA_PURGE_MULT, 1000) };
+}
+
 fn main() {
+    keep_freed_memory();
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(err) if !err.use_stderr() => err.exit(), // --help, --version
