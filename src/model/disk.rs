@@ -213,7 +213,7 @@ struct BoundaryRamps {
 }
 
 impl BoundaryRamps {
-    /// [`box_rect_span`] with a full aperture and σ > 0 for the strip [`y0`, `y1`], its lower
+    /// [`box_rect_span`] with a full aperture and σ > 0 for the strip from `y0` to `y1`, its lower
     /// boundary's ramps taken from the strip below where it computed them (the same values: the
     /// same expression of the same inputs), its upper boundary's kept for the strip above.
     fn strip(
