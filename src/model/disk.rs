@@ -143,9 +143,9 @@ impl DiskDot {
     ///
     /// The ramps at the pixel edges ([`box_rect_span`]) were most of a blurred disk's time, and
     /// half of them were computed twice: a strip's upper boundary is the next one's lower
-    /// ([`BoundaryRamps`]), and a strip's mirror image about the centre has the same half-width,
-    /// so the same profile along x. Both are taken again only where the inputs agree to the bit,
-    /// so the patch is the one computed strip by strip.
+    /// ([`BoundaryRamps`]), and a strip's mirror image about the centre has the same half-width
+    /// to the bit ([`DiskDot::strips`]), so the same profile along x. Both are the values the
+    /// strip itself would compute, so the patch is the one computed strip by strip.
     fn blurred_coverage(
         &self,
         (c_lo, c_hi): (usize, usize),
@@ -168,7 +168,9 @@ impl DiskDot {
             let y0 = self.y_px + t[k] * self.radius_y_px;
             let y1 = self.y_px + t[k + 1] * self.radius_y_px;
             let mirror = n - 1 - k;
-            let (c0, at) = if mirror < k && half_widths[mirror].to_bits() == w.to_bits() {
+            let (c0, at) = if mirror < k {
+                // The same half-width to the bit (`strips_computed` copies it): the same profile.
+                debug_assert_eq!(half_widths[mirror].to_bits(), w.to_bits());
                 wx_at[mirror].clone()
             } else {
                 let c0 = box_rect_span(&mut wx, (c_lo, c_hi), fx, (x0, x1), self.blur_x_px, 1.0);
@@ -225,13 +227,10 @@ impl BoundaryRamps {
         scale: f64,
     ) -> usize {
         out.clear();
-        let reach = NORMAL_RANGE * sigma + 0.5;
-        let first = (y0 - reach).floor().max(lo as f64) as usize;
-        let last = ((y1 + reach).ceil().max(0.0) as usize).min(hi);
-        if first > last {
+        let Some((first, last)) = reached((lo, hi), 1.0, (y0, y1), sigma) else {
             self.y_bits = None;
             return lo;
-        }
+        };
         let kept = if self.y_bits == Some(y0.to_bits()) {
             self.first..self.first + self.ramps.len()
         } else {
@@ -371,6 +370,20 @@ impl Dot for DiskDot {
     }
 }
 
+/// The first and last pixel of `lo..=hi` whose aperture (of width `a`) lies within
+/// [`NORMAL_RANGE`] σ of the interval from `x0` to `x1`; None when none does.
+fn reached(
+    (lo, hi): (usize, usize),
+    a: f64,
+    (x0, x1): (f64, f64),
+    sigma: f64,
+) -> Option<(usize, usize)> {
+    let reach = NORMAL_RANGE * sigma.max(0.0) + 0.5 * a;
+    let first = (x0 - reach).floor().max(lo as f64) as usize;
+    let last = ((x1 + reach).ceil().max(0.0) as usize).min(hi);
+    (first <= last).then_some((first, last))
+}
+
 /// [`box_rect`] of the pixels of `lo..=hi` the interval reaches, times `scale`, written to `out`
 /// (cleared first); returns the first of them. With a full aperture a pixel's upper edge is the
 /// next one's lower edge: each antiderivative is evaluated once. Pixels whose aperture ends more
@@ -386,12 +399,9 @@ fn box_rect_span(
     scale: f64,
 ) -> usize {
     out.clear();
-    let reach = NORMAL_RANGE * sigma.max(0.0) + 0.5 * a;
-    let first = (x0 - reach).floor().max(lo as f64) as usize;
-    let last = ((x1 + reach).ceil().max(0.0) as usize).min(hi);
-    if first > last {
+    let Some((first, last)) = reached((lo, hi), a, (x0, x1), sigma) else {
         return lo;
-    }
+    };
     if sigma <= 0.0 {
         // A hard edge along this axis only: the aperture's overlap with the interval.
         out.extend((first..=last).map(|c| {

@@ -63,9 +63,11 @@ fn table() -> &'static [[[f64; 4]; 2]] {
             let (cdf, pdf) = exact(z);
             [z * cdf + pdf, cdf, pdf]
         };
-        (0..n)
-            .map(|k| {
-                let ([g0, c0, p0], [g1, c1, p1]) = (node(k), node(k + 1));
+        let nodes: Vec<[f64; 3]> = (0..=n).map(node).collect();
+        nodes
+            .windows(2)
+            .map(|w| {
+                let ([g0, c0, p0], [g1, c1, p1]) = (w[0], w[1]);
                 [
                     hermite_cubic((g0, c0), (g1, c1)),
                     hermite_cubic((c0, p0), (c1, p1)),
