@@ -8,7 +8,7 @@ use super::bic::chi2;
 use super::calibrate_scene::{calibrate_seeded, SceneFrom};
 use super::capture_mode::{compare_hardware, model_hardware, HardwareModelSide};
 use super::discrepancy::{run_discrepancy, RunDiscrepancy};
-use super::image_stats::{centre_crop, frame_stats, light_map, FrameStats, STATS_CROP_PX};
+use super::image_stats::{centre_crop, frame_stats, moved_frame_stats, STATS_CROP_PX};
 use super::measurement::{load_measurement, Measurement};
 use super::nominal::Nominal;
 use super::residuals::residual_map;
@@ -186,10 +186,7 @@ pub fn compare_with_scene(
                 pattern: meas.labels[pi].clone(),
                 run: Some(run.id.clone()),
                 measured: meas.moved_stats[ri].clone(),
-                model: FrameStats {
-                    light_map: Some(light_map(&reference, &moved, (sx, sy))),
-                    ..frame_stats(Some(&moved), &mcrop, None)
-                },
+                model: moved_frame_stats(&reference, &moved, &mcrop, (sx, sy)),
             });
             let mut per_scheme = Vec::new();
             let _correlating = tracing::debug_span!("dic").entered();

@@ -360,7 +360,7 @@ impl MeanMap {
 }
 
 fn mean_map(img: &Image) -> MeanMap {
-    let (n, _) = img.mean_std();
+    let n = img.mean();
     MeanMap::over_blocks((img.width(), img.height()), |(c0, c1), (r0, r1)| {
         // Four sub-blocks give the scatter of the block mean.
         let mut subs = [0.0f64; 4];
@@ -466,20 +466,44 @@ pub fn light_change(moved: (&FrameStats, &FrameStats)) -> Vec<LightBlock> {
 }
 
 /// Statistics of one frame: the mean map over `full` (when given, else over the crop), the rest
-/// over the centred crop `crop` with its static repeat crop when there is one.
+/// over the centred crop `crop` with its static repeat crop when there is one. The parts side by
+/// side: each is serial inside, and outside the candidates' lanes (the measured side, a
+/// comparison run alone) one part at a time left a core idle.
 pub fn frame_stats(full: Option<&Image>, crop: &Image, repeat_crop: Option<&Image>) -> FrameStats {
     let (mean, std) = crop.mean_std();
     let n_eff = (crop.width() * crop.height()) as f64 / 64.0;
+    let ((mean_map, ptc), (psd_x, psd_y)) = rayon::join(
+        || rayon::join(|| mean_map(full.unwrap_or(crop)), || ptc(crop, repeat_crop)),
+        || rayon::join(|| psd(crop, true), || psd(crop, false)),
+    );
     FrameStats {
-        mean_dn: full.map_or(mean, |f| f.mean_std().0),
+        mean_dn: full.map_or(mean, |f| f.mean()),
         contrast: std / mean,
         contrast_se: std / mean / (2.0 * n_eff).sqrt(),
-        mean_map: mean_map(full.unwrap_or(crop)),
-        ptc: ptc(crop, repeat_crop),
+        mean_map,
+        ptc,
         ptc_from_repeat: repeat_crop.is_some(),
-        psd_x: psd(crop, true),
-        psd_y: psd(crop, false),
+        psd_x,
+        psd_y,
         light_map: None,
+    }
+}
+
+/// [`frame_stats`] of a moved frame with its light map against `reference` ([`light_map`]),
+/// the two side by side.
+pub fn moved_frame_stats(
+    reference: &Image,
+    moved: &Image,
+    crop: &Image,
+    shift_px: (f64, f64),
+) -> FrameStats {
+    let (light, stats) = rayon::join(
+        || light_map(reference, moved, shift_px),
+        || frame_stats(Some(moved), crop, None),
+    );
+    FrameStats {
+        light_map: Some(light),
+        ..stats
     }
 }
 

@@ -3,7 +3,7 @@
 //! centred crops the print is calibrated to) from which the nominal experiment starts.
 
 use super::capture_mode::{measure_hardware, HardwareMeasurement};
-use super::image_stats::{centre_crop, frame_stats, light_map, FrameStats, STATS_CROP_PX};
+use super::image_stats::{centre_crop, frame_stats, moved_frame_stats, FrameStats, STATS_CROP_PX};
 use super::nominal::{
     pattern_for, pattern_indices, pooled_noise_variance, white_level_guess, Nominal,
 };
@@ -181,10 +181,8 @@ impl PairVisitor for MeasuredPairs<'_> {
             pair.bit_depth,
         )?;
         let crop = centre_crop(deformed, STATS_CROP_PX);
-        self.moved_stats.push(FrameStats {
-            light_map: Some(light_map(reference, deformed, shift_px)),
-            ..frame_stats(Some(deformed), &crop, None)
-        });
+        self.moved_stats
+            .push(moved_frame_stats(reference, deformed, &crop, shift_px));
         self.moved_crops.push(crop);
         self.dic.push(Vec::new());
         Ok(())

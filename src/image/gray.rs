@@ -97,10 +97,17 @@ impl Image {
         Image::from_fn(roi.width, roi.height, |c, r| self.get(roi.x + c, roi.y + r))
     }
 
+    /// The mean pixel value (0 for an empty image; accumulated in f64), as
+    /// [`Image::mean_std`] gives it.
+    pub fn mean(&self) -> f64 {
+        let n = self.data.len().max(1) as f64;
+        self.data.iter().map(|&v| v as f64).sum::<f64>() / n
+    }
+
     /// Mean and population standard deviation of all pixels (accumulated in f64).
     pub fn mean_std(&self) -> (f64, f64) {
         let n = self.data.len().max(1) as f64;
-        let mean = self.data.iter().map(|&v| v as f64).sum::<f64>() / n;
+        let mean = self.mean();
         let var = self
             .data
             .iter()
