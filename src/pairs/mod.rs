@@ -61,7 +61,9 @@ pub enum PairError {
 /// What [`correlate_pairs`] hands each run's frames and results to. An error stops the loop
 /// (a caller's cancellation, a check of its own) and is returned as it is.
 pub trait PairVisitor {
-    type Error: From<PairError>;
+    /// Send: a run's correlation hands it back across [`rayon::join`] (the next run's frames
+    /// are read beside it).
+    type Error: From<PairError> + Send;
 
     /// A run's frames, before its schemes are correlated.
     fn frames(&mut self, _pair: &RunPair<'_>) -> Result<(), Self::Error> {
@@ -98,10 +100,17 @@ struct PreparedFrame {
     prepared: Vec<Option<PreparedReference>>,
 }
 
+impl PreparedFrame {
+    /// Whether this is `run`'s reference frame, read out in the run's mode.
+    fn is_reference_of(&self, run: &Run) -> bool {
+        self.file == run.reference && self.mode == run.capture.as_ref().map(|c| c.name.clone())
+    }
+}
+
 /// Correlates every run of `runs` (frames in `dir`) under each of `schemes`, or under its own
 /// hardware scheme when the camera read it out in one, with this process's memo of analyses;
 /// see the module doc.
-pub fn correlate_pairs<V: PairVisitor + Sync>(
+pub fn correlate_pairs<V: PairVisitor + Send + Sync>(
     dir: &Path,
     runs: &[Run],
     schemes: &[Scheme],
@@ -111,8 +120,10 @@ pub fn correlate_pairs<V: PairVisitor + Sync>(
     correlate_pairs_in(AnalysisMemo::global(), dir, runs, schemes, dic, visitor)
 }
 
-/// [`correlate_pairs`] with the analyses recalled from and remembered in `memo`.
-pub fn correlate_pairs_in<V: PairVisitor + Sync>(
+/// [`correlate_pairs`] with the analyses recalled from and remembered in `memo`. The next run's
+/// frames are read while a run is correlated: reading and digesting a paper-size pair is
+/// serial, and one at a time it left a core idle for a third of a diagnosis's measured side.
+pub fn correlate_pairs_in<V: PairVisitor + Send + Sync>(
     memo: &AnalysisMemo,
     dir: &Path,
     runs: &[Run],
@@ -121,73 +132,127 @@ pub fn correlate_pairs_in<V: PairVisitor + Sync>(
     visitor: &mut V,
 ) -> Result<(), V::Error> {
     let mut kept: Vec<PreparedFrame> = Vec::new();
+    let mut next = runs.first().map(|run| read_frames(dir, run, schemes, true));
     for (index, run) in runs.iter().enumerate() {
-        let mode = run.capture.as_ref().map(|c| c.name.clone());
-        let position = kept
-            .iter()
-            .position(|f| f.file == run.reference && f.mode == mode);
-        let mut frame = match position {
+        let ReadFrames {
+            reference,
+            deformed,
+        } = next.take().expect("read before its turn")?;
+        let mut frame = match kept.iter().position(|f| f.is_reference_of(run)) {
             Some(k) => kept.remove(k),
-            None => read_reference(dir, run, schemes)?,
+            None => reference.expect("read where none was kept"),
         };
-        let (deformed, _) = read_image(&dir.join(&run.deformed)).map_err(PairError::from)?;
-        check_pair(&frame.image, &deformed).map_err(|source| PairError::Frames {
-            run: run.id.clone(),
-            source,
-        })?;
-        let pair = RunPair {
-            index,
-            run,
-            reference: &frame.image,
-            deformed: &deformed,
-            bit_depth: frame.bit_depth,
-        };
-        if visitor.cancelled() {
-            return Err(PairError::Cancelled.into());
-        }
-        visitor.frames(&pair)?;
-        let deformed_digest = FrameDigest::of(&deformed);
-        for (scheme, prepared) in frame.schemes.iter().zip(frame.prepared.iter_mut()) {
-            let key = AnalysisKey::new(
-                frame.digest,
-                deformed_digest,
-                run.capture.is_some(),
-                scheme,
-                dic,
-            );
-            if let Some(known) = memo.recall(&key) {
-                visitor.result(&pair, scheme, DicResult::clone(&known))?;
-                continue;
-            }
-            let prepared = match prepared {
-                Some(p) => p,
-                None => prepared.insert(prepare_scheme(&frame.image, run, scheme, dic, &|| {
-                    visitor.cancelled()
-                })?),
-            };
-            let moved = as_analysed(&deformed, run, scheme)?;
-            let watching: &V = visitor;
-            let watch = Watch {
-                progress: None,
-                cancelled: Some(&|| watching.cancelled()),
-            };
-            let result = prepared
-                .correlate_watched(moved.as_ref(), watch)
-                .map_err(|source| match source {
-                    DicError::Cancelled => PairError::Cancelled,
-                    source => PairError::Dic {
-                        run: run.id.clone(),
-                        scheme: scheme.name.clone(),
-                        source,
-                    },
-                })?;
-            memo.remember(key, &result);
-            visitor.result(&pair, scheme, result)?;
-        }
         // One reference per read-out mode: a mode's runs come one pattern after another, and an
         // experiment with hardware schemes alternates between the modes.
         kept.retain(|f| f.mode != frame.mode);
+        // Whether the next run's reference must be read: the frames kept after this run.
+        let following = runs.get(index + 1).map(|following| {
+            let kept_after = frame.is_reference_of(following)
+                || kept.iter().any(|f| f.is_reference_of(following));
+            (following, !kept_after)
+        });
+        let (following, correlated) = rayon::join(
+            || {
+                following
+                    .map(|(run, with_reference)| read_frames(dir, run, schemes, with_reference))
+            },
+            || correlate_run(memo, (index, run), (&mut frame, &deformed), dic, visitor),
+        );
+        correlated?;
+        next = following;
         kept.push(frame);
+    }
+    Ok(())
+}
+
+/// A run's frames as [`read_frames`] reads them: its reference when no kept frame is it.
+struct ReadFrames {
+    reference: Option<PreparedFrame>,
+    deformed: Image,
+}
+
+/// Reads `run`'s deformed frame and, when `with_reference`, its reference, side by side.
+fn read_frames(
+    dir: &Path,
+    run: &Run,
+    schemes: &[Scheme],
+    with_reference: bool,
+) -> Result<ReadFrames, PairError> {
+    let (reference, deformed) = rayon::join(
+        || {
+            with_reference
+                .then(|| read_reference(dir, run, schemes))
+                .transpose()
+        },
+        || read_image(&dir.join(&run.deformed)),
+    );
+    Ok(ReadFrames {
+        reference: reference?,
+        deformed: deformed?.0,
+    })
+}
+
+/// Run `index`'s frames checked and handed to `visitor`, then correlated under each of the
+/// reference `frame`'s schemes (or recalled from `memo`).
+fn correlate_run<V: PairVisitor + Sync>(
+    memo: &AnalysisMemo,
+    (index, run): (usize, &Run),
+    (frame, deformed): (&mut PreparedFrame, &Image),
+    dic: &DicSettings,
+    visitor: &mut V,
+) -> Result<(), V::Error> {
+    check_pair(&frame.image, deformed).map_err(|source| PairError::Frames {
+        run: run.id.clone(),
+        source,
+    })?;
+    let pair = RunPair {
+        index,
+        run,
+        reference: &frame.image,
+        deformed,
+        bit_depth: frame.bit_depth,
+    };
+    if visitor.cancelled() {
+        return Err(PairError::Cancelled.into());
+    }
+    visitor.frames(&pair)?;
+    let deformed_digest = FrameDigest::of(deformed);
+    for (scheme, prepared) in frame.schemes.iter().zip(frame.prepared.iter_mut()) {
+        let key = AnalysisKey::new(
+            frame.digest,
+            deformed_digest,
+            run.capture.is_some(),
+            scheme,
+            dic,
+        );
+        if let Some(known) = memo.recall(&key) {
+            visitor.result(&pair, scheme, DicResult::clone(&known))?;
+            continue;
+        }
+        let prepared = match prepared {
+            Some(p) => p,
+            None => prepared.insert(prepare_scheme(&frame.image, run, scheme, dic, &|| {
+                visitor.cancelled()
+            })?),
+        };
+        let moved = as_analysed(deformed, run, scheme)?;
+        let watching: &V = visitor;
+        let watch = Watch {
+            progress: None,
+            cancelled: Some(&|| watching.cancelled()),
+        };
+        let result = prepared
+            .correlate_watched(moved.as_ref(), watch)
+            .map_err(|source| match source {
+                DicError::Cancelled => PairError::Cancelled,
+                source => PairError::Dic {
+                    run: run.id.clone(),
+                    scheme: scheme.name.clone(),
+                    source,
+                },
+            })?;
+        memo.remember(key, &result);
+        visitor.result(&pair, scheme, result)?;
     }
     Ok(())
 }
