@@ -3,7 +3,6 @@
 //! profile, and the print's contrast and size, each matched to the measured reference crop
 //! (see [`super::print`] for why a print is calibrated and what its spectral shape is).
 
-use super::image_stats::STATS_CROP_PX;
 use super::measurement::Measurement;
 use super::nominal::Nominal;
 use super::nominal::PatternEstimate;
@@ -12,12 +11,12 @@ use super::print::{
     placement_band_edge, spectral_shape_bins, spectral_shape_chi2, spectral_shape_chi2_below,
     PrintCalibration, PrintKnowledge,
 };
-use super::scene::{Scene, Shot};
 use super::stage::{fit_stage, StageObservation};
 use super::DiagnoseError;
 use crate::image::Image;
 use crate::model::{DotProfile, ModelConfig, Placement, SpecklePattern};
 use rayon::prelude::*;
+use std::sync::Arc;
 
 /// Asked before each step whether to go on (a cancelled job says no); shared by the patterns'
 /// and the placements' calibrations running side by side.
@@ -200,9 +199,14 @@ fn reference_crop(
     model: &ModelConfig,
     pi: usize,
     seed: u64,
-) -> Result<Image, DiagnoseError> {
-    let scene = Scene::of_patterns(nominal, &model.effects, &meas.manifest, seed, &|i| i == pi)?;
-    Ok(scene.render(pi, Shot::REFERENCE, Some(STATS_CROP_PX)))
+) -> Result<Arc<Image>, DiagnoseError> {
+    Ok(super::scene::reference_crop(
+        nominal,
+        &model.effects,
+        &meas.manifest,
+        seed,
+        pi,
+    )?)
 }
 
 /// Scales pattern `pi`'s white level so the model's reference crop has the measured mean.

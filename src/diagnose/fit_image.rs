@@ -26,14 +26,17 @@ use super::optimise::{
 };
 use super::print::PrintKnowledge;
 use super::results::{Comparison, ImageFit};
-use super::scene::{Scene, Shot};
+use super::scene::{reference_crop, Scene, Shot};
+use crate::image::Image;
 use crate::model::effects::{FillFactor, MotionBlur, PsfBlur};
 use crate::model::EffectId;
 use crate::model::Effects;
+use std::borrow::Borrow;
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 /// χ² of the crops' spectra against the measured frames' and its terms (bins).
-fn spectra_chi2(measured: &[&FrameStats], crops: &[crate::image::Image]) -> (f64, usize) {
+fn spectra_chi2<I: Borrow<Image>>(measured: &[&FrameStats], crops: &[I]) -> (f64, usize) {
     let (mut c, mut n) = (0.0, 0);
     for (m, img) in measured.iter().zip(crops) {
         // Spectra only: no noise curve, no mean map, no contrast (NaN is skipped).
@@ -52,8 +55,8 @@ fn spectra_chi2(measured: &[&FrameStats], crops: &[crate::image::Image]) -> (f64
             ..(*m).clone()
         };
         let o = FrameStats {
-            psd_x: psd(img, true),
-            psd_y: psd(img, false),
+            psd_x: psd(img.borrow(), true),
+            psd_y: psd(img.borrow(), false),
             ..only.clone()
         };
         let (ci, ni) = image_chi2(&only, &o);
@@ -91,20 +94,18 @@ fn ratio_chi2(
 pub(super) const TARGET_BUILT: &str = "the comparison before this fit built the same target";
 
 /// The reference crops of every pattern rendered with `effects`.
-fn reference_crops(
-    meas: &Measurement,
-    before: &Comparison,
-    effects: &Effects,
-) -> Vec<crate::image::Image> {
-    let scene = Scene::new(
-        &before.model.nominal,
-        effects,
-        &meas.manifest,
-        meas.options.seed,
-    )
-    .expect(TARGET_BUILT);
+fn reference_crops(meas: &Measurement, before: &Comparison, effects: &Effects) -> Vec<Arc<Image>> {
     (0..meas.labels.len())
-        .map(|pi| scene.render(pi, Shot::REFERENCE, Some(STATS_CROP_PX)))
+        .map(|pi| {
+            reference_crop(
+                &before.model.nominal,
+                effects,
+                &meas.manifest,
+                meas.options.seed,
+                pi,
+            )
+            .expect(TARGET_BUILT)
+        })
         .collect()
 }
 

@@ -27,6 +27,7 @@ pub use pattern::{
     DotProfile, DotShape, Placement, SpecklePattern, TargetDot, TooManyDots, MAX_TARGET_DOTS,
 };
 pub use readout::{BinnedValue, BinningDomain, SensorChain, SensorReadout};
+pub(crate) use remembered::Remembered;
 pub use render::{
     project, project_prepared, project_with_depth, render_frame, render_frame_read_out,
     render_frame_until, Camera, FrameSpec,
