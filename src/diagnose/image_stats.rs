@@ -402,13 +402,20 @@ fn mean_map(img: &Image) -> MeanMap {
         // Four sub-blocks give the scatter of the block mean.
         let mut subs = [0.0f64; 4];
         let mut cnt = [0usize; 4];
+        let mid = (c0 + c1) / 2;
         for r in r0..r1 {
             let row = img.row(r);
             let sr = usize::from(r >= (r0 + r1) / 2) * 2;
-            for (c, v) in row.iter().enumerate().take(c1).skip(c0) {
-                let s = sr + usize::from(c >= (c0 + c1) / 2);
-                subs[s] += *v as f64;
-                cnt[s] += 1;
+            // Each half-row summed in a register, its pixels in the order a pass over the
+            // whole row gave each quarter (the same sums to the bit): a sum picked per pixel
+            // was added to in memory, and was 4 % of a paper-size round's CPU.
+            for (s, half) in [(sr, &row[c0..mid]), (sr + 1, &row[mid..c1])] {
+                let mut sum = subs[s];
+                for v in half {
+                    sum += *v as f64;
+                }
+                subs[s] = sum;
+                cnt[s] += half.len();
             }
         }
         let means: Vec<f64> = (0..4)
