@@ -209,30 +209,7 @@ pub fn psd(img: &Image, along_x: bool) -> Vec<PsdBin> {
     let fft = plan_f64(len, Direction::Forward);
     let mut scratch = vec![Complex::new(0.0, 0.0); fft.get_inplace_scratch_len()];
     let nbins = 12usize;
-    let (fmin, fmax) = (2.0 / len as f64, 0.5);
-    let edges: Vec<f64> = (0..=nbins)
-        .map(|k| fmin * (fmax / fmin).powf(k as f64 / nbins as f64))
-        .collect();
-    let edge = |k: usize| edges[k];
-    // The bin of every FFT frequency, once (the same for every line).
-    let bins: Vec<Option<usize>> = (0..=len / 2)
-        .map(|k| {
-            let f = k as f64 / len as f64;
-            if k == 0 || f < fmin || f > fmax {
-                return None;
-            }
-            (0..nbins).find(|&b| f >= edge(b) && f <= edge(b + 1))
-        })
-        .collect();
-    // The bins as runs of consecutive frequencies (k from 1 to len/2), in k's order.
-    let mut runs: Vec<(usize, std::ops::Range<usize>)> = Vec::new();
-    for (k, bin) in bins.iter().enumerate().take(len / 2 + 1).skip(1) {
-        let Some(bin) = *bin else { continue };
-        match runs.last_mut() {
-            Some((b, ks)) if *b == bin && ks.end == k => ks.end = k + 1,
-            _ => runs.push((bin, k..k + 1)),
-        }
-    }
+    let (edges, runs) = frequency_bins(len, nbins);
     let groups = 8usize;
     // sums[group][bin], counts[bin]
     let mut sums = vec![vec![0.0f64; nbins]; groups];
@@ -282,44 +259,83 @@ pub fn psd(img: &Image, along_x: bool) -> Vec<PsdBin> {
             let (zk, zm) = (buf[k], buf[len - k].conj());
             (0.25 * (zk + zm).norm_sqr(), 0.25 * (zk - zm).norm_sqr())
         };
-        // A bin's sum held in a register over its run of frequencies, added to in the order a
-        // sum per frequency in memory was (both lines' terms in turn where they share a
-        // group): the same sums to the bit, without a store and a load between two additions
-        // to one bin (that chain was most of this function's own time).
-        for (bin, ks) in &runs {
-            let (bin, n) = (*bin, ks.len());
-            match gb {
-                Some(gb) if gb == ga => {
-                    let mut sum = sums[ga][bin];
-                    for (power_a, power_b) in ks.clone().map(powers) {
-                        sum += power_a * scale;
-                        sum += power_b * scale;
-                    }
-                    sums[ga][bin] = sum;
-                    counts[ga][bin] += 2 * n;
+        add_powers(&mut sums, &mut counts, &runs, powers, (ga, gb), scale);
+    }
+    group_bins(&sums, &counts, &edges)
+}
+
+/// One transform's powers (`powers(k)`: its first and second line's at frequency k) added,
+/// times `scale`, to the sums and counts of the lines' groups `ga` and `gb` (no second line:
+/// None) per bin, over the bins' runs of frequencies.
+fn add_powers(
+    sums: &mut [Vec<f64>],
+    counts: &mut [Vec<usize>],
+    runs: &[(usize, std::ops::Range<usize>)],
+    powers: impl Fn(usize) -> (f64, f64) + Copy,
+    (ga, gb): (usize, Option<usize>),
+    scale: f64,
+) {
+    // A bin's sum held in a register over its run of frequencies, added to in the order a
+    // sum per frequency in memory was (both lines' terms in turn where they share a group):
+    // the same sums to the bit, without a store and a load between two additions to one bin
+    // (that chain was most of `psd`'s own time).
+    for (bin, ks) in runs {
+        let (bin, n) = (*bin, ks.len());
+        match gb {
+            Some(gb) if gb == ga => {
+                let mut sum = sums[ga][bin];
+                for (power_a, power_b) in ks.clone().map(powers) {
+                    sum += power_a * scale;
+                    sum += power_b * scale;
                 }
-                Some(gb) => {
-                    let (mut sum_a, mut sum_b) = (sums[ga][bin], sums[gb][bin]);
-                    for (power_a, power_b) in ks.clone().map(powers) {
-                        sum_a += power_a * scale;
-                        sum_b += power_b * scale;
-                    }
-                    (sums[ga][bin], sums[gb][bin]) = (sum_a, sum_b);
-                    counts[ga][bin] += n;
-                    counts[gb][bin] += n;
+                sums[ga][bin] = sum;
+                counts[ga][bin] += 2 * n;
+            }
+            Some(gb) => {
+                let (mut sum_a, mut sum_b) = (sums[ga][bin], sums[gb][bin]);
+                for (power_a, power_b) in ks.clone().map(powers) {
+                    sum_a += power_a * scale;
+                    sum_b += power_b * scale;
                 }
-                None => {
-                    let mut sum = sums[ga][bin];
-                    for (power_a, _) in ks.clone().map(powers) {
-                        sum += power_a * scale;
-                    }
-                    sums[ga][bin] = sum;
-                    counts[ga][bin] += n;
+                (sums[ga][bin], sums[gb][bin]) = (sum_a, sum_b);
+                counts[ga][bin] += n;
+                counts[gb][bin] += n;
+            }
+            None => {
+                let mut sum = sums[ga][bin];
+                for (power_a, _) in ks.clone().map(powers) {
+                    sum += power_a * scale;
                 }
+                sums[ga][bin] = sum;
+                counts[ga][bin] += n;
             }
         }
     }
-    group_bins(&sums, &counts, &edges)
+}
+
+/// A spectrum's `nbins` log-spaced bin edges from 2/`len` to 0.5 cycles/px, and the bins as
+/// runs of consecutive FFT frequencies k (from 1 to `len`/2, in k's order; a frequency on an
+/// edge in the lower bin): the same for every line.
+fn frequency_bins(len: usize, nbins: usize) -> (Vec<f64>, Vec<(usize, std::ops::Range<usize>)>) {
+    let (fmin, fmax) = (2.0 / len as f64, 0.5);
+    let edges: Vec<f64> = (0..=nbins)
+        .map(|k| fmin * (fmax / fmin).powf(k as f64 / nbins as f64))
+        .collect();
+    let mut runs: Vec<(usize, std::ops::Range<usize>)> = Vec::new();
+    for k in 1..=len / 2 {
+        let f = k as f64 / len as f64;
+        if f < fmin || f > fmax {
+            continue;
+        }
+        let Some(bin) = (0..nbins).find(|&b| f >= edges[b] && f <= edges[b + 1]) else {
+            continue;
+        };
+        match runs.last_mut() {
+            Some((b, ks)) if *b == bin && ks.end == k => ks.end = k + 1,
+            _ => runs.push((bin, k..k + 1)),
+        }
+    }
+    (edges, runs)
 }
 
 /// Each bin's mean over the groups of lines that reached it (`sums[group][bin]` over
