@@ -387,19 +387,45 @@ mod tests {
             proptest::prop_assert!(calls.get() <= 14, "{} evaluations", calls.get());
         }
 
-        /// A χ² bowl in two dimensions (σ 1 along x, 1/√k along y), any centre in the box and
-        /// any anisotropy. The simplex stops once its values agree to 1e-3 (a thousandth of a
-        /// χ²'s 1σ rise), and a simplex flattened along the narrow axis can agree that well
-        /// before it reaches the floor: over 3,000 cases the worst end was χ² = 0.024 (0.16 σ
-        /// off along x). What this guarantees is an end within a quarter of a standard error
-        /// (χ² < 1/16); a restart from the end would tighten it (not done: it would move the
-        /// fill factor's fits).
-        #[test]
-        fn nelder_mead_finds_a_bowls_centre(a in -2.0f64..2.0, b in -2.0f64..2.0, k in 1.0f64..20.0) {
+    }
+
+    /// A χ² bowl in two dimensions (σ 1 along x, 1/√k along y), centres anywhere in the box
+    /// and anisotropies up to 20, 40,000 of them drawn from a fixed seed. The simplex stops once
+    /// its values agree to 1e-3 (a thousandth of a χ²'s 1σ rise), and a simplex flattened along
+    /// the narrow axis can agree that well before it reaches the floor. Over 400,000 cases 37
+    /// ended beyond a quarter of a standard error (χ² ≥ 1/16; 9 in 100,000) and the worst at
+    /// χ² = 0.28 (0.53 σ). A property test of 64 random cases that asserted χ² < 1/16 for every
+    /// one failed on a fresh clone's CI at χ² = 0.080 (a = 1.85, b = −0.30, k = 12.9): it
+    /// claimed more than the stop gives. Held here: at most one case in a thousand beyond a
+    /// quarter σ (ten times the measured rate) and none beyond one σ. A restart from the end
+    /// would tighten it (not done: it would move the fill factor's fits).
+    #[test]
+    fn nelder_mead_ends_near_a_bowls_centre() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        let cases = 40_000;
+        let (mut beyond_quarter, mut worst) = (0usize, 0.0f64);
+        for _ in 0..cases {
+            let (a, b): (f64, f64) = (rng.gen_range(-2.0..2.0), rng.gen_range(-2.0..2.0));
+            let k: f64 = rng.gen_range(1.0..20.0);
             let f = |x: &[f64]| (x[0] - a).powi(2) + k * (x[1] - b).powi(2);
-            let x = nelder_mead(&f, &[0.0, 0.0], &[0.5, 0.5], &[-3.0, -3.0], &[3.0, 3.0], 500);
-            proptest::prop_assert!(f(&x) < 1.0 / 16.0, "χ² = {} at {:?}", f(&x), x);
+            let x = nelder_mead(
+                &f,
+                &[0.0, 0.0],
+                &[0.5, 0.5],
+                &[-3.0, -3.0],
+                &[3.0, 3.0],
+                500,
+            );
+            let chi2 = f(&x);
+            beyond_quarter += usize::from(chi2 >= 1.0 / 16.0);
+            worst = worst.max(chi2);
         }
+        assert!(
+            beyond_quarter * 1000 <= cases,
+            "{beyond_quarter} of {cases} ended beyond a quarter σ"
+        );
+        assert!(worst < 1.0, "the worst end: χ² = {worst}");
     }
 
     #[test]
