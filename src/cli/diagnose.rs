@@ -7,7 +7,7 @@ use super::diagnose_on_bench::{on_bench, OnBench};
 use super::ProgressBar;
 use anyhow::{Context, Result};
 use clap::Args;
-use ffdic::diagnose::{diagnose_rounds, Candidate, Diagnosis, Rounds, MAX_ROUNDS};
+use ffdic::diagnose::{diagnose_rounds, Candidate, Diagnosis, Method, Rounds, MAX_ROUNDS};
 use ffdic::model::effects::{join_effects, verdict_name};
 use ffdic::report::{length_pm, parameters_text, plus_minus, significant};
 use std::path::PathBuf;
@@ -55,10 +55,14 @@ fn significance(c: &Candidate) -> String {
     if !k.beyond_null {
         why.push("within 2 SE of none".to_string());
     }
-    if k.beyond_null && !k.delta_bic_ok {
+    let excluded = c.method == Method::Excluded;
+    if excluded {
+        why.push("not rendered (excluded below)".into());
+    }
+    if k.beyond_null && !excluded && !k.delta_bic_ok {
         why.push("ΔBIC ≥ −10".into());
     }
-    if k.beyond_null && !k.drop_ok {
+    if k.beyond_null && !excluded && !k.drop_ok {
         why.push(format!(
             "drop {} px, image χ² drop {}",
             plus_minus(k.drop_px, k.drop_se_px),

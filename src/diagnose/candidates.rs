@@ -17,7 +17,7 @@ use super::identifiability::DatasetDesign;
 pub use super::identifiability::NotIdentifiable;
 use super::measurement::Measurement;
 use super::results::{Comparison, ImageFit};
-use super::verdict::{Candidate, Judge, Method};
+use super::verdict::{Candidate, DesignRules, Judge, Method};
 use super::{DiagnoseError, Progress};
 use crate::model::effects::UserKind;
 use crate::model::{CandidateId, EffectId, Effects, ModelConfig};
@@ -286,7 +286,7 @@ pub(super) fn judge_candidates(
 pub(super) fn fit_one_candidate(
     meas: &Measurement,
     (model, refit): (&ModelConfig, &[EffectId]),
-    before: &Comparison,
+    (before, rules): (&Comparison, DesignRules),
     id: &CandidateId,
     ask: Progress,
 ) -> Result<Option<UnjudgedFit>, DiagnoseError> {
@@ -318,6 +318,9 @@ pub(super) fn fit_one_candidate(
         None
     } else if let Some(predicted) = predict(meas, before, &with, &fit) {
         Some((predicted, Method::Predicted))
+    } else if !rules.may_be_named(&fit) {
+        // Excluded whatever its rendering shows (`Method::Excluded`).
+        None
     } else {
         // A candidate that leaves the reference frame as it was (a motion blur, an illumination
         // change) keeps the print calibrated against it: refitted, the print would differ only

@@ -13,7 +13,8 @@
 //! explains the rest (`withheld`: the nearest catalogue name for something outside it). A candidate whose parameter is within two
 //! standard errors of no effect is not re-rendered: adding nothing changes nothing, so its
 //! discrepancy is the model's and its ΔBIC the bare parameter penalty k·ln n (`recomputed`
-//! false). Effects the dataset cannot reveal are listed with the runs to add, not fitted; pairs
+//! false); nor is one the criteria that do not read its comparison already exclude (at its
+//! range's bound, or confounded with the print or the light by the design: `Method::Excluded`). Effects the dataset cannot reveal are listed with the runs to add, not fitted; pairs
 //! that explain the same residual are named with the run that would separate them.
 
 use super::calibrate_scene::SceneFrom;
@@ -26,12 +27,11 @@ use super::fit_user_effect::fit_user_effect;
 pub use super::identifiability::Confounded;
 use super::identifiability::{design_of, separating_run, DatasetDesign};
 use super::measurement::{load_measurement, Measurement};
-use super::print::PrintKnowledge;
 use super::results::Comparison;
 use super::unexplained::{model_scatter, unexplained, ModelScatter, Unexplained};
 use super::verdict::{
-    Candidate, Diagnosis, Judge, Withheld, ILLUMINATION_SEPARATION, MIN_EXPLAINED_FRACTION,
-    VIGNETTING_MOVE_FRACTION,
+    Candidate, DesignRules, Diagnosis, Judge, Withheld, ILLUMINATION_SEPARATION,
+    MIN_EXPLAINED_FRACTION,
 };
 use super::{CompareOptions, DiagnoseError, Progress};
 use crate::model::{CandidateId, EffectId, ModelConfig};
@@ -84,26 +84,25 @@ pub fn diagnose_prepared(
     };
     // Asks, without a step done, whether to go on: inside each comparison, before every point.
     let ask = |_: usize, _: usize| progress(done.load(Ordering::Relaxed), total);
-    let (by_seed, scatter, fitted) =
-        seeds_and_candidates(meas, (model, refit), &before, &fit_ids, (&tick, &ask))?;
+    let rules = DesignRules::of(&before, &design);
+    let (by_seed, scatter, fitted) = seeds_and_candidates(
+        meas,
+        (model, refit),
+        (&before, rules),
+        &fit_ids,
+        (&tick, &ask),
+    )?;
     let seed_sd = {
         let n = by_seed.len() as f64;
         let m = by_seed.iter().sum::<f64>() / n;
         (by_seed.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
     };
     let se_before = before.discrepancy_se_px.max(seed_sd);
-    let print_calibrated = before
-        .model
-        .nominal
-        .patterns
-        .iter()
-        .any(|p| p.print == PrintKnowledge::Calibrated);
     let judge = Judge {
         before: &before,
         se_before,
         seed_sd,
-        print_calibrated,
-        small_moves: design.largest_move_fraction < VIGNETTING_MOVE_FRACTION,
+        rules,
         dic: &meas.options.dic,
     };
     let (mut candidates, mut models) = judge_candidates(&judge, fitted);
@@ -129,7 +128,7 @@ pub fn diagnose_prepared(
         }
     }
     drop(settling);
-    let confounded = confounded_pairs(&design, &candidates, left.winner.clone(), print_calibrated);
+    let confounded = confounded_pairs(&design, &candidates, left.winner.clone(), rules);
     Ok(Diagnosis {
         model: before.model.clone(),
         discrepancy_px: before.discrepancy_px,
@@ -289,7 +288,7 @@ fn rest_has_a_name(
 fn seeds_and_candidates(
     meas: &Measurement,
     (model, refit): (&ModelConfig, &[EffectId]),
-    before: &Comparison,
+    (before, rules): (&Comparison, DesignRules),
     fit_ids: &[CandidateId],
     (tick, ask): (&(dyn Fn() -> Result<(), DiagnoseError> + Sync), Progress),
 ) -> Result<(Vec<f64>, ModelScatter, Vec<UnjudgedFit>), DiagnoseError> {
@@ -301,8 +300,10 @@ fn seeds_and_candidates(
         RoundJob::Seed(k) => {
             seed_discrepancy(meas, model, before, k, ask).map(|(d, s)| RoundDone::Seed(d, s))
         }
-        RoundJob::Candidate(id) => fit_one_candidate(meas, (model, refit), before, id, ask)
-            .map(|f| RoundDone::Candidate(f.map(Box::new))),
+        RoundJob::Candidate(id) => {
+            fit_one_candidate(meas, (model, refit), (before, rules), id, ask)
+                .map(|f| RoundDone::Candidate(f.map(Box::new)))
+        }
     };
     let mut by_seed = vec![before.discrepancy_px];
     let mut scatter = ModelScatter::default();
@@ -363,23 +364,21 @@ fn confounded_pairs(
     design: &DatasetDesign,
     candidates: &[Candidate],
     winner: Option<CandidateId>,
-    print_calibrated: bool,
+    rules: DesignRules,
 ) -> Vec<Confounded> {
     let fitted: Vec<EffectId> = candidates
         .iter()
         .filter_map(|c| c.effect.catalogue())
         .collect();
     let mut confounded = design.confounded(&fitted);
-    if fitted.contains(&EffectId::Vignetting)
-        && design.largest_move_fraction < VIGNETTING_MOVE_FRACTION
-    {
+    if fitted.contains(&EffectId::Vignetting) && rules.small_moves {
         confounded.push(Confounded {
             effects: [EffectId::Vignetting.as_str().into(), "illumination".into()],
             separate_with: ILLUMINATION_SEPARATION.into(),
             evidence: "design".into(),
         });
     }
-    if print_calibrated {
+    if rules.print_calibrated {
         for effect in [EffectId::PsfBlur, EffectId::FillFactor] {
             if fitted.contains(&effect) {
                 confounded.push(Confounded {
@@ -472,7 +471,9 @@ mod tests {
             candidate(EffectId::PsfBlur, &[("sigma_px", 0.8, 0.05)], -15.0, 0.0),
             candidate(EffectId::FillFactor, &[("fx", 0.5, 0.05)], -12.0, 0.0),
         ];
-        let pairs = confounded_pairs(&design, &candidates, None, true);
+        let rules = DesignRules::with_print(true, &design);
+        assert!(rules.small_moves);
+        let pairs = confounded_pairs(&design, &candidates, None, rules);
         assert_eq!(
             names(&pairs),
             vec![
@@ -495,7 +496,9 @@ mod tests {
         assert!(pairs.iter().all(|p| p.evidence == "design"));
         // A 130 px move (5.1 %) and a characterised print leave the design's blur and aperture.
         let wide = design_of(&manifest(&[(5.0, 0.0)], &["a"], true), 2560);
-        let pairs = confounded_pairs(&wide, &candidates, None, false);
+        let rules = DesignRules::with_print(false, &wide);
+        assert!(!rules.small_moves);
+        let pairs = confounded_pairs(&wide, &candidates, None, rules);
         assert_eq!(names(&pairs), vec![["fill_factor", "psf_blur"]]);
     }
 
@@ -524,12 +527,23 @@ mod tests {
             candidate(EffectId::LensDistortion, &[("k1", 1e-4, 1e-4)], 3.0, 0.0095),
         ];
         let winner = Some(EffectId::Rotation.into());
-        let pairs = confounded_pairs(&design, &candidates, winner, false);
+        let pairs = confounded_pairs(
+            &design,
+            &candidates,
+            winner,
+            DesignRules::with_print(false, &design),
+        );
         assert_eq!(names(&pairs), vec![["rotation", "scale"]]);
         assert_eq!(pairs[0].evidence, "data");
         assert_eq!(pairs[0].separate_with, "translations along x and along y");
         // Without a verdict, the data name no pair.
-        assert!(confounded_pairs(&design, &candidates, None, false).is_empty());
+        assert!(confounded_pairs(
+            &design,
+            &candidates,
+            None,
+            DesignRules::with_print(false, &design)
+        )
+        .is_empty());
     }
 
     #[test]
@@ -546,7 +560,12 @@ mod tests {
             candidate(EffectId::Scale, &[("ds", 1e-4, 1e-6)], -85.0, 0.0099),
         ];
         let winner = Some(EffectId::LensDistortion.into());
-        let pairs = confounded_pairs(&design, &candidates, winner, false);
+        let pairs = confounded_pairs(
+            &design,
+            &candidates,
+            winner,
+            DesignRules::with_print(false, &design),
+        );
         assert_eq!(names(&pairs), vec![["lens_distortion", "scale"]]);
         assert_eq!(
             (pairs[0].evidence.as_str(), pairs[0].separate_with.as_str()),

@@ -3,7 +3,9 @@
 //! range, what the dataset can separate). The module doc of [`super`] states the criteria.
 
 use super::bic::{chi2, delta_bic, image_change, SIGNIFICANT_DELTA_BIC};
+use super::identifiability::DatasetDesign;
 pub use super::identifiability::{Confounded, NotIdentifiable};
+use super::print::PrintKnowledge;
 use super::results::{Comparison, ImageFit, ModelInfo};
 use super::unexplained::Unexplained;
 use crate::model::effects::UserKind;
@@ -263,6 +265,11 @@ pub(super) fn outside_range(fit: &ImageFit) -> Option<String> {
 pub enum Method {
     /// The parameter is within two standard errors of no effect: adding nothing changes nothing.
     Unchanged,
+    /// Beyond its null, but excluded from the verdict whatever its comparison would show (at its
+    /// range's bound, or confounded with the print or the light by the design:
+    /// [`DesignRules::may_be_named`]): not rendered, its discrepancy the model's and its ΔBIC the
+    /// bare parameter penalty, as for `Unchanged`.
+    Excluded,
     /// A geometric effect: the model's analyses shifted by the fitted field (first order, no
     /// rendering); the winner is always rendered.
     Predicted,
@@ -275,10 +282,56 @@ pub(super) struct Judge<'a> {
     pub(super) before: &'a Comparison,
     pub(super) se_before: f64,
     pub(super) seed_sd: f64,
+    pub(super) rules: DesignRules,
+    pub(super) dic: &'a crate::dic::DicSettings,
+}
+
+/// What the dataset's design and the model's print leave unseparable, known before any candidate
+/// is compared: the lens blur and the aperture against a print calibrated from the frames (the
+/// calibration absorbs whatever blur one magnification cannot attribute), vignetting against
+/// the print's and the light's own non-uniformity under small moves.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct DesignRules {
+    /// A pattern's print is calibrated from the frames, not characterised in the manifest.
     pub(super) print_calibrated: bool,
     /// No translation reaches [`VIGNETTING_MOVE_FRACTION`] of the field.
     pub(super) small_moves: bool,
-    pub(super) dic: &'a crate::dic::DicSettings,
+}
+
+impl DesignRules {
+    /// The rules for the model's comparison `before` on a dataset of `design`.
+    pub(super) fn of(before: &Comparison, design: &DatasetDesign) -> Self {
+        let patterns = &before.model.nominal.patterns;
+        let calibrated = patterns
+            .iter()
+            .any(|p| p.print == PrintKnowledge::Calibrated);
+        Self::with_print(calibrated, design)
+    }
+
+    /// The rules for a dataset of `design` whose print is calibrated or not.
+    pub(super) fn with_print(print_calibrated: bool, design: &DatasetDesign) -> Self {
+        DesignRules {
+            print_calibrated,
+            small_moves: design.largest_move_fraction < VIGNETTING_MOVE_FRACTION,
+        }
+    }
+
+    /// Whether the design separates `effect` from the print's (or the light's) own properties.
+    pub(super) fn separable(&self, effect: &CandidateId) -> bool {
+        let catalogue = effect.catalogue();
+        !(self.print_calibrated
+            && matches!(catalogue, Some(EffectId::PsfBlur | EffectId::FillFactor))
+            || catalogue == Some(EffectId::Vignetting) && self.small_moves)
+    }
+
+    /// Whether a comparison of the model with `fit` could make it significant: not when its
+    /// parameters are within their null, at its range's bound, or confounded by the design (the
+    /// criteria that do not read the comparison). A rendered comparison costs seconds at paper
+    /// size (the reproduce run's aperture on its calibrated print: 2.3 s of a lane that set the
+    /// round's end), and for such a candidate it could only fill in a ΔBIC no verdict reads.
+    pub(super) fn may_be_named(&self, fit: &ImageFit) -> bool {
+        fit.beyond_null && outside_range(fit).is_none() && self.separable(&fit.effect)
+    }
 }
 
 /// The smallest translation, as a fraction of the frame width, that tells vignetting (fixed on
@@ -310,7 +363,11 @@ impl Judge<'_> {
             None => (
                 before.discrepancy_px,
                 fit.k as f64 * (n_obs.max(1) as f64).ln(),
-                Method::Unchanged,
+                if fit.beyond_null {
+                    Method::Excluded
+                } else {
+                    Method::Unchanged
+                },
                 0.0,
             ),
         };
@@ -336,12 +393,10 @@ impl Judge<'_> {
                 Evidence::Either => displacement_ok || image_ok,
             };
         let range = outside_range(fit);
-        let catalogue = fit.effect.catalogue();
-        let separable_from_print = !(self.print_calibrated
-            && matches!(catalogue, Some(EffectId::PsfBlur | EffectId::FillFactor))
-            || catalogue == Some(EffectId::Vignetting) && self.small_moves);
+        let separable_from_print = self.rules.separable(&fit.effect);
+        let compared = matches!(method, Method::Predicted | Method::Rendered);
         let criteria = Criteria {
-            delta_bic_ok: method != Method::Unchanged && delta < SIGNIFICANT_DELTA_BIC,
+            delta_bic_ok: compared && delta < SIGNIFICANT_DELTA_BIC,
             beyond_null: fit.beyond_null,
             evidence,
             drop_px,
@@ -372,7 +427,7 @@ impl Judge<'_> {
                 && criteria.within_range
                 && criteria.separable_from_print,
             drop_px,
-            recomputed: method != Method::Unchanged,
+            recomputed: compared,
             method,
             criteria,
             derived: fit.geometric.derived.clone(),
@@ -396,6 +451,38 @@ mod tests {
             beyond_null: true,
             geometric: GeometricTerms::default(),
         }
+    }
+
+    #[test]
+    fn a_candidate_the_design_excludes_is_not_worth_a_rendering() {
+        let rules = |print_calibrated, small_moves| DesignRules {
+            print_calibrated,
+            small_moves,
+        };
+        let blur = fit(EffectId::PsfBlur, &[("sigma_px", 0.8)]);
+        let aperture = fit(EffectId::FillFactor, &[("fx", 0.5), ("fy", 0.8)]);
+        let falloff = fit(EffectId::Vignetting, &[("v", 0.1)]);
+        // A characterised print and a wide move leave all three a chance.
+        for f in [&blur, &aperture, &falloff] {
+            assert!(rules(false, false).may_be_named(f), "{}", f.effect);
+        }
+        // A calibrated print absorbs the blur and the aperture, not the falloff.
+        assert!(!rules(true, false).may_be_named(&blur));
+        assert!(!rules(true, false).may_be_named(&aperture));
+        assert!(rules(true, false).may_be_named(&falloff));
+        // Small moves leave the falloff the light's or the print's.
+        assert!(!rules(false, true).may_be_named(&falloff));
+        assert!(rules(false, true).may_be_named(&blur));
+        // Within its null, or at its range's bound: no chance whatever the design.
+        let null = ImageFit {
+            beyond_null: false,
+            ..blur.clone()
+        };
+        assert!(!rules(false, false).may_be_named(&null));
+        let bound = fit(EffectId::FillFactor, &[("fx", 0.05), ("fy", 0.8)]);
+        assert!(!rules(false, false).may_be_named(&bound));
+        // Geometric effects are never the print's.
+        assert!(rules(true, true).may_be_named(&fit(EffectId::Scale, &[("ds", 1e-4)])));
     }
 
     #[test]
