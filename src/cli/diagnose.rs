@@ -53,7 +53,13 @@ fn significance(c: &Candidate) -> String {
     let k = &c.criteria;
     let mut why = Vec::new();
     if !k.beyond_null {
-        why.push("within 2 SE of none".to_string());
+        // A fit whose χ² is not curved at its end (at a bound of its range, or flat) has no
+        // standard error, and so no distance from none to state (`stderr` leaves it out).
+        why.push(if c.stderr.is_empty() && !c.params.is_empty() {
+            "no standard error at the fit".to_string()
+        } else {
+            "within 2 SE of none".to_string()
+        });
     }
     let excluded = c.method == Method::Excluded;
     if excluded {
