@@ -10,12 +10,15 @@
 //! because an image-level effect can be certain from the image statistics while the displacement
 //! discrepancy stays at its floor), `none` when no candidate is significant — or when the winner
 //! explains under 90 % of the model's unexplained low-order field and no other geometric effect
-//! explains the rest (`withheld`: the nearest catalogue name for something outside it). A candidate whose parameter is within two
-//! standard errors of no effect is not re-rendered: adding nothing changes nothing, so its
-//! discrepancy is the model's and its ΔBIC the bare parameter penalty k·ln n (`recomputed`
-//! false); nor is one the criteria that do not read its comparison already exclude (at its
-//! range's bound, or confounded with the print or the light by the design: `Method::Excluded`). Effects the dataset cannot reveal are listed with the runs to add, not fitted; pairs
-//! that explain the same residual are named with the run that would separate them.
+//! explains the rest (`withheld`: the nearest catalogue name for something outside it).
+//!
+//! A candidate whose parameter is within two standard errors of no effect is not re-rendered:
+//! adding nothing changes nothing, so its discrepancy is the model's and its ΔBIC the bare
+//! parameter penalty k·ln n (`recomputed` false); nor is one the criteria that do not read its
+//! comparison already exclude (at its range's bound, or confounded with the print or the light
+//! by the design: `Method::Excluded`). Effects the dataset cannot reveal are listed with the runs
+//! to add, not fitted; pairs that explain the same residual are named with the run that would
+//! separate them.
 
 use super::calibrate_scene::SceneFrom;
 use super::candidates::{
