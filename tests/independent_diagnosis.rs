@@ -244,25 +244,29 @@ fn psf_spec(state_print: &str) -> (Value, f64) {
 }
 
 #[test]
-fn hidden_psf_blur_with_a_nominal_print_is_confounded_with_it() {
+fn hidden_psf_blur_with_a_nominal_print_is_not_fitted_against_it() {
     let (spec, _) = psf_spec("nominal");
     let (r, _) = diagnose(&spec, 1);
     let d = &r.diagnoses[0];
     // Never another effect; with a print known only nominally, the blur is the print's or the
-    // lens's, and the diagnosis says so with the run that separates them.
-    assert!(
-        ffdic::model::effects::verdict_name(&d.verdict) == "psf_blur"
-            || ffdic::model::effects::verdict_name(&d.verdict) == "none",
-        "verdict {}",
-        ffdic::model::effects::verdict_name(&d.verdict)
+    // lens's: the print's calibration absorbs it, so neither the blur nor the aperture is
+    // fitted, and the diagnosis says so with what would separate them.
+    assert_eq!(
+        ffdic::model::effects::verdict_name(&d.verdict),
+        "none",
+        "verdict"
     );
-    if ffdic::model::effects::verdict_name(&d.verdict) == "none" {
-        assert!(d
-            .confounded
+    for effect in [
+        ffdic::model::EffectId::PsfBlur,
+        ffdic::model::EffectId::FillFactor,
+    ] {
+        assert!(d.candidates.iter().all(|c| c.effect != effect), "{effect}");
+        let n = d
+            .not_identifiable
             .iter()
-            .any(|c| c.effects.contains(&"psf_blur".to_string())
-                && c.effects.contains(&"print".to_string())
-                && !c.separate_with.is_empty()));
+            .find(|n| n.effect == effect)
+            .unwrap_or_else(|| panic!("{effect} reported as not identifiable"));
+        assert!(n.runs_to_add.contains("characterised print"), "{n:?}");
     }
 }
 
@@ -313,11 +317,20 @@ fn hidden_fill_factor_is_never_a_fit_at_its_bound() {
         "verdict {}",
         ffdic::model::effects::verdict_name(&d.verdict)
     );
+    // Not named: the diagnosis says why, as a confound or, against a print calibrated from the
+    // frames, as what would reveal the aperture.
     if ffdic::model::effects::verdict_name(&d.verdict) == "none" {
-        assert!(d
-            .confounded
-            .iter()
-            .any(|c| c.effects.contains(&"fill_factor".to_string())));
+        assert!(
+            d.confounded
+                .iter()
+                .any(|c| c.effects.contains(&"fill_factor".to_string()))
+                || d.not_identifiable
+                    .iter()
+                    .any(|n| n.effect == ffdic::model::EffectId::FillFactor),
+            "{:?} {:?}",
+            d.confounded,
+            d.not_identifiable
+        );
     }
     for c in d.candidates.iter().filter(|c| c.significant) {
         assert!(

@@ -79,7 +79,7 @@ fn significance(c: &Candidate) -> String {
         why.push("at the range's bound".into());
     }
     if !k.separable_from_print {
-        why.push("confounded with the print".into());
+        why.push("confounded with the print's or the light's non-uniformity".into());
     }
     format!("no: {}", why.join("; "))
 }

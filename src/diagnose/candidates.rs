@@ -383,7 +383,7 @@ pub(super) fn render_winner(
 mod tests {
     use super::*;
     use crate::diagnose::identifiability::design_of;
-    use crate::diagnose::test_fields::manifest;
+    use crate::diagnose::test_fields::{manifest, PrintStated};
     use std::path::Path;
 
     #[test]
@@ -391,7 +391,7 @@ mod tests {
         let baseline =
             ModelConfig::from_toml(crate::diagnose::BASELINE_TOML, Path::new("b")).unwrap();
         // The paper's design: one 5 mm move, no dot size, no repeats, no stated repeatability.
-        let design = design_of(&manifest(&[(5.0, 0.0)], &["a"], false), 2560);
+        let design = design_of(&manifest(&[(5.0, 0.0)], &["a"], PrintStated::Nothing), 2560);
         let (fit, not) = candidates_to_fit(&baseline, &design);
         let fit: Vec<EffectId> = fit.iter().filter_map(|c| c.catalogue()).collect();
         let not: Vec<EffectId> = not.iter().map(|n| n.effect).collect();

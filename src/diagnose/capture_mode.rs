@@ -228,7 +228,7 @@ pub fn compare_hardware(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diagnose::test_fields::{frame_stats, manifest, synthetic_result};
+    use crate::diagnose::test_fields::{frame_stats, manifest, synthetic_result, PrintStated};
     use crate::dic::{DicSettings, PoiStatus};
     use ffdic_hw::{AxisReduction, BinningDomain, BinningMode};
 
@@ -308,7 +308,7 @@ mod tests {
         // binned twin: (0.2, −0.1) px of the 2x2 frames. The measured frames show that and
         // (0.03, 0.04) px more: a rigid part of 0.05 px. Run r1's decimated frames show exactly
         // its twin's change, (−0.6, 0.2)/2: nothing.
-        let m = manifest(&[(5.0, 0.0), (0.0, 5.0)], &["a", "b"], false);
+        let m = manifest(&[(5.0, 0.0), (0.0, 5.0)], &["a", "b"], PrintStated::Nothing);
         let measured = vec![
             captured(&m, 0, two_by_two(true), analysis((1.23, 0.44), 1)),
             captured(&m, 1, two_by_two(false), analysis((0.4, 0.2), 2)),
@@ -374,7 +374,7 @@ mod tests {
     fn an_unmeasurable_run_is_reported_and_left_out_of_the_total() {
         // The model's analysis of the second run has no valid point: its discrepancy is NaN and
         // the total is the first run's alone.
-        let m = manifest(&[(5.0, 0.0), (0.0, 5.0)], &["a"], false);
+        let m = manifest(&[(5.0, 0.0), (0.0, 5.0)], &["a"], PrintStated::Nothing);
         let mut lost = analysis((0.0, 0.0), 8);
         lost.points
             .iter_mut()
@@ -400,7 +400,7 @@ mod tests {
 
     #[test]
     fn without_capture_mode_runs_or_their_model_side_there_is_no_comparison() {
-        let m = manifest(&[(5.0, 0.0)], &["a"], false);
+        let m = manifest(&[(5.0, 0.0)], &["a"], PrintStated::Nothing);
         let options = CompareOptions::default();
         let labels = ["a".to_string()];
         assert!(compare_hardware(&[], Vec::new(), &labels, &[0], &[], &options).is_none());

@@ -65,11 +65,12 @@ pub struct CardEffect {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ImagingEntry {
     pub effect: EffectId,
+    /// Empty when the runs and the print could not reveal the effect (not fitted).
     pub params: BTreeMap<String, f64>,
     pub stderr: BTreeMap<String, f64>,
-    /// The runs separate it from what it is confounded with.
+    /// The runs reveal it and separate it from what it is confounded with.
     pub identifiable: bool,
-    /// When not: the run that would.
+    /// When not: the runs (or the print's characterisation) that would.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub separate_with: Option<String>,
 }
@@ -279,7 +280,8 @@ fn centred_entry(c: &CentredDistortion, z: f64) -> CardEffect {
     }
 }
 
-/// Blur, pixel aperture and sensor noise as the last round fitted them.
+/// Blur, pixel aperture and sensor noise as the last round fitted them, or, where its runs and
+/// print could not reveal one, that one without parameters and with what would.
 fn imaging_entries(rounds: &Rounds) -> Vec<ImagingEntry> {
     let Some(last) = rounds.diagnoses.last() else {
         return Vec::new();
@@ -291,10 +293,20 @@ fn imaging_entries(rounds: &Rounds) -> Vec<ImagingEntry> {
     ]
     .into_iter()
     .filter_map(|effect| {
-        let c = last
+        let Some(c) = last
             .candidates
             .iter()
-            .find(|c| c.effect.catalogue() == Some(effect))?;
+            .find(|c| c.effect.catalogue() == Some(effect))
+        else {
+            let n = last.not_identifiable.iter().find(|n| n.effect == effect)?;
+            return Some(ImagingEntry {
+                effect,
+                params: BTreeMap::new(),
+                stderr: BTreeMap::new(),
+                identifiable: false,
+                separate_with: Some(n.runs_to_add.clone()),
+            });
+        };
         let name = effect.to_string();
         let confounded = last
             .confounded
@@ -353,7 +365,7 @@ fn judge_card(
 mod tests {
     use super::*;
     use crate::diagnose::test_fields::{candidate, comparison, diagnosis, finding};
-    use crate::diagnose::verdict::Confounded;
+    use crate::diagnose::verdict::{Confounded, NotIdentifiable};
 
     #[test]
     fn a_centred_distortion_is_significant_when_k1_or_k2_passes_z_errors() {
@@ -409,9 +421,14 @@ mod tests {
             None,
         );
         last.confounded.push(Confounded {
-            effects: ["psf_blur".into(), "print".into()],
-            separate_with: "a characterised print".into(),
+            effects: ["psf_blur".into(), "fill_factor".into()],
+            separate_with: "a step series".into(),
             evidence: "design".into(),
+        });
+        last.not_identifiable.push(NotIdentifiable {
+            effect: EffectId::FillFactor,
+            reason: "the print is calibrated".into(),
+            runs_to_add: "a characterised print".into(),
         });
         let rounds = Rounds {
             rounds: Vec::new(),
@@ -423,18 +440,25 @@ mod tests {
             diagnoses: vec![first, last],
         };
         let entries = imaging_entries(&rounds);
-        let summary: Vec<(EffectId, f64, bool, Option<&str>)> = entries
+        let summary: Vec<(EffectId, Option<f64>, bool, Option<&str>)> = entries
             .iter()
             .map(|e| {
-                let value = e.params.values().next().copied().unwrap_or(f64::NAN);
+                let value = e.params.values().next().copied();
                 (e.effect, value, e.identifiable, e.separate_with.as_deref())
             })
             .collect();
+        // The blur as fitted, confounded; the aperture not fitted, with what would reveal it.
         assert_eq!(
             summary,
             vec![
-                (EffectId::PsfBlur, 0.8, false, Some("a characterised print")),
-                (EffectId::SensorNoise, 2.0, true, None),
+                (EffectId::PsfBlur, Some(0.8), false, Some("a step series")),
+                (
+                    EffectId::FillFactor,
+                    None,
+                    false,
+                    Some("a characterised print")
+                ),
+                (EffectId::SensorNoise, Some(2.0), true, None),
             ]
         );
         assert_eq!(entries[0].stderr["sigma_px"], 0.05);

@@ -145,7 +145,7 @@ mod tests {
     use crate::diagnose::discrepancy::CommonPoint;
     use crate::diagnose::fit_geometric::GeometricFit;
     use crate::diagnose::test_fields::{
-        field_points, field_sample, half_diagonal, manifest, measurement, CENTRE,
+        field_points, field_sample, half_diagonal, manifest, measurement, PrintStated, CENTRE,
     };
     use crate::reduce::Scheme;
     use rand::SeedableRng;
@@ -204,7 +204,10 @@ mod tests {
             angle: 4e-3,
             skew: -2e-3,
         };
-        let meas = measurement(manifest(&MOVES_MM, &["a"], false), &["native"]);
+        let meas = measurement(
+            manifest(&MOVES_MM, &["a"], PrintStated::Nothing),
+            &["native"],
+        );
         let native = Scheme::parse("native").unwrap();
         let mut samples: Vec<FieldSample> = MOVES_MM
             .iter()
@@ -246,7 +249,10 @@ mod tests {
             },
             3e-4,
         );
-        let meas = measurement(manifest(&MOVES_MM, &["a"], false), &["native"]);
+        let meas = measurement(
+            manifest(&MOVES_MM, &["a"], PrintStated::Nothing),
+            &["native"],
+        );
         let native = Scheme::parse("native").unwrap();
         let points: Vec<Vec<CommonPoint>> = (0..MOVES_MM.len())
             .map(|k| field_points((0.0, 0.0), |_, _| (0.0, 0.0), 0.01, k as u64))
@@ -285,7 +291,10 @@ mod tests {
             angle: 5e-3,
             skew: 0.0,
         };
-        let meas = measurement(manifest(&MOVES_MM, &["a"], false), &["native"]);
+        let meas = measurement(
+            manifest(&MOVES_MM, &["a"], PrintStated::Nothing),
+            &["native"],
+        );
         let native = Scheme::parse("native").unwrap();
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
         let scatter = Normal::new(0.0, 0.05).unwrap();
@@ -328,7 +337,7 @@ mod tests {
     fn two_runs_or_moves_along_one_axis_make_no_map() {
         let native = Scheme::parse("native").unwrap();
         let map_of = |moves: &[(f64, f64)]| {
-            let meas = measurement(manifest(moves, &["a"], false), &["native"]);
+            let meas = measurement(manifest(moves, &["a"], PrintStated::Nothing), &["native"]);
             let samples: Vec<FieldSample> = moves
                 .iter()
                 .enumerate()

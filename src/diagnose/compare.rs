@@ -427,14 +427,14 @@ pub fn compare(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diagnose::test_fields::{manifest, synthetic_result};
+    use crate::diagnose::test_fields::{manifest, synthetic_result, PrintStated};
     use crate::dic::DicSettings;
 
     #[test]
     fn accuracy_is_the_measured_mean_against_the_commanded_move() {
         // A 0.1 mm move at 26 px/mm (2.6 px) measured as 2.65 px in x, −0.02 in y, with 0.01 px
         // of noise; in a 2x2 binned scheme the move is 1.3 px of the reduced frame.
-        let run = &manifest(&[(0.1, 0.0)], &["a"], false).runs[0];
+        let run = &manifest(&[(0.1, 0.0)], &["a"], PrintStated::Nothing).runs[0];
         let dic = DicSettings {
             subset_px: 21,
             step_px: 21,

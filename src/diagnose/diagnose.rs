@@ -15,10 +15,10 @@
 //! A candidate whose parameter is within two standard errors of no effect is not re-rendered:
 //! adding nothing changes nothing, so its discrepancy is the model's and its ΔBIC the bare
 //! parameter penalty k·ln n (`recomputed` false); nor is one the criteria that do not read its
-//! comparison already exclude (at its range's bound, or confounded with the print or the light
-//! by the design: `Method::Excluded`). Effects the dataset cannot reveal are listed with the runs
-//! to add, not fitted; pairs that explain the same residual are named with the run that would
-//! separate them.
+//! comparison already exclude (at its range's bound, or confounded with the light by the
+//! design: `Method::Excluded`). Effects the dataset cannot reveal (blur and aperture against a
+//! print calibrated from the frames among them) are listed with what would reveal them, not
+//! fitted; pairs that explain the same residual are named with the run that would separate them.
 
 use super::calibrate_scene::SceneFrom;
 use super::candidates::{
@@ -87,7 +87,7 @@ pub fn diagnose_prepared(
     };
     // Asks, without a step done, whether to go on: inside each comparison, before every point.
     let ask = |_: usize, _: usize| progress(done.load(Ordering::Relaxed), total);
-    let rules = DesignRules::of(&before, &design);
+    let rules = DesignRules::of(&design);
     let (by_seed, scatter, fitted) = seeds_and_candidates(
         meas,
         (model, refit),
@@ -361,7 +361,7 @@ fn seed_discrepancy(
 }
 
 /// Effects the fits cannot tell apart: by the dataset's design (vignetting against
-/// illumination on small moves, blur and aperture against a calibrated print), and by the data
+/// illumination on small moves, blur against aperture without a step series), and by the data
 /// (a second significant candidate explaining nearly as much as the winner).
 fn confounded_pairs(
     design: &DatasetDesign,
@@ -380,17 +380,6 @@ fn confounded_pairs(
             separate_with: ILLUMINATION_SEPARATION.into(),
             evidence: "design".into(),
         });
-    }
-    if rules.print_calibrated {
-        for effect in [EffectId::PsfBlur, EffectId::FillFactor] {
-            if fitted.contains(&effect) {
-                confounded.push(Confounded {
-                    effects: [effect.as_str().into(), "print".into()],
-                    separate_with: PRINT_SEPARATION.into(),
-                    evidence: "design".into(),
-                });
-            }
-        }
     }
     let Some(w) = winner else {
         return confounded;
@@ -415,14 +404,11 @@ fn confounded_pairs(
     confounded
 }
 
-/// What separates lens blur and pixel aperture from the print's own profile.
-pub const PRINT_SEPARATION: &str = "a characterised print (the dataset.json pattern's dot_spacing_mm and contrast, with profile \"gaussian\" and its dot_diameter_mm or a measured mtf, or profile \"disk\" and its dot_diameter_mm and edge_softness_mm), a second magnification, a through-focus pair, or a slanted-edge frame measured as in ISO 12233: the print's calibration to the frames absorbs whatever blur one magnification cannot attribute";
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::diagnose::identifiability::{SEVERAL_SIZES, STEP_SERIES};
-    use crate::diagnose::test_fields::{candidate, finding, manifest};
+    use crate::diagnose::test_fields::{candidate, finding, manifest, PrintStated};
 
     #[test]
     fn the_share_explained_is_of_the_field_beyond_the_noise() {
@@ -464,42 +450,34 @@ mod tests {
     }
 
     #[test]
-    fn small_moves_and_a_calibrated_print_confound_by_design() {
+    fn small_moves_and_one_move_size_confound_by_design() {
         // One 1 mm move: 26 px of a 2560 px frame, 1 % of the field (vignetting needs 5 %);
-        // no step series (blur against aperture); the print calibrated (blur and aperture
-        // against it).
-        let design = design_of(&manifest(&[(1.0, 0.0)], &["a"], true), 2560);
+        // no step series (blur against aperture); the print characterised.
+        let design = design_of(
+            &manifest(&[(1.0, 0.0)], &["a"], PrintStated::Characterised),
+            2560,
+        );
         let candidates = vec![
             candidate(EffectId::Vignetting, &[("strength", 0.3, 0.02)], -20.0, 0.0),
             candidate(EffectId::PsfBlur, &[("sigma_px", 0.8, 0.05)], -15.0, 0.0),
             candidate(EffectId::FillFactor, &[("fx", 0.5, 0.05)], -12.0, 0.0),
         ];
-        let rules = DesignRules::with_print(true, &design);
+        let rules = DesignRules::of(&design);
         assert!(rules.small_moves);
         let pairs = confounded_pairs(&design, &candidates, None, rules);
         assert_eq!(
             names(&pairs),
-            vec![
-                ["fill_factor", "psf_blur"],
-                ["vignetting", "illumination"],
-                ["psf_blur", "print"],
-                ["fill_factor", "print"],
-            ]
+            vec![["fill_factor", "psf_blur"], ["vignetting", "illumination"]]
         );
         let separations: Vec<&str> = pairs.iter().map(|p| p.separate_with.as_str()).collect();
-        assert_eq!(
-            separations,
-            vec![
-                STEP_SERIES,
-                ILLUMINATION_SEPARATION,
-                PRINT_SEPARATION,
-                PRINT_SEPARATION
-            ]
-        );
+        assert_eq!(separations, vec![STEP_SERIES, ILLUMINATION_SEPARATION]);
         assert!(pairs.iter().all(|p| p.evidence == "design"));
-        // A 130 px move (5.1 %) and a characterised print leave the design's blur and aperture.
-        let wide = design_of(&manifest(&[(5.0, 0.0)], &["a"], true), 2560);
-        let rules = DesignRules::with_print(false, &wide);
+        // A 130 px move (5.1 %) leaves the design's blur and aperture.
+        let wide = design_of(
+            &manifest(&[(5.0, 0.0)], &["a"], PrintStated::Characterised),
+            2560,
+        );
+        let rules = DesignRules::of(&wide);
         assert!(!rules.small_moves);
         let pairs = confounded_pairs(&wide, &candidates, None, rules);
         assert_eq!(names(&pairs), vec![["fill_factor", "psf_blur"]]);
@@ -512,7 +490,7 @@ mod tests {
         // separate them; tilt (significant) 0.007: not; distortion 0.0095 but not significant
         // (ΔBIC +3): not.
         let moves = [(5.0, 0.0), (2.5, 0.0), (0.0, 5.0), (0.0, 2.5)];
-        let design = design_of(&manifest(&moves, &["a"], true), 2560);
+        let design = design_of(&manifest(&moves, &["a"], PrintStated::Characterised), 2560);
         let candidates = vec![
             candidate(
                 EffectId::Rotation,
@@ -530,29 +508,21 @@ mod tests {
             candidate(EffectId::LensDistortion, &[("k1", 1e-4, 1e-4)], 3.0, 0.0095),
         ];
         let winner = Some(EffectId::Rotation.into());
-        let pairs = confounded_pairs(
-            &design,
-            &candidates,
-            winner,
-            DesignRules::with_print(false, &design),
-        );
+        let pairs = confounded_pairs(&design, &candidates, winner, DesignRules::of(&design));
         assert_eq!(names(&pairs), vec![["rotation", "scale"]]);
         assert_eq!(pairs[0].evidence, "data");
         assert_eq!(pairs[0].separate_with, "translations along x and along y");
         // Without a verdict, the data name no pair.
-        assert!(confounded_pairs(
-            &design,
-            &candidates,
-            None,
-            DesignRules::with_print(false, &design)
-        )
-        .is_empty());
+        assert!(confounded_pairs(&design, &candidates, None, DesignRules::of(&design)).is_empty());
     }
 
     #[test]
     fn a_pair_the_design_confounds_is_not_named_again_from_the_data() {
         // One move size: distortion and scale confounded by design; the data say so too.
-        let design = design_of(&manifest(&[(5.0, 0.0)], &["a"], true), 2560);
+        let design = design_of(
+            &manifest(&[(5.0, 0.0)], &["a"], PrintStated::Characterised),
+            2560,
+        );
         let candidates = vec![
             candidate(
                 EffectId::LensDistortion,
@@ -563,12 +533,7 @@ mod tests {
             candidate(EffectId::Scale, &[("ds", 1e-4, 1e-6)], -85.0, 0.0099),
         ];
         let winner = Some(EffectId::LensDistortion.into());
-        let pairs = confounded_pairs(
-            &design,
-            &candidates,
-            winner,
-            DesignRules::with_print(false, &design),
-        );
+        let pairs = confounded_pairs(&design, &candidates, winner, DesignRules::of(&design));
         assert_eq!(names(&pairs), vec![["lens_distortion", "scale"]]);
         assert_eq!(
             (pairs[0].evidence.as_str(), pairs[0].separate_with.as_str()),

@@ -24,7 +24,6 @@ use super::measurement::Measurement;
 use super::optimise::{
     curvature_stderr, dispersion_factor, minimise_1d, nelder_mead, unless_stopped,
 };
-use super::print::PrintKnowledge;
 use super::results::{Comparison, ImageFit};
 use super::scene::{reference_crop, Scene, Shot};
 use crate::image::Image;
@@ -147,31 +146,13 @@ pub fn fit_psf_blur(
         }),
         ..model.clone()
     };
-    // A calibrated print: the spectra's shape, not their level (the calibrated contrast and
-    // density), and only above half its dot-spacing frequency: below it the shape is the dots'
-    // placement statistics (which the comparison chose there, `compare::choose_placement`), above
-    // it their profile and whatever blurs it. A characterised print's level is stated, so the
-    // level is evidence too: read as the verdict's image χ² reads it. On the shape alone, five
-    // realisations of the independent generator's characterised prints gave σ 1.4–3.4 SE high
-    // (0.623–0.671 px for a truth of 0.6), and every one then named an aperture for the rest of
-    // the spectrum (docs/calibration.md).
-    let nominal = &before.model.nominal;
-    let f_min: Vec<f64> = nominal
-        .patterns
-        .iter()
-        .map(|p| super::print::placement_band_edge(&p.pattern, nominal.scale_px_per_mm))
-        .collect();
-    let obj_dof = |x: &[f64]| {
-        measured
-            .iter()
-            .zip(reference_crops(meas, before, &with(x[0])))
-            .zip(nominal.patterns.iter().zip(&f_min))
-            .map(|((m, crop), (p, f))| match p.print {
-                PrintKnowledge::Characterised => spectra_chi2(&[m], std::slice::from_ref(&crop)),
-                PrintKnowledge::Calibrated => super::print::spectral_shape_chi2_above(m, &crop, *f),
-            })
-            .fold((0.0, 0), |(c, n), (ci, ni)| (c + ci, n + ni))
-    };
+    // Fitted only against characterised prints (`identifiability.rs`: a print calibrated from
+    // the frames absorbs the blur), whose level is stated: the spectra's level is evidence too,
+    // read as the verdict's image χ² reads it. On the spectra's shape alone (above half the
+    // dot-spacing frequency), five realisations of the independent generator's characterised
+    // prints gave σ 1.4–3.4 SE high (0.623–0.671 px for a truth of 0.6), and every one then
+    // named an aperture for the rest of the spectrum (docs/calibration.md).
+    let obj_dof = |x: &[f64]| spectra_chi2(&measured, &reference_crops(meas, before, &with(x[0])));
     let chi2 = |x: &[f64]| obj_dof(x).0;
     let obj = unless_stopped(&chi2, stop);
     let sigma = minimise_1d(&|s| obj(&[s]), 0.0, 3.0, 9);
@@ -323,7 +304,9 @@ pub fn fit_motion_blur(
 mod tests {
     use super::*;
     use crate::diagnose::image_stats::PtcPoint;
-    use crate::diagnose::test_fields::{comparison, frame_stats, manifest, measurement};
+    use crate::diagnose::test_fields::{
+        comparison, frame_stats, manifest, measurement, PrintStated,
+    };
     use crate::image::Image;
 
     fn bin(f: f64, value: f64, se: f64) -> PsdBin {
@@ -409,7 +392,7 @@ mod tests {
     #[test]
     fn a_dataset_without_a_move_has_no_motion_blur_to_fit() {
         let meas = measurement(
-            manifest(&[(0.0, 0.0), (0.0, 0.0)], &["a"], false),
+            manifest(&[(0.0, 0.0), (0.0, 0.0)], &["a"], PrintStated::Nothing),
             &["ff100"],
         );
         let before = comparison(Vec::new());

@@ -7,9 +7,13 @@
 //!   several sizes (ratio ≥ 1.5) are measured: distortion grows with the move, a scale change
 //!   does not.
 //! - `psf_blur` needs the printed dot size in the manifest: an imaged dot's σ² is the printed σ²
-//!   plus the PSF's (a speckle estimated from the frame already contains the blur). It is
-//!   confounded with `fill_factor` (both low-pass the image) unless sub-pixel step series in x and
-//!   in y are measured: the aperture's bias against the sub-pixel fraction differs per axis.
+//!   plus the PSF's (a speckle estimated from the frame already contains the blur).
+//! - `psf_blur` and `fill_factor` need a characterised print (its profile, contrast, spacing and
+//!   size stated, [`super::print::characterised`]): a print calibrated from the frames absorbs
+//!   whatever blur one magnification cannot attribute, so neither could be named however well
+//!   its fit did, and no stage move supplies what is missing. With a characterised print they
+//!   are confounded with each other (both low-pass the image) unless sub-pixel step series in x
+//!   and in y are measured: the aperture's bias against the sub-pixel fraction differs per axis.
 //! - `sensor_noise` needs static repeat frames: noise against mean from a single speckle frame is
 //!   entangled with the speckle itself.
 //! - `rotation`, `scale`, `target_tilt`, `illumination_change`, `motion_blur` need a moved run.
@@ -34,6 +38,10 @@ pub struct DatasetDesign {
     /// The dataset states its stage's repeatability (`stage_repeatability_um`).
     pub repeatability_stated: bool,
     pub dot_size_known: bool,
+    /// Every run's print is characterised in the manifest ([`super::print::characterised`]), not
+    /// calibrated from the frames.
+    #[serde(default)]
+    pub print_characterised: bool,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -109,6 +117,10 @@ pub fn design_of(manifest: &Manifest, width: usize) -> DatasetDesign {
                 .as_ref()
                 .is_some_and(|p| p.dot_diameter_mm.is_some())
         }),
+        print_characterised: manifest
+            .runs
+            .iter()
+            .all(|r| super::print::characterised(r).is_some()),
     }
 }
 
@@ -118,6 +130,9 @@ pub const SEVERAL_SIZES: &str =
 /// as separable by the design ([`DatasetDesign::confounded`]); a bench's separating plan captures
 /// exactly this many.
 pub const STEP_SERIES_MIN_STEPS: usize = 3;
+
+/// What separates lens blur and pixel aperture from the print's own profile.
+pub const PRINT_SEPARATION: &str = "a characterised print (the dataset.json pattern's dot_spacing_mm and contrast, with profile \"gaussian\" and its dot_diameter_mm or a measured mtf, or profile \"disk\" and its dot_diameter_mm and edge_softness_mm), a second magnification, a through-focus pair, or a slanted-edge frame measured as in ISO 12233: the print's calibration to the frames absorbs whatever blur one magnification cannot attribute";
 
 pub const STEP_SERIES: &str =
     "a sub-pixel step series in x and in y (at least 3 moves below 2 px along each axis, e.g. step_series with dx_step_mm, dy_step_mm)";
@@ -147,6 +162,10 @@ impl DatasetDesign {
             PsfBlur if !self.dot_size_known => no(
                 "the printed dot size is not in the manifest: a speckle estimated from the frames already contains the blur",
                 "the printed dot diameter (pattern.dot_diameter_mm) of every run, or a run of a pattern with a known dot size",
+            ),
+            PsfBlur | FillFactor if !self.print_characterised => no(
+                "the print is calibrated from the frames, not characterised: its calibration absorbs whatever blur one magnification cannot attribute",
+                PRINT_SEPARATION,
             ),
             SensorNoise if !self.has_repeats => no(
                 "no static repeat frames: noise against mean from one speckle frame is entangled with the speckle",
@@ -240,13 +259,13 @@ fn separating_catalogue_run(a: EffectId, b: EffectId) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diagnose::test_fields::manifest;
+    use crate::diagnose::test_fields::{manifest, PrintStated};
 
     #[test]
     fn the_papers_one_move_design_cannot_tell_distortion_from_scale() {
         // One 5 mm move (130 px of a 2560 px frame): distortion is identifiable (5 % of the
         // field), but not apart from a scale change, which needs a second move size.
-        let d = design_of(&manifest(&[(5.0, 0.0)], &["a"], false), 2560);
+        let d = design_of(&manifest(&[(5.0, 0.0)], &["a"], PrintStated::Nothing), 2560);
         assert_eq!(d.moved_runs, 1);
         assert_eq!(d.move_sizes_px, vec![130.0]);
         assert!((d.largest_move_fraction - 130.0 / 2560.0).abs() < 1e-12);
@@ -268,16 +287,22 @@ mod tests {
         assert_eq!(c[0].separate_with, SEVERAL_SIZES);
     }
 
-    #[test]
-    fn moves_of_several_sizes_and_a_step_series_separate_what_one_move_cannot() {
+    /// Moves of three sizes along x, and three sub-pixel steps along each axis (0.2, 0.4, 0.6 px
+    /// at 26 px/mm), mm.
+    fn sizes_and_step_series() -> Vec<(f64, f64)> {
         let mut moves = vec![(1.25, 0.0), (2.5, 0.0), (5.0, 0.0)];
-        // Three sub-pixel steps along each axis (0.2, 0.4, 0.6 px at 26 px/mm).
         for k in 1..=3 {
             let mm = 0.2 * k as f64 / 26.0;
             moves.push((mm, 0.0));
             moves.push((0.0, mm));
         }
-        let d = design_of(&manifest(&moves, &["a"], true), 2560);
+        moves
+    }
+
+    #[test]
+    fn moves_of_several_sizes_and_a_step_series_separate_what_one_move_cannot() {
+        let moves = sizes_and_step_series();
+        let d = design_of(&manifest(&moves, &["a"], PrintStated::Characterised), 2560);
         assert_eq!((d.subpixel_steps_x, d.subpixel_steps_y), (3, 3));
         assert_eq!(d.move_sizes_px.len(), 6, "{:?}", d.move_sizes_px);
         assert!(d.not_identifiable(EffectId::PsfBlur).is_none());
@@ -290,14 +315,55 @@ mod tests {
         assert!(d.confounded(&all).is_empty(), "{:?}", d.confounded(&all));
         // Two steps along y are not a series: aperture and blur stay confounded.
         let fewer: Vec<_> = moves.iter().copied().take(moves.len() - 1).collect();
-        let c = design_of(&manifest(&fewer, &["a"], true), 2560).confounded(&all);
+        let c =
+            design_of(&manifest(&fewer, &["a"], PrintStated::Characterised), 2560).confounded(&all);
         assert_eq!(c.len(), 1);
         assert_eq!(c[0].separate_with, STEP_SERIES);
     }
 
     #[test]
+    fn a_print_calibrated_from_the_frames_leaves_blur_and_aperture_unfitted() {
+        // The dots' size and spacing stated, their profile and contrast not: the print is
+        // calibrated, and absorbs whatever blurs it, whatever the runs.
+        let moves = sizes_and_step_series();
+        let calibrated = design_of(&manifest(&moves, &["a"], PrintStated::DotSize), 2560);
+        assert!(calibrated.dot_size_known && !calibrated.print_characterised);
+        for effect in [EffectId::PsfBlur, EffectId::FillFactor] {
+            let n = calibrated
+                .not_identifiable(effect)
+                .expect("not identifiable");
+            assert_eq!(n.runs_to_add, PRINT_SEPARATION, "{effect}");
+        }
+        // Without the dot size the blur says what it lacks first.
+        let bare = design_of(&manifest(&moves, &["a"], PrintStated::Nothing), 2560);
+        assert!(bare
+            .not_identifiable(EffectId::PsfBlur)
+            .unwrap()
+            .reason
+            .contains("dot size"));
+        assert_eq!(
+            bare.not_identifiable(EffectId::FillFactor)
+                .unwrap()
+                .runs_to_add,
+            PRINT_SEPARATION
+        );
+        // Characterised: both fitted.
+        let stated = design_of(&manifest(&moves, &["a"], PrintStated::Characterised), 2560);
+        assert!(stated.print_characterised);
+        assert!(stated.not_identifiable(EffectId::PsfBlur).is_none());
+        assert!(stated.not_identifiable(EffectId::FillFactor).is_none());
+    }
+
+    #[test]
     fn a_static_dataset_reveals_no_motion_effect() {
-        let d = design_of(&manifest(&[(0.0, 0.0), (0.0, 0.0)], &["a"], true), 2560);
+        let d = design_of(
+            &manifest(
+                &[(0.0, 0.0), (0.0, 0.0)],
+                &["a"],
+                PrintStated::Characterised,
+            ),
+            2560,
+        );
         assert_eq!(d.moved_runs, 0);
         for effect in [
             EffectId::Rotation,

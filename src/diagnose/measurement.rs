@@ -326,11 +326,11 @@ impl ReferenceStats {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diagnose::test_fields::manifest;
+    use crate::diagnose::test_fields::{manifest, PrintStated};
 
     #[test]
     fn every_run_must_have_the_first_runs_size() {
-        let m = manifest(&[(1.0, 0.0), (2.0, 0.0)], &["a"], false);
+        let m = manifest(&[(1.0, 0.0), (2.0, 0.0)], &["a"], PrintStated::Nothing);
         let mut first = None;
         same_size_as_first(&m.runs[0], &Image::filled(64, 48, 0.0), &mut first).unwrap();
         assert_eq!(first, Some((64, 48)));

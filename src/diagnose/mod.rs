@@ -15,7 +15,8 @@
 //!   dot size that gives the measured spectral shape) unless the manifest characterises it
 //!   (`"profile": "gaussian"` with contrast and size or MTF): a nominal print never is the print
 //!   the camera sees. Blur that one magnification cannot attribute to the print or to the lens is
-//!   therefore reported as confounded with the print, with the run that separates them.
+//!   therefore not fitted against such a print (blur and aperture are reported as not
+//!   identifiable, with what would reveal them).
 //! - **The stage** ([`stage`]): travel scale and misalignment fitted to the mean displacements, and
 //!   each run's rigid landing offset, within ±3σ of the stated repeatability (the model's
 //!   `stage_error`, else the dataset's `stage_repeatability_um`; free when neither states one).

@@ -410,11 +410,15 @@ pub fn pattern_indices(manifest: &Manifest) -> (Vec<String>, Vec<usize>) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diagnose::test_fields::manifest;
+    use crate::diagnose::test_fields::{manifest, PrintStated};
 
     #[test]
     fn patterns_are_numbered_in_order_of_first_appearance() {
-        let m = manifest(&[(1.0, 0.0); 5], &["c", "a", "c", "b"], false);
+        let m = manifest(
+            &[(1.0, 0.0); 5],
+            &["c", "a", "c", "b"],
+            PrintStated::Nothing,
+        );
         let (labels, of_run) = pattern_indices(&m);
         assert_eq!(labels, ["c", "a", "b"]);
         assert_eq!(of_run, [0, 1, 0, 2, 0]);

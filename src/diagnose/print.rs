@@ -25,8 +25,8 @@
 //!
 //! Both go through the model's own optics and sensor, so the print absorbs exactly what the model
 //! does not explain of the spectrum — which is why `psf_blur` (and the spectral side of
-//! `fill_factor`) cannot be told from the print on such a dataset: `diagnose` reports them as
-//! confounded with the print, naming what would separate them, instead of giving a verdict.
+//! `fill_factor`) cannot be told from the print on such a dataset: `diagnose` reports them as not
+//! identifiable, naming what would reveal them, instead of fitting them.
 //!
 //! A pattern is characterised when its manifest entry states the dots' `profile` and gives their
 //! `contrast` and size: for `"gaussian"` as `dot_diameter_mm` (FWHM) or as a measured `mtf` —

@@ -325,7 +325,7 @@ mod tests {
     use crate::diagnose::nominal::PatternEstimate;
     use crate::diagnose::print::PrintKnowledge;
     use crate::diagnose::stage_landing::StageLanding;
-    use crate::diagnose::test_fields::manifest;
+    use crate::diagnose::test_fields::{manifest, PrintStated};
     use crate::model::SpecklePattern;
 
     /// The paper's print a on a 256x256 sensor at 26 px/mm, white at 30,000 DN, a noise floor of
@@ -352,7 +352,11 @@ mod tests {
                 profile_chi2: None,
             }],
         };
-        let m = manifest(&[(1.0, 0.0), (2.0, 0.0)], &["a"], true);
+        let m = manifest(
+            &[(1.0, 0.0), (2.0, 0.0)],
+            &["a"],
+            PrintStated::Characterised,
+        );
         Scene::new(&nominal, &Effects::default(), &m, 7).unwrap()
     }
 

@@ -100,7 +100,17 @@ fn for_confounded(c: &Confounded) -> Vec<SeparatingRuns> {
 
 /// The runs that reveal an effect the dataset could not (none for what needs more than moves).
 fn for_not_identifiable(n: &NotIdentifiable) -> Vec<SeparatingRuns> {
-    for_effect(n.effect)
+    use EffectId::*;
+    match n.effect {
+        // What the blur and the aperture lack is knowledge of the print (its dot size, or the
+        // print characterised: `identifiability.rs`), which no run of the same print supplies:
+        // a step series separates them from each other, not from a print calibrated to the
+        // frames.
+        PsfBlur | FillFactor => Vec::new(),
+        LensDistortion | Scale | Rotation | TargetTilt | SensorNoise | IlluminationChange
+        | MotionBlur | StageError | StageMisalignment | FixedPattern | Quantization
+        | Vignetting => for_effect(n.effect),
+    }
 }
 
 /// The runs whose variation an effect's signature needs.
@@ -123,7 +133,7 @@ fn for_effect(effect: EffectId) -> Vec<SeparatingRuns> {
 mod tests {
     use super::*;
     use crate::diagnose::identifiability::design_of;
-    use crate::diagnose::test_fields::manifest;
+    use crate::diagnose::test_fields::{manifest, PrintStated};
 
     fn confounded(a: &str, b: &str, evidence: &str) -> Confounded {
         Confounded {
@@ -135,11 +145,11 @@ mod tests {
 
     /// The paper's design (one 5 mm move, no repeats, no step series): the bench adds moves of
     /// several sizes for distortion against scale, a step series for the aperture against the
-    /// blur, static frames for the noise; a confound with the print adds nothing, and a data
-    /// confound is the bench's only between two geometric fields.
+    /// blur, static frames for the noise; a print the dataset does not characterise adds
+    /// nothing, and a data confound is the bench's only between two geometric fields.
     #[test]
     fn each_open_question_asks_for_its_runs() {
-        let design = design_of(&manifest(&[(5.0, 0.0)], &["a"], false), 2560);
+        let design = design_of(&manifest(&[(5.0, 0.0)], &["a"], PrintStated::Nothing), 2560);
         let mut pairs = design.confounded(&[
             EffectId::LensDistortion,
             EffectId::Scale,
@@ -148,11 +158,18 @@ mod tests {
         ]);
         pairs.push(confounded("psf_blur", "print", "design"));
         pairs.push(confounded("fill_factor", "vignetting", "data"));
-        let not_identifiable: Vec<NotIdentifiable> = [EffectId::SensorNoise, EffectId::StageError]
-            .into_iter()
-            .filter_map(|e| design.not_identifiable(e))
-            .collect();
-        assert_eq!(not_identifiable.len(), 2);
+        let not_identifiable: Vec<NotIdentifiable> = [
+            EffectId::SensorNoise,
+            EffectId::StageError,
+            EffectId::PsfBlur,
+            EffectId::FillFactor,
+        ]
+        .into_iter()
+        .filter_map(|e| design.not_identifiable(e))
+        .collect();
+        assert_eq!(not_identifiable.len(), 4);
+        // The print not characterised: neither blur nor aperture asks for a step series.
+        assert!(runs_for(&[], &not_identifiable[2..]).is_empty());
         assert_eq!(
             runs_for(&pairs, &not_identifiable),
             vec![

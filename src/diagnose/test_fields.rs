@@ -55,16 +55,31 @@ pub(super) fn synthetic_result(
 
 /// A manifest at 26 px/mm whose runs move by `moves_mm`, run i of pattern `patterns[i % len]`;
 /// `known_dots` states every print's dot size.
-pub(super) fn manifest(moves_mm: &[(f64, f64)], patterns: &[&str], known_dots: bool) -> Manifest {
+/// What a test manifest states of its prints.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum PrintStated {
+    /// The label only: the print is estimated from the frames.
+    Nothing,
+    /// The dots' diameter and spacing: the rest is calibrated from the frames.
+    DotSize,
+    /// Profile, diameter, spacing and contrast: characterised (`print::characterised`).
+    Characterised,
+}
+
+pub(super) fn manifest(moves_mm: &[(f64, f64)], patterns: &[&str], print: PrintStated) -> Manifest {
     let runs: Vec<_> = moves_mm
         .iter()
         .enumerate()
         .map(|(i, (dx, dy))| {
             let label = patterns[i % patterns.len()];
-            let pattern = if known_dots {
-                serde_json::json!({"label": label, "dot_diameter_mm": 0.5, "dot_spacing_mm": 1.0})
-            } else {
-                serde_json::json!({"label": label})
+            let pattern = match print {
+                PrintStated::Nothing => serde_json::json!({"label": label}),
+                PrintStated::DotSize => {
+                    serde_json::json!({"label": label, "dot_diameter_mm": 0.5, "dot_spacing_mm": 1.0})
+                }
+                PrintStated::Characterised => serde_json::json!({"label": label,
+                    "dot_diameter_mm": 0.5, "dot_spacing_mm": 1.0, "contrast": 0.6,
+                    "profile": "gaussian"}),
             };
             serde_json::json!({"id": format!("r{i}"), "pattern": pattern,
                 "reference": format!("ref_{label}.tif"), "deformed": format!("def{i}.tif"),

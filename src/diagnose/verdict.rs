@@ -5,7 +5,6 @@
 use super::bic::{chi2, delta_bic, image_change, SIGNIFICANT_DELTA_BIC};
 use super::identifiability::DatasetDesign;
 pub use super::identifiability::{Confounded, NotIdentifiable};
-use super::print::PrintKnowledge;
 use super::results::{Comparison, ImageFit, ModelInfo};
 use super::unexplained::Unexplained;
 use crate::model::effects::UserKind;
@@ -100,8 +99,10 @@ pub struct Criteria {
     pub within_range: bool,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub outside_range: Option<String>,
-    /// The effect can be told from the print (false for blur and aperture when the print is
-    /// calibrated to the frames: see `Confounded`).
+    /// The design tells the effect from the print's and the light's own non-uniformity (false
+    /// for vignetting under moves below [`VIGNETTING_MOVE_FRACTION`] of the field: see
+    /// `Confounded`). Blur and aperture against a print calibrated from the frames are not
+    /// candidates at all (`DatasetDesign::not_identifiable`).
     pub separable_from_print: bool,
     /// False when the verdict was withheld: the effect explains under
     /// [`MIN_EXPLAINED_FRACTION`] of the low-order field and no geometric catalogue effect
@@ -266,7 +267,7 @@ pub enum Method {
     /// The parameter is within two standard errors of no effect: adding nothing changes nothing.
     Unchanged,
     /// Beyond its null, but excluded from the verdict whatever its comparison would show (at its
-    /// range's bound, or confounded with the print or the light by the design:
+    /// range's bound, or confounded with the light by the design:
     /// [`DesignRules::may_be_named`]): not rendered, its discrepancy the model's and its ΔBIC the
     /// bare parameter penalty, as for `Unchanged`.
     Excluded,
@@ -286,42 +287,27 @@ pub(super) struct Judge<'a> {
     pub(super) dic: &'a crate::dic::DicSettings,
 }
 
-/// What the dataset's design and the model's print leave unseparable, known before any candidate
-/// is compared: the lens blur and the aperture against a print calibrated from the frames (the
-/// calibration absorbs whatever blur one magnification cannot attribute), vignetting against
-/// the print's and the light's own non-uniformity under small moves.
+/// What the dataset's design leaves unseparable, known before any candidate is compared:
+/// vignetting against the print's and the light's own non-uniformity under small moves. (The
+/// lens blur and the aperture against a print calibrated from the frames are not fitted at all:
+/// [`DatasetDesign::not_identifiable`].)
 #[derive(Clone, Copy, Debug)]
 pub(super) struct DesignRules {
-    /// A pattern's print is calibrated from the frames, not characterised in the manifest.
-    pub(super) print_calibrated: bool,
     /// No translation reaches [`VIGNETTING_MOVE_FRACTION`] of the field.
     pub(super) small_moves: bool,
 }
 
 impl DesignRules {
-    /// The rules for the model's comparison `before` on a dataset of `design`.
-    pub(super) fn of(before: &Comparison, design: &DatasetDesign) -> Self {
-        let patterns = &before.model.nominal.patterns;
-        let calibrated = patterns
-            .iter()
-            .any(|p| p.print == PrintKnowledge::Calibrated);
-        Self::with_print(calibrated, design)
-    }
-
-    /// The rules for a dataset of `design` whose print is calibrated or not.
-    pub(super) fn with_print(print_calibrated: bool, design: &DatasetDesign) -> Self {
+    /// The rules for a dataset of `design`.
+    pub(super) fn of(design: &DatasetDesign) -> Self {
         DesignRules {
-            print_calibrated,
             small_moves: design.largest_move_fraction < VIGNETTING_MOVE_FRACTION,
         }
     }
 
     /// Whether the design separates `effect` from the print's (or the light's) own properties.
     pub(super) fn separable(&self, effect: &CandidateId) -> bool {
-        let catalogue = effect.catalogue();
-        !(self.print_calibrated
-            && matches!(catalogue, Some(EffectId::PsfBlur | EffectId::FillFactor))
-            || catalogue == Some(EffectId::Vignetting) && self.small_moves)
+        !(effect.catalogue() == Some(EffectId::Vignetting) && self.small_moves)
     }
 
     /// Whether a comparison of the model with `fit` could make it significant: not when its
@@ -455,34 +441,28 @@ mod tests {
 
     #[test]
     fn a_candidate_the_design_excludes_is_not_worth_a_rendering() {
-        let rules = |print_calibrated, small_moves| DesignRules {
-            print_calibrated,
-            small_moves,
-        };
+        let rules = |small_moves| DesignRules { small_moves };
         let blur = fit(EffectId::PsfBlur, &[("sigma_px", 0.8)]);
         let aperture = fit(EffectId::FillFactor, &[("fx", 0.5), ("fy", 0.8)]);
         let falloff = fit(EffectId::Vignetting, &[("v", 0.1)]);
-        // A characterised print and a wide move leave all three a chance.
+        // A wide move leaves all three a chance.
         for f in [&blur, &aperture, &falloff] {
-            assert!(rules(false, false).may_be_named(f), "{}", f.effect);
+            assert!(rules(false).may_be_named(f), "{}", f.effect);
         }
-        // A calibrated print absorbs the blur and the aperture, not the falloff.
-        assert!(!rules(true, false).may_be_named(&blur));
-        assert!(!rules(true, false).may_be_named(&aperture));
-        assert!(rules(true, false).may_be_named(&falloff));
         // Small moves leave the falloff the light's or the print's.
-        assert!(!rules(false, true).may_be_named(&falloff));
-        assert!(rules(false, true).may_be_named(&blur));
+        assert!(!rules(true).may_be_named(&falloff));
+        assert!(rules(true).may_be_named(&blur));
+        assert!(rules(true).may_be_named(&aperture));
         // Within its null, or at its range's bound: no chance whatever the design.
         let null = ImageFit {
             beyond_null: false,
             ..blur.clone()
         };
-        assert!(!rules(false, false).may_be_named(&null));
+        assert!(!rules(false).may_be_named(&null));
         let bound = fit(EffectId::FillFactor, &[("fx", 0.05), ("fy", 0.8)]);
-        assert!(!rules(false, false).may_be_named(&bound));
-        // Geometric effects are never the print's.
-        assert!(rules(true, true).may_be_named(&fit(EffectId::Scale, &[("ds", 1e-4)])));
+        assert!(!rules(false).may_be_named(&bound));
+        // Geometric effects are never the light's.
+        assert!(rules(true).may_be_named(&fit(EffectId::Scale, &[("ds", 1e-4)])));
     }
 
     #[test]

@@ -52,6 +52,12 @@ pub fn camera_card_text(card: &CameraCard) -> String {
         let params = parameters_text(&i.params, &i.stderr);
         match &i.separate_with {
             None => out += &format!("{}: {params}\n", i.effect),
+            Some(how) if i.params.is_empty() => {
+                out += &format!(
+                    "{}: not identifiable with these runs and this print, not fitted; add {how}\n",
+                    i.effect
+                )
+            }
             Some(how) => {
                 out += &format!(
                     "{}: not identifiable with these runs ({params}); separate it with {how}\n",

@@ -101,7 +101,8 @@ function showCard(doc) {
     ? `${s.runs} runs scatter ${num(s.residual_px, 3)} px about the map. The stage is the length standard: its travel error and the camera's scale are one number.`
     : "";
   clear($("#card-imaging"), table(["effect", "parameters", "identifiable"],
-    card.imaging.map((i) => [i.effect, paramsText(i.params, i.stderr),
+    card.imaging.map((i) => [i.effect,
+      Object.keys(i.params).length ? paramsText(i.params, i.stderr) : "not fitted",
       i.identifiable ? "yes" : `no — separate it with ${i.separate_with || "another run"}`])));
   clear($("#card-not-fitted"), (card.not_identifiable || []).length
     ? el("ul", { class: "small" }, card.not_identifiable.map((n) => el("li", {}, `not fitted: ${n}`)))
