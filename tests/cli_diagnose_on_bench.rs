@@ -15,11 +15,12 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 /// One 2 mm move of target a (26 px of the 400 px frame), no static frames, on `config`'s mock
-/// bench: the dataset's folder in the store.
-fn one_move_dataset(config: &DaemonConfig) -> PathBuf {
+/// bench, its print stated nominally or `characterised`: the dataset's folder in the store.
+fn one_move_dataset(config: &DaemonConfig, characterised: bool) -> PathBuf {
     let (service, _) = Service::start(config.clone(), daemon::small_bench(config)).unwrap();
     let request: ExperimentRequest = serde_json::from_value(json!({
         "name": "one move", "patterns": ["a"], "settle_ms": 0,
+        "print_characterised": characterised,
         "moves": [{"id": "x2mm", "dx_mm": 2.0, "dy_mm": 0.0}],
         "dic": {"subset_px": 21, "step_px": 10, "strain_window": 5}
     }))
@@ -72,14 +73,21 @@ fn check_the_designed_moves(bench: &Value) -> Vec<Value> {
     moves
 }
 
-#[test]
-fn what_one_move_leaves_open_is_captured_on_the_bench_and_resolved() {
+/// The small mock bench's daemon config in a folder of its own: the folder (kept while it
+/// lives), the config's path, its data folder and the config.
+fn small_bench_config() -> (tempfile::TempDir, PathBuf, PathBuf, DaemonConfig) {
     let tmp = tempfile::tempdir().unwrap();
     let data = tmp.path().join("data");
     let config_path = tmp.path().join("ffdic.toml");
     std::fs::write(&config_path, daemon::small_config_toml(&data)).unwrap();
     let config = DaemonConfig::load(&config_path).unwrap();
-    let dataset = one_move_dataset(&config);
+    (tmp, config_path, data, config)
+}
+
+#[test]
+fn what_one_move_leaves_open_is_captured_on_the_bench_and_resolved() {
+    let (_tmp, config_path, data, config) = small_bench_config();
+    let dataset = one_move_dataset(&config, false);
     let path = |p: &Path| p.to_str().unwrap().to_string();
     let out = ffdic_ok(&[
         "diagnose",
@@ -169,4 +177,28 @@ fn what_one_move_leaves_open_is_captured_on_the_bench_and_resolved() {
         before["verdicts"],
         after["verdicts"]
     );
+}
+
+/// A request that says its print is characterised gets a dataset stating the print whole (its
+/// profile beside its size, spacing, contrast and softness), which a diagnosis takes as stated;
+/// without it the dataset states the print nominally (no profile), to be calibrated to the frames.
+#[test]
+fn an_experiment_states_a_characterised_print_whole() {
+    let (_tmp, _, _, config) = small_bench_config();
+    let preset = ffdic::model::SpecklePattern::preset("a").unwrap();
+    for characterised in [false, true] {
+        let dir = one_move_dataset(&config, characterised);
+        let manifest = ffdic::dataset::Manifest::read(&dir).unwrap();
+        let p = manifest.runs[0]
+            .pattern
+            .as_ref()
+            .expect("the print is stated");
+        assert_eq!(p.dot_diameter_mm, Some(preset.dot_diameter_mm));
+        assert_eq!(p.contrast, Some(preset.contrast));
+        assert_eq!(
+            p.profile,
+            characterised.then_some(preset.profile),
+            "characterised: {characterised}"
+        );
+    }
 }

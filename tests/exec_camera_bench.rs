@@ -385,7 +385,7 @@ fn calibrate_on(service: &ffdic::service::Service) -> Box<CameraCard> {
     let plan = ffdic::experiment::CalibrationPlan {
         name: "hidden bench".into(),
         move_sizes_mm: vec![1.0, 5.0],
-        phase_scan_count: 0,
+        phase_scan_count: Some(0),
         static_frames: 1,
         rounds: 3,
         ..Default::default()

@@ -514,7 +514,8 @@ class Client:
         """``POST /calibrations``: queues a calibration (a move plan run on the bench, then
         diagnosed in rounds into a camera card) and returns its run id. ``plan`` and ``fields``
         are merged (fields win) into a ``CalibrationPlan``: ``name``, ``pattern``,
-        ``move_sizes_mm``, ``phase_scan_step_px``, ``phase_scan_count``, ``static_frames``,
+        ``print_characterised``, ``move_sizes_mm``, ``phase_scan_step_px``, ``phase_scan_count``
+        (unset: 4 with a characterised print, none without), ``static_frames``,
         ``rounds`` (1 to 8), ``model``, ``dic``, ``seed``. Follow it with
         ``follow(run_id, kind="job")``; its card is :meth:`calibration_card`."""
         body: Dict[str, Any] = dict(plan or {})

@@ -22,8 +22,8 @@ pub struct CalibrateArgs {
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Calibration plan, TOML (default: moves of 10 % of the field and a fifth of that along ±x
-    /// and ±y, a 0.25 px phase scan of 4 steps along each axis, 2 static frames, 4 rounds;
-    /// docs/calibration.md).
+    /// and ±y, a nominal print and so no phase scan (`print_characterised = true`: a 0.25 px
+    /// scan of 4 steps along each axis), 2 static frames, 4 rounds; docs/calibration.md).
     #[arg(long)]
     pub plan: Option<PathBuf>,
     /// Data folder (default: the config's): the run, its dataset and the card's model go there.

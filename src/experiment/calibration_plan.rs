@@ -3,7 +3,9 @@
 //! Each kind of run separates effects the others cannot: two move sizes tell lens distortion
 //! (quadratic in the move) from a scale change (linear), moves along both axes tell a tilt from
 //! decentring distortion and map the stage's axes, the phase scan tells the pixel aperture from
-//! lens blur (their bias against the sub-pixel phase differs), the repeats give the noise floor.
+//! lens blur (their bias against the sub-pixel phase differs) when the print is characterised
+//! (against a print calibrated to the frames neither is fitted, so the scan is captured only when
+//! asked for), the repeats give the noise floor.
 //! Plans are TOML files like experiments; unknown keys are refused with the key named.
 
 use super::request::{field_error, ExperimentRequest, FieldError, SchemeSpec};
@@ -17,6 +19,8 @@ pub const DEFAULT_LARGE_MOVE_FIELD_FRACTION: f64 = 0.1;
 /// The default large move over the small one: a field quadratic in the move (distortion) then
 /// differs from one linear in it (scale) by this factor.
 pub const DEFAULT_MOVE_SIZE_RATIO: f64 = 5.0;
+/// The phase scan's steps along each axis when a plan with a characterised print leaves them unset.
+pub const DEFAULT_PHASE_SCAN_COUNT: usize = 4;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields, default)]
@@ -26,14 +30,20 @@ pub struct CalibrationPlan {
     /// The mounted target: a preset (`a`, `b`, `c`) or a full description.
     #[schema(value_type = Object)]
     pub pattern: PatternSpec,
+    /// The target is characterised: its dots are as `pattern` describes them (as an experiment's
+    /// `print_characterised`). Only then can the card fit the lens blur and the pixel aperture,
+    /// which a print calibrated to the frames absorbs.
+    pub print_characterised: bool,
     /// Move sizes, mm, each made along +x, −x, +y and −y from the reference position. Empty: 10 %
     /// of the field's width (within the stage's travel and 75 % of `dic.max_motion_px`) and a
     /// fifth of that.
     pub move_sizes_mm: Vec<f64>,
     /// The phase scan's step along each axis, px of the sensor (0 or a count of 0: no scan).
     pub phase_scan_step_px: f64,
-    /// Steps of the phase scan along each axis.
-    pub phase_scan_count: usize,
+    /// Steps of the phase scan along each axis. Unset: 4 with a characterised print
+    /// (`DEFAULT_PHASE_SCAN_COUNT`), none without (the scan tells the aperture from the blur, and
+    /// a print calibrated to the frames absorbs both).
+    pub phase_scan_count: Option<usize>,
     /// Static frames of the reference position (the noise floor).
     pub static_frames: usize,
     /// Diagnosis rounds before the card is written (1–8, checked where the job is submitted).
@@ -54,9 +64,10 @@ impl Default for CalibrationPlan {
         Self {
             name: "camera-card".into(),
             pattern: PatternSpec::Preset("a".into()),
+            print_characterised: false,
             move_sizes_mm: Vec::new(),
             phase_scan_step_px: 0.25,
-            phase_scan_count: 4,
+            phase_scan_count: None,
             static_frames: 2,
             rounds: 4,
             model: "baseline".into(),
@@ -160,6 +171,17 @@ impl CalibrationPlan {
         self.experiment_with_moves(limits, size, moves)
     }
 
+    /// The phase scan's steps along each axis: as set, else [`DEFAULT_PHASE_SCAN_COUNT`] with a
+    /// characterised print and none without.
+    pub fn phase_scan_steps(&self) -> usize {
+        self.phase_scan_count
+            .unwrap_or(if self.print_characterised {
+                DEFAULT_PHASE_SCAN_COUNT
+            } else {
+                0
+            })
+    }
+
     /// [`Self::experiment`] with `moves` in place of the plan's sizes' (an on-bench diagnosis's
     /// designed moves): the plan's target, phase scan, static frames and DIC; every move within
     /// what the DIC tracks.
@@ -192,19 +214,20 @@ impl CalibrationPlan {
             ));
         }
         let step_mm = self.phase_scan_step_px / limits.scale_px_per_mm;
-        let step_series = if self.phase_scan_count > 0 && step_mm > 0.0 {
+        let count = self.phase_scan_steps();
+        let step_series = if count > 0 && step_mm > 0.0 {
             vec![
                 StepSeries {
                     id: "xs".into(),
                     dx_step_mm: step_mm,
                     dy_step_mm: 0.0,
-                    count: self.phase_scan_count,
+                    count,
                 },
                 StepSeries {
                     id: "ys".into(),
                     dx_step_mm: 0.0,
                     dy_step_mm: step_mm,
-                    count: self.phase_scan_count,
+                    count,
                 },
             ]
         } else {
@@ -213,6 +236,7 @@ impl CalibrationPlan {
         Ok(ExperimentRequest {
             name: self.name.clone(),
             patterns: vec![self.pattern.clone()],
+            print_characterised: self.print_characterised,
             moves,
             step_series,
             static_frames: self.static_frames,
@@ -259,9 +283,45 @@ mod tests {
             ids,
             ["xp1", "xm1", "yp1", "ym1", "xp2", "xm2", "yp2", "ym2"]
         );
-        assert_eq!(request.step_series.len(), 2);
-        assert!((request.step_series[0].dx_step_mm - 0.25 / 13.0).abs() < 1e-15);
+        // A nominal print: no phase scan (it could separate nothing), the print as nominal.
+        assert!(request.step_series.is_empty());
+        assert!(!request.print_characterised);
         assert!(request.plan(&limits()).is_ok());
+    }
+
+    #[test]
+    fn a_characterised_print_takes_the_phase_scan_unless_the_plan_says_otherwise() {
+        let characterised = CalibrationPlan {
+            print_characterised: true,
+            ..CalibrationPlan::default()
+        };
+        let request = characterised.experiment(&limits(), (640, 540)).unwrap();
+        assert!(request.print_characterised);
+        let counts: Vec<usize> = request.step_series.iter().map(|s| s.count).collect();
+        assert_eq!(counts, [DEFAULT_PHASE_SCAN_COUNT, DEFAULT_PHASE_SCAN_COUNT]);
+        assert!((request.step_series[0].dx_step_mm - 0.25 / 13.0).abs() < 1e-15);
+        assert!((request.step_series[1].dy_step_mm - 0.25 / 13.0).abs() < 1e-15);
+        // Set, the count is the plan's either way.
+        for print_characterised in [false, true] {
+            let plan = CalibrationPlan {
+                print_characterised,
+                phase_scan_count: Some(3),
+                ..CalibrationPlan::default()
+            };
+            let request = plan.experiment(&limits(), (640, 540)).unwrap();
+            assert_eq!(request.step_series.len(), 2);
+            assert!(request.step_series.iter().all(|s| s.count == 3));
+        }
+        let none = CalibrationPlan {
+            print_characterised: true,
+            phase_scan_count: Some(0),
+            ..CalibrationPlan::default()
+        };
+        assert!(none
+            .experiment(&limits(), (640, 540))
+            .unwrap()
+            .step_series
+            .is_empty());
     }
 
     #[test]

@@ -98,7 +98,7 @@ impl PerpendicularityCheck {
             name: "perpendicularity".into(),
             pattern: self.pattern.clone(),
             move_sizes_mm: Vec::new(),
-            phase_scan_count: 0,
+            phase_scan_count: Some(0),
             static_frames: 0,
             dic: self.dic.clone(),
             seed: self.seed,

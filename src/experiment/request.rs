@@ -29,6 +29,13 @@ pub struct ExperimentRequest {
     /// changer (real hardware) takes exactly one: the target mounted by hand.
     #[schema(value_type = Vec<Object>)]
     pub patterns: Vec<PatternSpec>,
+    /// The mounted prints are characterised: their dots' profile, diameter, spacing, contrast and
+    /// edge softness are as `patterns` describe them (a print measured, or the mock bench's,
+    /// which renders its presets exactly). The dataset then states each print whole
+    /// (`profile`), and a diagnosis takes it as stated instead of calibrating it to the frames,
+    /// which is what lets it fit the lens blur and the pixel aperture at all. False: the prints
+    /// are nominal, as a print on a real bench is unless measured.
+    pub print_characterised: bool,
     /// Stage moves from the reference position, mm.
     #[schema(value_type = Vec<Object>)]
     pub moves: Vec<MoveSpec>,
@@ -70,6 +77,7 @@ impl Default for ExperimentRequest {
         Self {
             name: paper.name,
             patterns: paper.patterns,
+            print_characterised: false,
             moves: paper.moves,
             step_series: paper.step_series,
             static_frames: paper.static_frames,
@@ -106,6 +114,8 @@ pub(crate) fn field_error(field: impl Into<String>, reason: impl Into<String>) -
 pub struct ExperimentPlan {
     pub name: String,
     pub patterns: Vec<SpecklePattern>,
+    /// The dataset states the prints as characterised ([`ExperimentRequest::print_characterised`]).
+    pub print_characterised: bool,
     pub moves: Vec<MoveSpec>,
     pub static_frames: usize,
     pub repeats: usize,
@@ -213,6 +223,7 @@ impl ExperimentRequest {
         Ok(ExperimentPlan {
             name: self.name.clone(),
             patterns,
+            print_characterised: self.print_characterised,
             moves,
             static_frames: self.static_frames,
             repeats: self.repeats,

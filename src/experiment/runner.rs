@@ -385,7 +385,11 @@ impl<'a> Session<'a> {
                 let full = target.manifest_run(
                     run,
                     &plan.moves[run.move_index],
-                    super::simulate::pattern_info(&pattern.label, pattern, false),
+                    super::simulate::pattern_info(
+                        &pattern.label,
+                        pattern,
+                        plan.print_characterised,
+                    ),
                     Some(self.full_resolution.exposure_us),
                 );
                 let hardware: Vec<Run> = plan

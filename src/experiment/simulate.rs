@@ -4,7 +4,7 @@
 
 use super::captures::{capture_plan, layout_seed, TargetCapture};
 use super::spec::ExperimentSpec;
-use crate::dataset::{CameraInfo, DatasetError, DotProfile, Manifest, PatternInfo};
+use crate::dataset::{CameraInfo, DatasetError, Manifest, PatternInfo};
 use crate::image::{write_tiff_u16, Image, ImageError};
 use crate::model::derive_seed;
 use crate::model::{render_frame, FrameSpec, ModelConfig, SpecklePattern, TargetDot, TooManyDots};
@@ -129,9 +129,9 @@ pub fn simulate_dataset(
 }
 
 /// What a dataset records of the speckle in front of the camera: every parameter of the pattern.
-/// `characterised` says the print is known exactly (a simulation renders the very print it names:
-/// `"profile": "gaussian"`, see `diagnose::print`); a print on a real bench is only nominal, and a
-/// comparison calibrates it to the frames.
+/// `characterised` says the print is known exactly (a simulation renders the very print it names,
+/// and a bench's request may say so: its `profile` is stated, see `diagnose::print`); a print on a
+/// real bench is otherwise only nominal, and a comparison calibrates it to the frames.
 pub(crate) fn pattern_info(
     label: &str,
     pattern: &crate::model::SpecklePattern,
@@ -141,7 +141,7 @@ pub(crate) fn pattern_info(
         label: label.to_string(),
         dot_diameter_mm: Some(pattern.dot_diameter_mm),
         dot_spacing_mm: Some(pattern.dot_spacing_mm),
-        profile: characterised.then_some(DotProfile::Gaussian),
+        profile: characterised.then_some(pattern.profile),
         contrast: Some(pattern.contrast),
         edge_softness_mm: Some(pattern.edge_softness_mm),
         ..PatternInfo::default()

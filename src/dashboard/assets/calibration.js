@@ -23,11 +23,14 @@ function showRecord(r) {
   $("#run-message").textContent = r.message || "";
   const plan = r.request || {};
   const sizes = plan.move_sizes_mm || [];
+  // Unset: four steps with a characterised print, none without (CalibrationPlan::phase_scan_steps).
+  const scan = plan.phase_scan_count ?? (plan.print_characterised ? 4 : 0);
   clear($("#run-info"), [
     ["name", plan.name || "—"],
     ["target", patternText(plan.pattern)],
     ["move sizes [mm]", sizes.length ? sizes.map((s) => num(s, 4)).join(", ") : "from the field and the DIC's reach"],
-    ["phase scan", plan.phase_scan_count ? `${plan.phase_scan_count} steps of ${num(plan.phase_scan_step_px, 3)} px per axis` : "none"],
+    ["print", plan.print_characterised ? "characterised" : "nominal (calibrated to the frames)"],
+    ["phase scan", scan ? `${scan} steps of ${num(plan.phase_scan_step_px ?? 0.25, 3)} px per axis` : "none"],
     ["static frames", String(plan.static_frames ?? "—")],
     ["rounds", String(plan.rounds ?? "—")],
     ["model", plan.model || "—"],

@@ -176,11 +176,11 @@ fn separating_plan(
         pattern: target_pattern(manifest)?,
         // The fewest steps the identifiability rule takes as a series, along each axis: six
         // runs (issue 33: at most six for a confound).
-        phase_scan_count: if wants(SeparatingRuns::StepSeries) {
+        phase_scan_count: Some(if wants(SeparatingRuns::StepSeries) {
             STEP_SERIES_MIN_STEPS
         } else {
             0
-        },
+        }),
         static_frames: if wants(SeparatingRuns::StaticRepeats) {
             2
         } else {
