@@ -70,6 +70,11 @@ pub struct ImagingEntry {
     pub stderr: BTreeMap<String, f64>,
     /// The runs reveal it and separate it from what it is confounded with.
     pub identifiable: bool,
+    /// The last round's candidate met every criterion of a verdict; false: its fit is what the
+    /// data allow, not a measured effect (a value at its range's bound, within its errors of
+    /// none, or no better than the model without it).
+    #[serde(default)]
+    pub significant: bool,
     /// When not: the runs (or the print's characterisation) that would.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub separate_with: Option<String>,
@@ -304,6 +309,7 @@ fn imaging_entries(rounds: &Rounds) -> Vec<ImagingEntry> {
                 params: BTreeMap::new(),
                 stderr: BTreeMap::new(),
                 identifiable: false,
+                significant: false,
                 separate_with: Some(n.runs_to_add.clone()),
             });
         };
@@ -318,6 +324,7 @@ fn imaging_entries(rounds: &Rounds) -> Vec<ImagingEntry> {
             params: c.params.clone(),
             stderr: c.stderr.clone(),
             identifiable: confounded.is_none(),
+            significant: c.significant,
             separate_with: confounded,
         })
     })
@@ -462,6 +469,9 @@ mod tests {
             ]
         );
         assert_eq!(entries[0].stderr["sigma_px"], 0.05);
+        // Significance as the last round judged its candidates: the noise's drop is nil.
+        let significant: Vec<bool> = entries.iter().map(|e| e.significant).collect();
+        assert_eq!(significant, [true, false, false]);
         let none = Rounds {
             diagnoses: Vec::new(),
             ..rounds

@@ -49,7 +49,10 @@ pub fn camera_card_text(card: &CameraCard) -> String {
         out += &format!("not fitted: {n}\n");
     }
     for i in &card.imaging {
-        let params = parameters_text(&i.params, &i.stderr);
+        let mut params = parameters_text(&i.params, &i.stderr);
+        if !i.significant && !i.params.is_empty() {
+            params += " (not significant)";
+        }
         match &i.separate_with {
             None => out += &format!("{}: {params}\n", i.effect),
             Some(how) if i.params.is_empty() => {

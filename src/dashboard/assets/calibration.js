@@ -105,7 +105,9 @@ function showCard(doc) {
     : "";
   clear($("#card-imaging"), table(["effect", "parameters", "identifiable"],
     card.imaging.map((i) => [i.effect,
-      Object.keys(i.params).length ? paramsText(i.params, i.stderr) : "not fitted",
+      Object.keys(i.params).length
+        ? paramsText(i.params, i.stderr) + (i.significant ? "" : " (not significant)")
+        : "not fitted",
       i.identifiable ? "yes" : `no — separate it with ${i.separate_with || "another run"}`])));
   clear($("#card-not-fitted"), (card.not_identifiable || []).length
     ? el("ul", { class: "small" }, card.not_identifiable.map((n) => el("li", {}, `not fitted: ${n}`)))
