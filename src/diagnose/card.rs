@@ -18,8 +18,9 @@
 //! points taken off: the magnification at the image centre. It is the affine stage-to-camera map
 //! of Micro-Manager's pixel calibrator; the stage is the length standard, so its travel error and
 //! the camera's scale are one number. The imaging chain (blur, pixel aperture, gain, read noise)
-//! comes from the last round's candidate fits, each marked identifiable or not as that round's
-//! design says.
+//! comes from the candidate fit of the round that named it (the card's model holds that fit, and
+//! later rounds do not offer it again), else from the last round's, each marked identifiable or
+//! not as that round's design says.
 
 use super::calibrate_scene::SceneFrom;
 use super::candidates::field_samples;
@@ -61,7 +62,8 @@ pub struct CardEffect {
     pub significant: bool,
 }
 
-/// An image-level effect of the card (blur, pixel aperture, sensor noise), from the last round.
+/// An image-level effect of the card (blur, pixel aperture, sensor noise), from the round that
+/// named it, or else the last round.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ImagingEntry {
     pub effect: EffectId,
@@ -70,7 +72,7 @@ pub struct ImagingEntry {
     pub stderr: BTreeMap<String, f64>,
     /// The runs reveal it and separate it from what it is confounded with.
     pub identifiable: bool,
-    /// The last round's candidate met every criterion of a verdict; false: its fit is what the
+    /// The round's candidate met every criterion of a verdict; false: its fit is what the
     /// data allow, not a measured effect (a value at its range's bound, within its errors of
     /// none, or no better than the model without it).
     #[serde(default)]
@@ -141,9 +143,9 @@ pub fn calibrate(
 }
 
 /// The card of an analysed measurement: the joint geometric fit on the first round's baseline
-/// comparison, the stage map, the last round's imaging fits, and the card's model compared with
-/// the measurement (twice, for the model's own scatter). The card's model is named `name`, a
-/// dash and its content's hash.
+/// comparison, the stage map, the imaging fits (the naming round's, else the last round's), and
+/// the card's model compared with the measurement (twice, for the model's own scatter). The
+/// card's model is named `name`, a dash and its content's hash.
 pub fn camera_card(
     meas: &Measurement,
     rounds: &Rounds,
@@ -285,8 +287,10 @@ fn centred_entry(c: &CentredDistortion, z: f64) -> CardEffect {
     }
 }
 
-/// Blur, pixel aperture and sensor noise as the last round fitted them, or, where its runs and
-/// print could not reveal one, that one without parameters and with what would.
+/// Blur, pixel aperture and sensor noise: as the round that named one fitted it (the card's model
+/// holds that fit, and later rounds no longer offer it as a candidate); otherwise as the last
+/// round fitted it, or, where its runs and print could not reveal one, that one without
+/// parameters and with what would.
 fn imaging_entries(rounds: &Rounds) -> Vec<ImagingEntry> {
     let Some(last) = rounds.diagnoses.last() else {
         return Vec::new();
@@ -298,12 +302,18 @@ fn imaging_entries(rounds: &Rounds) -> Vec<ImagingEntry> {
     ]
     .into_iter()
     .filter_map(|effect| {
-        let Some(c) = last
+        let named_in = rounds.diagnoses.iter().rev().find(|d| {
+            d.verdict
+                .as_ref()
+                .is_some_and(|v| v.catalogue() == Some(effect))
+        });
+        let round = named_in.unwrap_or(last);
+        let Some(c) = round
             .candidates
             .iter()
             .find(|c| c.effect.catalogue() == Some(effect))
         else {
-            let n = last.not_identifiable.iter().find(|n| n.effect == effect)?;
+            let n = round.not_identifiable.iter().find(|n| n.effect == effect)?;
             return Some(ImagingEntry {
                 effect,
                 params: BTreeMap::new(),
@@ -314,7 +324,7 @@ fn imaging_entries(rounds: &Rounds) -> Vec<ImagingEntry> {
             });
         };
         let name = effect.to_string();
-        let confounded = last
+        let confounded = round
             .confounded
             .iter()
             .find(|k| k.effects.contains(&name))
@@ -401,17 +411,16 @@ mod tests {
     }
 
     #[test]
-    fn the_imaging_entries_are_the_last_rounds_with_what_confounds_them() {
+    fn the_imaging_entries_are_the_naming_rounds_else_the_last_with_what_confounds_them() {
         let before = comparison(Vec::new());
+        // Round 1 names the noise; the model then holds it, and round 2 no longer offers it.
         let first = diagnosis(
             &before,
-            vec![candidate(
-                EffectId::PsfBlur,
-                &[("sigma_px", 1.5, 0.1)],
-                -30.0,
-                0.001,
-            )],
-            Some(EffectId::PsfBlur.into()),
+            vec![
+                candidate(EffectId::SensorNoise, &[("gain", 2.0, 0.1)], -30.0, 0.001),
+                candidate(EffectId::PsfBlur, &[("sigma_px", 1.5, 0.1)], -12.0, 0.0),
+            ],
+            Some(EffectId::SensorNoise.into()),
         );
         let mut last = diagnosis(
             &before,
@@ -423,7 +432,6 @@ mod tests {
                     0.01,
                 ),
                 candidate(EffectId::PsfBlur, &[("sigma_px", 0.8, 0.05)], -20.0, 0.001),
-                candidate(EffectId::SensorNoise, &[("gain", 2.0, 0.1)], -12.0, 0.0),
             ],
             None,
         );
@@ -439,7 +447,7 @@ mod tests {
         });
         let rounds = Rounds {
             rounds: Vec::new(),
-            verdicts: vec![EffectId::PsfBlur.into()],
+            verdicts: vec![EffectId::SensorNoise.into()],
             final_discrepancy_px: 0.0,
             final_unexplained: finding(0.0, None),
             runs_to_separate: Vec::new(),
@@ -469,9 +477,9 @@ mod tests {
             ]
         );
         assert_eq!(entries[0].stderr["sigma_px"], 0.05);
-        // Significance as the last round judged its candidates: the noise's drop is nil.
+        // The blur's significance as the last round judged it; the noise as the round that named it.
         let significant: Vec<bool> = entries.iter().map(|e| e.significant).collect();
-        assert_eq!(significant, [true, false, false]);
+        assert_eq!(significant, [true, false, true]);
         let none = Rounds {
             diagnoses: Vec::new(),
             ..rounds

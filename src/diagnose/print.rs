@@ -154,7 +154,7 @@ pub fn sigma_from_mtf(pairs: &[[f64; 2]]) -> Option<f64> {
 
 /// χ² of the spectral shape: ln(measured/model) per bin about its weighted mean.
 pub fn spectral_shape_chi2(measured: &FrameStats, model: &Image) -> f64 {
-    spectral_shape_chi2_above(measured, model, 0.0).0
+    spectral_shape_chi2_below(measured, model, f64::INFINITY)
 }
 
 /// How many spectral bins [`spectral_shape_chi2`] can compare for this measured frame.
@@ -163,28 +163,12 @@ pub fn spectral_shape_bins(measured: &FrameStats) -> usize {
     used(&measured.psd_x) + used(&measured.psd_y)
 }
 
-/// [`spectral_shape_chi2`] over the bins at or above `f_min` cycles/px, and its degrees of
-/// freedom (the bins compared, less the level the shape is taken about).
-pub fn spectral_shape_chi2_above(measured: &FrameStats, model: &Image, f_min: f64) -> (f64, usize) {
-    spectral_shape_chi2_in(measured, model, f_min, f64::INFINITY)
-}
-
 /// [`spectral_shape_chi2`] over the bins below `f_max` cycles/px.
 pub fn spectral_shape_chi2_below(measured: &FrameStats, model: &Image, f_max: f64) -> f64 {
-    spectral_shape_chi2_in(measured, model, 0.0, f_max).0
-}
-
-/// χ² and degrees of freedom.
-fn spectral_shape_chi2_in(
-    measured: &FrameStats,
-    model: &Image,
-    f_min: f64,
-    f_max: f64,
-) -> (f64, usize) {
     let pairs = |m: &[PsdBin], o: Vec<PsdBin>| -> Vec<(f64, f64)> {
         m.iter()
             .zip(o)
-            .filter(|(a, b)| a.value > 0.0 && b.value > 0.0 && a.f >= f_min && a.f < f_max)
+            .filter(|(a, b)| a.value > 0.0 && b.value > 0.0 && a.f < f_max)
             .map(|(a, b)| {
                 let se = ((a.se / a.value).powi(2) + (b.se / b.value).powi(2)).sqrt();
                 ((a.value / b.value).ln(), se)
@@ -196,13 +180,10 @@ fn spectral_shape_chi2_in(
     all.extend(pairs(&measured.psd_y, psd(model, false)));
     let w: f64 = all.iter().map(|(_, se)| 1.0 / (se * se)).sum();
     if !(w > 0.0) {
-        return (0.0, 0);
+        return 0.0;
     }
     let mean = all.iter().map(|(r, se)| r / (se * se)).sum::<f64>() / w;
-    (
-        all.iter().map(|(r, se)| ((r - mean) / se).powi(2)).sum(),
-        all.len() - 1,
-    )
+    all.iter().map(|(r, se)| ((r - mean) / se).powi(2)).sum()
 }
 
 #[cfg(test)]
