@@ -22,7 +22,8 @@ use super::bic::image_chi2;
 use super::image_stats::{psd, FrameStats, PsdBin, STATS_CROP_PX};
 use super::measurement::Measurement;
 use super::optimise::{
-    curvature_stderr, dispersion_factor, minimise_1d, nelder_mead, unless_stopped,
+    curvature_stderr, dispersion_factor, minimise_1d, nelder_mead, stderr_within_null_reach,
+    unless_stopped,
 };
 use super::results::{Comparison, ImageFit};
 use super::scene::{reference_crop, Scene, Shot};
@@ -108,21 +109,24 @@ fn reference_crops(meas: &Measurement, before: &Comparison, effects: &Effects) -
         .collect()
 }
 
-/// The standard errors of an image fit at its minimum `x`: from χ²'s curvature (`obj`), scaled
-/// by the scatter its terms leave there beyond their own errors (`obj_dof`: χ² and its terms;
+/// The standard errors of an image fit at its minimum `x`: from χ²'s curvature (`obj`), no
+/// smaller than χ² at the effect's `null` allows ([`stderr_within_null_reach`]), scaled by the
+/// scatter its terms leave there beyond their own errors (`obj_dof`: χ² and its terms;
 /// [`dispersion_factor`]). Measured on the independent generator's benches: docs/calibration.md.
 fn honest_stderr(
     effect: EffectId,
     obj: &dyn Fn(&[f64]) -> f64,
     obj_dof: &dyn Fn(&[f64]) -> (f64, usize),
     x: &[f64],
+    null: &[f64],
     h: &[f64],
     (lo, hi): (&[f64], &[f64]),
 ) -> Vec<f64> {
     let (chi2, terms) = obj_dof(x);
     let factor = dispersion_factor(chi2, terms.saturating_sub(x.len()));
     tracing::debug!(%effect, chi2, terms, factor, "an image fit's minimum");
-    curvature_stderr(obj, x, chi2, h, lo, hi)
+    let curvature = curvature_stderr(obj, x, chi2, h, lo, hi);
+    stderr_within_null_reach(obj, x, chi2, null, &curvature, h, (lo, hi))
         .into_iter()
         .map(|se| se * factor)
         .collect()
@@ -161,6 +165,7 @@ pub fn fit_psf_blur(
         &obj,
         &obj_dof,
         &[sigma],
+        &[0.0],
         &[0.05],
         (&[0.0], &[3.0]),
     )[0];
@@ -210,6 +215,7 @@ pub fn fit_fill_factor(
         &obj,
         &obj_dof,
         &x,
+        &[1.0, 1.0],
         &[0.04, 0.04],
         (&lo, &hi),
     );
@@ -286,6 +292,7 @@ pub fn fit_motion_blur(
         &obj,
         &obj_dof,
         &[l],
+        &[0.0],
         &[0.2],
         (&[0.0], &[4.0]),
     )[0];

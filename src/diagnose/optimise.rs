@@ -272,6 +272,44 @@ pub fn curvature_stderr(
         .collect()
 }
 
+/// Standard errors no smaller than χ² at each parameter's null allows. For each parameter farther
+/// than its step `h` from `null`, χ² is evaluated with that parameter at its null and the others
+/// at the fit: were χ² quadratic, its rise Δ there would be (distance/σ)², so σ is at least
+/// distance/√Δ (the likelihood-ratio test's reading of the same χ²; Wilks, *Ann. Math. Stat.* 9,
+/// 1938). Where Δ ≤ 0 the data cannot tell the fit from the null, and σ is the parameter's whole
+/// range. The curvature alone fails on an objective that is flat but rough — a model frame's
+/// noise drawn again at every trial — where its three points can read any curvature: a pixel
+/// aperture fitted to a print with no power where the aperture's transfer differs from 1 read
+/// fill factor 0.23 ± 0.07 against full pixels (χ² 10.7–11.5 over the whole range).
+pub fn stderr_within_null_reach(
+    f: &dyn Fn(&[f64]) -> f64,
+    x: &[f64],
+    f0: f64,
+    null: &[f64],
+    curvature_se: &[f64],
+    h: &[f64],
+    (lo, hi): (&[f64], &[f64]),
+) -> Vec<f64> {
+    (0..x.len())
+        .map(|i| {
+            let distance = (x[i] - null[i]).abs();
+            if !(distance > h[i]) {
+                return curvature_se[i];
+            }
+            let mut at_null = x.to_vec();
+            at_null[i] = null[i];
+            let rise = f(&at_null) - f0;
+            let range = hi[i] - lo[i];
+            let reach = if rise > 0.0 {
+                (distance / rise.sqrt()).min(range)
+            } else {
+                range
+            };
+            curvature_se[i].max(reach)
+        })
+        .collect()
+}
+
 /// The factor on a fit's standard errors from χ²'s curvature when the terms scatter about the
 /// fitted model more than their own errors say: √ĉ, ĉ = max(1, χ²_min/ν) with ν the degrees of
 /// freedom left (quasi-likelihood: McCullagh & Nelder, *Generalized Linear Models*, 2nd ed.
@@ -291,6 +329,57 @@ pub fn dispersion_factor(chi2_min: f64, dof: usize) -> f64 {
 mod tests {
     use super::*;
     use std::cell::Cell;
+
+    #[test]
+    fn a_flat_rough_chi2_leaves_the_parameter_its_whole_range() {
+        // Quadratic about 0.6 with σ 0.1 (null 1): the rise at the null, (0.4/0.1)² = 16, gives
+        // back σ, and the curvature's σ stands.
+        let quadratic = |x: &[f64]| 10.0 + ((x[0] - 0.6) / 0.1).powi(2);
+        let x = [0.6];
+        let f0 = quadratic(&x);
+        let curv = curvature_stderr(&quadratic, &x, f0, &[0.04], &[0.05], &[1.0]);
+        assert!((curv[0] - 0.1).abs() < 1e-9, "{curv:?}");
+        let se = stderr_within_null_reach(
+            &quadratic,
+            &x,
+            f0,
+            &[1.0],
+            &curv,
+            &[0.04],
+            (&[0.05], &[1.0]),
+        );
+        assert!((se[0] - 0.1).abs() < 1e-9, "{se:?}");
+        // Flat within ±0.4 but rough: the three points of the curvature read a sharp minimum
+        // (σ 0.04), yet χ² at the null is no higher than at the fit.
+        let rough = |x: &[f64]| {
+            10.7 + if (x[0] - 0.23).abs() < 1e-12 {
+                0.0
+            } else if x[0] < 0.9 {
+                0.4
+            } else {
+                0.3
+            }
+        };
+        let x = [0.23];
+        let f0 = rough(&x);
+        let curv = curvature_stderr(&rough, &x, f0, &[0.04], &[0.05], &[1.0]);
+        assert!(curv[0] < 0.1, "{curv:?}");
+        let se =
+            stderr_within_null_reach(&rough, &x, f0, &[1.0], &curv, &[0.04], (&[0.05], &[1.0]));
+        // Δ 0.3 at a distance of 0.77: σ ≥ 0.77/√0.3 = 1.41, capped at the range 0.95.
+        assert!((se[0] - 0.95).abs() < 1e-12, "{se:?}");
+        // A fit within its step of the null keeps the curvature's σ.
+        let se = stderr_within_null_reach(
+            &rough,
+            &[0.98],
+            f0,
+            &[1.0],
+            &[0.2],
+            &[0.04],
+            (&[0.05], &[1.0]),
+        );
+        assert_eq!(se, [0.2]);
+    }
 
     /// Counts the evaluations of `f`.
     fn counted(f: impl Fn(f64) -> f64) -> (impl Fn(f64) -> f64, std::rc::Rc<Cell<usize>>) {
