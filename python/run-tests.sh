@@ -5,6 +5,7 @@
 # MATURIN_PEP517_ARGS), pytest over python/tests, then the examples end to end.
 #
 #   python/run-tests.sh [DAEMON_BINARY]     (default: target/debug/ffdic)
+#   python/run-tests.sh --venv-only         (the test requirements' venv, and nothing else)
 #
 # The daemon binary is what the client tests and the example start (`ffdic serve`) and what
 # test_engine.py compares the bindings' numbers with (`ffdic analyze`, `simulate`, `compare`).
@@ -14,11 +15,7 @@ HERE="$(cd "$(dirname "$0")" && pwd)"
 ROOT="$(cd "$HERE/.." && pwd)"
 cd "$ROOT"
 
-BIN="${1:-target/debug/ffdic}"
-[ -x "$BIN" ] || { echo "python tests: no daemon binary at $BIN (cargo build --bin ffdic)" >&2; exit 2; }
-BIN="$(cd "$(dirname "$BIN")" && pwd)/$(basename "$BIN")"
 VENV="${CARGO_TARGET_DIR:-$ROOT/target}/python-venv"
-
 STAMP="$VENV/.requirements.sha256"
 want="$(sha256sum "$HERE/tests/requirements.txt" | cut -d' ' -f1)"
 if [ ! -x "$VENV/bin/pytest" ] || [ "$(cat "$STAMP" 2>/dev/null)" != "$want" ]; then
@@ -27,6 +24,12 @@ if [ ! -x "$VENV/bin/pytest" ] || [ "$(cat "$STAMP" 2>/dev/null)" != "$want" ]; 
   "$VENV/bin/pip" install --quiet --disable-pip-version-check -r "$HERE/tests/requirements.txt"
   echo "$want" >"$STAMP"
 fi
+# `--venv-only`: the venv and nothing else (scripts/test-all.sh makes it while the crate compiles).
+[ "${1:-}" = "--venv-only" ] && exit 0
+
+BIN="${1:-target/debug/ffdic}"
+[ -x "$BIN" ] || { echo "python tests: no daemon binary at $BIN (cargo build --bin ffdic)" >&2; exit 2; }
+BIN="$(cd "$(dirname "$BIN")" && pwd)/$(basename "$BIN")"
 
 echo "python: pip install ./python (at ${SECONDS} s)"
 "$VENV/bin/pip" install --quiet --disable-pip-version-check --force-reinstall --no-deps ./python

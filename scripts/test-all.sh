@@ -32,7 +32,7 @@ phase() {
 # - the Zaber simulator is checked with zproto, which pulls serialport's libudev feature.
 # - iproute2: the Aravis tests bring up loopback inside their own network namespace.
 # - python3-venv: the independent dataset generator of the diagnosis tests (tests/independent/,
-#   numpy and tifffile from PyPI into target/independent-venv, made by the tests on first use);
+#   numpy and tifffile from PyPI into target/independent-venv, by tests/independent/venv.sh);
 # - chromium, nodejs, npm: the dashboard's end-to-end test (tests/dashboard_browser.rs) drives
 #   headless Chromium with playwright-core, pinned in tests/browser/package-lock.json.
 # - curl: tests/schemathesis/run.sh fetches the daemon's OpenAPI document with it.
@@ -63,6 +63,16 @@ if [ ! -d tests/browser/node_modules ]; then
   npm ci --prefix tests/browser --no-audit --no-fund
 fi
 
+# The three Python venvs — the independent generator's (the diagnosis tests), schemathesis's and
+# the Python package's tests' — are made while clippy and the crate compile: pip waits on the
+# network and the disk more than on the cores, and each venv was on the critical path of its
+# phase (18, 25 and 20–35 s here, made one after another on a busy machine). Each script makes
+# its venv only when missing or out of date; the tests wait for them below.
+VENVS_LOG="$(mktemp "${TMPDIR:-/tmp}/ffdic-venvs.XXXXXX")"
+(bash tests/independent/venv.sh && bash tests/schemathesis/run.sh --venv-only &&
+  bash python/run-tests.sh --venv-only) >"$VENVS_LOG" 2>&1 &
+VENVS_PID=$!
+
 phase "cargo fmt --check"
 cargo fmt --all --check
 phase "cargo clippy"
@@ -73,7 +83,11 @@ phase "cargo test"
 # cargo's environment it would change the build scripts' fingerprints (proc-macro2's and
 # anyhow's probe the compiler's channel) and rebuild their dependants here and again for the wheel.
 TEST_LOG="$(mktemp "${TMPDIR:-/tmp}/ffdic-tests.XXXXXX")"
-trap 'rm -f "$TEST_LOG"' EXIT
+trap 'rm -f "$TEST_LOG" "$VENVS_LOG"' EXIT
+# The venvs (above) before any test starts: the generator's is the tests' to use, not to race.
+# Should one have failed, its phase makes it again and fails there with pip's own message.
+wait "$VENVS_PID" || { cat "$VENVS_LOG"; echo "a venv failed ahead of its phase (it is made again there)"; }
+cat "$VENVS_LOG"
 # Doc tests are run by rustdoc, not through the runner: they run apart, without the flag.
 # `--tests`: every target with `test = true` (the libraries' and binaries' unit tests, the
 # integration tests); the Python module's (`test = false`: it is tested from Python, below) is

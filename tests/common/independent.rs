@@ -29,34 +29,22 @@ pub fn target_dir() -> PathBuf {
         .unwrap_or_else(|| repo().join("target"))
 }
 
-/// The venv's python, made (once per run of the tests) when missing.
+/// The venv's python, made (once per run of the tests) when missing or out of date by
+/// `tests/independent/venv.sh` (which `scripts/test-all.sh` runs ahead, while the crate compiles).
 pub fn python() -> PathBuf {
     static PYTHON: OnceLock<PathBuf> = OnceLock::new();
     PYTHON
         .get_or_init(|| {
             let venv = target_dir().join("independent-venv");
-            let py = venv.join("bin/python");
-            let marker = venv.join(".requirements-installed");
-            let requirements = repo().join("tests/independent/requirements.txt");
-            let wanted = std::fs::read_to_string(&requirements).expect("requirements.txt");
-            if std::fs::read_to_string(&marker).ok().as_deref() != Some(wanted.as_str()) {
-                let ok = Command::new("python3")
-                    .args(["-m", "venv"])
-                    .arg(&venv)
-                    .status()
-                    .expect("python3 runs")
-                    .success();
-                assert!(ok, "python3 -m venv {} failed", venv.display());
-                let ok = Command::new(&py)
-                    .args(["-m", "pip", "install", "--quiet", "-r"])
-                    .arg(&requirements)
-                    .status()
-                    .expect("pip runs")
-                    .success();
-                assert!(ok, "pip install -r {} failed", requirements.display());
-                std::fs::write(&marker, wanted).expect("marker written");
-            }
-            py
+            let script = repo().join("tests/independent/venv.sh");
+            let ok = Command::new("bash")
+                .arg(&script)
+                .arg(&venv)
+                .status()
+                .expect("bash runs")
+                .success();
+            assert!(ok, "{} {} failed", script.display(), venv.display());
+            venv.join("bin/python")
         })
         .clone()
 }
