@@ -5,7 +5,6 @@
 # MATURIN_PEP517_ARGS), pytest over python/tests, then the examples end to end.
 #
 #   python/run-tests.sh [DAEMON_BINARY]     (default: target/debug/ffdic)
-#   python/run-tests.sh --venv-only         (the test requirements' venv, and nothing else)
 #
 # The daemon binary is what the client tests and the example start (`ffdic serve`) and what
 # test_engine.py compares the bindings' numbers with (`ffdic analyze`, `simulate`, `compare`).
@@ -16,16 +15,7 @@ ROOT="$(cd "$HERE/.." && pwd)"
 cd "$ROOT"
 
 VENV="${CARGO_TARGET_DIR:-$ROOT/target}/python-venv"
-STAMP="$VENV/.requirements.sha256"
-want="$(sha256sum "$HERE/tests/requirements.txt" | cut -d' ' -f1)"
-if [ ! -x "$VENV/bin/pytest" ] || [ "$(cat "$STAMP" 2>/dev/null)" != "$want" ]; then
-  echo "python: installing the pinned test requirements into $VENV (at ${SECONDS} s since this script began)"
-  [ -x "$VENV/bin/python" ] || python3 -m venv "$VENV"
-  "$VENV/bin/pip" install --quiet --disable-pip-version-check -r "$HERE/tests/requirements.txt"
-  echo "$want" >"$STAMP"
-fi
-# `--venv-only`: the venv and nothing else (scripts/test-all.sh makes it while the crate compiles).
-[ "${1:-}" = "--venv-only" ] && exit 0
+bash "$ROOT/scripts/pip-venv.sh" "$VENV" "$HERE/tests/requirements.txt" python
 
 BIN="${1:-target/debug/ffdic}"
 [ -x "$BIN" ] || { echo "python tests: no daemon binary at $BIN (cargo build --bin ffdic)" >&2; exit 2; }

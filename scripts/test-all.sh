@@ -32,7 +32,7 @@ phase() {
 # - the Zaber simulator is checked with zproto, which pulls serialport's libudev feature.
 # - iproute2: the Aravis tests bring up loopback inside their own network namespace.
 # - python3-venv: the independent dataset generator of the diagnosis tests (tests/independent/,
-#   numpy and tifffile from PyPI into target/independent-venv, by tests/independent/venv.sh);
+#   numpy and tifffile from PyPI into target/independent-venv, by scripts/pip-venv.sh);
 # - chromium, nodejs, npm: the dashboard's end-to-end test (tests/dashboard_browser.rs) drives
 #   headless Chromium with playwright-core, pinned in tests/browser/package-lock.json.
 # - curl: tests/schemathesis/run.sh fetches the daemon's OpenAPI document with it.
@@ -69,8 +69,10 @@ fi
 # phase (18, 25 and 20–35 s here, made one after another on a busy machine). Each script makes
 # its venv only when missing or out of date; the tests wait for them below.
 VENVS_LOG="$(mktemp "${TMPDIR:-/tmp}/ffdic-venvs.XXXXXX")"
-(bash tests/independent/venv.sh && bash tests/schemathesis/run.sh --venv-only &&
-  bash python/run-tests.sh --venv-only) >"$VENVS_LOG" 2>&1 &
+TARGET="${CARGO_TARGET_DIR:-target}"
+(bash scripts/pip-venv.sh "$TARGET/independent-venv" tests/independent/requirements.txt "independent generator" &&
+  bash scripts/pip-venv.sh target/schemathesis-venv tests/schemathesis/requirements.txt schemathesis &&
+  bash scripts/pip-venv.sh "$TARGET/python-venv" python/tests/requirements.txt python) >"$VENVS_LOG" 2>&1 &
 VENVS_PID=$!
 
 phase "cargo fmt --check"

@@ -30,16 +30,18 @@ pub fn target_dir() -> PathBuf {
 }
 
 /// The venv's python, made (once per run of the tests) when missing or out of date by
-/// `tests/independent/venv.sh` (which `scripts/test-all.sh` runs ahead, while the crate compiles).
+/// `scripts/pip-venv.sh` (which `scripts/test-all.sh` runs ahead, while the crate compiles).
 pub fn python() -> PathBuf {
     static PYTHON: OnceLock<PathBuf> = OnceLock::new();
     PYTHON
         .get_or_init(|| {
             let venv = target_dir().join("independent-venv");
-            let script = repo().join("tests/independent/venv.sh");
+            let script = repo().join("scripts/pip-venv.sh");
             let ok = Command::new("bash")
                 .arg(&script)
                 .arg(&venv)
+                .arg(repo().join("tests/independent/requirements.txt"))
+                .arg("independent generator")
                 .status()
                 .expect("bash runs")
                 .success();

@@ -2,7 +2,6 @@
 # A bounded schemathesis run against a real `ffdic serve` on the small mock bench.
 #
 #   tests/schemathesis/run.sh [BINARY]        (default: target/debug/ffdic)
-#   tests/schemathesis/run.sh --venv-only     (the venv below, made or checked, and nothing else)
 #
 # Creates (or reuses) a venv in target/schemathesis-venv with the pinned requirements, starts the
 # daemon on 127.0.0.1:0 with a temporary data folder, runs every check in every phase
@@ -20,19 +19,10 @@ HERE="$(cd "$(dirname "$0")" && pwd)"
 ROOT="$(cd "$HERE/../.." && pwd)"
 cd "$ROOT"
 
-VENV="$ROOT/target/schemathesis-venv"
+VENV="$ROOT/target/schemathesis-venv"   # scripts/test-all.sh makes it ahead: keep the two alike
 
-# --- the venv: install only when the pinned requirements changed since the last install ------
-STAMP="$VENV/.requirements.sha256"
-want="$(sha256sum "$HERE/requirements.txt" | cut -d' ' -f1)"
-if [ ! -x "$VENV/bin/schemathesis" ] || [ "$(cat "$STAMP" 2>/dev/null)" != "$want" ]; then
-  echo "schemathesis: installing the pinned requirements into $VENV"
-  [ -x "$VENV/bin/python" ] || python3 -m venv "$VENV"
-  "$VENV/bin/pip" install --quiet --disable-pip-version-check -r "$HERE/requirements.txt"
-  echo "$want" >"$STAMP"
-fi
-# `--venv-only`: the venv and nothing else (scripts/test-all.sh makes it while the crate compiles).
-[ "${1:-}" = "--venv-only" ] && exit 0
+# --- the venv: made only when missing or when the pinned requirements changed since ---------
+bash "$ROOT/scripts/pip-venv.sh" "$VENV" "$HERE/requirements.txt" schemathesis
 
 BIN="${1:-target/debug/ffdic}"
 shift || true
