@@ -597,7 +597,6 @@ async fn a_calibration_over_http_writes_a_card_and_stores_its_model() {
     let plan = json!({
         "name": "small bench",
         "move_sizes_mm": [0.5, 2.5],
-        "phase_scan_count": 0,
         "static_frames": 1,
         "rounds": 1,
         "dic": {"subset_px": 21, "step_px": 10, "strain_window": 5}
@@ -614,6 +613,9 @@ async fn a_calibration_over_http_writes_a_card_and_stores_its_model() {
     let record = wait_terminal(&server.url(&format!("/calibrations/{id}"))).await;
     assert_eq!(record["status"], "succeeded", "{record}");
     assert!(record["dataset_id"].is_string(), "{record}");
+    // The record keeps the plan as run: the phase scan's count left unset is stated, none with
+    // a nominal print.
+    assert_eq!(record["request"]["phase_scan_count"], json!(0), "{record}");
     let card: Value = get_json(&server.url(&format!("/calibrations/{id}/card"))).await;
     let model = card["model"].as_str().unwrap();
     assert!(model.starts_with("card-small-bench-"), "{model}");

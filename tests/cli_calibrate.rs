@@ -8,13 +8,12 @@ use crate::common::{daemon, ffdic, ffdic_ok};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 
-/// Two move sizes along ±x and ±y (the stage's map needs both axes), no phase scan, one round,
-/// small subsets: seconds on the small mock bench.
+/// Two move sizes along ±x and ±y (the stage's map needs both axes), no phase scan (the default
+/// with a nominal print), one round, small subsets: seconds on the small mock bench.
 const PLAN: &str = r#"
 name = "cli-card"
 pattern = "a"
 move_sizes_mm = [0.5, 2.5]
-phase_scan_count = 0
 static_frames = 1
 rounds = 1
 seed = 5
@@ -73,6 +72,8 @@ fn calibrate_on_the_bench_prints_the_card_and_stores_its_model() {
         "the card's discrepancy has an SE"
     );
     assert_eq!(doc["plan"]["move_sizes_mm"], serde_json::json!([0.5, 2.5]));
+    // The plan as run: the phase scan's count stated, none with a nominal print.
+    assert_eq!(doc["plan"]["phase_scan_count"], serde_json::json!(0));
     assert!(doc["rounds"]["rounds"].is_array());
 
     // The runs it captured are a dataset in the data folder: their card again, with --dataset.

@@ -57,6 +57,11 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
         }
         None => on_bench(&plan, config.clone(), !args.json)?,
     };
+    // On the bench the plan is reported as run (its record's): the phase scan's count stated.
+    let plan = match &args.dataset {
+        Some(_) => plan,
+        None => plan.with_phase_scan_stated(),
+    };
     if args.json {
         let doc = serde_json::json!({
             "card": card,

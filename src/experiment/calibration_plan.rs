@@ -182,6 +182,13 @@ impl CalibrationPlan {
             })
     }
 
+    /// The plan with its phase scan's count stated ([`Self::phase_scan_steps`]): what a run
+    /// captures, as its record keeps it, so a reader of the record need not know the default.
+    pub fn with_phase_scan_stated(mut self) -> Self {
+        self.phase_scan_count = Some(self.phase_scan_steps());
+        self
+    }
+
     /// [`Self::experiment`] with `moves` in place of the plan's sizes' (an on-bench diagnosis's
     /// designed moves): the plan's target, phase scan, static frames and DIC; every move within
     /// what the DIC tracks.
@@ -322,6 +329,11 @@ mod tests {
             .unwrap()
             .step_series
             .is_empty());
+        // Stated as run: the default resolved, a set count kept.
+        let stated = |p: &CalibrationPlan| p.clone().with_phase_scan_stated().phase_scan_count;
+        assert_eq!(stated(&characterised), Some(DEFAULT_PHASE_SCAN_COUNT));
+        assert_eq!(stated(&CalibrationPlan::default()), Some(0));
+        assert_eq!(stated(&none), Some(0));
     }
 
     #[test]

@@ -23,14 +23,15 @@ function showRecord(r) {
   $("#run-message").textContent = r.message || "";
   const plan = r.request || {};
   const sizes = plan.move_sizes_mm || [];
-  // Unset: four steps with a characterised print, none without (CalibrationPlan::phase_scan_steps).
-  const scan = plan.phase_scan_count ?? (plan.print_characterised ? 4 : 0);
+  // A record states the count it ran (CalibrationPlan::with_phase_scan_stated); null only in
+  // records made before it did.
+  const scan = plan.phase_scan_count;
   clear($("#run-info"), [
     ["name", plan.name || "—"],
     ["target", patternText(plan.pattern)],
     ["move sizes [mm]", sizes.length ? sizes.map((s) => num(s, 4)).join(", ") : "from the field and the DIC's reach"],
     ["print", plan.print_characterised ? "characterised" : "nominal (calibrated to the frames)"],
-    ["phase scan", scan ? `${scan} steps of ${num(plan.phase_scan_step_px ?? 0.25, 3)} px per axis` : "none"],
+    ["phase scan", scan == null ? "not stated" : scan ? `${scan} steps of ${num(plan.phase_scan_step_px ?? 0.25, 3)} px per axis` : "none"],
     ["static frames", String(plan.static_frames ?? "—")],
     ["rounds", String(plan.rounds ?? "—")],
     ["model", plan.model || "—"],

@@ -36,6 +36,8 @@ pub struct CalibrationJob {
 
 impl CalibrationJob {
     pub fn plan(service: &Service, calibration: CalibrationPlan) -> Result<Self, SubmitError> {
+        // The record keeps the plan as run: its phase scan's count stated.
+        let calibration = calibration.with_phase_scan_stated();
         if !(1..=crate::diagnose::MAX_ROUNDS).contains(&calibration.rounds) {
             return Err(SubmitError::Field(crate::experiment::FieldError {
                 field: "rounds".into(),
