@@ -31,7 +31,7 @@ function showRecord(r) {
     ["target", patternText(plan.pattern)],
     ["move sizes [mm]", sizes.length ? sizes.map((s) => num(s, 4)).join(", ") : "from the field and the DIC's reach"],
     ["print", plan.print_characterised ? "characterised" : "nominal (calibrated to the frames)"],
-    ["phase scan", scan == null ? "not stated" : scan ? `${scan} steps of ${num(plan.phase_scan_step_px ?? 0.25, 3)} px per axis` : "none"],
+    ["phase scan", scan == null ? "not stated" : scan ? `${scan} steps of ${num(plan.phase_scan_step_px, 3)} px per axis` : "none"],
     ["static frames", String(plan.static_frames ?? "—")],
     ["rounds", String(plan.rounds ?? "—")],
     ["model", plan.model || "—"],
