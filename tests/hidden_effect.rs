@@ -328,6 +328,7 @@ fn hidden_fill_factor_fine_speckle() {
         edge_softness_mm: 0.01,
         placement: Default::default(),
         profile: Default::default(),
+        min_gap_mm: 0.0,
     })];
     let o = run_with("fill_factor-fine", truth, sp, options(vec![native()], 0.0));
     assert_verdict(&o, "fill_factor");

@@ -192,6 +192,7 @@ mod tests {
             edge_softness_mm: 0.0,
             placement: Default::default(),
             profile: Default::default(),
+            min_gap_mm: 0.0,
         }
     }
 

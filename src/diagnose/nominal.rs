@@ -227,6 +227,7 @@ fn pattern_guess(
                 edge_softness_mm: softness,
                 placement: Placement::default(),
                 profile,
+                min_gap_mm: 0.0,
             },
             "manifest",
             white_dn,
@@ -275,6 +276,7 @@ fn pattern_guess(
             edge_softness_mm,
             placement: Placement::default(),
             profile,
+            min_gap_mm: 0.0,
         },
         if all_missing {
             "estimated"

@@ -10,7 +10,10 @@
 //!   sides carry the same noise, so the raw ratio is compared), and
 //! - the dot's imaged size, so the *shape* of the model's power spectra along x and y matches the
 //!   measured one (χ² of ln(measured/model) per bin about its weighted mean: the level is the
-//!   contrast's business), by Brent's method on σ.
+//!   contrast's business), by Brent's method on σ;
+//! - for hard disks that never touch, the least gap between them, by the same shape
+//!   (`calibrate_scene::fit_gap`): how close the nearest disks come sets DIC's error under
+//!   subsampling.
 //!
 //! Before either, the dots' **placement** ([`crate::model::Placement`]): below the dot-spacing
 //! frequency a print's spectrum is its placement statistics — a jittered grid (one dot per cell,
@@ -83,6 +86,9 @@ pub struct PrintCalibration {
     pub dot_diameter_mm: f64,
     #[serde(default)]
     pub edge_softness_mm: f64,
+    /// The least gap between the dots of a hard-core print, mm (0: they may touch).
+    #[serde(default)]
+    pub min_gap_mm: f64,
 }
 
 /// Where a print's spectrum stops being its placement's and becomes its dots' profile, cycles/px:
@@ -125,6 +131,7 @@ pub fn characterised(run: &Run) -> Option<SpecklePattern> {
         edge_softness_mm,
         placement: Placement::default(),
         profile: p.profile?,
+        min_gap_mm: 0.0,
     })
 }
 

@@ -9,8 +9,8 @@ use crate::image::Image;
 use crate::model::derive_seed;
 use crate::model::effects::user::{rendered_fields, UserField};
 use crate::model::{
-    project_prepared, render_frame, render_frame_read_out, Effects, FrameSpec, Remembered,
-    SensorReadout, TargetDot, TooManyDots,
+    project_prepared, render_frame, render_frame_read_out, Effects, FrameSpec, Placement,
+    Remembered, SensorReadout, TargetDot, TooManyDots,
 };
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -105,7 +105,13 @@ pub fn reference_crop(
         pattern,
     };
     REFERENCE_CROPS.get_or(key, || {
-        let scene = Scene::of_patterns(nominal, effects, manifest, seed, &|i| i == pattern)?;
+        let scene = Scene::of_patterns(
+            nominal,
+            effects,
+            manifest,
+            seed,
+            (&|i| i == pattern, Some(STATS_CROP_PX)),
+        )?;
         Ok(Arc::new(scene.render(
             pattern,
             Shot::REFERENCE,
@@ -135,21 +141,36 @@ impl Scene {
         manifest: &Manifest,
         seed: u64,
     ) -> Result<Self, TooManyDots> {
-        Self::of_patterns(nominal, model, manifest, seed, &|_| true)
+        Self::of_patterns(nominal, model, manifest, seed, (&|_| true, None))
     }
 
     /// [`Scene::new`] holding the dots of the patterns `wanted` names only: a print's
     /// calibration renders one pattern some fifty times, and laying out the others each time
-    /// was a fifth of a comparison.
+    /// was a fifth of a comparison. With `crop` (a centred crop's side, px, for its reference
+    /// shot only), a hard-core print is laid out over that crop alone: its sequential
+    /// adsorption costs more the nearer the print is to jamming, and over the whole target
+    /// (the paper's field plus a 5 mm move: some 76,000 dots of print b) at each of the
+    /// calibration's trial sizes and gaps it was 8.7 % of a diagnosis round's profile. The crop's dots
+    /// are another realisation of the same print, as every seed's are.
     pub fn of_patterns(
         nominal: &Nominal,
         model: &Effects,
         manifest: &Manifest,
         seed: u64,
-        wanted: &dyn Fn(usize) -> bool,
+        (wanted, crop): (&dyn Fn(usize) -> bool, Option<usize>),
     ) -> Result<Self, TooManyDots> {
         let travel = travel_mm(nominal, manifest);
         let camera = nominal.camera(0);
+        let whole = camera.field_mm(travel + 2.0);
+        // The crop's field with room for a dot's reach and as much again (the render keeps the
+        // dots within 2 mm, their reach and 5 % of the crop of it).
+        let crop_camera = crop.map(|side| {
+            let (_, _, w, h) = centred_crop(nominal.width, nominal.height, side);
+            let mut c = nominal.camera(0);
+            c.width = w;
+            c.height = h;
+            c
+        });
         let dots = nominal
             .patterns
             .iter()
@@ -158,10 +179,29 @@ impl Scene {
                 if !wanted(i) {
                     return Ok(Vec::new());
                 }
-                p.pattern.dots(
-                    camera.field_mm(travel + 2.0),
-                    derive_seed(seed, i as u64, 0xD075),
-                )
+                let field = match (&crop_camera, p.pattern.placement) {
+                    (Some(c), Placement::HardCore) => {
+                        let reach = p.pattern.shape().reach_mm();
+                        let (x0, y0, x1, y1) = c.field_mm(2.0 + reach);
+                        // Sides of whole spacings: a layout holds one dot per spacing² of
+                        // its field rounded up, which on a crop's field would add 1–2 % of dots.
+                        let s = p.pattern.dot_spacing_mm;
+                        let whole = |lo: f64, hi: f64| {
+                            let pad = 0.1 * (hi - lo);
+                            let n = ((hi - lo + 2.0 * pad) / s).ceil();
+                            // A hair under n spacings, so rounding up gives n.
+                            let half = 0.5 * n * s * (1.0 - 1e-9);
+                            let mid = 0.5 * (lo + hi);
+                            (mid - half, mid + half)
+                        };
+                        let ((x0, x1), (y0, y1)) = (whole(x0, x1), whole(y0, y1));
+                        (x0, y0, x1, y1)
+                    }
+                    (_, Placement::HardCore | Placement::JitteredGrid | Placement::Poisson) => {
+                        whole
+                    }
+                };
+                p.pattern.dots(field, derive_seed(seed, i as u64, 0xD075))
             })
             .collect::<Result<_, _>>()?;
         Ok(Self {

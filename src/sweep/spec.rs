@@ -120,6 +120,7 @@ impl PrintAxis {
                     edge_softness_mm: 0.0,
                     placement: Default::default(),
                     profile: Default::default(),
+                    min_gap_mm: 0.0,
                 }
             }
             PrintAxis::Pattern(label) => {

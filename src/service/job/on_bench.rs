@@ -144,6 +144,7 @@ fn target_pattern(manifest: &Manifest) -> Result<PatternSpec, FieldError> {
         edge_softness_mm: info.edge_softness_mm.unwrap_or(0.0),
         placement: info.placement.unwrap_or_default(),
         profile: info.profile.unwrap_or_default(),
+        min_gap_mm: 0.0,
     }))
 }
 
