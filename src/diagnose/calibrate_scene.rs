@@ -566,7 +566,9 @@ fn search_size(
         chi2_end = chi2_best,
         "a print size searched"
     );
-    let size = if chi2_best <= chi2_current {
+    // Strictly better: where the χ² is flat (a disk's softness below what its rendering
+    // resolves, `model::disk`) a tie is no reason to move, nor to run another round.
+    let size = if chi2_best < chi2_current {
         best
     } else {
         current

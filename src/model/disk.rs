@@ -11,7 +11,8 @@
 //! one-dimensional integrals, each a difference of the integrated normal CDF
 //! (G(z) = zΦ(z) + φ(z)): the disk is a sum of separable terms, one per strip. Strips are σ
 //! high, at least 1/8 px, since the outline's error then lies at frequencies the blur removes
-//! (its transfer function exp(−2π²σ²f²) at f = 1/σ is 2.7e-9).
+//! (its transfer function exp(−2π²σ²f²) at f = 1/σ is 2.7e-9). A disk blurred by less than
+//! [`HARD_BELOW_BLUR_PX`] is rendered hard: there the blur matters less than the strips' error.
 
 use super::normal::{integrated_cdf, NORMAL_RANGE};
 use super::speckle::{Dot, Footprint, Weights};
@@ -42,6 +43,13 @@ pub struct DiskDot {
 const FINEST_STRIP_PX: f64 = 0.125;
 /// The most strips one disk is cut into (a 32 px disk at the finest strip).
 const MAX_STRIPS: usize = 256;
+
+/// A blur below which a disk is rendered hard ([`DiskDot::hard_coverage`], exact): a blur of σ
+/// moves at most ≈ σ/√(2π) = 0.4σ of an edge's depth across a pixel border, which below this is
+/// under the 0.3 % of the depth the strips' outline is off by in an edge pixel; and the strips
+/// cost some 50 terms per disk of the paper's print b, where a print's calibration settles at
+/// softnesses of a few thousandths of a pixel as often as at none.
+pub(crate) const HARD_BELOW_BLUR_PX: f64 = 0.0075;
 
 impl DiskDot {
     /// The strips' boundaries as fractions of the radius in y, from −1 to 1, and each strip's
@@ -354,7 +362,7 @@ impl Dot for DiskDot {
     fn footprint(&self, size: (usize, usize), aperture: (f64, f64)) -> Option<Footprint> {
         let (c_lo, c_hi, r_lo, r_hi) = Footprint::span(self, size, aperture)?;
         let (cols, rows) = ((c_lo, c_hi), (r_lo, r_hi));
-        let values = if self.blur_x_px <= 0.0 && self.blur_y_px <= 0.0 {
+        let values = if self.blur_x_px < HARD_BELOW_BLUR_PX && self.blur_y_px < HARD_BELOW_BLUR_PX {
             self.hard_coverage(cols, rows, aperture)
         } else {
             self.blurred_coverage(cols, rows, aperture)
@@ -510,6 +518,35 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Below [`HARD_BELOW_BLUR_PX`] a disk is its hard self, and the strips at that blur are
+    /// within 0.4σ of the depth and the strips' own error of it in every pixel.
+    #[test]
+    fn a_blur_below_the_threshold_renders_the_hard_disk() {
+        let hard = render_dots(21, 21, &[disk(10.3, 9.62, 3.1, 0.0)], 0.0, (1.0, 1.0));
+        let below = render_dots(
+            21,
+            21,
+            &[disk(10.3, 9.62, 3.1, 0.99 * HARD_BELOW_BLUR_PX)],
+            0.0,
+            (1.0, 1.0),
+        );
+        assert_eq!(hard.data(), below.data());
+        let at = render_dots(
+            21,
+            21,
+            &[disk(10.3, 9.62, 3.1, HARD_BELOW_BLUR_PX)],
+            0.0,
+            (1.0, 1.0),
+        );
+        let worst = hard
+            .data()
+            .iter()
+            .zip(at.data())
+            .map(|(h, a)| (h - a).abs() as f64)
+            .fold(0.0, f64::max);
+        assert!(worst < 0.4 * HARD_BELOW_BLUR_PX * 100.0 + 0.3, "{worst}");
     }
 
     /// A disk much wider than its blur is flat inside at its depth, and the profile across its
