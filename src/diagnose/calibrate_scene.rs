@@ -378,8 +378,8 @@ fn contrast_of(img: &Image) -> f64 {
 
 /// Fits pattern `pi`'s print with its profile: up to `rounds` rounds of contrast, then size — a
 /// Gaussian's σ, or a disk's gap under a hard core (where `gap` says), its diameter and then
-/// its edge softness — by Brent's method on the
-/// spectral shape's χ², which it returns for the fitted print. The rounds are a coordinate
+/// its edge softness — by Brent's method on the spectral shape's χ², which it returns for the
+/// fitted print. The rounds are a coordinate
 /// descent: one whose searches all keep their starting size has converged (the next would search
 /// the same sizes again under a contrast matched again to the same print), and the rest are left
 /// out — on a disk print they cost 7–11 renderings per search and found nothing.
@@ -486,8 +486,9 @@ enum Gap {
 /// 35–72 over its 24 bins and one with the gap fitted at 9.5–48.5, lower in all 16
 /// comparisons; and the one without it overstated the random error of v under ff50 by 19 %
 /// (`docs/model-and-diagnosis.md`). The gap found is an effective one (the generator's
-/// 0.012 mm read 0.001–0.032 mm): the model's adsorption is not the generator's dart throwing. Up to the distance
-/// the hard core can keep (0.8 spacing). Whether the gap moved; none for another placement.
+/// 0.012 mm read 0.001–0.032 mm): the model's adsorption is not the generator's dart throwing.
+/// Up to the distance the hard core can keep (0.8 spacing). Whether the gap moved; none for
+/// another placement.
 fn fit_gap(
     nominal: &mut Nominal,
     pi: usize,

@@ -150,8 +150,8 @@ impl Scene {
     /// shot only), a hard-core print is laid out over that crop alone: its sequential
     /// adsorption costs more the nearer the print is to jamming, and over the whole target
     /// (the paper's field plus a 5 mm move: some 76,000 dots of print b) at each of the
-    /// calibration's trial sizes and gaps it was 8.7 % of a diagnosis round's profile. The crop's dots
-    /// are another realisation of the same print, as every seed's are.
+    /// calibration's trial sizes and gaps it was 8.7 % of a diagnosis round's profile. The
+    /// crop's dots are another realisation of the same print, as every seed's are.
     pub fn of_patterns(
         nominal: &Nominal,
         model: &Effects,

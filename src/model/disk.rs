@@ -47,9 +47,9 @@ const MAX_STRIPS: usize = 256;
 /// A blur below which a disk is rendered hard ([`DiskDot::hard_coverage`], exact): a blur of σ
 /// moves at most ≈ σ/√(2π) = 0.4σ of an edge's depth across a pixel border, which below this is
 /// under the 0.3 % of the depth the strips' outline is off by in an edge pixel; and the strips
-/// cost some 50 terms per disk of the paper's print b, where a print's calibration settles at
-/// softnesses of a few thousandths of a pixel as often as at none.
-pub(crate) const HARD_BELOW_BLUR_PX: f64 = 0.0075;
+/// cost some 50 terms per disk of the paper's print b, whose calibration can settle at a
+/// softness of a few thousandths of a pixel.
+const HARD_BELOW_BLUR_PX: f64 = 0.0075;
 
 impl DiskDot {
     /// The strips' boundaries as fractions of the radius in y, from −1 to 1, and each strip's
