@@ -13,7 +13,7 @@
 //! shifted by the run's landing offset, all fitted to the measured mean displacements
 //! ([`super::stage`]).
 
-use super::image_stats::{noise_variance, percentile};
+use super::image_stats::{centred_crop, noise_variance, percentile};
 use super::print::{
     characterised, stated_placement, stated_profile, PrintCalibration, PrintKnowledge,
 };
@@ -143,6 +143,17 @@ impl Nominal {
             exposure_level: white / self.full_scale_dn(),
             principal_dx_px: 0.0,
             principal_dy_px: 0.0,
+        }
+    }
+
+    /// [`Nominal::camera`] reading only the centred window of `side` px that [`centred_crop`]
+    /// cuts (its optical axis at the window's centre, as the full frame's is).
+    pub fn crop_camera(&self, pattern: usize, side: usize) -> Camera {
+        let (_, _, width, height) = centred_crop(self.width, self.height, side);
+        Camera {
+            width,
+            height,
+            ..self.camera(pattern)
         }
     }
 

@@ -2,7 +2,7 @@
 //! effects and every pattern's dots (laid out once, from a fixed seed) and renders any exposure
 //! of the experiment — a [`Shot`] — whole, as a centred crop, or read out in a hardware scheme.
 
-use super::image_stats::{centred_crop, STATS_CROP_PX};
+use super::image_stats::STATS_CROP_PX;
 use super::nominal::Nominal;
 use crate::dataset::Manifest;
 use crate::image::Image;
@@ -164,13 +164,7 @@ impl Scene {
         let whole = camera.field_mm(travel + 2.0);
         // The crop's field with room for a dot's reach and as much again (the render keeps the
         // dots within 2 mm, their reach and 5 % of the crop of it).
-        let crop_camera = crop.map(|side| {
-            let (_, _, w, h) = centred_crop(nominal.width, nominal.height, side);
-            let mut c = nominal.camera(0);
-            c.width = w;
-            c.height = h;
-            c
-        });
+        let crop_camera = crop.map(|side| nominal.crop_camera(0, side));
         let dots = nominal
             .patterns
             .iter()
@@ -186,7 +180,7 @@ impl Scene {
                         // Sides of whole spacings: a layout holds one dot per spacing² of
                         // its field rounded up, which on a crop's field would add 1–2 % of dots.
                         let s = p.pattern.dot_spacing_mm;
-                        let whole = |lo: f64, hi: f64| {
+                        let in_whole_spacings = |lo: f64, hi: f64| {
                             let pad = 0.1 * (hi - lo);
                             let n = ((hi - lo + 2.0 * pad) / s).ceil();
                             // A hair under n spacings, so rounding up gives n.
@@ -194,7 +188,8 @@ impl Scene {
                             let mid = 0.5 * (lo + hi);
                             (mid - half, mid + half)
                         };
-                        let ((x0, x1), (y0, y1)) = (whole(x0, x1), whole(y0, y1));
+                        let ((x0, x1), (y0, y1)) =
+                            (in_whole_spacings(x0, x1), in_whole_spacings(y0, y1));
                         (x0, y0, x1, y1)
                     }
                     (_, Placement::HardCore | Placement::JitteredGrid | Placement::Poisson) => {
@@ -251,10 +246,8 @@ impl Scene {
         let mut camera = n.camera(pattern);
         let mut effects = self.effects.clone();
         if let Some(side) = crop {
-            let (_, _, w, h) = centred_crop(n.width, n.height, side);
             let full_r0 = camera.half_diagonal_px();
-            camera.width = w;
-            camera.height = h;
+            camera = n.crop_camera(pattern, side);
             let crop_r0 = camera.half_diagonal_px();
             if let Some(d) = effects.lens_distortion.as_mut() {
                 if d.norm_radius_px <= 0.0 {
