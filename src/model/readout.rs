@@ -132,6 +132,7 @@ impl SensorChain {
 
     /// One pixel of irradiance `dn` read out: shot noise on its electrons (clipped at the full
     /// well), read noise, back to DN (not yet quantised).
+    #[inline(always)]
     pub fn read_pixel(&self, dn: f64, rng: &mut ChaCha8Rng) -> f64 {
         match self.noise {
             Some(n) => {
@@ -142,6 +143,7 @@ impl SensorChain {
         }
     }
 
+    #[inline(always)]
     fn read_electrons(&self, electrons: f64, gain: f64, read_e: f64, rng: &mut ChaCha8Rng) -> f64 {
         let shot = super::shot_noise::poisson_count(electrons, rng);
         let z: f64 = StandardNormal.sample(rng);
@@ -150,6 +152,7 @@ impl SensorChain {
     }
 
     /// The ADC: rounds and clips to its range, when the model has one.
+    #[inline]
     pub fn quantise(&self, dn: f64) -> f64 {
         match self.full_scale {
             Some(full) => dn.round().clamp(0.0, full),

@@ -387,6 +387,7 @@ impl<'a> Radiometry<'a> {
 
     /// Pixel (`col`, `row`) of irradiance `px`; `fpn` is its row's fixed-pattern stream, read
     /// left to right.
+    #[inline]
     fn pixel(&self, col: usize, row: usize, px: f32, fpn: &mut ChaCha8Rng) -> f64 {
         // Irradiance cannot be negative where dots overlap.
         let mut v = (px as f64).max(0.0);
@@ -437,13 +438,48 @@ fn apply_sensor(
             if stop() {
                 return;
             }
-            let mut rng = SensorChain::row_rng(frame.seed, row);
-            let mut fpn = Radiometry::fixed_pattern_rng(row);
-            for (col, px) in line.iter_mut().enumerate() {
-                let v = radiometry.pixel(col, row, *px, &mut fpn);
-                *px = chain.quantise(chain.read_pixel(v, &mut rng)) as f32;
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("sse4.1") {
+                // SAFETY: the CPU has SSE4.1, just checked.
+                unsafe { sense_row_sse41(&radiometry, &chain, frame.seed, row, line) };
+                return;
             }
+            sense_row(&radiometry, &chain, frame.seed, row, line);
         });
+}
+
+/// One row of irradiance through radiometry, the sensor's noise (its stream seeded by `seed` and
+/// the row) and the ADC.
+#[inline(always)]
+fn sense_row(
+    radiometry: &Radiometry,
+    chain: &SensorChain,
+    seed: u64,
+    row: usize,
+    line: &mut [f32],
+) {
+    let mut rng = SensorChain::row_rng(seed, row);
+    let mut fpn = Radiometry::fixed_pattern_rng(row);
+    for (col, px) in line.iter_mut().enumerate() {
+        let v = radiometry.pixel(col, row, *px, &mut fpn);
+        *px = chain.quantise(chain.read_pixel(v, &mut rng)) as f32;
+    }
+}
+
+/// [`sense_row`] compiled for SSE4.1, whose rounding instruction makes the ADC's `round` and
+/// the Poisson sampler's `floor` a few instructions where x86-64's baseline calls libm for each
+/// (`round` and `floor` were 3.1 % and 1.3 % of a diagnosis round's profile). Both round exactly
+/// either way: the frame is the same to the bit (`model::render` tests compare it).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "sse4.1")]
+fn sense_row_sse41(
+    radiometry: &Radiometry,
+    chain: &SensorChain,
+    seed: u64,
+    row: usize,
+    line: &mut [f32],
+) {
+    sense_row(radiometry, chain, seed, row, line);
 }
 
 /// Renders one frame as the sensor reads it out in `readout` (hardware binning or decimation):
@@ -480,4 +516,63 @@ pub fn render_frame_read_out(
         &SensorChain::new(effects),
         frame.seed,
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::effects::{FixedPattern, Quantization, SensorNoise, Vignetting};
+
+    /// The row compiled for SSE4.1 reads out the same bits as the baseline's, over irradiances
+    /// from the dark (the Poisson sampler's inversion below a mean of 10 electrons) through PTRS
+    /// to the clipped full well, with every per-pixel effect of the chain on.
+    #[test]
+    fn the_sse41_row_reads_out_the_same_bits() {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("sse4.1") {
+            let camera = Camera {
+                width: 4096,
+                height: 3,
+                scale_px_per_mm: 20.0,
+                exposure_level: 0.5,
+                principal_dx_px: 0.0,
+                principal_dy_px: 0.0,
+            };
+            let effects = Effects {
+                sensor_noise: Some(SensorNoise {
+                    full_well_e: 30_000.0,
+                    read_noise_e: 3.5,
+                    gain: 0.4,
+                }),
+                quantization: Some(Quantization { bits: 16 }),
+                fixed_pattern: Some(FixedPattern {
+                    prnu: 0.01,
+                    dsnu: 2.0,
+                }),
+                vignetting: Some(Vignetting { v: 0.2 }),
+                ..Effects::default()
+            };
+            let frame = FrameSpec {
+                stage_dx_mm: 0.0,
+                stage_dy_mm: 0.0,
+                moved: false,
+                seed: 97,
+            };
+            let radiometry = Radiometry::new(&camera, &effects, &frame);
+            let chain = SensorChain::new(&effects);
+            let irradiance: Vec<f32> = (0..camera.width)
+                .map(|c| (c as f32 * 0.37).powf(1.6) - 5.0)
+                .collect();
+            for row in 0..camera.height {
+                let mut baseline = irradiance.clone();
+                let mut sse41 = irradiance.clone();
+                sense_row(&radiometry, &chain, frame.seed, row, &mut baseline);
+                // SAFETY: the CPU has SSE4.1, checked above.
+                unsafe { sense_row_sse41(&radiometry, &chain, frame.seed, row, &mut sse41) };
+                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&baseline), bits(&sse41), "row {row}");
+                assert!(baseline.contains(&65535.0) && baseline.contains(&0.0));
+            }
+        }
+    }
 }

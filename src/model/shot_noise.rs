@@ -22,6 +22,7 @@ use rand::Rng;
 const PTRS_MIN_MEAN: f64 = 10.0;
 
 /// One Poisson count of mean `mean` (≥ 0; a non-finite or non-positive mean gives 0), as a float.
+#[inline(always)]
 pub fn poisson_count<R: Rng + ?Sized>(mean: f64, rng: &mut R) -> f64 {
     if !(mean > 0.0) || !mean.is_finite() {
         0.0
@@ -32,6 +33,7 @@ pub fn poisson_count<R: Rng + ?Sized>(mean: f64, rng: &mut R) -> f64 {
     }
 }
 
+#[inline]
 fn by_inversion<R: Rng + ?Sized>(mean: f64, rng: &mut R) -> f64 {
     let u: f64 = rng.gen();
     let mut k = 0.0;
@@ -47,6 +49,7 @@ fn by_inversion<R: Rng + ?Sized>(mean: f64, rng: &mut R) -> f64 {
     k
 }
 
+#[inline(always)]
 fn by_transformed_rejection<R: Rng + ?Sized>(mean: f64, rng: &mut R) -> f64 {
     // Hörmann (1993), algorithm PTRS, with his constants.
     let sqrt_mean = mean.sqrt();
