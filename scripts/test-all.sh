@@ -13,9 +13,10 @@ export CARGO_INCREMENTAL=0
 # line), and without them the library and its unit-test harness build with 14 % less CPU each
 # (135 and 145 s against 161 and 165 s, interleaved, after a touch).
 export CARGO_PROFILE_TEST_DEBUG=false
-# The integration tests' allocator (mimalloc, tests/integration.rs) keeps freed memory ten
-# seconds before it goes back to the kernel, as the binary sets it (src/main.rs says why).
-export MIMALLOC_ARENA_PURGE_MULT=1000
+# The integration tests' allocator (mimalloc, tests/integration.rs) keeps freed memory a minute
+# before it goes back to the kernel (mimalloc 3's purge delay, 1 s, times 60), as the binary
+# sets it (src/main.rs says why).
+export MIMALLOC_ARENA_PURGE_MULT=60
 
 # Each phase says when it starts (seconds since the script began), and the end prints the time of
 # every phase and the slowest ten tests: where the suite's time goes, in every CI log.

@@ -50,18 +50,29 @@ enum Command {
 #[global_allocator]
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
-/// mimalloc hands an arena's freed memory back to the kernel 100 ms after it is freed (its
-/// purge delay, 10 ms, times the arenas' multiplier, 10). A diagnosis frees a frame's buffers and
-/// allocates the next ones further apart than that, and faulted them back in page by page: on
-/// the paper-size example ≈ 110,000 page faults and 1.3 s of system time a round, 0.96 ± 0.20 s
-/// of its wall time (four interleaved pairs, docs/performance.md). A multiplier of 1000 keeps
-/// freed memory for ten seconds: the next frame takes it, and a finished job still gives it back.
+/// mimalloc hands an arena's freed memory back to the kernel a purge delay after it is freed
+/// (mimalloc 3's options: `purge_delay` 1000 ms times `arena_purge_mult` 1, one second). A
+/// diagnosis frees a frame's buffers and allocates the next ones further apart than that, and
+/// faulted them back in page by page: on the paper-size example ≈ 110,000 page faults and 1.3 s
+/// of system time a round, 0.96 ± 0.20 s of its wall time (four interleaved pairs,
+/// docs/performance.md). The arenas' multiplier is set so that freed memory is kept a minute:
+/// the next frame takes it, and the next round's (with ten seconds, a paper-size
+/// `diagnose --rounds 3` faulted 5,000–21,000 pages back in, +1.0 ± 0.2 s of its 15 s), and a
+/// finished job, or a daemon's, still gives it back.
 fn keep_freed_memory() {
-    // `mi_option_arena_purge_mult` in mimalloc 3's mimalloc.h (libmimalloc-sys 0.1.49 builds
-    // mimalloc 3 and names no constant for it).
+    // `mi_option_purge_delay` and `mi_option_arena_purge_mult` in mimalloc 3's mimalloc.h
+    // (libmimalloc-sys 0.1.49 builds mimalloc 3 and names no constant for either).
+    const PURGE_DELAY: libmimalloc_sys::mi_option_t = 15;
     const ARENA_PURGE_MULT: libmimalloc_sys::mi_option_t = 24;
-    // SAFETY: sets one of mimalloc's options, which it reads when it next purges.
-    unsafe { libmimalloc_sys::mi_option_set(ARENA_PURGE_MULT, 1000) };
+    const KEEP_FREED_MS: std::os::raw::c_long = 60_000;
+    // SAFETY: reads and sets two of mimalloc's options, which it reads when it next purges.
+    unsafe {
+        let delay_ms = libmimalloc_sys::mi_option_get(PURGE_DELAY);
+        // A delay of 0 purges at once and a negative one never: neither is multiplied.
+        if delay_ms > 0 {
+            libmimalloc_sys::mi_option_set(ARENA_PURGE_MULT, (KEEP_FREED_MS / delay_ms).max(1));
+        }
+    }
 }
 
 fn main() {

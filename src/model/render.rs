@@ -467,9 +467,10 @@ fn sense_row(
 }
 
 /// [`sense_row`] compiled for SSE4.1, whose rounding instruction makes the ADC's `round` and
-/// the Poisson sampler's `floor` a few instructions where x86-64's baseline calls libm for each
-/// (`round` and `floor` were 3.1 % and 1.3 % of a diagnosis round's profile). Both round exactly
-/// either way: the frame is the same to the bit (`model::render` tests compare it).
+/// the Poisson sampler's `floor` a few instructions where x86-64's baseline calls a software
+/// rounding (`compiler_builtins`' `round` and `floor` were 3.1 % and 1.3 % of a diagnosis
+/// round's profile). Both round exactly either way: the frame is the same to the bit (a test
+/// below compares the two rows).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "sse4.1")]
 fn sense_row_sse41(
