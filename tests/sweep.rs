@@ -46,10 +46,20 @@ fn task_ids(plan: &serde_json::Value) -> Vec<String> {
         .collect()
 }
 
+/// The results written whole, not counting a result's hidden temporary file
+/// (`atomic_write::write_atomically`'s `.NAME.tmp`, which a kill mid-write leaves behind).
 fn results(dir: &Path) -> usize {
+    result_files(dir).len()
+}
+
+fn result_files(dir: &Path) -> Vec<std::path::PathBuf> {
     std::fs::read_dir(dir.join("results"))
-        .map(|d| d.count())
-        .unwrap_or(0)
+        .map(|d| {
+            d.map(|e| e.unwrap().path())
+                .filter(|p| !p.file_name().unwrap().to_string_lossy().starts_with('.'))
+                .collect()
+        })
+        .unwrap_or_default()
 }
 
 #[test]
@@ -131,9 +141,10 @@ fn a_killed_and_sharded_sweep_merges_to_the_map_of_one_local_run() {
         after_kill >= 3,
         "the run wrote results before it was killed"
     );
-    // No partial file: every result present parses (written atomically).
-    for entry in std::fs::read_dir(split.join("results")).unwrap() {
-        let bytes = std::fs::read(entry.unwrap().path()).unwrap();
+    // No partial file under a result's name: every result present parses (written atomically;
+    // the kill may leave a hidden temporary file, which is not a result).
+    for path in result_files(&split) {
+        let bytes = std::fs::read(&path).unwrap();
         serde_json::from_slice::<serde_json::Value>(&bytes).expect("a whole result");
     }
     if after_kill < total {
