@@ -411,7 +411,7 @@ fn rms_beside_line(frames: &[Vec<f32>], clean: &[f32]) -> f64 {
     (ss / n).sqrt()
 }
 
-/// An effect that only adds noise ([`EffectId::only_adds_noise`]) leaves the light as it was:
+/// An effect that only adds noise (of those [`EffectId::keeps_the_print`] holds) leaves the light as it was:
 /// the mean of its frames over seeds is the noiseless frame up to a gain and an offset (the
 /// sensor's DN scale), with a residual that falls as 1/√seeds. That is what lets a noise
 /// candidate's comparison keep the calibrated print (`SceneFrom::Rematch`). A blur changes the
@@ -445,8 +445,8 @@ fn effects_that_only_add_noise_leave_the_light_as_it_was() {
         }),
         ..Effects::default()
     };
-    assert!(noise.enabled().iter().all(|e| e.only_adds_noise()));
-    assert_eq!(noise.reference_light(), Effects::default());
+    assert!(noise.enabled().iter().all(|e| e.keeps_the_print()));
+    assert_eq!(noise.print_image(), Effects::default());
     assert_ne!(noise.reference_part(), Effects::default());
     let residual = |effects: &Effects, seeds: u64| {
         let frames: Vec<Vec<f32>> = (0..seeds).map(|s| render(effects, 100 + s)).collect();
@@ -461,10 +461,10 @@ fn effects_that_only_add_noise_leave_the_light_as_it_was() {
         psf_blur: Some(PsfBlur { sigma_px: 1.0 }),
         ..noise.clone()
     };
-    assert_ne!(blurred.reference_light(), Effects::default());
+    assert_ne!(blurred.print_image(), Effects::default());
     let (one, sixteen) = (residual(&blurred, 1), residual(&blurred, 16));
     assert!(sixteen / one > 0.5, "{sixteen} / {one}");
-    assert!(!EffectId::PsfBlur.only_adds_noise());
+    assert!(!EffectId::PsfBlur.keeps_the_print());
 }
 
 /// A user's intensity effect multiplies the moved frame's irradiance by 1 + its expression at

@@ -149,6 +149,13 @@ fn rematch_levels(
         match_contrast(meas, nominal, model, pi, seed)?;
         record_calibration(meas, nominal, model, pi, seed, stated)?;
         match_white(meas, nominal, model, pi, seed)?;
+        if tracing::enabled!(tracing::Level::DEBUG) {
+            // How the kept print's spectral shape fits under this model (the refit's searches
+            // log theirs): one more spectrum of a remembered crop.
+            let crop = reference_crop(meas, nominal, model, pi, seed)?;
+            let chi2 = spectral_shape_chi2(&meas.reference_stats[pi], &crop);
+            tracing::debug!(pattern = pi, chi2, "a print kept, its levels matched again");
+        }
     }
     Ok(())
 }
@@ -170,10 +177,10 @@ pub enum SceneFrom<'a> {
     Refit(&'a Nominal),
     /// The prints of a calibrated scene taken as they are (placement, profile, sizes), the white
     /// levels and contrasts matched again: a model whose reference frame differs from that
-    /// scene's only in the noise the sensor adds ([`crate::model::Effects::reference_light`]).
-    /// The noise changes the crop's variance, not the print: refitted, the print's sizes moved
-    /// only by the refit's own path, and the refit was most of a noise candidate's time (on
-    /// the paper-size example 5.5 s of a 25 s round).
+    /// scene's only in the noise the sensor adds or a smooth shading
+    /// ([`crate::model::Effects::print_image`]). The noise changes the crop's variance, not the
+    /// print: refitted, the print's sizes moved only by the refit's own path, and the refit was
+    /// most of a noise candidate's time (on the paper-size example 5.5 s of a 25 s round).
     Rematch(&'a Nominal),
     /// Taken as they are: a model with the same image chain, or one that renders the same
     /// reference frame ([`crate::model::Effects::reference_part`]).

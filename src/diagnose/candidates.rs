@@ -326,11 +326,12 @@ pub(super) fn fit_one_candidate(
         // change) keeps the print calibrated against it: refitted, the print would differ only
         // by the refit's own path, and it cost most of such a candidate's time (a disk print:
         // some 90 renderings of its crop).
-        // A noise candidate (shot and read noise, a fixed pattern) leaves the light as it
-        // was: the print is kept, its levels matched again.
+        // A noise candidate (shot and read noise, a fixed pattern) or a vignetting leaves the
+        // print's image as it was (`EffectId::keeps_the_print`): the print is kept, its levels
+        // matched again.
         let scene = if with.effects.reference_part() == model.effects.reference_part() {
             SceneFrom::Reuse(&before.model.nominal)
-        } else if with.effects.reference_light() == model.effects.reference_light() {
+        } else if with.effects.print_image() == model.effects.print_image() {
             SceneFrom::Rematch(&before.model.nominal)
         } else {
             SceneFrom::Refit(&before.model.nominal)

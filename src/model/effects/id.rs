@@ -90,16 +90,20 @@ impl EffectId {
         }
     }
 
-    /// Whether the effect only adds noise to what the sensor reads out — the shot and read
-    /// noise, a fixed pattern, the ADC's steps — and leaves the light that reaches it as it was:
-    /// a print calibrated under one noise is the same print under another, its white level and
-    /// contrast matched again ([`super::Effects::reference_light`]).
-    pub fn only_adds_noise(self) -> bool {
+    /// Whether the effect leaves the print's image at the scale of its dots as it was, so that a
+    /// print calibrated without it holds with it, its white level and contrast matched again
+    /// ([`super::Effects::print_image`]): noise the sensor adds to what it reads out (the shot
+    /// and read noise, a fixed pattern, the ADC's steps), or a shading smooth over the field
+    /// (vignetting: a fall of a few per cent from the centre to the corners, under which each
+    /// dot's neighbourhood is lit evenly). A print's sizes are read from the spectral shape of
+    /// its reference crop (`diagnose::print`: each line's spectrum with its own mean removed,
+    /// against the crop's level), which a smooth shading leaves but for its lowest frequencies.
+    pub fn keeps_the_print(self) -> bool {
         use EffectId::*;
         match self {
-            SensorNoise | FixedPattern | Quantization => true,
+            SensorNoise | FixedPattern | Quantization | Vignetting => true,
             StageMisalignment | StageError | Rotation | Scale | LensDistortion | TargetTilt
-            | PsfBlur | FillFactor | Vignetting | IlluminationChange | MotionBlur => false,
+            | PsfBlur | FillFactor | IlluminationChange | MotionBlur => false,
         }
     }
 

@@ -138,11 +138,11 @@ impl Effects {
         self.part(|id| !id.leaves_the_reference())
     }
 
-    /// The reference part ([`Effects::reference_part`]) without the effects that only add
-    /// noise ([`EffectId::only_adds_noise`]): two models with the same reference light image the
-    /// print alike and differ at most in the noise and the level the sensor reads out.
-    pub fn reference_light(&self) -> Effects {
-        self.part(|id| !id.leaves_the_reference() && !id.only_adds_noise())
+    /// The reference part ([`Effects::reference_part`]) without the effects that keep the print
+    /// ([`EffectId::keeps_the_print`]): two models with the same print image see the print
+    /// alike and differ at most in the noise, the shading and the level the sensor reads out.
+    pub fn print_image(&self) -> Effects {
+        self.part(|id| !id.leaves_the_reference() && !id.keeps_the_print())
     }
 
     /// The catalogue effects `keep` names, user effects left out.
