@@ -161,7 +161,7 @@ pub fn sigma_from_mtf(pairs: &[[f64; 2]]) -> Option<f64> {
 
 /// χ² of the spectral shape: ln(measured/model) per bin about its weighted mean.
 pub fn spectral_shape_chi2(measured: &FrameStats, model: &Image) -> f64 {
-    spectral_shape_chi2_below(measured, model, f64::INFINITY)
+    spectral_shape_chi2_below(measured, model, f64::INFINITY).0
 }
 
 /// How many spectral bins [`spectral_shape_chi2`] can compare for this measured frame.
@@ -170,8 +170,8 @@ pub fn spectral_shape_bins(measured: &FrameStats) -> usize {
     used(&measured.psd_x) + used(&measured.psd_y)
 }
 
-/// [`spectral_shape_chi2`] over the bins below `f_max` cycles/px.
-pub fn spectral_shape_chi2_below(measured: &FrameStats, model: &Image, f_max: f64) -> f64 {
+/// [`spectral_shape_chi2`] over the bins below `f_max` cycles/px, and how many bins it compared.
+pub fn spectral_shape_chi2_below(measured: &FrameStats, model: &Image, f_max: f64) -> (f64, usize) {
     let pairs = |m: &[PsdBin], o: Vec<PsdBin>| -> Vec<(f64, f64)> {
         m.iter()
             .zip(o)
@@ -187,10 +187,11 @@ pub fn spectral_shape_chi2_below(measured: &FrameStats, model: &Image, f_max: f6
     all.extend(pairs(&measured.psd_y, psd(model, false)));
     let w: f64 = all.iter().map(|(_, se)| 1.0 / (se * se)).sum();
     if !(w > 0.0) {
-        return 0.0;
+        return (0.0, 0);
     }
     let mean = all.iter().map(|(r, se)| r / (se * se)).sum::<f64>() / w;
-    all.iter().map(|(r, se)| ((r - mean) / se).powi(2)).sum()
+    let chi2 = all.iter().map(|(r, se)| ((r - mean) / se).powi(2)).sum();
+    (chi2, all.len())
 }
 
 #[cfg(test)]
