@@ -50,7 +50,8 @@ pub struct PatternEstimate {
     #[serde(default)]
     pub placement_stated: bool,
     /// That choice's evidence: the spectral-shape χ² there of the jittered grid, of Poisson
-    /// placement and of the hard core.
+    /// placement and of the hard core (Poisson is kept unless another is lower by more than the
+    /// χ²'s own scatter).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub placement_chi2: Option<[f64; 3]>,
     /// Whether the manifest states the dots' profile; otherwise the print is calibrated with

@@ -94,10 +94,11 @@ impl EffectId {
     /// print calibrated without it holds with it, its white level and contrast matched again
     /// ([`super::Effects::print_image`]): noise the sensor adds to what it reads out (the shot
     /// and read noise, a fixed pattern, the ADC's steps), or a shading smooth over the field
-    /// (vignetting: a fall of a few per cent from the centre to the corners, under which each
-    /// dot's neighbourhood is lit evenly). A print's sizes are read from the spectral shape of
-    /// its reference crop (`diagnose::print`: each line's spectrum with its own mean removed,
-    /// against the crop's level), which a smooth shading leaves but for its lowest frequencies.
+    /// (vignetting: a fall from the centre to the corners, under which each dot's neighbourhood
+    /// is lit evenly; checked up to a fall of 30 %, docs/performance.md). A print's sizes are
+    /// read from the spectral shape of its reference crop (`diagnose::print`: each line's
+    /// spectrum with its own mean removed, against the crop's level), which a smooth shading
+    /// leaves but for its lowest frequencies.
     pub fn keeps_the_print(self) -> bool {
         use EffectId::*;
         match self {
