@@ -168,7 +168,7 @@ pub enum SceneFrom<'a> {
     Calibrate,
     /// Calibrated again as [`SceneFrom::Calibrate`] does, from the same statement, but with the
     /// placement and the dots' profile a calibrated scene decided: a model whose image chain
-    /// differs (a blur, an aperture, a noise) sees the same kind of print, with other dot sizes
+    /// differs (a blur, an aperture) sees the same kind of print, with other dot sizes
     /// and contrast. The fit repeats the steps that decided the print (not more: a print fitted
     /// further than the scene it is judged against would credit the candidate with the better
     /// fit — on the DIC Challenge's Sample 3 two more rounds from the calibrated print alone
