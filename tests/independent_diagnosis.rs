@@ -135,7 +135,8 @@ fn gaussian_dots_placed_independently_are_calibrated_as_such() {
             .calibration
             .as_ref()
             .expect("a nominal print is calibrated");
-        let truth_sigma_mm = d / 2.354_820_045_030_949;
+        // The generator's own σ of its dots (truth.json), not one derived here from the FWHM.
+        let truth_sigma_mm = measured.truth["patterns"][0]["sigma_mm"].as_f64().unwrap();
         println!(
             "print {k}: placement {:?} (χ² {:?}), profile {:?} (χ² {:?}), σ {:.5} mm against {:.5}",
             p.pattern.placement,

@@ -411,9 +411,9 @@ fn rms_beside_line(frames: &[Vec<f32>], clean: &[f32]) -> f64 {
     (ss / n).sqrt()
 }
 
-/// An effect that only adds noise (of those [`EffectId::keeps_the_print`] holds) leaves the light as it was:
-/// the mean of its frames over seeds is the noiseless frame up to a gain and an offset (the
-/// sensor's DN scale), with a residual that falls as 1/√seeds. That is what lets a noise
+/// An effect that only adds noise (of those [`EffectId::keeps_the_print`] holds) leaves the light
+/// as it was: the mean of its frames over seeds is the noiseless frame up to a gain and an offset
+/// (the sensor's DN scale), with a residual that falls as 1/√seeds. That is what lets a noise
 /// candidate's comparison keep the calibrated print (`SceneFrom::Rematch`). A blur changes the
 /// light: its residual stays.
 #[test]
