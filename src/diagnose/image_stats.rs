@@ -459,15 +459,33 @@ pub fn light_map(reference: &Image, moved: &Image, shift_px: (f64, f64)) -> Mean
         let c = c as i64 - s;
         c >= 0 && c < n as i64
     };
+    // The columns c whose reference column c − sx lies in the frame.
+    let cols_inside =
+        (sx.clamp(0, w as i64) as usize)..((w as i64 + sx).clamp(0, w as i64) as usize);
     MeanMap::over_blocks((w, h), |(c0, c1), (r0, r1)| {
         let (mut moved_sum, mut reference_sum) = ([0.0f64; 4], [0.0f64; 4]);
+        let mid = (c0 + c1) / 2;
+        let halves = [(0, c0..mid), (1, mid..c1)].map(|(side, cols)| {
+            (
+                side,
+                cols.start.max(cols_inside.start)..cols.end.min(cols_inside.end),
+            )
+        });
         for r in (r0..r1).filter(|&r| inside(r, h, sy)) {
             let (row, source) = (moved.row(r), reference.row((r as i64 - sy) as usize));
             let half = usize::from(r >= (r0 + r1) / 2) * 2;
-            for c in (c0..c1).filter(|&c| inside(c, w, sx)) {
-                let q = half + usize::from(c >= (c0 + c1) / 2);
-                moved_sum[q] += f64::from(row[c]);
-                reference_sum[q] += f64::from(source[(c as i64 - sx) as usize]);
+            // Each quarter's two sums in registers, its pixels in the order a pass over the
+            // whole row gave them (the same sums to the bit): a sum picked per pixel was added
+            // to in memory.
+            for (side, cols) in halves.iter().filter(|(_, cols)| !cols.is_empty()) {
+                let q = half + side;
+                let (mut m, mut s) = (moved_sum[q], reference_sum[q]);
+                let from = (cols.start as i64 - sx) as usize;
+                for (&v, &u) in row[cols.clone()].iter().zip(&source[from..]) {
+                    m += f64::from(v);
+                    s += f64::from(u);
+                }
+                (moved_sum[q], reference_sum[q]) = (m, s);
             }
         }
         let ratios: Vec<f64> = (0..4)
@@ -584,6 +602,54 @@ pub fn centred_crop(width: usize, height: usize, side: usize) -> (usize, usize, 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The light map's sums per quarter are the ones a pass over every pixel with its own
+    /// bounds check gives, to the bit, for shifts inside, outside and beyond the frame.
+    #[test]
+    fn a_light_maps_quarter_sums_are_a_pass_over_every_pixel() {
+        let (w, h) = (203usize, 157usize);
+        let pixel = |c: usize, r: usize, k: usize| {
+            (1000.0 + 500.0 * ((c * 7 + r * 13 + k) as f32 * 0.41).sin()).round()
+        };
+        let reference = Image::from_fn(w, h, |c, r| pixel(c, r, 0));
+        let moved = Image::from_fn(w, h, |c, r| pixel(c, r, 5));
+        for shift in [
+            (0.0f64, 0.0f64),
+            (13.4, -7.6),
+            (-40.0, 22.0),
+            (250.0, 3.0),
+            (-3.0, -300.0),
+        ] {
+            let (sx, sy) = (shift.0.round() as i64, shift.1.round() as i64);
+            let inside = |c: usize, n: usize, s: i64| (0..n as i64).contains(&(c as i64 - s));
+            let expected = MeanMap::over_blocks((w, h), |(c0, c1), (r0, r1)| {
+                let (mut m, mut s) = ([0.0f64; 4], [0.0f64; 4]);
+                for r in (r0..r1).filter(|&r| inside(r, h, sy)) {
+                    for c in (c0..c1).filter(|&c| inside(c, w, sx)) {
+                        let q =
+                            usize::from(r >= (r0 + r1) / 2) * 2 + usize::from(c >= (c0 + c1) / 2);
+                        m[q] += f64::from(moved.get(c, r));
+                        s[q] += f64::from(
+                            reference.get((c as i64 - sx) as usize, (r as i64 - sy) as usize),
+                        );
+                    }
+                }
+                let ratios: Vec<f64> = (0..4)
+                    .filter(|&q| s[q] > 0.0)
+                    .map(|q| m[q] / s[q])
+                    .collect();
+                if ratios.len() < 2 {
+                    (f64::NAN, f64::NAN)
+                } else {
+                    mean_and_se(&ratios)
+                }
+            });
+            let got = light_map(&reference, &moved, shift);
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&got.values), bits(&expected.values), "{shift:?}");
+            assert_eq!(bits(&got.se), bits(&expected.se), "{shift:?}");
+        }
+    }
 
     /// The moved frame is the reference's texture shifted by (13, −7) px and lit by a ramp of
     /// ±5 % across the frame: the light map gives the ramp at every block's centre, the texture
