@@ -43,6 +43,29 @@ enum Command {
     Sweep(cli::sweep::SweepArgs),
 }
 
+impl Command {
+    /// Whether the command renders and correlates the model's frames over and over (a diagnosis,
+    /// a comparison, a calibration, the study's reproduction, the daemon that runs them), holding
+    /// hundreds of MB: such a process runs without transparent huge pages
+    /// ([`no_transparent_huge_pages`]).
+    fn runs_the_model_loop(&self) -> bool {
+        match self {
+            Command::Reproduce(_)
+            | Command::Serve(_)
+            | Command::Compare(_)
+            | Command::Diagnose(_)
+            | Command::Calibrate(_) => true,
+            Command::Analyze(_)
+            | Command::Reduce(_)
+            | Command::Simulate(_)
+            | Command::Store(_)
+            | Command::History(_)
+            | Command::Dataset(_)
+            | Command::Sweep(_) => false,
+        }
+    }
+}
+
 /// mimalloc instead of the system's allocator: a diagnosis renders thousands of frames, each dot's
 /// footprint a small buffer and each band of rows a large one; glibc's malloc returned the large
 /// ones to the kernel and faulted them back in (12 % of a round), mimalloc keeps them (a round on
@@ -76,12 +99,16 @@ fn keep_freed_memory() {
 }
 
 /// Transparent huge pages off for this process (and the processes it starts, which inherit the
-/// setting). mimalloc advises its arenas for huge pages, and on this machine kind (Debian, THP and
-/// its defrag on `madvise`) a paper-size round faulted some 260 pages of 2 MiB in (its
+/// setting), for the commands that run the model loop ([`Command::runs_the_model_loop`]).
+/// mimalloc advises its arenas for huge pages, and on this machine kind (Debian, THP and its
+/// defrag on `madvise`) a paper-size round faulted some 260 pages of 2 MiB in (its
 /// `thp_fault_alloc` in /proc/vmstat) and spent 1.2–1.4 s of system time, ≈ 4.5 ms a page; with
 /// pages of 4 KiB, 130,000–150,000 faults and 0.40–0.58 s. Over four interleaved pairs the round
 /// was 0.46 ± 0.10 s faster (system time −0.80 ± 0.02 s, user time −0.08 ± 0.22 s: the same), its
-/// output the same to the byte (docs/performance.md).
+/// output the same to the byte. One analysis of a 1280x1080 pair (85 MB) is the other way round:
+/// its 40-odd huge pages came in at once, and without them it took 0.084 s against 0.068 s
+/// (ten interleaved pairs; docs/performance.md), so `analyze` and the other short commands
+/// keep them.
 #[cfg(target_os = "linux")]
 fn no_transparent_huge_pages() {
     // SAFETY: prctl with PR_SET_THP_DISABLE takes integer arguments only and changes nothing
@@ -93,8 +120,6 @@ fn no_transparent_huge_pages() {
 
 fn main() {
     keep_freed_memory();
-    #[cfg(target_os = "linux")]
-    no_transparent_huge_pages();
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(err) if !err.use_stderr() => err.exit(), // --help, --version
@@ -113,6 +138,10 @@ fn main() {
     };
     if !matches!(cli.command, Command::Serve(_)) {
         cli::logging::init_if_asked();
+    }
+    #[cfg(target_os = "linux")]
+    if cli.command.runs_the_model_loop() {
+        no_transparent_huge_pages();
     }
     let outcome = match &cli.command {
         Command::Analyze(args) => cli::analyze::run(args),
