@@ -488,16 +488,22 @@ pub fn light_map(reference: &Image, moved: &Image, shift_px: (f64, f64)) -> Mean
                 (moved_sum[q], reference_sum[q]) = (m, s);
             }
         }
-        let ratios: Vec<f64> = (0..4)
-            .filter(|&q| reference_sum[q] > 0.0)
-            .map(|q| moved_sum[q] / reference_sum[q])
-            .collect();
-        if ratios.len() < 2 {
-            (f64::NAN, f64::NAN)
-        } else {
-            mean_and_se(&ratios)
-        }
+        quarter_ratios(&moved_sum, &reference_sum)
     })
+}
+
+/// A light-map block's value and its SE: the mean of its quarters' ratios of moved to reference
+/// sums (the quarters the reference lit), NaN with fewer than two.
+fn quarter_ratios(moved_sum: &[f64; 4], reference_sum: &[f64; 4]) -> (f64, f64) {
+    let ratios: Vec<f64> = (0..4)
+        .filter(|&q| reference_sum[q] > 0.0)
+        .map(|q| moved_sum[q] / reference_sum[q])
+        .collect();
+    if ratios.len() < 2 {
+        (f64::NAN, f64::NAN)
+    } else {
+        mean_and_se(&ratios)
+    }
 }
 
 /// One block of a moved frame's light change beyond the model ([`light_change`]).
@@ -634,15 +640,7 @@ mod tests {
                         );
                     }
                 }
-                let ratios: Vec<f64> = (0..4)
-                    .filter(|&q| s[q] > 0.0)
-                    .map(|q| m[q] / s[q])
-                    .collect();
-                if ratios.len() < 2 {
-                    (f64::NAN, f64::NAN)
-                } else {
-                    mean_and_se(&ratios)
-                }
+                quarter_ratios(&m, &s)
             });
             let got = light_map(&reference, &moved, shift);
             let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();

@@ -332,13 +332,18 @@ pub(crate) fn mirror(i: isize, n: usize) -> usize {
     k as usize
 }
 
+/// The prefilter's overall gain, Π (1 − z)(1 − 1/z) over its poles z (Unser 1993).
+fn prefilter_gain(poles: &[f64]) -> f64 {
+    poles.iter().map(|&z| (1.0 - z) * (1.0 - 1.0 / z)).product()
+}
+
 /// In-place B-spline prefilter of one line with mirror boundaries (Unser 1993, Thévenaz 2000).
 fn prefilter_line(c: &mut [f64], poles: &[f64]) {
     let n = c.len();
     if n < 2 {
         return;
     }
-    let gain: f64 = poles.iter().map(|&z| (1.0 - z) * (1.0 - 1.0 / z)).product();
+    let gain = prefilter_gain(poles);
     c.iter_mut().for_each(|v| *v *= gain);
     for &z in poles {
         c[0] = initial_causal(c, z);
@@ -366,13 +371,12 @@ fn prefilter_rows(rows: &mut [f64], w: usize, poles: &[f64]) {
             .for_each(|row| prefilter_line(row, poles));
         return;
     }
-    let gain: f64 = poles.iter().map(|&z| (1.0 - z) * (1.0 - 1.0 / z)).product();
+    let gain = prefilter_gain(poles);
     rows.iter_mut().for_each(|v| *v *= gain);
-    let mut lines: Vec<&mut [f64]> = rows.chunks_exact_mut(w).collect();
     // Four names for the four rows (LINES_IN_STEP): the steps below are written out per row.
-    let [a, b, c, d] = lines.as_mut_slice() else {
-        unreachable!("rows.len() is LINES_IN_STEP rows")
-    };
+    let (a, rest) = rows.split_at_mut(w);
+    let (b, rest) = rest.split_at_mut(w);
+    let (c, d) = rest.split_at_mut(w);
     for &z in poles {
         for line in [&mut *a, &mut *b, &mut *c, &mut *d] {
             line[0] = initial_causal(line, z);
@@ -402,7 +406,7 @@ fn prefilter_columns(c: &mut [f64], w: usize, h: usize, poles: &[f64]) {
     if h < 2 {
         return;
     }
-    let gain: f64 = poles.iter().map(|&z| (1.0 - z) * (1.0 - 1.0 / z)).product();
+    let gain = prefilter_gain(poles);
     c.par_iter_mut().for_each(|v| *v *= gain);
     let mut col = vec![0.0f64; h];
     for &z in poles {
