@@ -100,7 +100,8 @@ cat "$VENVS_LOG"
 # at a time the integration binary left 131 of its 830 core-seconds idle (sampled each second).
 # With three it took 378.8 s against 415.1 s within the hour, one run each of the same build (the
 # cores 1.91–1.97 busy through the diagnoses against 1.84–1.89; two at a time have taken 369–415 s
-# on this machine kind); every test passed, the ones timed against a second included.
+# on this machine kind, three 340.2 and 342.3 s in two whole runs of this script); every test
+# passed, the ones timed against a second included.
 cargo test --all-features --workspace --tests \
   --config 'target."cfg(all())".runner = ["env", "RUSTC_BOOTSTRAP=1"]' \
   -- -Z unstable-options --report-time --test-threads 3 2>&1 | tee "$TEST_LOG"
