@@ -12,7 +12,6 @@
 use super::effects::Effects;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 
 use crate::image::Image;
@@ -145,10 +144,7 @@ impl SensorChain {
 
     #[inline(always)]
     fn read_electrons(&self, electrons: f64, gain: f64, read_e: f64, rng: &mut ChaCha8Rng) -> f64 {
-        let shot = super::shot_noise::poisson_count(electrons, rng);
-        let z: f64 = StandardNormal.sample(rng);
-        let read = read_e * z;
-        (shot + read) / gain
+        super::shot_noise::count_plus_read_noise(electrons, read_e, rng) / gain
     }
 
     /// The ADC: rounds and clips to its range, when the model has one.

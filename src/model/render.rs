@@ -526,7 +526,8 @@ mod tests {
 
     /// The row compiled for SSE4.1 reads out the same bits as the baseline's, over irradiances
     /// from the dark (the Poisson sampler's inversion below a mean of 10 electrons) through PTRS
-    /// to the clipped full well, with every per-pixel effect of the chain on.
+    /// and the Cornish–Fisher draw (from 100 electrons) to the clipped full well, with every
+    /// per-pixel effect of the chain on.
     #[test]
     fn the_sse41_row_reads_out_the_same_bits() {
         #[cfg(target_arch = "x86_64")]
