@@ -81,6 +81,10 @@ cargo fmt --all --check
 phase "cargo clippy"
 cargo clippy --workspace --all-targets --all-features -- -D warnings
 phase "cargo test"
+# The library's unit-test harness at opt-level 1 (the library itself, which the integration
+# tests and the binaries run, stays at 3): scripts/rustc-unit-test-harness.sh says why. Exported
+# for the wheel's build below too, which reuses this build's artefacts.
+export RUSTC_WRAPPER="$PWD/scripts/rustc-unit-test-harness.sh"
 # Each test's own time: libtest's --report-time, which the stable harness takes when
 # RUSTC_BOOTSTRAP=1 is in its environment. Only the test binaries get it, through a runner: in
 # cargo's environment it would change the build scripts' fingerprints (proc-macro2's and
