@@ -49,6 +49,9 @@ def parse(path):
 
 
 def in_ses(change, se):
+    """`change` in standard errors; infinite when it moved without a stated SE, 0 when it did not move."""
+    if change == 0:
+        return 0.0
     return change / se if se else float("inf")
 
 

@@ -2,8 +2,9 @@
 # RUSTC_WRAPPER for the suite (scripts/test-all.sh): compiles the library's unit-test harness —
 # the whole library again, with its `#[cfg(test)]` modules — at opt-level 1 instead of the test
 # profile's 3, and passes every other compilation through unchanged. The harness's LLVM passes
-# were the build's largest unit (170–190 s of one core at 3, 122 s at 1) for unit tests that take
-# 8.9 s at 3 and 10.1 s at 1 (docs/performance.md). Cargo's profiles cannot tell the harness from
+# were the build's largest unit: 144.5 s of one core at 3 against 113.7 s at 1 in the same
+# rebuild one after the other, for unit tests that take 8.9 s at 3 and 10.1 s at 1
+# (docs/performance.md). Cargo's profiles cannot tell the harness from
 # the library it tests (both are the package `ffdic`), so this is done here; a plain
 # `cargo test` builds both at 3. The float results are the same at any opt-level: Rust does not
 # reassociate or contract floating-point operations.
