@@ -21,6 +21,7 @@ use crate::dataset::Manifest;
 use crate::dic::{DicError, DicResult, PreparedReference, Watch};
 use crate::model::ModelConfig;
 use crate::reduce::{reduce, Scheme};
+use rayon::prelude::*;
 use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -132,80 +133,32 @@ pub fn compare_with_scene(
     let total = runs.len() * opts.schemes.len();
     let done = AtomicUsize::new(0);
     let go_on = || progress(done.load(Ordering::Relaxed), total);
-    let _span =
-        tracing::debug_span!("comparison", model = %model.name, seed, scene = scene_from.kind())
-            .entered();
+    let span =
+        tracing::debug_span!("comparison", model = %model.name, seed, scene = scene_from.kind());
+    let _entered = span.enter();
     let nominal = tracing::debug_span!("calibrate")
         .in_scope(|| calibrate_seeded(meas, model, seed, scene_from, &go_on))?;
     let scene = Scene::new(&nominal, &model.effects, &meas.manifest, seed)?;
-    let cancelled = || !go_on();
-    let mut model_dic: Vec<Option<Vec<DicResult>>> = vec![None; runs.len()];
+    // The prints side by side: each renders, prepares and correlates its own runs from its own
+    // seeds, so the results do not depend on the order; one print at a time left a core idle
+    // through its statistics and reductions (a comparison outside the candidates' lanes kept
+    // 1.6–1.8 of the 2 cores busy).
+    let sides: Vec<PrintSide> = (0..meas.labels.len())
+        .into_par_iter()
+        .map(|pi| {
+            // A print's spans inside the comparison's, on whichever thread takes it.
+            let _in_comparison = span.enter();
+            compare_print(meas, (&scene, &nominal), pi, (&done, total), progress)
+        })
+        .collect::<Result<_, _>>()?;
     let mut images = Vec::new();
     let mut moved_images: Vec<Option<ImageComparison>> = vec![None; runs.len()];
-    for pi in 0..meas.labels.len() {
-        if !go_on() {
-            return Err(DiagnoseError::Cancelled);
-        }
-        let rendering = tracing::debug_span!("render");
-        let reference = rendering.in_scope(|| scene.render(pi, Shot::REFERENCE, None));
-        let crop = centre_crop(&reference, STATS_CROP_PX);
-        let repeat = rendering.in_scope(|| {
-            meas.repeat_crops[pi]
-                .as_ref()
-                .map(|_| scene.render(pi, Shot::REPEAT, Some(STATS_CROP_PX)))
-        });
-        images.push(ImageComparison {
-            frame: "reference".into(),
-            pattern: meas.labels[pi].clone(),
-            run: None,
-            measured: meas.reference_stats[pi].clone(),
-            model: frame_stats(Some(&reference), &crop, repeat.as_ref()),
-        });
-        let mut prepared = Vec::new();
-        let preparing = tracing::debug_span!("prepare").entered();
-        for s in &opts.schemes {
-            let r = reduce(&reference, s)?;
-            prepared
-                .push(PreparedReference::new(&r, &opts.dic).map_err(|e| dic_error("model", s, e))?);
-        }
-        drop(preparing);
-        for (ri, run) in runs
-            .iter()
-            .enumerate()
-            .filter(|(ri, _)| meas.pattern_of_run[*ri] == pi)
-        {
-            if !go_on() {
-                return Err(DiagnoseError::Cancelled);
-            }
-            let at = nominal.landed_command(ri, (run.stage.dx_mm, run.stage.dy_mm));
-            let moved = rendering.in_scope(|| scene.render(pi, Shot::of_run(ri, at), None));
-            let mcrop = centre_crop(&moved, STATS_CROP_PX);
-            let [sx, sy] = nominal.actual_move_px(ri, (run.stage.dx_mm, run.stage.dy_mm));
-            moved_images[ri] = Some(ImageComparison {
-                frame: "moved".into(),
-                pattern: meas.labels[pi].clone(),
-                run: Some(run.id.clone()),
-                measured: meas.moved_stats[ri].clone(),
-                model: moved_frame_stats(&reference, &moved, &mcrop, (sx, sy)),
-            });
-            let mut per_scheme = Vec::new();
-            let _correlating = tracing::debug_span!("dic").entered();
-            for (s, prep) in opts.schemes.iter().zip(&prepared) {
-                let d = reduce(&moved, s)?;
-                let watch = Watch {
-                    progress: None,
-                    cancelled: Some(&cancelled),
-                };
-                per_scheme.push(prep.correlate_watched(&d, watch).map_err(|e| match e {
-                    DicError::Cancelled => DiagnoseError::Cancelled,
-                    other => dic_error(&run.id, s, other),
-                })?);
-                let n = done.fetch_add(1, Ordering::Relaxed) + 1;
-                if !progress(n, total) {
-                    return Err(DiagnoseError::Cancelled);
-                }
-            }
-            model_dic[ri] = Some(per_scheme);
+    let mut model_dic: Vec<Option<Vec<DicResult>>> = vec![None; runs.len()];
+    for side in sides {
+        images.push(side.reference);
+        for (ri, image, results) in side.runs {
+            moved_images[ri] = Some(image);
+            model_dic[ri] = Some(results);
         }
     }
     images.extend(moved_images.into_iter().flatten());
@@ -215,6 +168,98 @@ pub fn compare_with_scene(
         .collect();
     let hardware = model_hardware(&meas.hardware, &scene, &nominal, &meas.pattern_of_run, opts)?;
     Ok(assemble(meas, model, nominal, model_dic, images, hardware))
+}
+
+/// One print's model side: its reference frame's statistics, and per run of the print its moved
+/// frame's statistics and its analyses under each scheme.
+struct PrintSide {
+    reference: ImageComparison,
+    runs: Vec<(usize, ImageComparison, Vec<DicResult>)>,
+}
+
+/// Renders print `pi`'s frames from `scene` (landed as `nominal` says), prepares its reference
+/// under each scheme and correlates each of its runs; `done` of `total` counts the analyses for
+/// `progress`, which is asked before every frame and point.
+fn compare_print(
+    meas: &Measurement,
+    (scene, nominal): (&Scene, &Nominal),
+    pi: usize,
+    (done, total): (&AtomicUsize, usize),
+    progress: Progress,
+) -> Result<PrintSide, DiagnoseError> {
+    let opts = &meas.options;
+    let go_on = || progress(done.load(Ordering::Relaxed), total);
+    let cancelled = || !go_on();
+    if !go_on() {
+        return Err(DiagnoseError::Cancelled);
+    }
+    let rendering = tracing::debug_span!("render");
+    let reference = rendering.in_scope(|| scene.render(pi, Shot::REFERENCE, None));
+    let crop = centre_crop(&reference, STATS_CROP_PX);
+    let repeat = rendering.in_scope(|| {
+        meas.repeat_crops[pi]
+            .as_ref()
+            .map(|_| scene.render(pi, Shot::REPEAT, Some(STATS_CROP_PX)))
+    });
+    let reference_image = ImageComparison {
+        frame: "reference".into(),
+        pattern: meas.labels[pi].clone(),
+        run: None,
+        measured: meas.reference_stats[pi].clone(),
+        model: frame_stats(Some(&reference), &crop, repeat.as_ref()),
+    };
+    let mut prepared = Vec::new();
+    let preparing = tracing::debug_span!("prepare").entered();
+    for s in &opts.schemes {
+        let r = reduce(&reference, s)?;
+        prepared.push(PreparedReference::new(&r, &opts.dic).map_err(|e| dic_error("model", s, e))?);
+    }
+    drop(preparing);
+    let mut runs = Vec::new();
+    for (ri, run) in meas
+        .manifest
+        .runs
+        .iter()
+        .enumerate()
+        .filter(|(ri, _)| meas.pattern_of_run[*ri] == pi)
+    {
+        if !go_on() {
+            return Err(DiagnoseError::Cancelled);
+        }
+        let at = nominal.landed_command(ri, (run.stage.dx_mm, run.stage.dy_mm));
+        let moved = rendering.in_scope(|| scene.render(pi, Shot::of_run(ri, at), None));
+        let mcrop = centre_crop(&moved, STATS_CROP_PX);
+        let [sx, sy] = nominal.actual_move_px(ri, (run.stage.dx_mm, run.stage.dy_mm));
+        let image = ImageComparison {
+            frame: "moved".into(),
+            pattern: meas.labels[pi].clone(),
+            run: Some(run.id.clone()),
+            measured: meas.moved_stats[ri].clone(),
+            model: moved_frame_stats(&reference, &moved, &mcrop, (sx, sy)),
+        };
+        let mut per_scheme = Vec::new();
+        let _correlating = tracing::debug_span!("dic").entered();
+        for (s, prep) in opts.schemes.iter().zip(&prepared) {
+            let d = reduce(&moved, s)?;
+            let watch = Watch {
+                progress: None,
+                cancelled: Some(&cancelled),
+            };
+            per_scheme.push(prep.correlate_watched(&d, watch).map_err(|e| match e {
+                DicError::Cancelled => DiagnoseError::Cancelled,
+                other => dic_error(&run.id, s, other),
+            })?);
+            let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+            if !progress(n, total) {
+                return Err(DiagnoseError::Cancelled);
+            }
+        }
+        runs.push((ri, image, per_scheme));
+    }
+    Ok(PrintSide {
+        reference: reference_image,
+        runs,
+    })
 }
 
 /// The comparison from the model's analyses: the landings refined against them

@@ -4,10 +4,10 @@
 //! noise (see `capture_mode`).
 
 use crate::image::Image;
+use crate::model::normal_draws::NormalDraws;
 use crate::model::{BinnedValue, SensorReadout};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, Normal};
 use rayon::prelude::*;
 
 /// Reads `irradiance` (a noise-free full-resolution frame, DN) out as `readout` combines the
@@ -31,16 +31,16 @@ pub fn read_out_with_floor(
     out.par_chunks_mut(ow.max(1))
         .enumerate()
         .for_each(|(orow, line)| {
-            let mut rng = ChaCha8Rng::seed_from_u64(
+            let mut noise = NormalDraws::new(ChaCha8Rng::seed_from_u64(
                 seed ^ (orow as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15),
-            );
-            let normal = Normal::new(0.0, sigma_dn.max(0.0)).expect("finite sigma");
+            ));
+            let sigma_dn = sigma_dn.max(0.0);
             for (ocol, px) in line.iter_mut().enumerate() {
                 let mut sum = 0.0;
                 for dy in 0..ay {
                     let row = &data[(orow * by + dy) * w..][..w];
                     for &v in &row[ocol * bx..][..ax] {
-                        sum += v as f64 + normal.sample(&mut rng);
+                        sum += v as f64 + sigma_dn * noise.standard();
                     }
                 }
                 let value = match readout.value {

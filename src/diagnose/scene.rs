@@ -8,13 +8,13 @@ use crate::dataset::Manifest;
 use crate::image::Image;
 use crate::model::derive_seed;
 use crate::model::effects::user::{rendered_fields, UserField};
+use crate::model::normal_draws::NormalDraws;
 use crate::model::{
     project_prepared, render_frame, render_frame_read_out, Effects, FrameSpec, Placement,
     Remembered, SensorReadout, TargetDot, TooManyDots,
 };
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, Normal};
 use rayon::prelude::*;
 use std::sync::Arc;
 
@@ -356,11 +356,11 @@ impl Scene {
 /// to 0..=`full`.
 #[inline(always)]
 fn floor_noise_row(line: &mut [f32], seed: u64, row: usize, sigma: f64, full: f64) {
-    let mut rng =
-        ChaCha8Rng::seed_from_u64(seed ^ (row as u64 + 1).wrapping_mul(0xA24B_AED4_963E_E407));
-    let normal = Normal::new(0.0, sigma).expect("finite sigma");
+    let mut noise = NormalDraws::new(ChaCha8Rng::seed_from_u64(
+        seed ^ (row as u64 + 1).wrapping_mul(0xA24B_AED4_963E_E407),
+    ));
     for v in line.iter_mut() {
-        let x = *v as f64 + normal.sample(&mut rng);
+        let x = *v as f64 + sigma * noise.standard();
         *v = x.round().clamp(0.0, full) as f32;
     }
 }

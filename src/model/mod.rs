@@ -11,6 +11,7 @@ pub mod effects;
 mod hard_core;
 mod lattice;
 mod normal;
+pub(crate) mod normal_draws;
 mod pattern;
 mod readout;
 mod remembered;

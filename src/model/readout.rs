@@ -10,6 +10,7 @@
 //! either way (the electrons are the same). Decimation reads one pixel of every block.
 
 use super::effects::Effects;
+use super::normal_draws::NormalDraws;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
@@ -94,7 +95,7 @@ impl SensorReadout {
         out.par_chunks_mut(ow.max(1))
             .enumerate()
             .for_each(|(orow, line)| {
-                let mut rng = SensorChain::row_rng(seed, orow);
+                let mut noise_draws = SensorChain::row_noise(seed, orow);
                 let mut block = Vec::with_capacity(ax * ay);
                 for (ocol, px) in line.iter_mut().enumerate() {
                     block.clear();
@@ -102,7 +103,7 @@ impl SensorReadout {
                         let row = &irradiance[(orow * by + dy) * size.0..][..size.0];
                         block.extend_from_slice(&row[ocol * bx..][..ax]);
                     }
-                    *px = chain.read_block(&block, self, &mut rng) as f32;
+                    *px = chain.read_block(&block, self, &mut noise_draws) as f32;
                 }
             });
         Image::from_vec(ow, oh, out).expect("sized")
@@ -124,27 +125,35 @@ impl SensorChain {
         }
     }
 
-    /// The noise stream of one output row of a frame.
-    pub fn row_rng(seed: u64, row: usize) -> ChaCha8Rng {
-        ChaCha8Rng::seed_from_u64(seed ^ (row as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
+    /// The noise draws of one output row of a frame.
+    pub fn row_noise(seed: u64, row: usize) -> NormalDraws<ChaCha8Rng> {
+        NormalDraws::new(ChaCha8Rng::seed_from_u64(
+            seed ^ (row as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
+        ))
     }
 
     /// One pixel of irradiance `dn` read out: shot noise on its electrons (clipped at the full
     /// well), read noise, back to DN (not yet quantised).
     #[inline(always)]
-    pub fn read_pixel(&self, dn: f64, rng: &mut ChaCha8Rng) -> f64 {
+    pub fn read_pixel(&self, dn: f64, noise_draws: &mut NormalDraws<ChaCha8Rng>) -> f64 {
         match self.noise {
             Some(n) => {
                 let electrons = (dn * n.gain).clamp(0.0, n.full_well_e);
-                self.read_electrons(electrons, n.gain, n.read_noise_e, rng)
+                self.read_electrons(electrons, n.gain, n.read_noise_e, noise_draws)
             }
             None => dn,
         }
     }
 
     #[inline(always)]
-    fn read_electrons(&self, electrons: f64, gain: f64, read_e: f64, rng: &mut ChaCha8Rng) -> f64 {
-        super::shot_noise::count_plus_read_noise(electrons, read_e, rng) / gain
+    fn read_electrons(
+        &self,
+        electrons: f64,
+        gain: f64,
+        read_e: f64,
+        noise_draws: &mut NormalDraws<ChaCha8Rng>,
+    ) -> f64 {
+        super::shot_noise::count_plus_read_noise(electrons, read_e, noise_draws) / gain
     }
 
     /// The ADC: rounds and clips to its range, when the model has one.
@@ -157,7 +166,12 @@ impl SensorChain {
     }
 
     /// One output pixel from the irradiance of the sensor pixels it combines.
-    fn read_block(&self, block: &[f64], readout: &SensorReadout, rng: &mut ChaCha8Rng) -> f64 {
+    fn read_block(
+        &self,
+        block: &[f64],
+        readout: &SensorReadout,
+        noise_draws: &mut NormalDraws<ChaCha8Rng>,
+    ) -> f64 {
         let n = block.len() as f64;
         let combine = |sum: f64| match readout.value {
             BinnedValue::Average => sum / n,
@@ -170,7 +184,8 @@ impl SensorChain {
                     .iter()
                     .map(|&dn| (dn * noise.gain).clamp(0.0, noise.full_well_e))
                     .sum();
-                let dn = self.read_electrons(electrons, noise.gain, noise.read_noise_e, rng);
+                let dn =
+                    self.read_electrons(electrons, noise.gain, noise.read_noise_e, noise_draws);
                 self.quantise(combine(dn))
             }
             // Without a noise model the charge is summed exactly and digitised once.
@@ -178,7 +193,7 @@ impl SensorChain {
             (BinningDomain::Charge, Some(_)) | (BinningDomain::Digital, _) => {
                 let sum: f64 = block
                     .iter()
-                    .map(|&dn| self.quantise(self.read_pixel(dn, rng)))
+                    .map(|&dn| self.quantise(self.read_pixel(dn, noise_draws)))
                     .sum();
                 self.quantise(combine(sum))
             }

@@ -458,7 +458,7 @@ fn sense_row(
     row: usize,
     line: &mut [f32],
 ) {
-    let mut rng = SensorChain::row_rng(seed, row);
+    let mut rng = SensorChain::row_noise(seed, row);
     let mut fpn = Radiometry::fixed_pattern_rng(row);
     for (col, px) in line.iter_mut().enumerate() {
         let v = radiometry.pixel(col, row, *px, &mut fpn);
