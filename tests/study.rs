@@ -136,6 +136,12 @@ fn check_the_model_story(story: &serde_json::Value) {
 fn reproduce_json_has_a_row_per_run_and_scheme_and_recovers_the_motion() {
     let tmp = tempfile::tempdir().unwrap();
     let data = tmp.path().join("data");
+    // The winner's name already holds another model (a winner fitted on another dataset, or by
+    // an earlier version): reproduce stores its own under the name with the dataset's id, as the
+    // dashboard does, and leaves the other as it was (it once failed here, after the study).
+    let other = "name = \"baseline+sensor_noise\"\n[effects.psf_blur]\nsigma_px = 0.5\n";
+    std::fs::create_dir_all(data.join("models")).unwrap();
+    std::fs::write(data.join("models/baseline+sensor_noise.toml"), other).unwrap();
     let o = ffdic(&[
         "reproduce",
         "--experiment",
@@ -203,6 +209,22 @@ fn reproduce_json_has_a_row_per_run_and_scheme_and_recovers_the_motion() {
     }
     check_the_csv_has_the_commanded_move(&out, angle);
     check_the_model_story(&doc["model"]);
+    let stored_as = format!(
+        "baseline+sensor_noise.{}",
+        doc["model"]["dataset"].as_str().unwrap()
+    );
+    assert_eq!(
+        doc["model"]["model"],
+        stored_as.as_str(),
+        "{}",
+        doc["model"]
+    );
+    let stored = std::fs::read_to_string(data.join(format!("models/{stored_as}.toml"))).unwrap();
+    assert!(stored.contains("sensor_noise"), "{stored}");
+    assert_eq!(
+        std::fs::read_to_string(data.join("models/baseline+sensor_noise.toml")).unwrap(),
+        other
+    );
     let svg = std::fs::read_to_string(out.join("plots/figure5_u.svg")).unwrap();
     // One bar per pattern and scheme.
     assert_eq!(svg.matches(r#"class="bar""#).count(), 2 * 3);

@@ -10,14 +10,15 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use ffdic::diagnose::Diagnosis;
 use ffdic::experiment::{ExperimentRequest, SchemeSpec};
+use ffdic::model::ModelConfig;
 use ffdic::report::findings_text;
 use ffdic::report::{figures_text, paper_figures_text, study_json};
 use ffdic::service::job::{CompareRequest, DiagnosisJob, ExperimentJob};
 use ffdic::service::{
     find_analysis_model, mock_bench, CameraConfig, DaemonConfig, JobResult, MockBinning,
-    MockReduction, NewModel, Service,
+    MockReduction, ModelStoreError, NewModel, Service,
 };
-use ffdic::store::{RunId, RunRecord, RunStatus};
+use ffdic::store::{RunId, RunRecord, RunStatus, StoreError};
 use ffdic::study::{paper_findings, StudyRow};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -341,10 +342,9 @@ fn model_story(
     // baseline's print, the same seed); the model is stored for the dashboard's next comparison.
     let (model, after) = match (&winner, &diagnosis.after) {
         (Some(_), Some(after)) => {
-            let toml = rounds.final_model.to_toml();
-            let (added, _) = service.add_model(&NewModel { toml })?;
+            let added = store_winner(service, rounds.final_model.clone(), dataset.id.as_ref())?;
             (
-                Some(added.summary.name),
+                Some(added),
                 Some((after.discrepancy_px, after.discrepancy_se_px)),
             )
         }
@@ -430,4 +430,33 @@ fn story_text(s: &ModelStory) -> String {
     t += &format!("  the mock bench's truth: {}\n", truth_line.join("; "));
     t += &format!("  jobs: {}\n", s.jobs.join(", "));
     t
+}
+
+/// Fresh names tried after the winner's own when the names hold other models.
+const FRESH_NAMES: usize = 5;
+
+/// Stores the winner's `model` in the data folder and returns the name it is stored under: its
+/// own, or, when that name holds another model (a winner fitted on another dataset: a model name
+/// is a version for good), the name with the dataset's id, then `.2`, `.3`…, as the dashboard's
+/// `addWinner` does. The same text under a name is the model already there.
+fn store_winner(service: &Service, mut model: ModelConfig, dataset_id: &str) -> Result<String> {
+    let wanted = model.name.clone();
+    let names: Vec<String> = std::iter::once(wanted.clone())
+        .chain(std::iter::once(format!("{wanted}.{dataset_id}")))
+        .chain((2..=FRESH_NAMES).map(|k| format!("{wanted}.{dataset_id}.{k}")))
+        .collect();
+    for name in &names {
+        model.name = name.clone();
+        match service.add_model(&NewModel {
+            toml: model.to_toml(),
+        }) {
+            Ok((added, _)) => return Ok(added.summary.name),
+            Err(ModelStoreError::Store(StoreError::Conflict(_))) => continue,
+            Err(e) => return Err(e.into()),
+        }
+    }
+    bail!(
+        "the names {} all hold other models: the winner was not stored",
+        names.join(", ")
+    )
 }
