@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The whole test suite, as CI runs it. Installs what the suite needs on a fresh Debian machine
-# (as root; nothing is installed when everything is already there), then: format check, clippy
-# with every feature and target, all tests in the optimised test profile, schemathesis, and the
+# (as root; nothing is installed when everything is already there), then: format check, every
+# target built with every feature in the optimised test profile and linted by clippy as it
+# compiles, all tests, schemathesis, and the
 # Python package (wheel, pytest, example).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -65,7 +66,7 @@ if [ ! -d tests/browser/node_modules ]; then
 fi
 
 # The three Python venvs — the independent generator's (the diagnosis tests), schemathesis's and
-# the Python package's tests' — are made while clippy and the crate compile: pip waits on the
+# the Python package's tests' — are made while the crates compile: pip waits on the
 # network and the disk more than on the cores, and each venv was on the critical path of its
 # phase (18, 25 and 20–35 s here, made one after another on a busy machine). Each script makes
 # its venv only when missing or out of date; the tests wait for them below.
@@ -78,27 +79,55 @@ VENVS_PID=$!
 
 phase "cargo fmt --check"
 cargo fmt --all --check
-phase "cargo clippy"
-cargo clippy --workspace --all-targets --all-features -- -D warnings
-phase "cargo test"
+phase "cargo build of every target, linted by clippy as it compiles"
 # The library's unit-test harness at opt-level 1 (the library itself, which the integration
 # tests and the binaries run, stays at 3): scripts/rustc-unit-test-harness.sh says why. Exported
 # for the wheel's build below too, which reuses this build's artefacts.
 export RUSTC_WRAPPER="$PWD/scripts/rustc-unit-test-harness.sh"
+# Clippy lints the workspace's crates while they are compiled for the tests, as `cargo clippy`'s
+# own driver does in a check: clippy-driver is rustc with clippy's lint passes, and Cargo runs
+# it for the workspace's members only (RUSTC_WORKSPACE_WRAPPER; the dependencies are compiled by
+# rustc as before), with `-D warnings` through CLIPPY_ARGS as `cargo clippy -- -D warnings`
+# passes it. A separate `cargo clippy` checked every dependency a second time in check mode:
+# its phase took 112-171 s of the suite's 900-1,170 (docs/performance.md); the lints cost the
+# build some 10 s of CPU. clippy-driver builds without MIR optimisations (LLVM still optimises
+# at the profile's level): a paper3 round from the test profile's binary took the same time
+# either way and wrote the same JSON to the byte. Exported: the wheel's build (below) lints
+# the Python crate's cdylib the same way.
+export RUSTC_WORKSPACE_WRAPPER
+RUSTC_WORKSPACE_WRAPPER="$(command -v clippy-driver)"
+export CLIPPY_ARGS="-D__CLIPPY_HACKERY__warnings__CLIPPY_HACKERY__"
 # Each test's own time: libtest's --report-time, which the stable harness takes when
 # RUSTC_BOOTSTRAP=1 is in its environment. Only the test binaries get it, through a runner: in
 # cargo's environment it would change the build scripts' fingerprints (proc-macro2's and
 # anyhow's probe the compiler's channel) and rebuild their dependants here and again for the wheel.
+RUNNER='target."cfg(all())".runner = ["env", "RUSTC_BOOTSTRAP=1"]'
 TEST_LOG="$(mktemp "${TMPDIR:-/tmp}/ffdic-tests.XXXXXX")"
-trap 'rm -f "$TEST_LOG" "$VENVS_LOG"' EXIT
+ARTIFACTS_LOG="$(mktemp "${TMPDIR:-/tmp}/ffdic-artifacts.XXXXXX")"
+trap 'rm -f "$TEST_LOG" "$VENVS_LOG" "$ARTIFACTS_LOG"' EXIT
+# Every target of every member (the benchmarks included, as `clippy --all-targets` had them),
+# with every feature. Cargo prints its messages as JSON on stdout (kept) and the compiler's
+# diagnostics rendered on stderr, as usual.
+cargo test --all-features --workspace --all-targets --no-run --config "$RUNNER" \
+  --message-format=json-render-diagnostics >"$ARTIFACTS_LOG"
+# Cargo does not count the wrapper in a unit's fingerprint: a member compiled before this run
+# (by a plain `cargo test` with the same settings) is fresh here and was not linted now. Then
+# clippy checks the workspace as it used to. A fresh clone, as in CI, compiles every member here.
+if python3 scripts/fresh-workspace-units.py "$ARTIFACTS_LOG"; then
+  echo "every member of the workspace was compiled, and linted, in this build"
+else
+  echo "cargo clippy (the members above were compiled before this run, unlinted by it)"
+  cargo clippy --workspace --all-targets --all-features -- -D warnings
+fi
+phase "cargo test"
 # The venvs (above) before any test starts: the generator's is the tests' to use, not to race.
 # Should one have failed, its phase makes it again and fails there with pip's own message.
 wait "$VENVS_PID" || { cat "$VENVS_LOG"; echo "a venv failed ahead of its phase (it is made again there)"; }
 cat "$VENVS_LOG"
 # Doc tests are run by rustdoc, not through the runner: they run apart, without the flag.
 # `--tests`: every target with `test = true` (the libraries' and binaries' unit tests, the
-# integration tests); the Python module's (`test = false`: it is tested from Python, below) is
-# left out, which `--lib` would build as a harness linking libpython.
+# integration tests); the Python module's harness (`test = false`: it is tested from Python,
+# below) was built above for its lints and is not run.
 # Three tests at a time on two cores: the daemon's tests wait on sockets, timeouts and child
 # processes (the suite's first minute, `api_bounded`, kept the cores 35–70 % idle), and with two
 # at a time the integration binary left 131 of its 830 core-seconds idle (sampled each second).
@@ -106,8 +135,7 @@ cat "$VENVS_LOG"
 # cores 1.91–1.97 busy through the diagnoses against 1.84–1.89; two at a time have taken 369–415 s
 # on this machine kind, three 340.2 and 342.3 s in two whole runs of this script); every test
 # passed, the ones timed against a second included.
-cargo test --all-features --workspace --tests \
-  --config 'target."cfg(all())".runner = ["env", "RUSTC_BOOTSTRAP=1"]' \
+cargo test --all-features --workspace --tests --config "$RUNNER" \
   -- -Z unstable-options --report-time --test-threads 3 2>&1 | tee "$TEST_LOG"
 cargo test --all-features --workspace --doc
 phase "schemathesis against ffdic serve (every phase, bounded; see tests/schemathesis/), beside the Python package (pip install ./python in a venv, pytest, the example; see python/run-tests.sh)"
@@ -126,7 +154,7 @@ phase "schemathesis against ffdic serve (every phase, bounded; see tests/schemat
 # `extension-module` is named again. A user's `pip install ./python` builds the release profile
 # without `share-test-build`.
 PYTHON_LOG="$(mktemp "${TMPDIR:-/tmp}/ffdic-python.XXXXXX")"
-trap 'rm -f "$TEST_LOG" "$VENVS_LOG" "$PYTHON_LOG"' EXIT
+trap 'rm -f "$TEST_LOG" "$VENVS_LOG" "$ARTIFACTS_LOG" "$PYTHON_LOG"' EXIT
 (CARGO_PROFILE_DEV_OPT_LEVEL=3 CARGO_PROFILE_DEV_DEBUG_ASSERTIONS=true CARGO_PROFILE_DEV_DEBUG=false \
   MATURIN_PEP517_ARGS="--profile dev --features extension-module,share-test-build" \
   bash python/run-tests.sh "${CARGO_TARGET_DIR:-target}/debug/ffdic") >"$PYTHON_LOG" 2>&1 &
@@ -140,8 +168,8 @@ echo "== the Python package (beside schemathesis): exit $python_status"
 cat "$PYTHON_LOG"
 [ "$schemathesis_status" -eq 0 ] || { echo "schemathesis failed: exit $schemathesis_status"; exit "$schemathesis_status"; }
 [ "$python_status" -eq 0 ] || { echo "the Python package's tests failed: exit $python_status"; exit "$python_status"; }
-# The benchmarks are type-checked by clippy (--all-targets) and run by hand (cargo bench): their
-# release build (5 min here) proves nothing more.
+# The benchmarks are built in the test profile and linted (above) and run by hand (cargo bench):
+# their release build (5 min here) proves nothing more.
 
 phase "done"
 echo "== time per phase, s"
