@@ -105,10 +105,13 @@ RUNNER='target."cfg(all())".runner = ["env", "RUSTC_BOOTSTRAP=1"]'
 TEST_LOG="$(mktemp "${TMPDIR:-/tmp}/ffdic-tests.XXXXXX")"
 ARTIFACTS_LOG="$(mktemp "${TMPDIR:-/tmp}/ffdic-artifacts.XXXXXX")"
 trap 'rm -f "$TEST_LOG" "$VENVS_LOG" "$ARTIFACTS_LOG"' EXIT
-# Every target of every member (the benchmarks included, as `clippy --all-targets` had them),
-# with every feature. Cargo prints its messages as JSON on stdout (kept) and the compiler's
-# diagnostics rendered on stderr, as usual.
-cargo test --all-features --workspace --all-targets --no-run --config "$RUNNER" \
+# Every target the tests run and the benchmarks, with every feature: what `clippy
+# --all-targets` checked, but for the two libraries with `test = false`, whose harness nobody
+# runs: `ffdic-fft` (no test code of its own) and the Python module, which the wheel's build
+# below compiles, and lints, with every feature of its own (its pyo3 and numpy stay in that
+# phase, beside schemathesis, instead of on this one's path). Cargo prints its messages as JSON
+# on stdout (kept) and the compiler's diagnostics rendered on stderr, as usual.
+cargo test --all-features --workspace --tests --bench '*' --no-run --config "$RUNNER" \
   --message-format=json-render-diagnostics >"$ARTIFACTS_LOG"
 # Cargo does not count the wrapper in a unit's fingerprint: a member compiled before this run
 # (by a plain `cargo test` with the same settings) is fresh here and was not linted now. Then
@@ -126,8 +129,8 @@ wait "$VENVS_PID" || { cat "$VENVS_LOG"; echo "a venv failed ahead of its phase 
 cat "$VENVS_LOG"
 # Doc tests are run by rustdoc, not through the runner: they run apart, without the flag.
 # `--tests`: every target with `test = true` (the libraries' and binaries' unit tests, the
-# integration tests); the Python module's harness (`test = false`: it is tested from Python,
-# below) was built above for its lints and is not run.
+# integration tests); the Python module's (`test = false`: it is tested from Python, below) is
+# left out, which `--lib` would build as a harness.
 # Three tests at a time on two cores: the daemon's tests wait on sockets, timeouts and child
 # processes (the suite's first minute, `api_bounded`, kept the cores 35–70 % idle), and with two
 # at a time the integration binary left 131 of its 830 core-seconds idle (sampled each second).

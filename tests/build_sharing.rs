@@ -50,7 +50,7 @@ fn resolved(args: &[&str]) -> BTreeMap<String, BTreeSet<String>> {
 
 #[test]
 fn the_wheel_resolves_every_crate_as_the_test_build_did() {
-    // The test build: `cargo test --all-features --workspace --all-targets` (dev-dependencies active).
+    // The test build: `cargo test --all-features --workspace --tests` (dev-dependencies active).
     let tests = resolved(&[
         "--workspace",
         "--all-features",
