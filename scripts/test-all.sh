@@ -80,7 +80,7 @@ VENVS_PID=$!
 phase "cargo fmt --check"
 cargo fmt --all --check
 phase "cargo build of every target, linted by clippy as it compiles"
-# The library's unit-test harness at opt-level 1 (the library itself, which the integration
+# The library's unit-test harness at opt-level 0 (the library itself, which the integration
 # tests and the binaries run, stays at 3): scripts/rustc-unit-test-harness.sh says why. Exported
 # for the wheel's build below too, which reuses this build's artefacts.
 export RUSTC_WRAPPER="$PWD/scripts/rustc-unit-test-harness.sh"

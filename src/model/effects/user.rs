@@ -99,10 +99,16 @@ pub const COORDINATES: [&str; 4] = ["x", "y", "tx", "ty"];
 pub const MAX_USER_PARAMS: usize = 12;
 
 /// An expression as written and parsed once; compared and written back as its text.
+///
+/// The parsed form is boxed: exmex keeps its operators and nodes in inline arrays, so a
+/// `FlatEx<f64>` is 19,672 bytes (exmex 0.21), and an effect holds up to three. Held by value,
+/// every move of an effect (deserialising one, cloning a model) copied them through the stack:
+/// compiled without optimisation, `toml`'s deserialiser of an effect took frames of some 600 KB
+/// and a test thread's 2 MiB stack overflowed.
 #[derive(Clone, Debug)]
 pub struct Expression {
     text: String,
-    parsed: FlatEx<f64>,
+    parsed: Box<FlatEx<f64>>,
 }
 
 impl PartialEq for Expression {
@@ -113,7 +119,7 @@ impl PartialEq for Expression {
 
 impl Expression {
     pub fn parse(text: &str) -> Result<Self, String> {
-        let parsed = FlatEx::<f64>::parse(text).map_err(|e| format!("'{text}': {e}"))?;
+        let parsed = Box::new(FlatEx::<f64>::parse(text).map_err(|e| format!("'{text}': {e}"))?);
         Ok(Self {
             text: text.to_string(),
             parsed,
@@ -147,7 +153,7 @@ impl<'de> Deserialize<'de> for Expression {
 /// sits in `[x, y, tx, ty, parameters in name order]`.
 #[derive(Clone, Debug)]
 struct Bound {
-    expression: FlatEx<f64>,
+    expression: Box<FlatEx<f64>>,
     slots: Vec<usize>,
 }
 
