@@ -4,7 +4,8 @@
 # profile's 3, and passes every other compilation through unchanged. The harness's LLVM passes
 # were the build's largest unit: 144.5 s of one core at 3 against 113.7 s at 1 (unit tests 8.9
 # and 10.1 s); at 0 it takes 26.9 unit-s against 79.5 at 1 in the same hour, for unit tests of
-# 15.9–16.4 s against 9.8–9.9 s, nearly all of it one test of a disk's coverage on one core
+# 15.9–16.4 s against 9.8–9.9 s, most of it one test of a disk's coverage on one core, whose
+# quadrature was then computed once for both renderings it checks: 12.1–14.9 s at 0
 # (docs/performance.md). Cargo's profiles cannot tell the harness from the library it tests
 # (both are the package `ffdic`), so this is done here; a plain `cargo test` builds both at 3.
 # The float results are the same at any opt-level: Rust does not reassociate or contract
